@@ -1,0 +1,14 @@
+"""diffsusp: differentiable elastokinematic (K&C) suspension solver and identification, in JAX.
+
+Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", True)`) before use.
+"""
+
+from . import geometry
+from .errors import ConvergenceError, ModelError, ModelWarning
+from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
+from .statics import StaticSolution, solve_statics, solve_sweep
+
+__all__ = [
+    "ConvergenceError", "Loads", "Mechanism", "MechanismBuilder", "ModelError", "ModelWarning",
+    "StaticSolution", "ValidationReport", "geometry", "solve_statics", "solve_sweep", "validate",
+]

@@ -1,0 +1,23 @@
+"""Mechanism pytree, builder and validation."""
+
+from .builder import MechanismBuilder, frame_from_axes
+from .mechanism import (
+    GROUND,
+    JOINT_ROWS,
+    Bushings,
+    Drivers,
+    Joints,
+    LoadPoints,
+    Loads,
+    Markers,
+    Mechanism,
+    Springs,
+    Stops,
+)
+from .validate import ValidationReport, validate
+
+__all__ = [
+    "GROUND", "JOINT_ROWS", "Bushings", "Drivers", "Joints", "LoadPoints", "Loads", "Markers",
+    "Mechanism", "MechanismBuilder", "Springs", "Stops", "ValidationReport", "frame_from_axes",
+    "validate",
+]

@@ -1,0 +1,379 @@
+"""The mechanism pytree: parameters are float array leaves, topology is static.
+
+Conventions (DESIGN.md): mm, N, N·mm, rad. q = 0 is the design position, where every part frame
+coincides with the global frame, so every marker is given by its global pose at design. Elements of
+one kind are stacked (arrays with a leading element axis); indices into the marker table and names
+are static Python tuples.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+GROUND = -1
+"""Part index of the ground (it has no coordinates)."""
+
+JOINT_ROWS = {
+    "spherical": 3,
+    "revolute": 5,
+    "cylindrical": 4,
+    "translational": 5,
+    "universal": 4,
+    "fixed": 6,
+    "inline": 2,
+    "inplane": 1,
+    "perpendicular": 1,
+    "distance": 1,
+}
+"""Constraint rows per joint kind (Adams definitions, spec stiffness §1.6)."""
+
+BUSHING_AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+def _check_markers(what: str, names: tuple[str, ...], markers: tuple[int, ...], n_markers: int):
+    for name, m in zip(names, markers, strict=True):
+        if not 0 <= m < n_markers:
+            raise ValueError(f"{what} '{name}' refers to marker index {m}, which does not exist.")
+
+
+class Markers(eqx.Module):
+    """Frames fixed on parts, given by their global pose at design (q = 0).
+
+    **Fields:** `position` (mm, global), `orientation` (columns are the marker axes in the
+    global frame), `part` (part index, -1 for ground), `names`.
+    """
+
+    position: Float[Array, "m 3"]
+    orientation: Float[Array, "m 3 3"]
+    part: tuple[int, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        m = len(self.names)
+        if self.position.shape != (m, 3) or self.orientation.shape != (m, 3, 3):
+            raise ValueError(
+                f"Markers: position must have shape ({m}, 3) and orientation ({m}, 3, 3); got "
+                f"{self.position.shape} and {self.orientation.shape}."
+            )
+        if len(self.part) != m:
+            raise ValueError("Markers: 'part' must give one part index per marker.")
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ValueError(
+                f"unknown marker '{name}'; known markers: {', '.join(self.names)}."
+            ) from None
+
+
+class Joints(eqx.Module):
+    """Ideal joints between marker I (on one part) and marker J (on another), Adams definitions.
+
+    Kinds and rows (d = x_I − x_J, axes of I and J in the global frame): spherical d = 0;
+    revolute d = 0, z_I·x_J = z_I·y_J = 0; cylindrical d·x_J = d·y_J = 0 and the revolute's two
+    angular rows; translational = cylindrical + x_I·y_J = 0; universal d = 0, z_I·z_J = 0; fixed
+    d = 0 and z_I·x_J = z_I·y_J = x_I·y_J = 0; inline d·x_J = d·y_J = 0; inplane d·z_J = 0;
+    perpendicular z_I·z_J = 0; distance |d| = its design value (a massless link).
+    spec: stiffness §1.6.
+    """
+
+    kind: tuple[str, ...] = eqx.field(static=True)
+    i_marker: tuple[int, ...] = eqx.field(static=True)
+    j_marker: tuple[int, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        for name, kind in zip(self.names, self.kind, strict=True):
+            if kind not in JOINT_ROWS:
+                raise ValueError(
+                    f"joint '{name}' has unknown kind '{kind}'; use one of "
+                    f"{', '.join(JOINT_ROWS)}."
+                )
+
+    @property
+    def n_rows(self) -> int:
+        return sum(JOINT_ROWS[k] for k in self.kind)
+
+
+class Bushings(eqx.Module):
+    """Six-axis bushings in the Adams BUSHING convention, stacked.
+
+    Deformation of I relative to J, in J: δ_T = R_Jᵀ(x_I − x_J) (mm) and the projected angles
+    (AX, AY, AZ) of R_{I/J} (rad). Per axis, with e = δ − offset, the force on I in J axes is
+    −(k·e + cubic·e³) + preload, or the axis's spline value y(e) (A/Car: y = −k·x for a linear
+    spline) where `spline_axes` says so. J receives F_J = −F_I, T_J = −T_I − δ × F_I.
+    spec: stiffness §1.8 and §4.3; DESIGN.md "Bushings".
+
+    **Fields:** `k_trans` (N/mm), `k_rot` (N·mm/rad), `cubic_trans` (N/mm³), `cubic_rot`
+    (N·mm/rad³), `offset_trans` (mm), `offset_rot` (rad), `preload_force` (N),
+    `preload_torque` (N·mm), all `(n, 3)` in the J frame; `spline_x`, `spline_y` `(n, 6, k)`
+    tables (mm or rad → N or N·mm) used on the axes flagged in the static `spline_axes`.
+    """
+
+    k_trans: Float[Array, "n 3"]
+    k_rot: Float[Array, "n 3"]
+    cubic_trans: Float[Array, "n 3"]
+    cubic_rot: Float[Array, "n 3"]
+    offset_trans: Float[Array, "n 3"]
+    offset_rot: Float[Array, "n 3"]
+    preload_force: Float[Array, "n 3"]
+    preload_torque: Float[Array, "n 3"]
+    spline_x: Float[Array, "n 6 k"]
+    spline_y: Float[Array, "n 6 k"]
+    i_marker: tuple[int, ...] = eqx.field(static=True)
+    j_marker: tuple[int, ...] = eqx.field(static=True)
+    spline_axes: tuple[tuple[bool, ...], ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        n = len(self.names)
+        for field in ("k_trans", "k_rot", "cubic_trans", "cubic_rot", "offset_trans",
+                      "offset_rot", "preload_force", "preload_torque"):
+            shape = getattr(self, field).shape
+            if shape != (n, 3):
+                raise ValueError(f"Bushings.{field} must have shape ({n}, 3); got {shape}.")
+        if self.spline_x.shape[:2] != (n, 6) or self.spline_x.shape != self.spline_y.shape:
+            raise ValueError(
+                f"Bushings.spline_x and spline_y must both have shape ({n}, 6, k); got "
+                f"{self.spline_x.shape} and {self.spline_y.shape}."
+            )
+
+    @property
+    def has_splines(self) -> bool:
+        return any(any(row) for row in self.spline_axes)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ValueError(
+                f"unknown bushing '{name}'; known bushings: {', '.join(self.names)}."
+            ) from None
+
+
+class Springs(eqx.Module):
+    """Springs acting along the line of two markers (tension positive), stacked.
+
+    Linear: tension = k·(ℓ − free_length). Tabulated (static flag `tabulated`): tension is the
+    Akima interpolant of (`table_x` = ℓ − free_length in mm, `table_y` = tension in N), linear
+    beyond the ends. spec: stiffness §1.7.
+
+    **Fields:** `k` (N/mm), `free_length` (mm), `table_x`, `table_y` `(n, k)`.
+    """
+
+    k: Float[Array, " n"]
+    free_length: Float[Array, " n"]
+    table_x: Float[Array, "n k"]
+    table_y: Float[Array, "n k"]
+    i_marker: tuple[int, ...] = eqx.field(static=True)
+    j_marker: tuple[int, ...] = eqx.field(static=True)
+    tabulated: tuple[bool, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        n = len(self.names)
+        if self.k.shape != (n,) or self.free_length.shape != (n,):
+            raise ValueError(f"Springs.k and Springs.free_length must have shape ({n},).")
+        if self.table_x.shape[0] != n or self.table_x.shape != self.table_y.shape:
+            raise ValueError(f"Springs.table_x and table_y must both have shape ({n}, k).")
+
+
+class Stops(eqx.Module):
+    """One-sided bump (compression) and rebound (extension) stops on the distance of two markers.
+
+    Penetration p = length − ℓ for a bump stop (engaged when ℓ < length) and ℓ − length for a
+    rebound stop; force k·p + cubic·p³ for p > 0, pushing the markers apart (bump) or pulling
+    them together (rebound), zero otherwise.
+
+    **Fields:** `length` (mm), `k` (N/mm), `cubic` (N/mm³); static `kind` ("bump"/"rebound").
+    """
+
+    length: Float[Array, " n"]
+    k: Float[Array, " n"]
+    cubic: Float[Array, " n"]
+    i_marker: tuple[int, ...] = eqx.field(static=True)
+    j_marker: tuple[int, ...] = eqx.field(static=True)
+    kind: tuple[str, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+
+class Drivers(eqx.Module):
+    """Motion drivers: prescribe the travel of a marker along a global direction.
+
+    Row: (x_m(q) − x_m(0))·direction − value = 0, with `value` (mm) taken from the load case
+    (e.g. wheel-centre height, rack travel).
+
+    **Fields:** `direction` (n, 3) unit vectors in the global frame.
+    """
+
+    direction: Float[Array, "n 3"]
+    marker: tuple[int, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+
+class LoadPoints(eqx.Module):
+    """Where external forces and moments act: a marker, and the frame their components are in.
+
+    `frame` is a marker index (Adams GFORCE RM: components in that marker's current axes) or -1
+    for global components.
+    """
+
+    marker: tuple[int, ...] = eqx.field(static=True)
+    frame: tuple[int, ...] = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ValueError(
+                f"unknown load point '{name}'; known load points: {', '.join(self.names)}."
+            ) from None
+
+
+class Loads(eqx.Module):
+    """One load case (or a table of them, with a leading case axis on every array).
+
+    **Fields:** `force` (N) and `moment` (N·mm) per load point, in the frame the load point names;
+    `driver` values (mm) per motion driver.
+    """
+
+    force: Float[Array, "*cases l 3"]
+    moment: Float[Array, "*cases l 3"]
+    driver: Float[Array, "*cases d"]
+
+    @property
+    def n_cases(self) -> int | None:
+        return None if self.force.ndim == 2 else self.force.shape[0]
+
+
+class Mechanism(eqx.Module):
+    """A suspension model: parts, markers, joints, force elements, drivers and load points.
+
+    Every physical number is a float array leaf (differentiable, batchable, identifiable);
+    topology and names are static. Build one with `diffsusp.MechanismBuilder`.
+    `independent_rows` lists the constraint rows (joints then drivers) kept in the solve: rows
+    found redundant at design are dropped, as Adams does, and reported by `validate`.
+    """
+
+    parts: tuple[str, ...] = eqx.field(static=True)
+    markers: Markers
+    joints: Joints
+    bushings: Bushings
+    springs: Springs
+    stops: Stops
+    drivers: Drivers
+    load_points: LoadPoints
+    independent_rows: tuple[int, ...] = eqx.field(static=True)
+    length_scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True, default="mechanism")
+
+    def __check_init__(self):
+        n_markers = len(self.markers.names)
+        for part in self.markers.part:
+            if not (part == GROUND or 0 <= part < len(self.parts)):
+                raise ValueError(f"a marker refers to part index {part}, which does not exist.")
+        for what, elements in (
+            ("joint", self.joints),
+            ("bushing", self.bushings),
+            ("spring", self.springs),
+            ("stop", self.stops),
+        ):
+            _check_markers(what, elements.names, elements.i_marker, n_markers)
+            _check_markers(what, elements.names, elements.j_marker, n_markers)
+        _check_markers("driver", self.drivers.names, self.drivers.marker, n_markers)
+        _check_markers("load point", self.load_points.names, self.load_points.marker, n_markers)
+
+    @property
+    def n_coordinates(self) -> int:
+        return 6 * len(self.parts)
+
+    @property
+    def n_rows(self) -> int:
+        """All constraint rows, joints then drivers (before dropping redundant ones)."""
+        return self.joints.n_rows + len(self.drivers.names)
+
+    @property
+    def n_multipliers(self) -> int:
+        return len(self.independent_rows)
+
+    def part_index(self, name: str) -> int:
+        if name == "ground":
+            return GROUND
+        try:
+            return self.parts.index(name)
+        except ValueError:
+            raise ValueError(
+                f"unknown part '{name}'; known parts: ground, {', '.join(self.parts)}."
+            ) from None
+
+    def loads(
+        self,
+        forces: dict | None = None,
+        moments: dict | None = None,
+        drivers: dict | None = None,
+    ) -> Loads:
+        """Build `Loads` from named load points and drivers.
+
+        **Arguments:** `forces` / `moments`: load-point name → array `(3,)` or `(cases, 3)` (N,
+        N·mm, in the load point's frame); `drivers`: driver name → value(s) (mm). Anything not
+        given is zero. All given arrays must agree on the number of cases.
+
+        **Returns:** a `Loads` with a leading case axis if any input had one.
+        """
+        forces, moments, drivers = forces or {}, moments or {}, drivers or {}
+        arrays = [jnp.asarray(v, dtype=float) for v in (*forces.values(), *moments.values())]
+        arrays_d = [jnp.asarray(v, dtype=float) for v in drivers.values()]
+        cases = {a.shape[0] for a in arrays if a.ndim == 2} | {
+            a.shape[0] for a in arrays_d if a.ndim == 1
+        }
+        if len(cases) > 1:
+            raise ValueError(f"load arrays disagree on the number of cases: {sorted(cases)}.")
+        batch = tuple(cases)
+        n_l, n_d = len(self.load_points.names), len(self.drivers.names)
+        force = jnp.zeros((*batch, n_l, 3))
+        moment = jnp.zeros((*batch, n_l, 3))
+        driver = jnp.zeros((*batch, n_d))
+        for table, target in ((forces, "force"), (moments, "moment")):
+            for name, value in table.items():
+                value = jnp.asarray(value, dtype=float)
+                if value.shape[-1:] != (3,):
+                    raise ValueError(
+                        f"{target} at '{name}' must have 3 components (x, y, z); got shape "
+                        f"{value.shape}."
+                    )
+                i = self.load_points.index(name)
+                if target == "force":
+                    force = force.at[..., i, :].set(value)
+                else:
+                    moment = moment.at[..., i, :].set(value)
+        for name, value in drivers.items():
+            if name not in self.drivers.names:
+                raise ValueError(
+                    f"unknown driver '{name}'; known drivers: {', '.join(self.drivers.names)}."
+                )
+            driver = driver.at[..., self.drivers.names.index(name)].set(jnp.asarray(value))
+        return Loads(force=force, moment=moment, driver=driver)
+
+    def describe(self) -> str:
+        """A one-paragraph summary (counts of parts, joints, elements)."""
+        return (
+            f"{self.name}: {len(self.parts)} moving parts ({self.n_coordinates} coordinates), "
+            f"{len(self.joints.names)} joints ({self.joints.n_rows} rows), "
+            f"{len(self.drivers.names)} drivers, {len(self.bushings.names)} bushings, "
+            f"{len(self.springs.names)} springs, {len(self.stops.names)} stops, "
+            f"{len(self.load_points.names)} load points."
+        )
+
+
+def row_blocks(joints: Joints) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """Group joints by kind: (kind, joint indices, row offsets of each joint), in row order."""
+    offsets = np.cumsum([0] + [JOINT_ROWS[k] for k in joints.kind])[:-1]
+    blocks = []
+    for kind in JOINT_ROWS:
+        idx = np.array([i for i, k in enumerate(joints.kind) if k == kind], dtype=int)
+        if idx.size:
+            blocks.append((kind, idx, offsets[idx]))
+    return blocks

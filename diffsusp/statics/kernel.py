@@ -1,0 +1,401 @@
+"""Element kernels and assembly of the equilibrium (KKT) residual and Jacobian, for one load case.
+
+Unknowns: q (6 per moving part: position p in mm and Gibbs vector b of the rotation from design,
+spec stiffness §1.3) and one multiplier per independent constraint row. Residual:
+
+    r_q = Q_ext(q) + Q_int(q) + Φ_q(q)ᵀ λ        (generalised forces, spec stiffness §1.5, §1.9)
+    r_λ = Φ(q) − c                                (joint rows and motion drivers, §1.6)
+
+Every element touches at most two parts, so each one is written as a function of the 12
+coordinates z = (q_a, q_b) of its two parts and differentiated there (forward mode, 12
+directions), then scattered into the global vector and matrix. The ground is a virtual part whose
+coordinates stay at zero (its markers keep their design pose); its rows and columns are dropped.
+A wrench (F, T) applied at world point x of a part with coordinates (p, b) has the generalised
+force [F; G(b)ᵀ (T + (x − p) × F)], with G(b) = 2/(1 + b·b)(I + b×) (spec §1.4).
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix, projected_angles
+from ..model.laws import akima_eval
+from ..model.mechanism import GROUND, JOINT_ROWS, Loads, Mechanism, row_blocks
+
+# Rows of each joint kind that measure an angle (dimensionless) rather than a length (mm).
+_ANGULAR_ROWS = {
+    "spherical": (),
+    "revolute": (3, 4),
+    "cylindrical": (2, 3),
+    "translational": (2, 3, 4),
+    "universal": (3,),
+    "fixed": (3, 4, 5),
+    "inline": (),
+    "inplane": (),
+    "perpendicular": (0,),
+    "distance": (),
+}
+
+
+def _pose(z6, x0, r0):
+    r = gibbs_to_matrix(z6[3:])
+    return z6[:3] + r @ x0, r @ r0
+
+
+def _generalised_force(z6, x, force, torque):
+    moment = torque + jnp.cross(x - z6[:3], force)
+    return jnp.concatenate([force, gibbs_angular_jacobian(z6[3:]).T @ moment])
+
+
+# ----------------------------------------------------------------------------- force elements
+
+
+def _bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
+    """Generalised forces (12,) of one bushing on its I part then J part (Adams convention)."""
+    xi, ri = _pose(z[:6], x0i, r0i)
+    xj, rj = _pose(z[6:], x0j, r0j)
+    d = xi - xj
+    e_t = rj.T @ d - p["offset_trans"]
+    e_r = projected_angles(rj.T @ ri) - p["offset_rot"]
+    f = -(p["k_trans"] * e_t + p["cubic_trans"] * e_t**3) + p["preload_force"]
+    t = -(p["k_rot"] * e_r + p["cubic_rot"] * e_r**3) + p["preload_torque"]
+    if spline_mask is not None:
+        e = jnp.concatenate([e_t, e_r])
+        spline = jax.vmap(akima_eval)(p["spline_x"], p["spline_y"], e)
+        ft = jnp.where(spline_mask, spline, jnp.concatenate([f, t]))
+        f, t = ft[:3], ft[3:]
+    force, torque = rj @ f, rj @ t
+    return jnp.concatenate(
+        [
+            _generalised_force(z[:6], xi, force, torque),
+            _generalised_force(z[6:], xj, -force, -torque - jnp.cross(d, force)),
+        ]
+    )
+
+
+def _line_force(z, x0i, x0j, tension):
+    """Generalised forces of a tension `tension(ℓ)` along the line of two points."""
+    eye = jnp.eye(3)
+    xi, _ = _pose(z[:6], x0i, eye)
+    xj, _ = _pose(z[6:], x0j, eye)
+    u = xj - xi
+    length = jnp.sqrt(u @ u)
+    f = tension(length) * u / length  # pulls I toward J
+    zero = jnp.zeros(3)
+    return jnp.concatenate(
+        [_generalised_force(z[:6], xi, f, zero), _generalised_force(z[6:], xj, -f, zero)]
+    )
+
+
+def spring_tension(length, p, tabulated: bool):
+    """Spring tension (N, positive pulls the seats together) at `length` (mm)."""
+    if tabulated:
+        return akima_eval(p["table_x"], p["table_y"], length - p["free_length"])
+    return p["k"] * (length - p["free_length"])
+
+
+def stop_tension(length, p, kind: str):
+    """One-sided stop tension (N): negative (pushing apart) for an engaged bump stop."""
+    pen = jnp.maximum(p["length"] - length if kind == "bump" else length - p["length"], 0.0)
+    force = p["k"] * pen + p["cubic"] * pen**3
+    return -force if kind == "bump" else force
+
+
+def _load_force(z, x0m, r0f, force, moment, global_frame: bool):
+    """Generalised force of a load at marker m, components in frame f (second part of z)."""
+    xm, _ = _pose(z[:6], x0m, jnp.eye(3))
+    if global_frame:
+        rf = jnp.eye(3)
+    else:
+        _, rf = _pose(z[6:], jnp.zeros(3), r0f)
+    return jnp.concatenate([_generalised_force(z[:6], xm, rf @ force, rf @ moment), jnp.zeros(6)])
+
+
+# ----------------------------------------------------------------------------- constraints
+
+
+def joint_rows(kind: str, z, x0i, r0i, x0j, r0j):
+    """Constraint rows Φ of one joint of `kind` (Adams definitions, spec stiffness §1.6)."""
+    xi, ri = _pose(z[:6], x0i, r0i)
+    xj, rj = _pose(z[6:], x0j, r0j)
+    d = xi - xj
+    (xi_, yi_, zi_), (xj_, yj_, zj_) = ri.T, rj.T
+    if kind == "spherical":
+        return d
+    if kind == "revolute":
+        return jnp.concatenate([d, jnp.stack([zi_ @ xj_, zi_ @ yj_])])
+    if kind == "cylindrical":
+        return jnp.stack([d @ xj_, d @ yj_, zi_ @ xj_, zi_ @ yj_])
+    if kind == "translational":
+        return jnp.stack([d @ xj_, d @ yj_, zi_ @ xj_, zi_ @ yj_, xi_ @ yj_])
+    if kind == "universal":
+        return jnp.concatenate([d, jnp.stack([zi_ @ zj_])])
+    if kind == "fixed":
+        return jnp.concatenate([d, jnp.stack([zi_ @ xj_, zi_ @ yj_, xi_ @ yj_])])
+    if kind == "inline":
+        return jnp.stack([d @ xj_, d @ yj_])
+    if kind == "inplane":
+        return jnp.stack([d @ zj_])
+    if kind == "perpendicular":
+        return jnp.stack([zi_ @ zj_])
+    if kind == "distance":
+        d0 = x0i - x0j
+        return jnp.stack([jnp.sqrt(d @ d) - jnp.sqrt(d0 @ d0)])
+    raise ValueError(f"unknown joint kind '{kind}'")
+
+
+def _driver_row(z6, x0m, direction):
+    xm, _ = _pose(z6, x0m, jnp.eye(3))
+    return jnp.stack([(xm - x0m) @ direction])
+
+
+# ----------------------------------------------------------------------------- layout
+
+
+class Layout:
+    """Static index bookkeeping of one mechanism: where every element lands in the KKT system.
+
+    Coordinates of part a occupy 6a..6a+5; the ground is a virtual part P at 6P..6P+5.
+    Multiplier k (of `independent_rows`) sits at 6(P+1) + k; redundant rows go to one dummy slot
+    at the end. `keep` extracts the live unknowns in the order (q, λ).
+    """
+
+    def __init__(self, mech: Mechanism):
+        n_parts = len(mech.parts)
+        self.n = 6 * n_parts
+        self.m = len(mech.independent_rows)
+        self.base = base = 6 * (n_parts + 1)
+        self.size = base + self.m + 1
+        dummy = base + self.m
+        position = {r: base + k for k, r in enumerate(mech.independent_rows)}
+        self.row_slot = np.array([position.get(r, dummy) for r in range(mech.n_rows)], dtype=int)
+        self.keep = np.concatenate([np.arange(self.n), base + np.arange(self.m)])
+        marker_part = np.array(mech.markers.part, dtype=int)
+        self.marker_part = np.where(marker_part == GROUND, n_parts, marker_part)
+        self.angular = np.zeros(mech.n_rows, dtype=bool)
+        for kind, idx, offsets in row_blocks(mech.joints):
+            for row in _ANGULAR_ROWS[kind]:
+                self.angular[offsets + row] = True
+        self.angular_live = self.angular[list(mech.independent_rows)]
+
+    def coords(self, markers_i, markers_j) -> np.ndarray:
+        """(E, 12) global coordinate indices of the two parts of each element."""
+        a = self.marker_part[np.asarray(markers_i, dtype=int)]
+        b = self.marker_part[np.asarray(markers_j, dtype=int)]
+        six = np.arange(6)
+        return np.concatenate([6 * a[:, None] + six, 6 * b[:, None] + six], axis=1)
+
+
+@functools.lru_cache(maxsize=64)
+def layout(mech_static_key) -> Layout:
+    return Layout(mech_static_key.mech)
+
+
+class _Key:
+    """Hashable wrapper keyed on the mechanism's static structure (values do not matter)."""
+
+    def __init__(self, mech):
+        self.mech = mech
+        self.key = jax.tree_util.tree_structure(mech)
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return self.key == other.key
+
+
+def get_layout(mech: Mechanism) -> Layout:
+    return layout(_Key(mech))
+
+
+# ----------------------------------------------------------------------------- assembly
+
+
+def _bushing_params(mech):
+    b = mech.bushings
+    return dict(
+        k_trans=b.k_trans, k_rot=b.k_rot, cubic_trans=b.cubic_trans, cubic_rot=b.cubic_rot,
+        offset_trans=b.offset_trans, offset_rot=b.offset_rot, preload_force=b.preload_force,
+        preload_torque=b.preload_torque, spline_x=b.spline_x, spline_y=b.spline_y,
+    )
+
+
+def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jacobian: bool):
+    """All element contributions as a list of (row indices, col indices, values) for the matrix
+    and (indices, values) for the residual vector."""
+    qfull = jnp.concatenate([q, jnp.zeros(6, q.dtype)])
+    mk = mech.markers
+    vec_terms, mat_terms = [], []
+
+    def add_force(fn, idx, *args):
+        z = qfull[idx]
+        if with_jacobian:
+            val, jac = jax.vmap(_value_and_jacfwd(fn))(z, *args)
+            mat_terms.append((idx[:, :, None], idx[:, None, :], jac))
+        else:
+            val = jax.vmap(fn)(z, *args)
+        vec_terms.append((idx, val))
+
+    if mech.bushings.names:
+        b = mech.bushings
+        i, j = np.asarray(b.i_marker), np.asarray(b.j_marker)
+        params = _bushing_params(mech)
+        geometry = (mk.position[i], mk.orientation[i], mk.position[j], mk.orientation[j])
+        if b.has_splines:
+            add_force(_bushing_force, lay.coords(i, j), *geometry, params,
+                      jnp.asarray(b.spline_axes, dtype=bool))
+        else:
+            params = {k: v for k, v in params.items() if not k.startswith("spline")}
+            add_force(functools.partial(_bushing_force, spline_mask=None), lay.coords(i, j),
+                      *geometry, params)
+
+    for elements, tension_of in (
+        (mech.springs, lambda e, k: functools.partial(spring_tension, tabulated=k)),
+        (mech.stops, lambda e, k: functools.partial(stop_tension, kind=k)),
+    ):
+        if not elements.names:
+            continue
+        flags = elements.tabulated if elements is mech.springs else elements.kind
+        params = (
+            dict(k=elements.k, free_length=elements.free_length, table_x=elements.table_x,
+                 table_y=elements.table_y)
+            if elements is mech.springs
+            else dict(length=elements.length, k=elements.k, cubic=elements.cubic)
+        )
+        for flag in sorted(set(flags)):
+            sel = np.array([f == flag for f in flags])
+            i = np.asarray(elements.i_marker)[sel]
+            j = np.asarray(elements.j_marker)[sel]
+            tension = tension_of(elements, flag)
+            p_sel = {k: v[sel] for k, v in params.items()}
+            add_force(
+                lambda z, a, c, p, tension=tension: _line_force(
+                    z, a, c, lambda length: tension(length, p)
+                ),
+                lay.coords(i, j), mk.position[i], mk.position[j], p_sel,
+            )
+
+    if mech.load_points.names:
+        lp = mech.load_points
+        m_idx = np.asarray(lp.marker)
+        f_idx = np.asarray(lp.frame)
+        for is_global in (True, False):
+            sel = (f_idx == GROUND) == is_global
+            if not sel.any():
+                continue
+            mm, ff = m_idx[sel], np.where(f_idx[sel] < 0, m_idx[sel], f_idx[sel])
+            add_force(
+                functools.partial(_load_force, global_frame=is_global),
+                lay.coords(mm, ff), mk.position[mm], mk.orientation[ff],
+                loads.force[sel], loads.moment[sel],
+            )
+
+    # Constraint rows: value, (r, 12) Jacobian and λ-weighted Hessian per joint.
+    row_vals = []
+    lam_rows = jnp.concatenate([lam, jnp.zeros(1, lam.dtype)])[jnp.asarray(lay.row_slot - lay.base)]
+    for kind, idx, offsets in row_blocks(mech.joints):
+        i = np.asarray(mech.joints.i_marker)[idx]
+        j = np.asarray(mech.joints.j_marker)[idx]
+        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
+        fn = functools.partial(joint_rows, kind)
+        args = (mk.position[i], mk.orientation[i], mk.position[j], mk.orientation[j])
+        _constraint_terms(fn, lay.coords(i, j), rows, args, qfull, lam_rows, lay,
+                          vec_terms, mat_terms, row_vals, with_jacobian)
+    if mech.drivers.names:
+        mm = np.asarray(mech.drivers.marker)
+        rows = mech.joints.n_rows + np.arange(len(mm))[:, None]
+        idx = lay.coords(mm, mm)[:, :6]
+        _constraint_terms(_driver_row, idx, rows, (mk.position[mm], mech.drivers.direction),
+                          qfull, lam_rows, lay, vec_terms, mat_terms, row_vals, with_jacobian,
+                          offset=loads.driver[:, None])
+    return vec_terms, mat_terms, row_vals
+
+
+def _value_and_jacfwd(fn):
+    def wrapped(z, *args):
+        def f(z_):
+            return fn(z_, *args)
+
+        return jax.vmap(lambda t: jax.jvp(f, (z,), (t,)), out_axes=(None, 1))(
+            jnp.eye(z.shape[0], dtype=z.dtype)
+        )
+
+    return wrapped
+
+
+def _constraint_terms(fn, idx, rows, args, qfull, lam_rows, lay, vec_terms, mat_terms,
+                      row_vals, with_jacobian, offset=None):
+    z = qfull[idx]
+    lam_e = lam_rows[jnp.asarray(rows)]  # (E, r)
+    slots = lay.row_slot[rows]  # (E, r)
+    if with_jacobian:
+        val, jac, g, hess = _vmapped_constraint(fn, z, lam_e, args)
+        mat_terms.append((idx[:, :, None], idx[:, None, :], hess))
+        mat_terms.append((idx[:, :, None], slots[:, None, :], jnp.swapaxes(jac, 1, 2)))
+        mat_terms.append((slots[:, :, None], idx[:, None, :], jac))
+    else:
+        def value_and_reaction(z_, lam_, *a):
+            val, vjp = jax.vjp(lambda zz: fn(zz, *a), z_)
+            return val, vjp(lam_)[0]
+
+        val, g = jax.vmap(value_and_reaction)(z, lam_e, *args)
+    if offset is not None:
+        val = val - offset
+    vec_terms.append((idx, g))
+    vec_terms.append((slots, val))
+    row_vals.append((rows, val))
+
+
+def _vmapped_constraint(fn, z, lam_e, args):
+    """Per joint: rows Φ, Jacobian A (r×k), Aᵀλ and the Hessian Σ λ ∂²Φ (k×k)."""
+
+    def per_element(z_, lam_, *a):
+        def grad_and_rows(zz):
+            val, jac = _value_and_jacfwd(fn)(zz, *a)
+            return jac.T @ lam_, (val, jac)
+
+        g, hess, (val, jac) = _jvp_columns(grad_and_rows, z_)
+        return val, jac, g, hess
+
+    return jax.vmap(per_element)(z, lam_e, *args)
+
+
+def _jvp_columns(fn_with_aux, z):
+    """Value, forward-mode Jacobian (columns) and aux of `fn_with_aux` at z."""
+
+    def one(t):
+        (out, aux), (dout, _) = jax.jvp(fn_with_aux, (z,), (t,))
+        return out, dout, aux
+
+    out, dout, aux = jax.vmap(one, out_axes=(None, 1, None))(jnp.eye(z.shape[0], dtype=z.dtype))
+    return out, dout, aux
+
+
+def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
+    """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case."""
+    lay = get_layout(mech)
+    vec_terms, mat_terms, _ = _element_terms(mech, loads, q, lam, lay, with_jacobian)
+    r = jnp.zeros(lay.size, q.dtype)
+    for idx, val in vec_terms:
+        r = r.at[np.asarray(idx).reshape(-1)].add(val.reshape(-1))
+    r = r[lay.keep]
+    if not with_jacobian:
+        return r, None
+    jac = jnp.zeros((lay.size, lay.size), q.dtype)
+    for ri, ci, val in mat_terms:
+        ri, ci = np.broadcast_arrays(np.asarray(ri), np.asarray(ci))
+        jac = jac.at[ri.reshape(-1), ci.reshape(-1)].add(val.reshape(-1))
+    return r, jac[np.ix_(lay.keep, lay.keep)]
+
+
+def constraint_values(mech: Mechanism, loads: Loads, q):
+    """All constraint rows (joints then drivers, redundant ones included) at q."""
+    lay = get_layout(mech)
+    _, _, row_vals = _element_terms(mech, loads, q, jnp.zeros(lay.m, q.dtype), lay, False)
+    out = jnp.zeros(mech.n_rows, q.dtype)
+    for rows, val in row_vals:
+        out = out.at[np.asarray(rows).reshape(-1)].set(val.reshape(-1))
+    return out
