@@ -6,9 +6,19 @@ Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", T
 from . import geometry
 from .errors import ConvergenceError, ModelError, ModelWarning
 from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
-from .statics import StaticSolution, solve_statics, solve_sweep
+from .statics import (
+    StaticSolution,
+    bushing_states,
+    joint_reactions,
+    marker_poses,
+    part_poses,
+    solve_statics,
+    solve_sweep,
+    spring_states,
+)
 
 __all__ = [
     "ConvergenceError", "Loads", "Mechanism", "MechanismBuilder", "ModelError", "ModelWarning",
-    "StaticSolution", "ValidationReport", "geometry", "solve_statics", "solve_sweep", "validate",
+    "StaticSolution", "ValidationReport", "bushing_states", "geometry", "joint_reactions",
+    "marker_poses", "part_poses", "solve_statics", "solve_sweep", "spring_states", "validate",
 ]

@@ -320,6 +320,12 @@ class MechanismBuilder:
             load_points=load_points,
             independent_rows=tuple(range(joints.n_rows + len(self._drivers))),
             length_scale=max(scale, 1.0),
+            reference_points=tuple(
+                tuple(float(v) for v in np.mean(
+                    [self._markers[n][1] for n in names if self._markers[n][0] == part] or
+                    [np.zeros(3)], axis=0))
+                for part in self._parts
+            ),
             name=self.name,
         )
         return finalize(mech, check=check)

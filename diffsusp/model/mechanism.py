@@ -256,6 +256,8 @@ class Mechanism(eqx.Module):
     topology and names are static. Build one with `diffsusp.MechanismBuilder`.
     `independent_rows` lists the constraint rows (joints then drivers) kept in the solve: rows
     found redundant at design are dropped, as Adams does, and reported by `validate`.
+    `reference_points` (one per part, its markers' centroid at design, mm) are where the solver
+    measures each part's translation internally; they do not change any result.
     """
 
     parts: tuple[str, ...] = eqx.field(static=True)
@@ -268,6 +270,7 @@ class Mechanism(eqx.Module):
     load_points: LoadPoints
     independent_rows: tuple[int, ...] = eqx.field(static=True)
     length_scale: float = eqx.field(static=True)
+    reference_points: tuple[tuple[float, float, float], ...] = eqx.field(static=True)
     name: str = eqx.field(static=True, default="mechanism")
 
     def __check_init__(self):

@@ -57,12 +57,12 @@ def _row_names(mech: Mechanism) -> list[str]:
 
 def _design_matrices(mech: Mechanism):
     """Constraint values, Φ_q (all rows) and tangent stiffness at q = 0 with no load."""
-    from ..statics.kernel import assemble, constraint_values, get_layout
+    from ..statics.kernel import assemble, constraint_values, get_layout, to_internal
 
     all_rows = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows)))
     lay = get_layout(all_rows)
     loads = all_rows.loads()
-    q0 = jnp.zeros(mech.n_coordinates)
+    q0 = to_internal(all_rows, jnp.zeros(mech.n_coordinates))
     phi = np.asarray(constraint_values(all_rows, loads, q0))
     _, jac = jax.jit(lambda m, l: assemble(m, l, q0, jnp.zeros(lay.m)))(all_rows, loads)
     jac = np.asarray(jac)

@@ -1,7 +1,10 @@
 """Element kernels and assembly of the equilibrium (KKT) residual and Jacobian, for one load case.
 
-Unknowns: q (6 per moving part: position p in mm and Gibbs vector b of the rotation from design,
-spec stiffness §1.3) and one multiplier per independent constraint row. Residual:
+Unknowns: 6 per moving part — the position P (mm) of the part's reference point (the centroid of
+its markers at design, so that rotations about nearby joints stay mildly nonlinear for Newton)
+and the Gibbs vector b of its rotation from design (spec stiffness §1.3) — and one multiplier per
+independent constraint row. The public coordinates q = (p, b) of DESIGN.md (p = displacement of
+the point at the global origin) follow as p = P − R(b)·c. Residual:
 
     r_q = Q_ext(q) + Q_int(q) + Φ_q(q)ᵀ λ        (generalised forces, spec stiffness §1.5, §1.9)
     r_λ = Φ(q) − c                                (joint rows and motion drivers, §1.6)
@@ -52,13 +55,18 @@ def _generalised_force(z6, x, force, torque):
 # ----------------------------------------------------------------------------- force elements
 
 
-def _bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
-    """Generalised forces (12,) of one bushing on its I part then J part (Adams convention)."""
+def bushing_state(z, x0i, r0i, x0j, r0j, p, spline_mask):
+    """Deformation and law of one bushing (Adams convention, spec stiffness §1.8).
+
+    **Returns:** (δ_T in J (mm), projected angles (rad), force f and torque t on I in J axes,
+    x_I, x_J, R_J) at the coordinates z of its two parts.
+    """
     xi, ri = _pose(z[:6], x0i, r0i)
     xj, rj = _pose(z[6:], x0j, r0j)
-    d = xi - xj
-    e_t = rj.T @ d - p["offset_trans"]
-    e_r = projected_angles(rj.T @ ri) - p["offset_rot"]
+    delta_t = rj.T @ (xi - xj)
+    delta_r = projected_angles(rj.T @ ri)
+    e_t = delta_t - p["offset_trans"]
+    e_r = delta_r - p["offset_rot"]
     f = -(p["k_trans"] * e_t + p["cubic_trans"] * e_t**3) + p["preload_force"]
     t = -(p["k_rot"] * e_r + p["cubic_rot"] * e_r**3) + p["preload_torque"]
     if spline_mask is not None:
@@ -66,11 +74,17 @@ def _bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
         spline = jax.vmap(akima_eval)(p["spline_x"], p["spline_y"], e)
         ft = jnp.where(spline_mask, spline, jnp.concatenate([f, t]))
         f, t = ft[:3], ft[3:]
+    return delta_t, delta_r, f, t, xi, xj, rj
+
+
+def _bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
+    """Generalised forces (12,) of one bushing on its I part then J part."""
+    _, _, f, t, xi, xj, rj = bushing_state(z, x0i, r0i, x0j, r0j, p, spline_mask)
     force, torque = rj @ f, rj @ t
     return jnp.concatenate(
         [
             _generalised_force(z[:6], xi, force, torque),
-            _generalised_force(z[6:], xj, -force, -torque - jnp.cross(d, force)),
+            _generalised_force(z[6:], xj, -force, -torque - jnp.cross(xi - xj, force)),
         ]
     )
 
@@ -116,8 +130,11 @@ def _load_force(z, x0m, r0f, force, moment, global_frame: bool):
 # ----------------------------------------------------------------------------- constraints
 
 
-def joint_rows(kind: str, z, x0i, r0i, x0j, r0j):
-    """Constraint rows Φ of one joint of `kind` (Adams definitions, spec stiffness §1.6)."""
+def joint_rows(kind: str, z, x0i, r0i, x0j, r0j, length0):
+    """Constraint rows Φ of one joint of `kind` (Adams definitions, spec stiffness §1.6).
+
+    `x0i`, `x0j` are the markers' offsets from their parts' reference points; `length0` the
+    design distance of the two markers (for 'distance')."""
     xi, ri = _pose(z[:6], x0i, r0i)
     xj, rj = _pose(z[6:], x0j, r0j)
     d = xi - xj
@@ -141,13 +158,12 @@ def joint_rows(kind: str, z, x0i, r0i, x0j, r0j):
     if kind == "perpendicular":
         return jnp.stack([zi_ @ zj_])
     if kind == "distance":
-        d0 = x0i - x0j
-        return jnp.stack([jnp.sqrt(d @ d) - jnp.sqrt(d0 @ d0)])
+        return jnp.stack([jnp.sqrt(d @ d) - length0])
     raise ValueError(f"unknown joint kind '{kind}'")
 
 
-def _driver_row(z6, x0m, direction):
-    xm, _ = _pose(z6, x0m, jnp.eye(3))
+def _driver_row(z6, offset, x0m, direction):
+    xm, _ = _pose(z6, offset, jnp.eye(3))
     return jnp.stack([(xm - x0m) @ direction])
 
 
@@ -174,6 +190,8 @@ class Layout:
         self.keep = np.concatenate([np.arange(self.n), base + np.arange(self.m)])
         marker_part = np.array(mech.markers.part, dtype=int)
         self.marker_part = np.where(marker_part == GROUND, n_parts, marker_part)
+        self.centre = np.zeros((n_parts + 1, 3))
+        self.centre[:n_parts] = np.asarray(mech.reference_points, dtype=float).reshape(-1, 3)
         self.angular = np.zeros(mech.n_rows, dtype=bool)
         for kind, idx, offsets in row_blocks(mech.joints):
             for row in _ANGULAR_ROWS[kind]:
@@ -214,7 +232,7 @@ def get_layout(mech: Mechanism) -> Layout:
 # ----------------------------------------------------------------------------- assembly
 
 
-def _bushing_params(mech):
+def bushing_params(mech):
     b = mech.bushings
     return dict(
         k_trans=b.k_trans, k_rot=b.k_rot, cubic_trans=b.cubic_trans, cubic_rot=b.cubic_rot,
@@ -228,6 +246,7 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
     and (indices, values) for the residual vector."""
     qfull = jnp.concatenate([q, jnp.zeros(6, q.dtype)])
     mk = mech.markers
+    offset = mk.position - jnp.asarray(lay.centre[lay.marker_part])
     vec_terms, mat_terms = [], []
 
     def add_force(fn, idx, *args):
@@ -242,8 +261,8 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
     if mech.bushings.names:
         b = mech.bushings
         i, j = np.asarray(b.i_marker), np.asarray(b.j_marker)
-        params = _bushing_params(mech)
-        geometry = (mk.position[i], mk.orientation[i], mk.position[j], mk.orientation[j])
+        params = bushing_params(mech)
+        geometry = (offset[i], mk.orientation[i], offset[j], mk.orientation[j])
         if b.has_splines:
             add_force(_bushing_force, lay.coords(i, j), *geometry, params,
                       jnp.asarray(b.spline_axes, dtype=bool))
@@ -275,7 +294,7 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
                 lambda z, a, c, p, tension=tension: _line_force(
                     z, a, c, lambda length: tension(length, p)
                 ),
-                lay.coords(i, j), mk.position[i], mk.position[j], p_sel,
+                lay.coords(i, j), offset[i], offset[j], p_sel,
             )
 
     if mech.load_points.names:
@@ -289,7 +308,7 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
             mm, ff = m_idx[sel], np.where(f_idx[sel] < 0, m_idx[sel], f_idx[sel])
             add_force(
                 functools.partial(_load_force, global_frame=is_global),
-                lay.coords(mm, ff), mk.position[mm], mk.orientation[ff],
+                lay.coords(mm, ff), offset[mm], mk.orientation[ff],
                 loads.force[sel], loads.moment[sel],
             )
 
@@ -301,27 +320,32 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
         j = np.asarray(mech.joints.j_marker)[idx]
         rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
         fn = functools.partial(joint_rows, kind)
-        args = (mk.position[i], mk.orientation[i], mk.position[j], mk.orientation[j])
+        d0 = mk.position[i] - mk.position[j]
+        args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
+                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
         _constraint_terms(fn, lay.coords(i, j), rows, args, qfull, lam_rows, lay,
                           vec_terms, mat_terms, row_vals, with_jacobian)
     if mech.drivers.names:
         mm = np.asarray(mech.drivers.marker)
         rows = mech.joints.n_rows + np.arange(len(mm))[:, None]
         idx = lay.coords(mm, mm)[:, :6]
-        _constraint_terms(_driver_row, idx, rows, (mk.position[mm], mech.drivers.direction),
+        _constraint_terms(_driver_row, idx, rows,
+                          (offset[mm], mk.position[mm], mech.drivers.direction),
                           qfull, lam_rows, lay, vec_terms, mat_terms, row_vals, with_jacobian,
                           offset=loads.driver[:, None])
     return vec_terms, mat_terms, row_vals
 
 
 def _value_and_jacfwd(fn):
+    """`fn(z, *args) -> (value, ∂value/∂z)`, the primal computed once (forward mode)."""
+
     def wrapped(z, *args):
         def f(z_):
-            return fn(z_, *args)
+            out = fn(z_, *args)
+            return out, out
 
-        return jax.vmap(lambda t: jax.jvp(f, (z,), (t,)), out_axes=(None, 1))(
-            jnp.eye(z.shape[0], dtype=z.dtype)
-        )
+        jac, val = jax.jacfwd(f, has_aux=True)(z)
+        return val, jac
 
     return wrapped
 
@@ -353,25 +377,15 @@ def _vmapped_constraint(fn, z, lam_e, args):
     """Per joint: rows Φ, Jacobian A (r×k), Aᵀλ and the Hessian Σ λ ∂²Φ (k×k)."""
 
     def per_element(z_, lam_, *a):
-        def grad_and_rows(zz):
-            val, jac = _value_and_jacfwd(fn)(zz, *a)
-            return jac.T @ lam_, (val, jac)
+        def reaction(zz):
+            val, vjp = jax.vjp(lambda z3: fn(z3, *a), zz)
+            return vjp(lam_)[0], val
 
-        g, hess, (val, jac) = _jvp_columns(grad_and_rows, z_)
-        return val, jac, g, hess
+        hess, _ = jax.jacfwd(reaction, has_aux=True)(z_)
+        val, jac = _value_and_jacfwd(fn)(z_, *a)
+        return val, jac, jac.T @ lam_, hess
 
     return jax.vmap(per_element)(z, lam_e, *args)
-
-
-def _jvp_columns(fn_with_aux, z):
-    """Value, forward-mode Jacobian (columns) and aux of `fn_with_aux` at z."""
-
-    def one(t):
-        (out, aux), (dout, _) = jax.jvp(fn_with_aux, (z,), (t,))
-        return out, dout, aux
-
-    out, dout, aux = jax.vmap(one, out_axes=(None, 1, None))(jnp.eye(z.shape[0], dtype=z.dtype))
-    return out, dout, aux
 
 
 def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
@@ -399,3 +413,19 @@ def constraint_values(mech: Mechanism, loads: Loads, q):
     for rows, val in row_vals:
         out = out.at[np.asarray(rows).reshape(-1)].set(val.reshape(-1))
     return out
+
+
+def to_internal(mech: Mechanism, q):
+    """Public coordinates (p, b) → solver coordinates (P = p + R(b)·c, b), one case."""
+    c = jnp.asarray(get_layout(mech).centre[:-1])
+    qb = q.reshape(-1, 6)
+    rot = jax.vmap(gibbs_to_matrix)(qb[:, 3:])
+    return jnp.concatenate([qb[:, :3] + jnp.einsum("pij,pj->pi", rot, c), qb[:, 3:]], 1).ravel()
+
+
+def to_public(mech: Mechanism, y):
+    """Solver coordinates (P, b) → public coordinates (p = P − R(b)·c, b), one case."""
+    c = jnp.asarray(get_layout(mech).centre[:-1])
+    yb = y.reshape(-1, 6)
+    rot = jax.vmap(gibbs_to_matrix)(yb[:, 3:])
+    return jnp.concatenate([yb[:, :3] - jnp.einsum("pij,pj->pi", rot, c), yb[:, 3:]], 1).ravel()

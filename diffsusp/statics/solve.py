@@ -3,7 +3,7 @@
 spec: stiffness §1.9 (Q_ext + Q_int + Φ_qᵀλ = 0, Φ = c); DESIGN.md "Static equilibrium".
 
 Per load case: multipliers initialised by weighted least squares at the start pose; each Newton
-step solves the KKT system after Ruiz row/column equilibration (forces in N, moments in N·mm and
+step solves the KKT system after a Ruiz row/column equilibration (forces in N, moments in N·mm and
 constraint rows in mm or radians differ by orders of magnitude); the step is capped so no Gibbs
 vector moves by more than 0.5 at once and backtracked on a scaled merit function. A case has
 converged when every force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with F_s the load
@@ -21,9 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .kernel import assemble, get_layout
+from .kernel import assemble, constraint_values, get_layout, to_internal, to_public
 
 SUCCESS, MAX_STEPS, NONFINITE = 0, 1, 2
 STATUS_TEXT = {SUCCESS: "converged", MAX_STEPS: "max_steps reached", NONFINITE: "non-finite"}
@@ -50,7 +50,7 @@ class StaticSolution(eqx.Module):
         return self.status == SUCCESS
 
 
-def _ruiz(jac, sweeps: int = 3):
+def _ruiz(jac, sweeps: int = 1):
     """Row and column scalings (d_r, d_c) with diag(d_r)·J·diag(d_c) equilibrated."""
     d_r = jnp.ones(jac.shape[0], jac.dtype)
     d_c = jnp.ones(jac.shape[1], jac.dtype)
@@ -73,15 +73,13 @@ class _Weights(eqx.Module):
 
     force: Array  # (n + m,) multiply the residual to get "relative force" rows (forces only)
     constraint: Array  # (n + m,) multiply to get constraint rows in mm
-    is_force: Array
 
 
-def _weights(mech: Mechanism, loads: Loads, lam0, jac0):
+def _weights(mech: Mechanism, loads: Loads, reaction):
     lay = get_layout(mech)
     n, m = lay.n, lay.m
     length = mech.length_scale
     rot_col = np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6).astype(bool)
-    reaction = jac0[n:, :n].T @ lam0
     f_scale = (
         1.0
         + jnp.max(jnp.abs(loads.force), initial=0.0)
@@ -93,8 +91,7 @@ def _weights(mech: Mechanism, loads: Loads, lam0, jac0):
     constraint_w = jnp.concatenate(
         [jnp.zeros(n), jnp.asarray(np.where(lay.angular_live, length, 1.0))]
     )
-    return _Weights(force=force_w, constraint=constraint_w,
-                    is_force=jnp.asarray(np.r_[np.ones(n), np.zeros(m)].astype(bool)))
+    return _Weights(force=force_w, constraint=constraint_w)
 
 
 def _measures(r, w: _Weights, length):
@@ -104,9 +101,8 @@ def _measures(r, w: _Weights, length):
     return force, constraint, merit
 
 
-def _initial_multipliers(jac, r, n, length, angular):
+def _initial_multipliers(a, r, n, length, angular):
     """Weighted least squares for λ at the start pose: min ‖W(Q + Φ_qᵀλ)‖ (W: moments / L)."""
-    a = jac[n:, :n]  # Φ_q (m, n)
     col_w = jnp.asarray(np.tile(np.r_[np.ones(3), np.full(3, 1.0 / length)], n // 6))
     row_s = jnp.asarray(np.where(angular, 1.0 / length, 1.0))  # λ in N for every row
     a_s = a * row_s[:, None] * col_w[None, :]
@@ -121,11 +117,6 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     lay = get_layout(mech)
     n, m = lay.n, lay.m
     length = mech.length_scale
-    r0, jac0 = assemble(mech, loads, q0, jnp.zeros(m, q0.dtype))
-    lam0 = (
-        _initial_multipliers(jac0, r0, n, length, lay.angular_live) if m else jnp.zeros(0)
-    )
-    w = _weights(mech, loads, lam0, jac0)
     rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6), np.zeros(m)])
 
     def evaluate(y):
@@ -134,46 +125,61 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     def residual(y):
         return assemble(mech, loads, y[:n], y[n:], with_jacobian=False)[0]
 
+    # Multipliers: least squares against the generalised forces at the start pose.
+    r0 = residual(jnp.concatenate([q0, jnp.zeros(m, q0.dtype)]))
+    if m:
+        live = np.asarray(mech.independent_rows)
+        phi_q = jax.jacfwd(lambda q: constraint_values(mech, loads, q)[live])(q0)
+        lam0 = _initial_multipliers(phi_q, r0, n, length, lay.angular_live)
+        reaction = phi_q.T @ lam0
+    else:
+        lam0, reaction = jnp.zeros(0, q0.dtype), jnp.zeros(n, q0.dtype)
+    w = _weights(mech, loads, reaction)
     y0 = jnp.concatenate([q0, lam0])
-    r, jac = evaluate(y0)
+    r_start = r0 + jnp.concatenate([reaction, jnp.zeros(m, q0.dtype)])
 
-    def done(r):
+    def done(r, step):
+        # Converged, or at the round-off floor: within 1000× the tolerances and no longer moving.
         force, constraint, _ = _measures(r, w, length)
-        return (force <= rtol) & (constraint <= atol)
+        tight = (force <= rtol) & (constraint <= atol)
+        floor = (force <= 1e3 * rtol) & (constraint <= 1e3 * atol) & (step <= 1e-13)
+        return tight | floor
 
     def cond(state):
-        y, r, jac, it, status = state
-        return (it < max_steps) & (status == MAX_STEPS) & ~done(r)
+        y, r, it, status, step = state
+        return (it < max_steps) & (status == MAX_STEPS) & ~done(r, step)
 
     def body(state):
-        y, r, jac, it, status = state
+        y, _, it, status, _ = state
+        r, jac = evaluate(y)
         dy = _scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, 0.5 / jnp.maximum(cap, 1e-300))
-        _, _, merit0 = _measures(r, w, length)
+        merit0 = _measures(r, w, length)[2]
 
+        # Backtracking from α = 1 (the first pass of the loop evaluates the full step).
         def ls_cond(carry):
-            alpha, merit_new, k = carry
-            return (k < 12) & ~(merit_new <= (1.0 - 1e-4 * alpha) * merit0)
+            alpha, _, merit, k = carry
+            return (k < 13) & ~(merit <= (1.0 - 1e-4 * alpha) * merit0)
 
         def ls_body(carry):
-            alpha, _, k = carry
-            alpha = 0.5 * alpha
-            return alpha, _measures(residual(y + alpha * dy), w, length)[2], k + 1
+            alpha, _, _, k = carry
+            alpha = jnp.where(k == 0, 1.0, 0.5 * alpha)
+            r_try = residual(y + alpha * dy)
+            merit = _measures(r_try, w, length)[2]
+            return alpha, r_try, jnp.where(jnp.isfinite(merit), merit, jnp.inf), k + 1
 
-        merit1 = _measures(residual(y + dy), w, length)[2]
-        merit1 = jnp.where(jnp.isfinite(merit1), merit1, jnp.inf)
-        alpha, _, _ = jax.lax.while_loop(ls_cond, ls_body, (jnp.asarray(1.0), merit1, 0))
-        y_new = y + alpha * dy
-        r_new, jac_new = evaluate(y_new)
-        finite = jnp.all(jnp.isfinite(r_new)) & jnp.all(jnp.isfinite(jac_new))
-        status = jnp.where(finite, status, NONFINITE)
-        return y_new, r_new, jac_new, it + 1, status
+        init = (jnp.asarray(1.0), r, jnp.asarray(jnp.inf), jnp.asarray(0))
+        alpha, r_new, _, _ = jax.lax.while_loop(ls_cond, ls_body, init)
+        status = jnp.where(jnp.all(jnp.isfinite(r_new)), status, NONFINITE)
+        step = jnp.max(jnp.abs(alpha * dy[:n])) / (length + jnp.max(jnp.abs(y[:n])))
+        return y + alpha * dy, r_new, it + 1, status, step
 
-    state = (y0, r, jac, jnp.asarray(0), jnp.asarray(MAX_STEPS))
-    y, r, jac, it, status = jax.lax.while_loop(cond, body, state)
+    state = (y0, r_start, jnp.asarray(0), jnp.asarray(MAX_STEPS), jnp.asarray(jnp.inf))
+    y, r, it, status, step = jax.lax.while_loop(cond, body, state)
     force, constraint, _ = _measures(r, w, length)
-    status = jnp.where(done(r), SUCCESS, jnp.where(jnp.all(jnp.isfinite(r)), status, NONFINITE))
+    status = jnp.where(done(r, step), SUCCESS,
+                       jnp.where(jnp.all(jnp.isfinite(r)), status, NONFINITE))
     info = jnp.stack([status.astype(float), it.astype(float), force, constraint])
     return y, info
 
@@ -201,10 +207,11 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
 
 
 def _solve_one(mech, loads, q0, rtol, atol, max_steps):
-    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y0 = to_internal(mech, q0)
+    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
     n = get_layout(mech).n
     return StaticSolution(
-        q=y[:n],
+        q=to_public(mech, y[:n]),
         multipliers=y[n:],
         status=info[0].astype(int),
         iterations=info[1].astype(int),
@@ -250,8 +257,10 @@ def _check_inputs(mech: Mechanism, loads: Loads):
                     f"{owner}{where[3:]} contains non-finite values (NaN or inf); every number "
                     "of a model and its loads must be finite."
                 )
-    if not _is_traced(mech.bushings.k_trans) and mech.bushings.names:
+    if mech.bushings.names:
         for field in ("k_trans", "k_rot"):
+            if _is_traced(getattr(mech.bushings, field)):
+                continue
             k = np.asarray(getattr(mech.bushings, field))
             if np.any(k < 0):
                 e, a = np.argwhere(k < 0)[0]
@@ -287,6 +296,33 @@ def _report(sol: StaticSolution, throw: bool, what: str):
     return sol
 
 
+@eqx.filter_jit
+def _bushing_angles(mech, q):
+    from .outputs import bushing_states
+
+    return bushing_states(mech, q)[1]
+
+
+def _check_validity(mech: Mechanism, sol: StaticSolution):
+    """Warn when a bushing's projected angles leave their validity (|AX|, |AY| < 15°,
+    |AZ| < 90°; spec stiffness §0)."""
+    if not mech.bushings.names or _is_traced(sol.q):
+        return
+    angles = np.abs(np.asarray(_bushing_angles(mech, sol.q))).reshape(-1, len(mech.bushings.names), 3)
+    limits = np.radians([15.0, 15.0, 90.0])
+    ratio = angles / limits
+    if np.any(ratio > 1.0):
+        c, e, a = np.unravel_index(np.argmax(ratio), ratio.shape)
+        warnings.warn(
+            f"bushing '{mech.bushings.names[e]}' is rotated by {np.degrees(angles[c, e, a]):.1f}° "
+            f"about its {'xyz'[a]} axis (case {c}), beyond the projected angles' validity "
+            f"(|AX|, |AY| < 15°, |AZ| < 90°): its law is not meaningful there. Check the loads "
+            "or model a joint instead of the bushing.",
+            ModelWarning,
+            stacklevel=3,
+        )
+
+
 def _start(mech, loads, q0, n_cases):
     n = mech.n_coordinates
     if q0 is None:
@@ -313,8 +349,8 @@ def solve_statics(
     loads: Loads,
     *,
     q0: Float[Array, "*cases n"] | None = None,
-    rtol: float = 1e-10,
-    atol: float = 1e-9,
+    rtol: float = 1e-12,
+    atol: float = 1e-10,
     max_steps: int = 50,
     chunk: int | None = 4096,
     throw: bool = True,
@@ -344,6 +380,7 @@ def solve_statics(
         sol = jax.tree.map(lambda a: a[0], sol)
     else:
         sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+    _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
 
 
@@ -352,8 +389,8 @@ def solve_sweep(
     loads: Loads,
     *,
     q0: Float[Array, " n"] | None = None,
-    rtol: float = 1e-10,
-    atol: float = 1e-9,
+    rtol: float = 1e-12,
+    atol: float = 1e-10,
     max_steps: int = 50,
     throw: bool = True,
 ) -> StaticSolution:
@@ -366,4 +403,5 @@ def solve_sweep(
         raise ValueError("solve_sweep needs loads with a leading case axis (the path).")
     q0 = _start(mech, loads, q0, None)
     sol = _solve_path(mech, loads, q0, rtol, atol, max_steps)
+    _check_validity(mech, sol)
     return _report(sol, throw, "solve_sweep")

@@ -1,0 +1,143 @@
+"""Benchmark of the static-equilibrium solver (issue: core solver).
+
+Run by hand: `python benchmarks/statics.py [--quick]`. Prints a table and writes
+benchmarks/results/statics.json. Measures, after compilation: equilibria per second for batches
+of 1, 13, 100, 1 000 and 10 000 load cases on pseudo_mcpherson and double_wishbone, the latency
+of one solve, the compile time, the cost of the full Jacobian of all marker positions with
+respect to all stiffnesses for the 13 thesis cases, and the same equilibria solved by the plain
+NumPy/SciPy Newton of tests/oracle.py (finite-difference Jacobian) in the same process, reported
+as a ratio. Timings are never asserted anywhere.
+"""
+
+import argparse
+import json
+import pathlib
+import resource
+import sys
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import equinox as eqx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import diffsusp as ds  # noqa: E402
+from diffsusp.models import double_wishbone, pseudo_mcpherson, thesis_load_cases  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+import oracle  # noqa: E402
+
+
+def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
+    """Loads across the thesis envelope: vertical 1500–7500 N, lateral/longitudinal ±4000 N
+    (one horizontal component at a time, like the thesis's cases)."""
+    fz = rng.uniform(*vertical, n)
+    h = rng.uniform(-horizontal, horizontal, n)
+    lateral = rng.random(n) < 0.5
+    return np.stack([np.where(lateral, 0.0, h), np.where(lateral, h, 0.0), fz], axis=1)
+
+
+def timed(fn, repeats):
+    out = fn()
+    jax.block_until_ready(out)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        out = fn()
+    jax.block_until_ready(out)
+    return (time.perf_counter() - t0) / repeats, out
+
+
+def bench_model(name, mech, rng, sizes, baseline_cases):
+    rows = []
+    for n in sizes:
+        loads = mech.loads(forces={"contact_patch": envelope(n, rng)})
+        t0 = time.perf_counter()
+        sol = ds.solve_statics(mech, loads, throw=False)
+        jax.block_until_ready(sol.q)
+        first = time.perf_counter() - t0
+        dt, sol = timed(lambda: ds.solve_statics(mech, loads, throw=False),
+                        repeats=3 if n >= 1000 else 10)
+        rows.append(dict(model=name, cases=n, seconds=dt, per_second=n / dt,
+                         compile_and_first=first, mean_iterations=float(np.mean(sol.iterations)),
+                         failed=int(np.sum(np.asarray(sol.status) != 0))))
+    one = mech.loads(forces={"contact_patch": jnp.array([0.0, 0.0, 4500.0])})
+    latency, _ = timed(lambda: ds.solve_statics(mech, one), repeats=20)
+    # Baseline: the NumPy/SciPy Newton with a finite-difference Jacobian, same cases.
+    loads = envelope(baseline_cases, rng)
+    t0 = time.perf_counter()
+    n_l = len(mech.load_points.names)
+    for c in range(baseline_cases):
+        force = np.zeros((n_l, 3))
+        force[mech.load_points.index("contact_patch")] = loads[c]
+        oracle.solve(mech, force, np.zeros((n_l, 3)), np.zeros(len(mech.drivers.names)))
+    base = (time.perf_counter() - t0) / baseline_cases
+    return rows, dict(model=name, latency_one=latency, baseline_per_solve=base)
+
+
+def jacobian_cost(mech):
+    loads = thesis_load_cases(mech)
+
+    def positions(k):
+        m = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.springs.k), mech, k)
+        return ds.marker_poses(m, ds.solve_statics(m, loads).q)[0]
+
+    k = (mech.bushings.k_trans, mech.bushings.k_rot, mech.springs.k)
+    fn = eqx.filter_jit(jax.jacfwd(positions))
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(k))
+    first = time.perf_counter() - t0
+    dt, _ = timed(lambda: fn(k), repeats=5)
+    n_params = sum(x.size for x in k)
+    return dict(seconds=dt, compile_and_first=first, n_params=n_params)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--quick", action="store_true", help="small batches only (CI smoke)")
+    args = parser.parse_args()
+    rng = np.random.default_rng(0)
+    sizes = (1, 13, 100) if args.quick else (1, 13, 100, 1000, 10000)
+    results = dict(rows=[], models=[])
+    for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
+                       ("double_wishbone", double_wishbone())):
+        rows, info = bench_model(name, mech, rng, sizes, baseline_cases=3 if args.quick else 13)
+        results["rows"] += rows
+        results["models"].append(info)
+    results["jacobian_13_cases"] = jacobian_cost(pseudo_mcpherson())
+    if not args.quick:
+        mech = pseudo_mcpherson()
+        loads = mech.loads(forces={"contact_patch": envelope(100_000, rng)})
+        t0 = time.perf_counter()
+        sol = ds.solve_statics(mech, loads, throw=False, chunk=4096)
+        jax.block_until_ready(sol.q)
+        results["batch_100k"] = dict(seconds=time.perf_counter() - t0,
+                                     failed=int(np.sum(np.asarray(sol.status) != 0)))
+    results["max_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+    print(f"{'model':18s} {'cases':>7s} {'solves/s':>10s} {'iters':>6s} {'failed':>6s} "
+          f"{'compile+1st s':>13s}")
+    for r in results["rows"]:
+        print(f"{r['model']:18s} {r['cases']:7d} {r['per_second']:10.0f} "
+              f"{r['mean_iterations']:6.2f} {r['failed']:6d} {r['compile_and_first']:13.2f}")
+    for info in results["models"]:
+        best = max(r["per_second"] for r in results["rows"] if r["model"] == info["model"])
+        print(f"{info['model']}: latency of one solve {info['latency_one'] * 1e3:.2f} ms; "
+              f"NumPy/SciPy baseline {info['baseline_per_solve'] * 1e3:.1f} ms per solve; "
+              f"ratio (best batched throughput / baseline) "
+              f"{best * info['baseline_per_solve']:.0f}x")
+    jac = results["jacobian_13_cases"]
+    print(f"Jacobian of all marker positions w.r.t. {jac['n_params']} stiffnesses, 13 cases: "
+          f"{jac['seconds'] * 1e3:.1f} ms (compile+first {jac['compile_and_first']:.1f} s)")
+    if "batch_100k" in results:
+        print(f"100 000 cases (chunks of 4096): {results['batch_100k']['seconds']:.1f} s")
+    print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
+    out = pathlib.Path(__file__).parent / "results"
+    out.mkdir(exist_ok=True)
+    (out / ("statics_quick.json" if args.quick else "statics.json")).write_text(
+        json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,149 @@
+"""Quantities derived from an equilibrium: poses, bushing deformations and forces, spring
+lengths and forces, joint reactions. Each function takes public coordinates q (one case, or a
+leading case axis) and is differentiable, so it composes with the implicit solve.
+
+spec: stiffness §0 (poses, projected angles), §1.8 (bushing law), §1.7 (springs), §1.9
+(multipliers are the joint reactions).
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix
+from ..model.mechanism import GROUND, JOINT_ROWS, Mechanism, row_blocks
+from .kernel import (
+    _vmapped_constraint,
+    bushing_params,
+    bushing_state,
+    get_layout,
+    joint_rows,
+    spring_tension,
+    to_internal,
+)
+from .solve import StaticSolution
+
+
+def _batched(fn):
+    """Apply a one-case function of (mech, q, ...) over a leading case axis of q if present."""
+
+    @functools.wraps(fn)
+    def wrapper(mech, q, *args):
+        q = jnp.asarray(q)
+        if q.ndim == 2:
+            return jax.vmap(lambda q_, *a: fn(mech, q_, *a))(q, *args)
+        return fn(mech, q, *args)
+
+    return wrapper
+
+
+@_batched
+def part_poses(mech: Mechanism, q):
+    """Rotation R (P, 3, 3) and translation T (P, 3) (mm) of every part frame in the global
+    frame (at design R = I and T = 0)."""
+    qb = q.reshape(-1, 6)
+    return jax.vmap(gibbs_to_matrix)(qb[:, 3:]), qb[:, :3]
+
+
+@_batched
+def marker_poses(mech: Mechanism, q):
+    """Global positions (M, 3) (mm) and orientations (M, 3, 3) of every marker."""
+    rot, trans = part_poses(mech, q)
+    part = np.asarray(mech.markers.part)
+    moving = part != GROUND
+    idx = np.where(moving, part, 0)
+    r = jnp.where(moving[:, None, None], rot[idx], jnp.eye(3)) if len(mech.parts) else jnp.eye(3)
+    t = jnp.where(moving[:, None], trans[idx], 0.0) if len(mech.parts) else jnp.zeros(3)
+    pos = t + jnp.einsum("mij,mj->mi", r, mech.markers.position)
+    return pos, jnp.einsum("mij,mjk->mik", r, mech.markers.orientation)
+
+
+def _element_z(mech, q, i_markers, j_markers):
+    lay = get_layout(mech)
+    y = jnp.concatenate([to_internal(mech, q), jnp.zeros(6)])
+    idx = lay.coords(i_markers, j_markers)
+    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
+    return y[idx], offset
+
+
+@_batched
+def bushing_states(mech: Mechanism, q):
+    """Per bushing: translational deformation δ_T (n, 3) (mm, in J), projected angles (n, 3)
+    (rad), force (n, 3) (N) and torque (n, 3) (N·mm) on the I part in J axes."""
+    b = mech.bushings
+    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+    z, offset = _element_z(mech, q, i, j)
+    mk = mech.markers
+    params = bushing_params(mech)
+    if b.has_splines:
+        mask = jnp.asarray(b.spline_axes, dtype=bool)
+        state = jax.vmap(bushing_state)(z, offset[i], mk.orientation[i], offset[j],
+                                        mk.orientation[j], params, mask)
+    else:
+        params = {k: v for k, v in params.items() if not k.startswith("spline")}
+        state = jax.vmap(functools.partial(bushing_state, spline_mask=None))(
+            z, offset[i], mk.orientation[i], offset[j], mk.orientation[j], params
+        )
+    return state[:4]
+
+
+@_batched
+def spring_states(mech: Mechanism, q):
+    """Per spring: length (n,) (mm) and tension (n,) (N, positive pulls the seats together)."""
+    s = mech.springs
+    pos, _ = marker_poses(mech, q)
+    length = jnp.linalg.norm(pos[np.asarray(s.i_marker)] - pos[np.asarray(s.j_marker)], axis=-1)
+    params = dict(k=s.k, free_length=s.free_length, table_x=s.table_x, table_y=s.table_y)
+    tension = jnp.stack(
+        [
+            spring_tension(length[e], {k: v[e] for k, v in params.items()}, s.tabulated[e])
+            for e in range(len(s.names))
+        ]
+    ) if s.names else jnp.zeros(0)
+    return length, tension
+
+
+def joint_reactions(mech: Mechanism, sol: StaticSolution):
+    """Reaction wrench of every joint on its I part, at the I marker, global components.
+
+    **Returns:** force (n_joints, 3) (N) and moment (n_joints, 3) (N·mm), with a leading case
+    axis if `sol` has one. Rows dropped as redundant carry no reaction (Adams does the same).
+    """
+    if sol.q.ndim == 2:
+        return jax.vmap(lambda q, lam: _joint_reactions(mech, q, lam))(sol.q, sol.multipliers)
+    return _joint_reactions(mech, sol.q, sol.multipliers)
+
+
+def _joint_reactions(mech: Mechanism, q, lam):
+    lay = get_layout(mech)
+    y = to_internal(mech, q)
+    lam_rows = jnp.concatenate([lam, jnp.zeros(1)])[jnp.asarray(lay.row_slot - lay.base)]
+    mk = mech.markers
+    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
+    yfull = jnp.concatenate([y, jnp.zeros(6)])
+    pos, _ = marker_poses(mech, q)
+    n_joints = len(mech.joints.names)
+    force = jnp.zeros((n_joints, 3))
+    moment = jnp.zeros((n_joints, 3))
+    for kind, idx, offsets in row_blocks(mech.joints):
+        i = np.asarray(mech.joints.i_marker)[idx]
+        j = np.asarray(mech.joints.j_marker)[idx]
+        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
+        d0 = mk.position[i] - mk.position[j]
+        args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
+                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
+        z = yfull[lay.coords(i, j)]
+        _, _, g, _ = _vmapped_constraint(functools.partial(joint_rows, kind), z,
+                                         lam_rows[jnp.asarray(rows)], args)
+        f_i = g[:, :3]
+        b_i = z[:, 3:6]
+        # Q_b = G(b)ᵀ M about the part's reference point: recover M, move it to the marker.
+        m_ref = jax.vmap(lambda b, gb: jnp.linalg.solve(gibbs_angular_jacobian(b).T, gb))(
+            b_i, g[:, 3:6]
+        )
+        arm = pos[i] - z[:, :3]
+        force = force.at[idx].set(f_i)
+        moment = moment.at[idx].set(m_ref - jnp.cross(arm, f_i))
+    return force, moment
