@@ -250,13 +250,16 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
     vec_terms, mat_terms = [], []
 
     def add_force(fn, idx, *args):
-        z = qfull[idx]
-        if with_jacobian:
-            val, jac = jax.vmap(_value_and_jacfwd(fn))(z, *args)
-            mat_terms.append((idx[:, :, None], idx[:, None, :], jac))
-        else:
-            val = jax.vmap(fn)(z, *args)
-        vec_terms.append((idx, val))
+        for sel, side, sub in _ground_split(idx, lay):
+            f = _restrict(fn, side, slice_output=True)
+            a = jax.tree.map(lambda x: x[sel], args)
+            z = qfull[sub]
+            if with_jacobian:
+                val, jac = jax.vmap(_value_and_jacfwd(f))(z, *a)
+                mat_terms.append((sub[:, :, None], sub[:, None, :], jac))
+            else:
+                val = jax.vmap(f)(z, *a)
+            vec_terms.append((sub, val))
 
     if mech.bushings.names:
         b = mech.bushings
@@ -306,10 +309,12 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
             if not sel.any():
                 continue
             mm, ff = m_idx[sel], np.where(f_idx[sel] < 0, m_idx[sel], f_idx[sel])
+            idx = lay.coords(mm, ff)
+            if is_global:  # the frame is fixed: only the loaded part's coordinates matter
+                idx[:, 6:] = lay.base - 6 + np.arange(6)
             add_force(
                 functools.partial(_load_force, global_frame=is_global),
-                lay.coords(mm, ff), offset[mm], mk.orientation[ff],
-                loads.force[sel], loads.moment[sel],
+                idx, offset[mm], mk.orientation[ff], loads.force[sel], loads.moment[sel],
             )
 
     # Constraint rows: value, (r, 12) Jacobian and λ-weighted Hessian per joint.
@@ -336,6 +341,40 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
     return vec_terms, mat_terms, row_vals
 
 
+def _ground_split(idx, lay):
+    """Split a group of two-part elements (E, 12 coordinate indices) by which parts move:
+    yields (selection, side, indices) with side 'both' (12 coordinates), 'a' or 'b' (the 6 of
+    the moving part; the other is the ground). Differentiating only what moves halves the work
+    for the many elements attached to the ground (the body of a K&C rig)."""
+    ground = lay.base - 6
+    a_ground = idx[:, 0] == ground
+    b_ground = idx[:, 6] == ground
+    for sel, side, cols in (
+        (~a_ground & ~b_ground, "both", slice(0, 12)),
+        (~a_ground & b_ground, "a", slice(0, 6)),
+        (a_ground & ~b_ground, "b", slice(6, 12)),
+    ):
+        if sel.any():
+            yield sel, side, idx[sel][:, cols]
+
+
+def _restrict(fn, side: str, slice_output: bool):
+    """`fn(z12, ...)` as a function of the moving part's 6 coordinates (ground ones are zero).
+    With `slice_output`, keep only the moving part's 6 generalised forces."""
+    if side == "both":
+        return fn
+
+    def restricted(z6, *args):
+        zero = jnp.zeros(6, z6.dtype)
+        z = jnp.concatenate([z6, zero] if side == "a" else [zero, z6])
+        out = fn(z, *args)
+        if slice_output:
+            return out[:6] if side == "a" else out[6:]
+        return out
+
+    return restricted
+
+
 def _value_and_jacfwd(fn):
     """`fn(z, *args) -> (value, ∂value/∂z)`, the primal computed once (forward mode)."""
 
@@ -351,7 +390,14 @@ def _value_and_jacfwd(fn):
 
 
 def _constraint_terms(fn, idx, rows, args, qfull, lam_rows, lay, vec_terms, mat_terms,
-                      row_vals, with_jacobian, offset=None):
+                      row_vals, with_jacobian, offset=None, split=True):
+    if split and idx.shape[1] == 12:
+        for sel, side, sub in _ground_split(idx, lay):
+            _constraint_terms(_restrict(fn, side, slice_output=False), sub, rows[sel],
+                              jax.tree.map(lambda x: x[sel], args), qfull, lam_rows, lay,
+                              vec_terms, mat_terms, row_vals, with_jacobian,
+                              None if offset is None else offset[sel], split=False)
+        return
     z = qfull[idx]
     lam_e = lam_rows[jnp.asarray(rows)]  # (E, r)
     slots = lay.row_slot[rows]  # (E, r)
@@ -389,20 +435,30 @@ def _vmapped_constraint(fn, z, lam_e, args):
 
 
 def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
-    """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case."""
+    """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case.
+
+    All element contributions land in the live unknowns through one scatter-add each for the
+    vector and the matrix (static destinations; ground and redundant-row entries go to a trash
+    slot), which XLA runs far faster than one scatter per element group.
+    """
     lay = get_layout(mech)
     vec_terms, mat_terms, _ = _element_terms(mech, loads, q, lam, lay, with_jacobian)
-    r = jnp.zeros(lay.size, q.dtype)
-    for idx, val in vec_terms:
-        r = r.at[np.asarray(idx).reshape(-1)].add(val.reshape(-1))
-    r = r[lay.keep]
+    size = lay.n + lay.m
+    pos = np.full(lay.size, size)  # global index → live position; everything else → trash
+    pos[lay.keep] = np.arange(size)
+    dest = np.concatenate([pos[np.asarray(idx)].reshape(-1) for idx, _ in vec_terms])
+    vals = jnp.concatenate([val.reshape(-1) for _, val in vec_terms])
+    r = jnp.zeros(size + 1, q.dtype).at[dest].add(vals)[:size]
     if not with_jacobian:
         return r, None
-    jac = jnp.zeros((lay.size, lay.size), q.dtype)
+    dests, vals = [], []
     for ri, ci, val in mat_terms:
-        ri, ci = np.broadcast_arrays(np.asarray(ri), np.asarray(ci))
-        jac = jac.at[ri.reshape(-1), ci.reshape(-1)].add(val.reshape(-1))
-    return r, jac[np.ix_(lay.keep, lay.keep)]
+        ri, ci = np.broadcast_arrays(pos[np.asarray(ri)], pos[np.asarray(ci)])
+        trash = (ri == size) | (ci == size)
+        dests.append(np.where(trash, size * size, ri * size + ci).reshape(-1))
+        vals.append(val.reshape(-1))
+    flat = jnp.zeros(size * size + 1, q.dtype).at[np.concatenate(dests)].add(jnp.concatenate(vals))
+    return r, flat[:-1].reshape(size, size)
 
 
 def constraint_values(mech: Mechanism, loads: Loads, q):

@@ -250,7 +250,7 @@ def _check_inputs(mech: Mechanism, loads: Loads):
     """Value checks on concrete inputs (traced inputs are checked by `eqx.error_if`)."""
     for path, leaf in jax.tree_util.tree_leaves_with_path((mech, loads)):
         if eqx.is_inexact_array(leaf) and not _is_traced(leaf):
-            if not bool(jnp.all(jnp.isfinite(leaf))):
+            if not np.all(np.isfinite(np.asarray(leaf))):
                 where = jax.tree_util.keystr(path)
                 owner = "mechanism" if path[0].idx == 0 else "loads"
                 raise ValueError(
