@@ -11,7 +11,7 @@ that moves most in it.
 
 import dataclasses
 
-import jax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -55,17 +55,25 @@ def _row_names(mech: Mechanism) -> list[str]:
     return names
 
 
+@eqx.filter_jit
+def _at_design(mech: Mechanism):
+    from ..statics.kernel import assemble, constraint_values, get_layout, to_internal
+
+    loads = mech.loads()
+    q0 = to_internal(mech, jnp.zeros(mech.n_coordinates))
+    phi = constraint_values(mech, loads, q0)
+    _, jac = assemble(mech, loads, q0, jnp.zeros(get_layout(mech).m))
+    return phi, jac
+
+
 def _design_matrices(mech: Mechanism):
     """Constraint values, Φ_q (all rows) and tangent stiffness at q = 0 with no load."""
-    from ..statics.kernel import assemble, constraint_values, get_layout, to_internal
+    from ..statics.kernel import get_layout
 
     all_rows = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows)))
     lay = get_layout(all_rows)
-    loads = all_rows.loads()
-    q0 = to_internal(all_rows, jnp.zeros(mech.n_coordinates))
-    phi = np.asarray(constraint_values(all_rows, loads, q0))
-    _, jac = jax.jit(lambda m, l: assemble(m, l, q0, jnp.zeros(lay.m)))(all_rows, loads)
-    jac = np.asarray(jac)
+    phi, jac = _at_design(all_rows)
+    phi, jac = np.asarray(phi), np.asarray(jac)
     n = mech.n_coordinates
     return phi, jac[n:, :n], -jac[:n, :n], lay
 

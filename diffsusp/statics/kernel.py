@@ -485,3 +485,41 @@ def to_public(mech: Mechanism, y):
     yb = y.reshape(-1, 6)
     rot = jax.vmap(gibbs_to_matrix)(yb[:, 3:])
     return jnp.concatenate([yb[:, :3] - jnp.einsum("pij,pj->pi", rot, c), yb[:, 3:]], 1).ravel()
+
+
+def _screw_coefficients(t2):
+    """(1 − cos θ)/θ², (θ − sin θ)/θ³ and tan(θ/2)/θ for θ² = t2, series near 0."""
+    small = t2 < 1e-6
+    t2s = jnp.where(small, 1.0, t2)
+    theta = jnp.sqrt(t2s)
+    c1 = jnp.where(small, 0.5 - t2 / 24.0, (1.0 - jnp.cos(theta)) / t2s)
+    c2 = jnp.where(small, 1.0 / 6.0 - t2 / 120.0, (theta - jnp.sin(theta)) / (t2s * theta))
+    c3 = jnp.where(small, 0.5 + t2 / 24.0, jnp.tan(0.5 * theta) / theta)
+    return c1, c2, c3
+
+
+def retract(y, dy, n: int):
+    """Move solver coordinates y by a Newton increment dy along rigid-body screw motions.
+
+    The increment of each part (dP, db) is read as a twist: ω = G(b)·db (global rotation
+    vector) and dP the velocity of its reference point. The part is moved by the exponential of
+    that twist, P ← P + V(ω)·dP with V(ω)·ω× = exp(ω×) − I, b ← b(ω) ∘ b. To first order this is
+    the additive step; beyond it, a part turning about a joint stays on its arc instead of
+    leaving it along the tangent, which keeps Newton's steps long on swinging arms.
+    Multipliers move additively.
+    """
+    q = y[:n].reshape(-1, 6)
+    d = dy[:n].reshape(-1, 6)
+
+    def one(q6, d6):
+        b = q6[3:]
+        w = gibbs_angular_jacobian(b) @ d6[3:]
+        c1, c2, c3 = _screw_coefficients(w @ w)
+        wx = jnp.cross(w, d6[:3])
+        step = d6[:3] + c1 * wx + c2 * jnp.cross(w, wx)
+        g = c3 * w  # Gibbs vector of the rotation ω
+        b_new = (g + b + jnp.cross(g, b)) / (1.0 - g @ b)
+        return jnp.concatenate([q6[:3] + step, b_new])
+
+    moved = jax.vmap(one)(q, d).reshape(-1)
+    return jnp.concatenate([moved, y[n:] + dy[n:]])

@@ -23,10 +23,23 @@ from jaxtyping import Array, Float, Int
 
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .kernel import assemble, constraint_values, get_layout, to_internal, to_public
+from .kernel import (
+    assemble,
+    constraint_values,
+    get_layout,
+    retract,
+    to_internal,
+    to_public,
+)
 
-SUCCESS, MAX_STEPS, NONFINITE = 0, 1, 2
-STATUS_TEXT = {SUCCESS: "converged", MAX_STEPS: "max_steps reached", NONFINITE: "non-finite"}
+SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
+STATUS_TEXT = {
+    SUCCESS: "converged",
+    MAX_STEPS: "max_steps reached",
+    NONFINITE: "non-finite",
+    STALLED: "stalled: no descent in the last steps",
+}
+_STALL_STEPS = 6  # consecutive steps shorter than 1/100 of Newton's before giving up
 
 
 class StaticSolution(eqx.Module):
@@ -146,11 +159,11 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         return tight | floor
 
     def cond(state):
-        y, r, it, status, step = state
+        y, r, it, status, step, _ = state
         return (it < max_steps) & (status == MAX_STEPS) & ~done(r, step)
 
     def body(state):
-        y, _, it, status, _ = state
+        y, _, it, status, _, stall = state
         r, jac = evaluate(y)
         dy = _scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
@@ -165,18 +178,24 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         def ls_body(carry):
             alpha, _, _, k = carry
             alpha = jnp.where(k == 0, 1.0, 0.5 * alpha)
-            r_try = residual(y + alpha * dy)
+            r_try = residual(retract(y, alpha * dy, n))
             merit = _measures(r_try, w, length)[2]
             return alpha, r_try, jnp.where(jnp.isfinite(merit), merit, jnp.inf), k + 1
 
         init = (jnp.asarray(1.0), r, jnp.asarray(jnp.inf), jnp.asarray(0))
         alpha, r_new, _, _ = jax.lax.while_loop(ls_cond, ls_body, init)
         status = jnp.where(jnp.all(jnp.isfinite(r_new)), status, NONFINITE)
+        # A case whose line search keeps cutting the step to nothing has no equilibrium
+        # nearby (e.g. a suspension pulled past its travel): stop it so that it does not hold
+        # the whole vmapped batch to max_steps.
+        stall = jnp.where(alpha < 0.01, stall + 1, 0)
+        status = jnp.where(stall >= _STALL_STEPS, STALLED, status)
         step = jnp.max(jnp.abs(alpha * dy[:n])) / (length + jnp.max(jnp.abs(y[:n])))
-        return y + alpha * dy, r_new, it + 1, status, step
+        return retract(y, alpha * dy, n), r_new, it + 1, status, step, stall
 
-    state = (y0, r_start, jnp.asarray(0), jnp.asarray(MAX_STEPS), jnp.asarray(jnp.inf))
-    y, r, it, status, step = jax.lax.while_loop(cond, body, state)
+    state = (y0, r_start, jnp.asarray(0), jnp.asarray(MAX_STEPS), jnp.asarray(jnp.inf),
+             jnp.asarray(0))
+    y, r, it, status, step, _ = jax.lax.while_loop(cond, body, state)
     force, constraint, _ = _measures(r, w, length)
     status = jnp.where(done(r, step), SUCCESS,
                        jnp.where(jnp.all(jnp.isfinite(r)), status, NONFINITE))

@@ -1,0 +1,41 @@
+"""Built-in reference mechanisms: the thesis's validation cases and generic axles.
+
+Each builder returns a validated `Mechanism` whose docstring states its source, frame, and
+every assumption or reconstructed value. Units: mm, N, N·mm, rad.
+
+- `isolated_bushing`: one arm on one bushing (Adams `model_exemple11`, closed form).
+- `crank_slider`: crank-slider with a redundant constraint and a slider bushing.
+- `two_bushing_coupler`: two links on bushings joined by a coupler (parallel Krx/Kry).
+- `pseudo_mcpherson`: the thesis's K&C test half axle (Tables 2.1, 2.2).
+- `double_wishbone`: Chrono::Vehicle's generic double wishbone (JSON hardpoints).
+
+`ZOO` maps a name to a zero-argument builder, for parametrised tests.
+"""
+
+from collections.abc import Callable
+
+from ..model import Mechanism
+from .crank_slider import crank_slider
+from .double_wishbone import DOUBLE_WISHBONE_DESIGN_LOAD, double_wishbone
+from .isolated_bushing import isolated_bushing
+from .loadcases import TABLE_4_4, TABLE_5_1, thesis_load_cases
+from .pseudo_mcpherson import pseudo_mcpherson
+from .two_bushing_coupler import two_bushing_coupler
+
+ZOO: dict[str, Callable[[], Mechanism]] = {
+    "isolated_bushing": isolated_bushing,
+    "isolated_bushing_10000": lambda: isolated_bushing(k_trans=10000.0),
+    "crank_slider": crank_slider,
+    "two_bushing_coupler": two_bushing_coupler,
+    "pseudo_mcpherson": pseudo_mcpherson,
+    "pseudo_mcpherson_wheel_travel": lambda: pseudo_mcpherson(wheel_travel=True),
+    "double_wishbone": double_wishbone,
+    "double_wishbone_bushings": lambda: double_wishbone(bushings=True),
+}
+"""Name → zero-argument builder of every built-in model variant."""
+
+__all__ = [
+    "DOUBLE_WISHBONE_DESIGN_LOAD", "TABLE_4_4", "TABLE_5_1", "ZOO", "crank_slider",
+    "double_wishbone", "isolated_bushing", "pseudo_mcpherson", "thesis_load_cases",
+    "two_bushing_coupler",
+]
