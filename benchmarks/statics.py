@@ -31,10 +31,12 @@ import oracle  # noqa: E402
 
 
 def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
-    """Loads across the thesis envelope: vertical 1500–7500 N, lateral/longitudinal ±4000 N
-    (one horizontal component at a time, like the thesis's cases)."""
+    """Loads across the thesis envelope: vertical 1500–7500 N, and one horizontal component at
+    a time (lateral or longitudinal, like the thesis's cases) up to ±4000 N at 4500 N vertical,
+    scaled with the vertical load (a friction-like limit: the model has no bump stops, and a
+    4000 N side load on a lightly loaded wheel pulls it past its travel)."""
     fz = rng.uniform(*vertical, n)
-    h = rng.uniform(-horizontal, horizontal, n)
+    h = rng.uniform(-horizontal, horizontal, n) * np.minimum(1.0, fz / 4500.0)
     lateral = rng.random(n) < 0.5
     return np.stack([np.where(lateral, 0.0, h), np.where(lateral, h, 0.0), fz], axis=1)
 
