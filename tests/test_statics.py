@@ -181,7 +181,8 @@ def test_vmap_equals_loop_and_no_retrace(mount):
     solve_module._newton = counting
     try:
         for scale in (1.0, 1.3, 0.7):
-            stiffer = eqx.tree_at(lambda m: m.bushings.k_trans, mount, mount.bushings.k_trans * scale)
+            k = mount.bushings.k_trans * scale
+            stiffer = eqx.tree_at(lambda m: m.bushings.k_trans, mount, k)
             ds.solve_statics(stiffer, mount.loads(forces={"load": forces}))
     finally:
         solve_module._newton = newton
@@ -323,3 +324,46 @@ def test_bushing_rotated_past_validity_warns(iso):
 def test_projected_angle_convention_matches_adams():
     r = reuler_deg_to_matrix(jnp.array([0.0, 10.0, 0.0]))  # 10° about x
     np.testing.assert_allclose(projected_angles(r), [np.radians(10.0), 0.0, 0.0], atol=1e-15)
+
+
+@pytest.mark.slow
+def test_pseudo_mcpherson_gradients_match_central_differences():
+    """Wheel-centre position under the 13 thesis cases: ∂/∂(bushing stiffness, hardpoint, spring
+    free length, loads) by the implicit forward mode against central differences."""
+    from diffsusp.models import pseudo_mcpherson, thesis_load_cases
+
+    mech = pseudo_mcpherson()
+    loads = thesis_load_cases(mech)
+    wc = mech.markers.index("wheel_centre")
+    # The rear ball joint's hardpoint: both of its markers move together.
+    l7 = np.array([mech.markers.index("L7_rear_arm_ball"), mech.markers.index("L7_hub_rear_ball")])
+
+    def params_of(m, l):
+        return (m.bushings.k_trans[1, 0], m.markers.position[l7[0], 2], m.springs.free_length[0],
+                l.force[:, 0, 1])
+
+    def centre(theta):
+        k, z7, free, lateral = theta
+        m = eqx.tree_at(
+            lambda m: (m.bushings.k_trans, m.markers.position, m.springs.free_length), mech,
+            (mech.bushings.k_trans.at[1, 0].set(k), mech.markers.position.at[l7, 2].set(z7),
+             mech.springs.free_length.at[0].set(free)),
+        )
+        l = eqx.tree_at(lambda l: l.force, loads, loads.force.at[:, 0, 1].set(lateral))
+        pos, _ = ds.marker_poses(m, ds.solve_statics(m, l).q)
+        return pos[:, wc]
+
+    theta = params_of(mech, loads)
+    jac = eqx.filter_jit(jax.jacfwd(centre))(theta)
+    for k, h in zip(range(3), (1.0, 1e-3, 1e-3), strict=True):
+        plus = list(theta)
+        minus = list(theta)
+        plus[k] = theta[k] + h
+        minus[k] = theta[k] - h
+        fd = (centre(tuple(plus)) - centre(tuple(minus))) / (2 * h)
+        scale = float(jnp.max(jnp.abs(fd)))
+        np.testing.assert_allclose(jac[k], fd, rtol=1e-6, atol=1e-6 * scale)
+    # Loads: the lateral force of case 7 (index 6) moves only case 7.
+    e = jnp.zeros(13).at[6].set(10.0)
+    fd = (centre(theta[:3] + (theta[3] + e,)) - centre(theta[:3] + (theta[3] - e,))) / 20.0
+    np.testing.assert_allclose(jac[3][:, :, 6], fd, rtol=1e-6, atol=1e-9)

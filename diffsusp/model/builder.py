@@ -308,7 +308,8 @@ class MechanismBuilder:
             names=tuple(lp[0] for lp in self._load_points),
         )
         pos = np.array([self._markers[n][1] for n in names]).reshape(-1, 3)
-        scale = float(np.sqrt(np.mean(np.sum((pos - pos.mean(0)) ** 2, axis=1)))) if len(pos) else 1.0
+        spread = np.sum((pos - pos.mean(0)) ** 2, axis=1) if len(pos) else np.ones(1)
+        scale = float(np.sqrt(np.mean(spread)))
         mech = Mechanism(
             parts=tuple(self._parts),
             markers=markers,

@@ -31,6 +31,13 @@ JOINT_ROWS = {
 BUSHING_AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 
+def _index(names: tuple[str, ...], name: str, what: str, plural: str) -> int:
+    try:
+        return names.index(name)
+    except ValueError:
+        raise ValueError(f"unknown {what} '{name}'; known {plural}: {', '.join(names)}.") from None
+
+
 def _check_markers(what: str, names: tuple[str, ...], markers: tuple[int, ...], n_markers: int):
     for name, m in zip(names, markers, strict=True):
         if not 0 <= m < n_markers:
@@ -60,12 +67,7 @@ class Markers(eqx.Module):
             raise ValueError("Markers: 'part' must give one part index per marker.")
 
     def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise ValueError(
-                f"unknown marker '{name}'; known markers: {', '.join(self.names)}."
-            ) from None
+        return _index(self.names, name, "marker", "markers")
 
 
 class Joints(eqx.Module):
@@ -145,12 +147,7 @@ class Bushings(eqx.Module):
         return any(any(row) for row in self.spline_axes)
 
     def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise ValueError(
-                f"unknown bushing '{name}'; known bushings: {', '.join(self.names)}."
-            ) from None
+        return _index(self.names, name, "bushing", "bushings")
 
 
 class Springs(eqx.Module):
@@ -225,12 +222,7 @@ class LoadPoints(eqx.Module):
     names: tuple[str, ...] = eqx.field(static=True)
 
     def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise ValueError(
-                f"unknown load point '{name}'; known load points: {', '.join(self.names)}."
-            ) from None
+        return _index(self.names, name, "load point", "load points")
 
 
 class Loads(eqx.Module):

@@ -138,7 +138,7 @@ def joint_rows(kind: str, z, x0i, r0i, x0j, r0j, length0):
     xi, ri = _pose(z[:6], x0i, r0i)
     xj, rj = _pose(z[6:], x0j, r0j)
     d = xi - xj
-    (xi_, yi_, zi_), (xj_, yj_, zj_) = ri.T, rj.T
+    (xi_, _, zi_), (xj_, yj_, zj_) = ri.T, rj.T
     if kind == "spherical":
         return d
     if kind == "revolute":
@@ -193,7 +193,7 @@ class Layout:
         self.centre = np.zeros((n_parts + 1, 3))
         self.centre[:n_parts] = np.asarray(mech.reference_points, dtype=float).reshape(-1, 3)
         self.angular = np.zeros(mech.n_rows, dtype=bool)
-        for kind, idx, offsets in row_blocks(mech.joints):
+        for kind, _, offsets in row_blocks(mech.joints):
             for row in _ANGULAR_ROWS[kind]:
                 self.angular[offsets + row] = True
         self.angular_live = self.angular[list(mech.independent_rows)]

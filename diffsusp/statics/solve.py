@@ -39,7 +39,7 @@ STATUS_TEXT = {
     NONFINITE: "non-finite",
     STALLED: "stalled: no descent in the last steps",
 }
-_STALL_STEPS = 6  # consecutive steps shorter than 1/100 of Newton's before giving up
+_STALL_STEPS = 4  # consecutive steps shorter than 1/100 of Newton's before giving up
 
 
 class StaticSolution(eqx.Module):
@@ -327,7 +327,8 @@ def _check_validity(mech: Mechanism, sol: StaticSolution):
     |AZ| < 90°; spec stiffness §0)."""
     if not mech.bushings.names or _is_traced(sol.q):
         return
-    angles = np.abs(np.asarray(_bushing_angles(mech, sol.q))).reshape(-1, len(mech.bushings.names), 3)
+    angles = np.abs(np.asarray(_bushing_angles(mech, sol.q)))
+    angles = angles.reshape(-1, len(mech.bushings.names), 3)
     limits = np.radians([15.0, 15.0, 90.0])
     ratio = angles / limits
     if np.any(ratio > 1.0):
