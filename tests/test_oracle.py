@@ -17,13 +17,12 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import oracle  # tests/oracle.py (pytest puts tests/ on sys.path)
 import pytest
 from scipy.spatial.transform import Rotation
 
 import diffsusp
 from diffsusp import MechanismBuilder
-
-import oracle  # tests/oracle.py (pytest puts tests/ on sys.path)
 
 POS_TOL = 1e-8  # mm
 ROT_TOL = 1e-10  # rad
