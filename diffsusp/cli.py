@@ -7,6 +7,7 @@ solved in one batched, compiled call; prints a table and the timing.
 import time
 
 import typer
+from rich import box
 from rich.console import Console
 from rich.table import Table
 
@@ -46,6 +47,8 @@ def demo():
     from diffsusp.models import TABLE_5_1, pseudo_mcpherson, thesis_load_cases
 
     console = Console()
+    if not console.is_terminal:  # logs and test runners: do not squeeze the table to 80 columns
+        console = Console(width=120)
     with console.status("building the model and compiling the solver..."):
         mech = pseudo_mcpherson()
         loads = thesis_load_cases(mech)
@@ -69,23 +72,25 @@ def demo():
     d_steer = np.degrees(np.asarray(steer - steer0))
     d_incline = np.degrees(np.asarray(incline - incline0))
 
-    table = Table(title=f"{mech.name}: thesis load cases (Table 5-1) at the contact patch")
-    for col in ("case", "F_vert N", "F_lat N", "F_long N", "Δx mm", "Δy mm", "Δz mm",
-                "steer Δ deg", "incl. Δ deg", "iter", "status"):
-        table.add_column(col, justify="right")
+    table = Table(title=f"{mech.name}: thesis load cases (Table 5-1) at the contact patch",
+                  box=box.SIMPLE_HEAD)
+    for col in ("case", "Fz N", "Fy N", "Fx N", "Δx mm", "Δy mm", "Δz mm", "steer°", "incl°",
+                "iter", "status"):
+        table.add_column(col, justify="right", no_wrap=True)
     status_text = {0: "ok", 1: "max steps", 2: "non-finite"}
     for c in range(len(TABLE_5_1)):
         fv, fl, fx = TABLE_5_1[c]
         table.add_row(
             str(c + 1), f"{fv:.0f}", f"{fl:.0f}", f"{fx:.0f}",
-            *(f"{v:+.3f}" for v in disp[c]), f"{d_steer[c]:+.4f}", f"{d_incline[c]:+.4f}",
+            *(f"{v:+.2f}" for v in disp[c]), f"{d_steer[c]:+.3f}", f"{d_incline[c]:+.3f}",
             str(int(sol.iterations[c])), status_text[int(sol.status[c])],
         )
     console.print(table)
     console.print(
-        "Wheel-centre displacement from design; steer Δ: rotation of the spin axis about global "
-        "+z; incl. Δ: change of the spin axis's inclination to the ground plane (Adams/Car frame: "
-        "x rearward, y right, z up; left wheel)."
+        "Fz, Fy, Fx: vertical, lateral, longitudinal force at the contact patch (global axes). "
+        "Δ: wheel-centre displacement from design; steer°: rotation of the spin axis about "
+        "global +z; incl°: change of the spin axis's inclination to the ground plane "
+        "(Adams/Car frame: x rearward, y right, z up; left wheel)."
     )
     console.print(
         f"compile + first solve: {compile_time:.2f} s; 13 cases: {solve_time * 1e3:.2f} ms "
