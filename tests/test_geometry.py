@@ -2,6 +2,8 @@
 projected angles) and poses. Oracles: closed forms, scipy's Rotation, the thesis Table 2.2
 digest check, and finite differences."""
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -33,7 +35,9 @@ projected_angles = jax.jit(g.projected_angles)
 
 DEG = np.pi / 180.0
 
-unit_component = st.floats(-1.0, 1.0, allow_nan=False)
+# XLA flushes subnormal numbers to zero: keep them out of the generated inputs.
+floats = functools.partial(st.floats, allow_subnormal=False)
+unit_component = floats(-1.0, 1.0, allow_nan=False)
 raw_vector = st.tuples(unit_component, unit_component, unit_component)
 
 
@@ -48,7 +52,7 @@ def unit_vectors(draw):
 @st.composite
 def rotation_matrices(draw):
     """Rotations from random quaternions, including angles near and at 180° (w ≈ 0)."""
-    w = draw(st.one_of(st.floats(-1.0, 1.0), st.sampled_from([0.0, 1e-12, 1e-9, 1e-5])))
+    w = draw(st.one_of(floats(-1.0, 1.0), st.sampled_from([0.0, 1e-12, 1e-9, 1e-5])))
     xyz = draw(raw_vector)
     q = np.array([*xyz, w])
     n = np.linalg.norm(q)
@@ -92,7 +96,7 @@ def test_skew_is_cross_product(u, v):
 
 
 @PROPERTY
-@given(unit_vectors(), st.floats(-179.0, 179.0))
+@given(unit_vectors(), floats(-179.0, 179.0))
 def test_gibbs_round_trip_and_oracle(axis, angle_deg):
     theta = angle_deg * DEG
     b = axis * np.tan(theta / 2.0)
@@ -148,7 +152,7 @@ def test_matrix_to_gibbs_accurate_just_inside_the_limit():
 
 
 @PROPERTY
-@given(st.tuples(*[st.floats(-3.0, 3.0)] * 3), raw_vector)
+@given(st.tuples(*[floats(-3.0, 3.0)] * 3), raw_vector)
 def test_gibbs_angular_jacobian_vs_finite_differences(b, bdot):
     b, bdot = np.array(b), np.array(bdot)
     assume(np.linalg.norm(bdot) > 0.1)
@@ -167,7 +171,7 @@ def test_gibbs_angular_jacobian_vs_finite_differences(b, bdot):
 
 
 @PROPERTY
-@given(unit_vectors(), st.floats(-120.0, 120.0), unit_vectors(), st.floats(-120.0, 120.0))
+@given(unit_vectors(), floats(-120.0, 120.0), unit_vectors(), floats(-120.0, 120.0))
 def test_gibbs_compose_matches_matrix_product(axis1, deg1, axis2, deg2):
     b1 = axis1 * np.tan(deg1 * DEG / 2.0)
     b2 = axis2 * np.tan(deg2 * DEG / 2.0)
@@ -193,7 +197,7 @@ def test_gibbs_compose_sign_of_cross_term():
 
 
 @PROPERTY
-@given(unit_vectors(), st.one_of(st.floats(0.0, np.pi - 1e-9), st.sampled_from(
+@given(unit_vectors(), st.one_of(floats(0.0, np.pi - 1e-9), st.sampled_from(
     [0.0, 1e-300, 1e-12, 1e-8, 9.9e-3, 1.01e-2, 1.9e-3, 2.1e-3, np.pi - 1e-6, np.pi - 1e-9])))
 def test_rotvec_round_trip(axis, angle):
     v = axis * angle
@@ -236,7 +240,7 @@ def test_matrix_rotvec_matrix_round_trip(r):
 
 
 @PROPERTY
-@given(raw_vector, st.floats(0.1, 10.0), st.floats(1e-6, np.pi - 1e-6))
+@given(raw_vector, floats(0.1, 10.0), floats(1e-6, np.pi - 1e-6))
 def test_axis_angle_round_trip(direction, length, angle):
     direction = np.array(direction)
     assume(np.linalg.norm(direction) > 0.1)
@@ -324,7 +328,7 @@ def test_reuler_bushing_b_axis_points_to_front_arm_ball_joint():
 
 
 @PROPERTY
-@given(st.floats(-np.pi, np.pi), st.floats(1e-2, np.pi - 1e-2), st.floats(-np.pi, np.pi))
+@given(floats(-np.pi, np.pi), floats(1e-2, np.pi - 1e-2), floats(-np.pi, np.pi))
 def test_reuler_round_trip_and_oracle(psi, theta, phi):
     assume(abs(abs(psi) - np.pi) > 1e-9 and abs(abs(phi) - np.pi) > 1e-9)  # ±π wrap
     angles = np.array([psi, theta, phi])
@@ -337,13 +341,13 @@ def test_reuler_round_trip_and_oracle(psi, theta, phi):
 
 @PROPERTY
 @given(
-    st.floats(-np.pi, np.pi),
+    floats(-np.pi, np.pi),
     st.one_of(
         st.sampled_from([0.0, 1e-300, 1e-14, 1e-13, 2e-12, 1e-10, 1e-8, 1e-4]),
-        st.floats(0.0, np.pi),
+        floats(0.0, np.pi),
     ),
     st.booleans(),
-    st.floats(-np.pi, np.pi),
+    floats(-np.pi, np.pi),
 )
 def test_reuler_reproduces_matrix_everywhere_including_gimbal_lock(psi, theta, flip, phi):
     theta = np.pi - theta if flip else theta
