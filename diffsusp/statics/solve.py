@@ -5,9 +5,11 @@ spec: stiffness §1.9 (Q_ext + Q_int + Φ_qᵀλ = 0, Φ = c); DESIGN.md "Static
 Per load case: multipliers initialised by weighted least squares at the start pose; each Newton
 step solves the KKT system after a Ruiz row/column equilibration (forces in N, moments in N·mm and
 constraint rows in mm or radians differ by orders of magnitude); the step is capped so no Gibbs
-vector moves by more than 0.5 at once and backtracked on a scaled merit function. A case has
-converged when every force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with F_s the load
-scale and L the model's length scale) and every constraint row below `atol` mm.
+vector moves by more than 0.5 at once, applied to each part as a rigid screw motion (see
+`kernel.retract`), and backtracked on a scaled merit function. A case has converged when every
+force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with F_s the load scale and L the
+model's length scale) and every constraint row below `atol` mm; a case whose line search makes no
+progress for several steps is stopped as stalled (no equilibrium nearby).
 
 The solution is differentiated implicitly: for a parameter tangent dθ, dy = −J⁻¹ ∂r/∂θ·dθ at the
 solution (one more linear solve), in forward and reverse mode; the Newton loop is never unrolled.
