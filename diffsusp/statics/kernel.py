@@ -252,7 +252,7 @@ def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jaco
     def add_force(fn, idx, *args):
         for sel, side, sub in _ground_split(idx, lay):
             f = _restrict(fn, side, slice_output=True)
-            a = jax.tree.map(lambda x: x[sel], args)
+            a = jax.tree.map(lambda x, sel=sel: x[sel], args)
             z = qfull[sub]
             if with_jacobian:
                 val, jac = jax.vmap(_value_and_jacfwd(f))(z, *a)
@@ -394,7 +394,7 @@ def _constraint_terms(fn, idx, rows, args, qfull, lam_rows, lay, vec_terms, mat_
     if split and idx.shape[1] == 12:
         for sel, side, sub in _ground_split(idx, lay):
             _constraint_terms(_restrict(fn, side, slice_output=False), sub, rows[sel],
-                              jax.tree.map(lambda x: x[sel], args), qfull, lam_rows, lay,
+                              jax.tree.map(lambda x, sel=sel: x[sel], args), qfull, lam_rows, lay,
                               vec_terms, mat_terms, row_vals, with_jacobian,
                               None if offset is None else offset[sel], split=False)
         return
