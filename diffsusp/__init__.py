@@ -4,7 +4,7 @@ Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", T
 """
 
 from . import geometry
-from .errors import ConvergenceError, ModelError, ModelWarning
+from .errors import ConvergenceError, InputError, ModelError, ModelFileError, ModelWarning
 from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
 from .statics import (
     StaticSolution,
@@ -18,7 +18,8 @@ from .statics import (
 )
 
 __all__ = [
-    "ConvergenceError", "Loads", "Mechanism", "MechanismBuilder", "ModelError", "ModelWarning",
+    "ConvergenceError", "InputError", "Loads", "Mechanism", "MechanismBuilder", "ModelError",
+    "ModelFileError", "ModelWarning",
     "StaticSolution", "ValidationReport", "bushing_states", "geometry", "joint_reactions",
     "marker_poses", "part_poses", "solve_statics", "solve_sweep", "spring_states", "validate",
 ]

@@ -11,3 +11,27 @@ class ConvergenceError(RuntimeError):
 
 class ModelWarning(UserWarning):
     """A model that solves but is outside the validity of one of its laws."""
+
+
+class InputError(ModelError):
+    """Bad input from outside the library (a file, a table, a command-line argument).
+
+    The CLI maps it to exit code 2; `ModelError` itself (a model that cannot be solved) maps to 4.
+    """
+
+    bad_input = True
+
+
+class ModelFileError(InputError):
+    """A model, load-case or table file that cannot be read: the message names the file, the line
+    (1-based; None when the format has no lines) and the field, and says what is expected."""
+
+    def __init__(self, message: str, *, path=None, line: int | None = None,
+                 field: str | None = None):
+        self.path, self.line, self.field = path, line, field
+        where = str(path) if path is not None else "<input>"
+        if line is not None:
+            where += f":{line}"
+        if field:
+            where += f": {field}"
+        super().__init__(f"{where}: {message}")

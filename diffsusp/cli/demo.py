@@ -1,6 +1,4 @@
-"""The `diffsusp` command.
-
-`diffsusp demo`: the thesis half axle (`pseudo_mcpherson`) under the 13 load cases of Table 5-1,
+"""`diffsusp demo`: the thesis half axle (`pseudo_mcpherson`) under the 13 load cases of Table 5-1,
 solved in one batched, compiled call; prints a table and the timing.
 """
 
@@ -8,22 +6,9 @@ import time
 
 import typer
 from rich import box
-from rich.console import Console
 from rich.table import Table
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
-                  help="Differentiable K&C suspension solver (units: mm, N, deg at the edge).")
-
-
-@app.callback()
-def _main():
-    """diffsusp: static equilibrium and identification of suspension models."""
-
-
-def _enable_x64():
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
+from .common import EXIT_NOT_CONVERGED, app, console, enable_x64
 
 
 def wheel_angles(spin_axis):
@@ -39,17 +24,15 @@ def wheel_angles(spin_axis):
 @app.command()
 def demo():
     """Solve the 13 thesis load cases (Table 5-1) on the pseudo-McPherson half axle."""
-    _enable_x64()
+    enable_x64()
     import jax
     import numpy as np
 
     import diffsusp
     from diffsusp.models import TABLE_5_1, pseudo_mcpherson, thesis_load_cases
 
-    console = Console()
-    if not console.is_terminal:  # logs and test runners: do not squeeze the table to 80 columns
-        console = Console(width=120)
-    with console.status("building the model and compiling the solver..."):
+    out = console()
+    with out.status("building the model and compiling the solver..."):
         mech = pseudo_mcpherson()
         loads = thesis_load_cases(mech)
         t0 = time.perf_counter()
@@ -85,20 +68,17 @@ def demo():
             *(f"{v:+.2f}" for v in disp[c]), f"{d_steer[c]:+.3f}", f"{d_incline[c]:+.3f}",
             str(int(sol.iterations[c])), status_text[int(sol.status[c])],
         )
-    console.print(table)
-    console.print(
+    out.print(table)
+    out.print(
         "Fz, Fy, Fx: vertical, lateral, longitudinal force at the contact patch (global axes). "
         "Δ: wheel-centre displacement from design; steer°: rotation of the spin axis about "
         "global +z; incl°: change of the spin axis's inclination to the ground plane "
         "(Adams/Car frame: x rearward, y right, z up; left wheel)."
     )
-    console.print(
+    out.print(
         f"compile + first solve: {compile_time:.2f} s; 13 cases: {solve_time * 1e3:.2f} ms "
         f"({len(TABLE_5_1) / solve_time:.0f} equilibria/s)"
     )
     if not bool(np.all(np.asarray(sol.status) == 0)):
-        raise typer.Exit(code=3)
+        raise typer.Exit(code=EXIT_NOT_CONVERGED)
 
-
-if __name__ == "__main__":  # pragma: no cover
-    app()
