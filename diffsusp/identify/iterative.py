@@ -1,0 +1,257 @@
+"""Iterative (correlation) stiffness identification: the thesis's Chapter 5 loop on our solver.
+
+spec: stiffness §2 (§2.2 measured deformation, §2.4 per-direction regression and Pearson gate,
+eq. 5.13 x/y equalisation, §2.5 relative-change stop, §7 R5).
+
+Each iteration is one batched static solve of every load case with the current stiffnesses
+(warm-started from the previous iteration's equilibria). Then, per selected bushing and per
+direction, the model's restoring force (−F_I in J axes, Adams convention) is regressed with an
+intercept on the *measured* deformation of that direction across the cases:
+
+    K = cov(δ, F) / var(δ),  E0 = mean(δ) − mean(F) / K,  r = cov(δ, F) / sqrt(var δ · var F)
+
+and K is accepted only when r > `r_min` (a positive slope); otherwise the previous value is
+kept and the direction is reported as not identified. For axisymmetric bushings the x and y
+slopes are merged by the force-amplitude weights of eq. 5.13 [R] (w = Σ(F − mean F)², the square
+restored). The loop stops when every selected stiffness changed by less than `eps` relatively
+(eq. 5.14). At a fixed point the model's deformations equal the measured ones up to the
+offsets E0 (eq. 5.17); the stiffnesses themselves need not be unique (§2.7).
+"""
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..errors import InputError
+from ..model.mechanism import Loads, Mechanism
+from ..statics import bushing_states, solve_statics
+
+AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
+"""Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
+
+_DEG = math.pi / 180.0
+
+
+@dataclasses.dataclass(frozen=True)
+class IterationRecord:
+    """One pass of the loop: stiffnesses *after* the update (N/mm, N·mm/rad) `(n, 6)`,
+    correlation r `(n, 6)`, accepted (gate passed) `(n, 6)`, largest relative change, and the
+    number of load cases that did not converge."""
+
+    stiffness: np.ndarray
+    r: np.ndarray
+    accepted: np.ndarray
+    max_change: float
+    failed_cases: int
+
+
+@dataclasses.dataclass(frozen=True)
+class IterativeReport:
+    """Result of `identify.iterative`.
+
+    - `bushings`: names of the identified bushings; `stiffness` `(n, 6)` final values
+      (Ktx, Kty, Ktz in N/mm; Krx, Kry, Krz in N·mm/rad); `start` the initial values.
+    - `identified` `(n, 6)`: the direction's regression passed the gate at least once (a value
+      that never did is the start value, kept); `equalised` `(n, 6)`: set from the other radial
+      direction by axisymmetry (eq. 5.13) rather than by its own regression.
+    - `r` `(n, 6)`: correlation coefficients of the last iteration; `offset` `(n, 6)`: the
+      intercepts E0 (mm, rad) of the last iteration.
+    - `residual` `(cases, n, 6)`: model deformation − (measured − E0) at the final equilibria.
+    - `iterations`, `converged`, `history` (one `IterationRecord` per iteration).
+    """
+
+    bushings: tuple[str, ...]
+    stiffness: np.ndarray
+    start: np.ndarray
+    identified: np.ndarray
+    equalised: np.ndarray
+    r: np.ndarray
+    offset: np.ndarray
+    residual: np.ndarray
+    iterations: int
+    converged: bool
+    history: tuple[IterationRecord, ...]
+
+    def table(self) -> str:
+        """The stiffnesses as the thesis prints them (N/mm and N·mm/deg), `*` = not identified
+        (start value kept), `=` = equalised by axisymmetry."""
+        head = f"{'bushing':<14}" + "".join(f"{a:>12}" for a in AXES)
+        lines = [head, "-" * len(head)]
+        scale = np.array([1, 1, 1, _DEG, _DEG, _DEG])
+        for b, name in enumerate(self.bushings):
+            cells = []
+            for a in range(6):
+                mark = "=" if self.equalised[b, a] else (" " if self.identified[b, a] else "*")
+                cells.append(f"{self.stiffness[b, a] * scale[a]:>11.6g}{mark}")
+            lines.append(f"{name:<14}" + "".join(cells))
+        state = "converged" if self.converged else "NOT converged"
+        lines.append(f"{state} after {self.iterations} iterations; * not identified (start value "
+                     "kept), = equalised with the other radial direction (axisymmetric).")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "bushings": list(self.bushings), "axes": list(AXES),
+            "stiffness": self.stiffness.tolist(), "units": ["N/mm"] * 3 + ["N*mm/rad"] * 3,
+            "identified": self.identified.tolist(), "equalised": self.equalised.tolist(),
+            "r": self.r.tolist(), "offset": self.offset.tolist(),
+            "iterations": self.iterations, "converged": self.converged,
+        }
+
+
+@jax.jit
+def _regress(delta: Float[Array, "c n 6"], force: Float[Array, "c n 6"]):
+    """Per (bushing, direction) slope, intercept offset and Pearson r of force on deformation
+    (spec stiffness eq. 5.10–5.12)."""
+    d = delta - delta.mean(axis=0)
+    f = force - force.mean(axis=0)
+    cov, var_d, var_f = (d * f).mean(axis=0), (d * d).mean(axis=0), (f * f).mean(axis=0)
+    tiny = jnp.finfo(delta.dtype).tiny
+    slope = cov / jnp.maximum(var_d, tiny)
+    r = cov / jnp.sqrt(jnp.maximum(var_d * var_f, tiny))
+    offset = delta.mean(axis=0) - force.mean(axis=0) / jnp.where(slope != 0, slope, 1.0)
+    weight = (f * f).sum(axis=0)  # eq. 5.13 weights: force amplitude per direction
+    return slope, offset, r, weight
+
+
+def _equalise(k_new, accepted, weight, axisymmetric):
+    """Eq. 5.13 on (x, y) translations and rotations of the axisymmetric bushings, using the
+    directions that passed the gate; returns the values and which entries were set by it."""
+    k_new, equalised = k_new.copy(), np.zeros_like(accepted)
+    for b in np.flatnonzero(axisymmetric):
+        for x, y in ((0, 1), (3, 4)):
+            ok = accepted[b, [x, y]]
+            if not ok.any():
+                continue
+            w = weight[b, [x, y]] * ok
+            merged = float(np.dot(w, k_new[b, [x, y]]) / w.sum()) if w.sum() > 0 else float(
+                k_new[b, [x, y]][ok].mean())
+            for a, own in ((x, ok[0]), (y, ok[1])):
+                k_new[b, a] = merged
+                equalised[b, a] = not own
+    return k_new, equalised
+
+
+def _measured_array(measured, names: Sequence[str], n_cases: int) -> np.ndarray:
+    if isinstance(measured, Mapping):
+        missing = [n for n in names if n not in measured]
+        if missing:
+            raise InputError(f"measured deformations are missing bushing(s) {missing}; give a "
+                             "(cases, 6) array for each identified bushing.")
+        arr = np.stack([np.asarray(measured[n], dtype=float) for n in names], axis=1)
+    else:
+        arr = np.asarray(measured, dtype=float)
+    if arr.shape != (n_cases, len(names), 6):
+        raise InputError(f"measured deformations must have shape (cases, bushings, 6) = "
+                         f"({n_cases}, {len(names)}, 6) (Tx, Ty, Tz mm; AX, AY, AZ rad, in J); "
+                         f"got {arr.shape}.")
+    if not np.all(np.isfinite(arr)):
+        c, b, a = np.argwhere(~np.isfinite(arr))[0]
+        raise InputError(f"measured deformation of '{names[b]}' direction {AXES[a]} in load case "
+                         f"{c} is not finite; remove the case or mask it before identifying.")
+    return arr
+
+
+def _with_stiffness(mech: Mechanism, index: np.ndarray, k: np.ndarray) -> Mechanism:
+    kt = mech.bushings.k_trans.at[index].set(k[:, :3])
+    kr = mech.bushings.k_rot.at[index].set(k[:, 3:])
+    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech, (kt, kr))
+
+
+def iterative(
+    mech: Mechanism,
+    loads: Loads,
+    measured: Float[Array, "cases n 6"] | Mapping[str, Float[Array, "cases 6"]],
+    *,
+    bushings: Sequence[str] | None = None,
+    axisymmetric: Sequence[str] = (),
+    r_min: float = 0.75,
+    resolution: tuple[float, float] | None = None,
+    eps: float = 0.01,
+    max_iterations: int = 100,
+    callback: Callable[[int, IterationRecord], None] | None = None,
+) -> tuple[Mechanism, IterativeReport]:
+    """Identify bushing stiffnesses by the correlation loop of spec stiffness §2.
+
+    **Arguments:**
+    - `mech`: the model with the start stiffnesses (the thesis starts every direction at
+      10⁴ N/mm and 10⁴ N·mm/deg) and the known geometry, springs and other bushings.
+    - `loads`: the load cases (leading case axis), as applied on the rig.
+    - `measured`: measured deformations of the identified bushings, `(cases, n, 6)` in the
+      order of `bushings` or a mapping name → `(cases, 6)`: Tx, Ty, Tz (mm) and projected angles
+      AX, AY, AZ (rad) of I relative to J, in J (e.g. from `measure` poses).
+    - `bushings`: names to identify (default: all of the model's bushings).
+    - `axisymmetric`: names whose x and y stiffnesses are merged (eq. 5.13).
+    - `r_min`: correlation gate (spec: 0.75); `eps`: relative-change stop (spec: 0.01).
+    - `resolution`: (mm, rad) — a direction whose measured deformation varies less than this
+      over the cases (standard deviation) is not identified: the measurement does not resolve it
+      (spec §2.8, §2.10: "bushings whose deformation is below the measurement capability cannot
+      be identified"). Default: no such gate (exact synthetic data correlate at any amplitude).
+    - `max_iterations`: bound on the loop; `callback(i, record)` is called after each pass.
+
+    **Returns:** the identified mechanism and an `IterativeReport`.
+    """
+    names = tuple(mech.bushings.names if bushings is None else bushings)
+    index = np.array([mech.bushings.index(n) for n in names], dtype=int)
+    unknown = set(axisymmetric) - set(names)
+    if unknown:
+        raise InputError(f"axisymmetric names {sorted(unknown)} are not among the identified "
+                         f"bushings {list(names)}.")
+    if loads.n_cases is None or loads.n_cases < 3:
+        raise InputError("iterative identification needs a table of at least 3 load cases "
+                         "(a regression over cases per direction).")
+    delta = _measured_array(measured, names, loads.n_cases)
+    axi = np.array([n in axisymmetric for n in names])
+    resolved = np.ones((len(names), 6), bool)
+    if resolution is not None:
+        floor = np.repeat(np.asarray(resolution, dtype=float), 3)
+        resolved = delta.std(axis=0) > floor
+
+    k = np.concatenate([np.asarray(mech.bushings.k_trans)[index],
+                        np.asarray(mech.bushings.k_rot)[index]], axis=1)
+    start = k.copy()
+    ever = np.zeros(k.shape, bool)
+    history, q, converged = [], None, False
+    for it in range(1, max_iterations + 1):
+        current = _with_stiffness(mech, index, k)
+        sol = solve_statics(current, loads, q0=q, throw=False)
+        status = np.asarray(sol.status)
+        if np.all(status != 0):
+            raise InputError(f"iteration {it}: no load case converged with the stiffnesses "
+                             f"{k.tolist()}; start from values closer to the expected ones.")
+        q = jnp.where((status == 0)[:, None], sol.q, sol.q if q is None else q)
+        _, _, f, t = bushing_states(current, q)
+        force = -jnp.concatenate([f, t], axis=-1)[:, index]
+        ok = status == 0
+        slope, offset, r, weight = (np.asarray(a) for a in _regress(jnp.asarray(delta[ok]),
+                                                                    force[ok]))
+        accepted = (r > r_min) & resolved
+        k_new = np.where(accepted, slope, k)
+        k_new, equalised = _equalise(k_new, accepted, weight, axi)
+        change = float(np.max(np.abs(k_new - k) / np.abs(k)))
+        ever |= accepted
+        record = IterationRecord(k_new, r, accepted, change, int((~ok).sum()))
+        history.append(record)
+        if callback is not None:
+            callback(it, record)
+        k = k_new
+        if change < eps:
+            converged = True
+            break
+
+    final = _with_stiffness(mech, index, k)
+    sol = solve_statics(final, loads, q0=q, throw=False)
+    dT, ang, _, _ = bushing_states(final, sol.q)
+    model = np.asarray(jnp.concatenate([dT, ang], axis=-1))[:, index]
+    report = IterativeReport(
+        bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
+        r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
+        converged=converged, history=tuple(history),
+    )
+    return final, report
