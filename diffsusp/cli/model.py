@@ -1,0 +1,259 @@
+"""`diffsusp info MODEL` and `diffsusp simulate MODEL --loads TABLE --out RESULTS`.
+
+MODEL is anything `diffsusp.io.load_model` reads: a native `.toml` file, an Adams `.adm`, a
+Chrono `.json`, or a built-in model name (`diffsusp.models.ZOO`). TABLE is a CSV/Parquet load
+table (columns in `diffsusp.io.tables`) or the name of a load table in the model file.
+"""
+
+import time
+import warnings
+
+import typer
+from rich import box
+from rich.table import Table as RichTable
+
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_NOT_CONVERGED,
+    app,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+)
+
+PARAMETER_UNITS = {
+    "markers.position": "mm",
+    "markers.orientation": "1 (rotation matrix, columns = axes)",
+    "bushings.k_trans": "N/mm",
+    "bushings.k_rot": "N·mm/rad",
+    "bushings.cubic_trans": "N/mm³",
+    "bushings.cubic_rot": "N·mm/rad³",
+    "bushings.offset_trans": "mm",
+    "bushings.offset_rot": "rad",
+    "bushings.preload_force": "N",
+    "bushings.preload_torque": "N·mm",
+    "bushings.spline_x": "mm (tx, ty, tz) | rad (rx, ry, rz)",
+    "bushings.spline_y": "N (tx, ty, tz) | N·mm (rx, ry, rz)",
+    "springs.k": "N/mm",
+    "springs.free_length": "mm",
+    "springs.table_x": "mm (extension)",
+    "springs.table_y": "N (tension)",
+    "stops.length": "mm",
+    "stops.k": "N/mm",
+    "stops.cubic": "N/mm³",
+    "drivers.direction": "1 (unit vector)",
+}
+"""Unit of every float leaf of a `Mechanism` (the parameters one can differentiate and fit)."""
+
+_CHUNK = 256
+"""Cases per solve when a table is large enough to show a progress bar (the last chunk is
+padded so every chunk reuses one compiled shape)."""
+
+
+def parameter_leaves(mech) -> list[dict]:
+    """Path, shape and unit of every non-empty float leaf of `mech`."""
+    import jax
+    import numpy as np
+
+    out = []
+    for path, leaf in jax.tree_util.tree_leaves_with_path(mech):
+        if not hasattr(leaf, "shape") or np.size(leaf) == 0:
+            continue
+        name = jax.tree_util.keystr(path).lstrip(".")
+        out.append(dict(path=name, shape=list(leaf.shape), unit=PARAMETER_UNITS.get(name, "?")))
+    return out
+
+
+def _load(model: str, *, check: bool = True):
+    from ..io import load_model_file
+
+    return load_model_file(model, check=check)
+
+
+@app.command()
+def info(
+    model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
+    json_output: bool = typer.Option(False, "--json", help="Machine-readable output."),
+):
+    """Describe a model: parts, markers, joints, elements, DOF, rank, redundant rows, free modes
+    and its parameters (float leaves) with their shapes and units."""
+    enable_x64()
+    with cli_errors():
+        from ..model import validate
+
+        mf = _load(model, check=False)
+        mech = mf.mechanism
+        report = validate(mech)
+    names = mech.markers.names
+    summary = dict(
+        name=mech.name,
+        source=model,
+        parts=list(mech.parts),
+        markers=len(names),
+        joints=[dict(name=n, kind=k, i=names[i], j=names[j]) for n, k, i, j in zip(
+            mech.joints.names, mech.joints.kind, mech.joints.i_marker, mech.joints.j_marker,
+            strict=True)],
+        bushings=list(mech.bushings.names),
+        springs=list(mech.springs.names),
+        stops=list(mech.stops.names),
+        drivers=list(mech.drivers.names),
+        load_points=list(mech.load_points.names),
+        load_tables={k: dict(rows=t.n_rows, columns=list(t.names))
+                     for k, t in mf.load_tables.items()},
+        coordinates=report.n_coordinates,
+        constraint_rows=report.n_rows,
+        rank=report.rank,
+        dof=report.dof,
+        redundant=list(report.redundant),
+        free_modes=list(report.free_modes),
+        max_assembly_error=report.max_assembly_error,
+        parameters=parameter_leaves(mech),
+    )
+    if json_output:
+        print_json(summary)
+        return
+    out = console()
+    out.print(f"[bold]{mech.name}[/] ({model})", highlight=False)
+    out.print(f"parts ({len(mech.parts)}): {', '.join(mech.parts)}", highlight=False)
+    out.print(f"markers: {len(names)}")
+    for label, items in (("bushings", summary["bushings"]), ("springs", summary["springs"]),
+                         ("stops", summary["stops"]), ("drivers", summary["drivers"]),
+                         ("load points", summary["load_points"])):
+        out.print(f"{label} ({len(items)}): {', '.join(items) or '-'}", highlight=False)
+    joints = ", ".join(f"{j['name']} ({j['kind']})" for j in summary["joints"])
+    out.print(f"joints ({len(summary['joints'])}): {joints or '-'}", highlight=False)
+    if mf.load_tables:
+        tables = ", ".join(f"{k} ({v['rows']} rows)" for k, v in summary["load_tables"].items())
+        out.print(f"load tables: {tables}", highlight=False)
+    out.print(
+        f"coordinates: {report.n_coordinates}, constraint rows: {report.n_rows}, rank: "
+        f"{report.rank}, DOF: {report.dof}", highlight=False)
+    out.print(f"redundant rows: {', '.join(report.redundant) or 'none'}", highlight=False)
+    out.print(f"free modes: {'; '.join(report.free_modes) or 'none'}", highlight=False)
+    table = RichTable(title="parameters (float leaves)", box=box.SIMPLE_HEAD)
+    for col in ("leaf", "shape", "unit"):
+        table.add_column(col, no_wrap=True)
+    for p in summary["parameters"]:
+        table.add_row(p["path"], "×".join(map(str, p["shape"])), p["unit"])
+    out.print(table)
+
+
+def _load_table(mf, loads: str):
+    import os
+
+    from ..errors import ModelFileError
+    from ..io import read_table
+
+    if loads in mf.load_tables and not os.path.exists(loads):
+        return mf.load_tables[loads]
+    if not os.path.exists(loads):
+        known = ", ".join(mf.load_tables) or "none"
+        raise ModelFileError(
+            f"no such file, and not a load table of the model (its tables: {known}); give a "
+            ".csv or .parquet load table.", path=loads)
+    return read_table(loads)
+
+
+def _solve(mech, loads, max_steps: int, quiet: bool):
+    """Solve every case; a spinner for one chunk, a progress bar over chunks otherwise."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from ..statics import solve_statics
+
+    err = console(stderr=True)
+    n = loads.n_cases
+    if n <= _CHUNK:
+        if quiet:
+            return solve_statics(mech, loads, max_steps=max_steps, throw=False)
+        with err.status(f"solving {n} load case{'s' * (n != 1)} (compiling first)..."):
+            sol = solve_statics(mech, loads, max_steps=max_steps, throw=False)
+            jax.block_until_ready(sol.q)
+        return sol
+    parts = []
+    with Progress("solving", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=err, transient=True, disable=quiet) as bar:
+        task = bar.add_task("cases", total=n)
+        for start in range(0, n, _CHUNK):
+            stop = min(start + _CHUNK, n)
+            index = np.minimum(np.arange(start, start + _CHUNK), n - 1)
+            chunk = jax.tree.map(lambda a, i=index: a[i], loads)
+            sol = solve_statics(mech, chunk, max_steps=max_steps, throw=False)
+            parts.append(jax.tree.map(lambda a, k=stop - start: a[:k], sol))
+            bar.update(task, completed=stop)
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *parts)
+
+
+@app.command()
+def simulate(
+    model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
+    loads: str = typer.Option(..., "--loads", "-l",
+                              help="Load table (.csv, .parquet) or a load table of the model."),
+    out: str = typer.Option(..., "--out", "-o", help="Results table to write (.csv, .parquet)."),
+    max_steps: int = typer.Option(50, "--max-steps", help="Newton iterations per case."),
+    json_output: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+):
+    """Solve the static equilibrium of MODEL under every row of a load table and write one row
+    of results per case (poses, bushing deformations and forces, springs, status)."""
+    enable_x64()
+    import numpy as np
+
+    from ..io import loads_from_table, results_table, write_table
+    from ..io.tables import RESULT_STATUS, _suffix
+
+    t0 = time.perf_counter()
+    with cli_errors():
+        _suffix(out)  # a bad output name fails before the solve
+        mf = _load(model)
+        mech = mf.mechanism
+        table = _load_table(mf, loads)
+        case_loads = loads_from_table(mech, table)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sol = _solve(mech, case_loads, max_steps, json_output)
+            results = results_table(mech, sol, table)
+        try:
+            write_table(out, results.columns, results.units)
+        except OSError as e:
+            raise fail(f"cannot write {out}: {e.strerror or e}", EXIT_BAD_INPUT) from None
+    elapsed = time.perf_counter() - t0
+    status = np.asarray(sol.status)
+    failed = np.flatnonzero(status != 0)
+    notes = sorted({str(w.message) for w in caught
+                    if "cases did not converge" not in str(w.message)})
+    summary = dict(
+        model=mech.name,
+        source=model,
+        loads=loads,
+        cases=int(status.size),
+        converged=int(status.size - failed.size),
+        failed=[dict(case=int(c), status=RESULT_STATUS.get(int(status[c]), str(status[c])),
+                     residual=float(np.asarray(sol.residual)[c])) for c in failed],
+        max_residual=float(np.max(np.asarray(sol.residual), initial=0.0)),
+        max_constraint_error=float(np.max(np.asarray(sol.constraint_error), initial=0.0)),
+        out=str(out),
+        columns=len(results.names),
+        seconds=elapsed,
+        warnings=notes,
+    )
+    if json_output:
+        print_json(summary)
+    else:
+        con = console()
+        con.print(
+            f"{mech.name}: {summary['converged']} of {summary['cases']} load cases converged "
+            f"in {elapsed:.2f} s; {summary['columns']} columns written to {out}",
+            highlight=False)
+        err = console(stderr=True)
+        for note in notes:
+            err.print(f"[yellow]warning:[/] {note}", highlight=False)
+    if failed.size:
+        shown = ", ".join(f"{d['case']} ({d['status']})" for d in summary["failed"][:10])
+        more = f" and {failed.size - 10} more" if failed.size > 10 else ""
+        raise fail(
+            f"{failed.size} load case{'s' * (failed.size != 1)} did not converge: {shown}{more}. "
+            f"Their rows in {out} have a non-zero status.", EXIT_NOT_CONVERGED)
