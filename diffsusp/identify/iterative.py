@@ -159,9 +159,20 @@ def _measured_array(measured, names: Sequence[str], n_cases: int) -> np.ndarray:
 
 
 def _with_stiffness(mech: Mechanism, index: np.ndarray, k: np.ndarray) -> Mechanism:
-    kt = mech.bushings.k_trans.at[index].set(k[:, :3])
-    kr = mech.bushings.k_rot.at[index].set(k[:, 3:])
-    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech, (kt, kr))
+    kt, kr = np.array(mech.bushings.k_trans), np.array(mech.bushings.k_rot)
+    kt[index], kr[index] = k[:, :3], k[:, 3:]
+    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech,
+                       (jnp.asarray(kt), jnp.asarray(kr)))
+
+
+@eqx.filter_jit
+def _states(mech: Mechanism, q, index: tuple[int, ...]):
+    """Deformation (δ_T, angles) and restoring force and torque (−F_I, −T_I) of the selected
+    bushings, `(cases, n, 6)` each."""
+    d_t, ang, f, t = bushing_states(mech, q)
+    sel = np.asarray(index)
+    return (jnp.concatenate([d_t, ang], axis=-1)[:, sel],
+            -jnp.concatenate([f, t], axis=-1)[:, sel])
 
 
 def iterative(
@@ -226,8 +237,7 @@ def iterative(
             raise InputError(f"iteration {it}: no load case converged with the stiffnesses "
                              f"{k.tolist()}; start from values closer to the expected ones.")
         q = jnp.where((status == 0)[:, None], sol.q, sol.q if q is None else q)
-        _, _, f, t = bushing_states(current, q)
-        force = -jnp.concatenate([f, t], axis=-1)[:, index]
+        _, force = _states(current, q, tuple(int(i) for i in index))
         ok = status == 0
         slope, offset, r, weight = (np.asarray(a) for a in _regress(jnp.asarray(delta[ok]),
                                                                     force[ok]))
@@ -247,8 +257,7 @@ def iterative(
 
     final = _with_stiffness(mech, index, k)
     sol = solve_statics(final, loads, q0=q, throw=False)
-    dT, ang, _, _ = bushing_states(final, sol.q)
-    model = np.asarray(jnp.concatenate([dT, ang], axis=-1))[:, index]
+    model = np.asarray(_states(final, sol.q, tuple(int(i) for i in index))[0])
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),

@@ -8,6 +8,7 @@ spec: stiffness §0 (poses, projected angles), §1.8 (bushing law), §1.7 (sprin
 
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -27,8 +28,10 @@ from .solve import StaticSolution
 
 
 def _batched(fn):
-    """Apply a one-case function of (mech, q, ...) over a leading case axis of q if present."""
+    """Apply a one-case function of (mech, q, ...) over a leading case axis of q if present,
+    compiled (`eqx.filter_jit`: called op by op, bushing_states took ~100 ms for 13 cases)."""
 
+    @eqx.filter_jit
     @functools.wraps(fn)
     def wrapper(mech, q, *args):
         q = jnp.asarray(q)
@@ -105,6 +108,7 @@ def spring_states(mech: Mechanism, q):
     return length, tension
 
 
+@eqx.filter_jit
 def joint_reactions(mech: Mechanism, sol: StaticSolution):
     """Reaction wrench of every joint on its I part, at the I marker, global components.
 
