@@ -133,6 +133,29 @@ def test_general_regrouping_when_the_leading_column_is_removed():
     np.testing.assert_allclose(fit.x[1], 0.72 + X_RAMP.mean() * 4.98, rtol=1e-12)
 
 
+def test_intervals_zero_columns_and_prior_data_augmentation():
+    y = with_solution(AFFINE, np.array([4.98, 0.3]), 20.0)
+    fit = lsq.solve(AFFINE, y, names=["a", "b"])
+    np.testing.assert_allclose(fit.interval(2.0)[:, 1] - fit.x, 2 * fit.sigma, rtol=1e-14)
+    assert fit.contains_zero.tolist() == [False, True] and fit.sigma_pct[1] > 100
+    # A column with no effect on the data is named as such.
+    zero = lsq.solve(np.column_stack([X_RAMP, 0 * X_RAMP]), y, names=["a", "k"])
+    assert zero.x[1] == 0 and any(line.startswith("k ") and line.endswith("no effect on the data")
+                                  for line in zero.table().splitlines())
+    assert zero.identifiable.tolist() == [True, False] and zero.relations == []
+    # Recalage (spec §2.3, §7 item 11): measurements see only a + b; a block simulated with
+    # the a-priori model (a, b) = (4, 2) and a small weight completes the excitation. The sum
+    # stays the measured one, the split comes from the simulation.
+    W_meas = np.column_stack([X_RAMP, X_RAMP])
+    y_meas = with_solution(X_RAMP[:, None], np.array([6.0146]), 20.0, seed=5)
+    W_sim = AFFINE.copy()
+    y_sim = W_sim @ [4.0, 2.0]
+    fit = lsq.solve(np.vstack([W_meas, W_sim]), np.concatenate([y_meas, y_sim]),
+                    names=["a", "b"], blocks=np.repeat([0, 1], 1000), weights=[1.0, 1e-3])
+    assert fit.rank == 2 and fit.relations == []
+    assert abs(fit.x.sum() - 6.0146) < 1e-5 and abs(fit.x[1] - 2.0) < 0.1
+
+
 # ---------------------------------------------------------------------------------------------
 # §8.3 cornering stiffness: cubic, OLS and TLS of the rational law
 

@@ -6,7 +6,6 @@ whole weighted stacked [P_i W_i, −P_i Y_i], so the fit is the same as the one-
 stacked data, with memory O(p²) (the data of one block at a time).
 """
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -23,9 +22,9 @@ def _bucket(rows: int) -> int:
     return max(8, 1 << (rows - 1).bit_length())
 
 
-class Accumulator(eqx.Module):
+class Accumulator:
     """The R-factor of [W, −y] accumulated over blocks of rows (functional: `add` returns a
-    new accumulator).
+    new accumulator and leaves this one unchanged).
 
     ```python
     acc = lsq.Accumulator(p)
@@ -34,35 +33,46 @@ class Accumulator(eqx.Module):
     fit = acc.solve(names=names, method="basic")   # = lsq.solve on the stacked data
     ```
 
-    **Fields:** `R` ((p+1)×(p+1)), `rows` (rows added), `block_weights` (the weight of every
-    block added, in order), `p`.
+    **Attributes:** `R` ((p+1)×(p+1) JAX array), `rows` (rows added), `block_weights` and
+    `block_sigma` (the weight and, for automatic weights, the σ̂ of every block added, in
+    order), `p`.
     """
 
-    R: Float[Array, "q q"]
-    rows: int
-    block_weights: np.ndarray
-    block_sigma: np.ndarray
-    p: int = eqx.field(static=True)
-    threshold: float | None = eqx.field(static=True)
+    __slots__ = ("R", "rows", "p", "threshold", "_history")
 
-    def __init__(self, p: int, *, threshold: float | None = None, R=None, rows: int = 0,
-                 block_weights=None, block_sigma=None):
+    def __init__(self, p: int, *, threshold: float | None = None):
         """`p`: number of parameters. `threshold`: rank threshold for the automatic block
         weights (default as in `lsq.solve`)."""
         if int(p) < 1:
             raise InputError(f"Accumulator(p): p must be a positive number of parameters; got "
                              f"{p!r}.")
+        fit_mod.check_x64()
         self.p = int(p)
         self.threshold = threshold
-        self.R = jnp.zeros((self.p + 1, self.p + 1), jnp.result_type(float)) if R is None else R
-        self.rows = int(rows)
-        self.block_weights = np.zeros(0) if block_weights is None else block_weights
-        self.block_sigma = np.zeros(0) if block_sigma is None else block_sigma
+        self.R = jnp.zeros((self.p + 1, self.p + 1), jnp.result_type(float))
+        self.rows = 0
+        self._history = None  # (previous history, weights, sigmas): O(1) per add
 
     def _new(self, R, rows, w, s):
-        return Accumulator(self.p, threshold=self.threshold, R=R, rows=self.rows + rows,
-                           block_weights=np.concatenate([self.block_weights, w]),
-                           block_sigma=np.concatenate([self.block_sigma, s]))
+        new = object.__new__(Accumulator)
+        new.p, new.threshold, new.R, new.rows = self.p, self.threshold, R, self.rows + rows
+        new._history = (self._history, w, s)
+        return new
+
+    def _collect(self, which):
+        parts, node = [], self._history
+        while node is not None:
+            parts.append(np.atleast_1d(np.asarray(node[which], float)))
+            node = node[0]
+        return np.concatenate(parts[::-1]) if parts else np.zeros(0)
+
+    @property
+    def block_weights(self) -> np.ndarray:
+        return self._collect(1)
+
+    @property
+    def block_sigma(self) -> np.ndarray:
+        return self._collect(2)
 
     def _check(self, W, y, batched):
         W = np.asarray(W, float)
@@ -85,12 +95,12 @@ class Accumulator(eqx.Module):
         W, y = self._check(W, y, batched=False)
         r = W.shape[0]
         M = np.zeros((_bucket(r), self.p + 1))
-        M[:r] = np.concatenate([W, -y[:, None]], axis=1)
-        M = jnp.asarray(M, self.R.dtype)
+        M[:r, :-1] = W
+        M[:r, -1] = -y
         if isinstance(weight, str):
             if weight != "auto":
                 raise InputError(f"weight must be a number, None or 'auto'; got {weight!r}.")
-            rho, dof, R_i = weights_mod.block_sigmas(M[None], np.array([float(r)]),
+            rho, dof, R_i = weights_mod.block_sigmas(jnp.asarray(M[None]), np.array([float(r)]),
                                                      self.threshold or 0.0)
             if dof[0] <= 0:
                 raise InputError(
@@ -104,11 +114,13 @@ class Accumulator(eqx.Module):
                                  "its weight would be infinite; pass an explicit weight.")
             P = 1.0 / sigma
             R = core.stack_r(self.R, P * R_i[0])
-            return self._new(R, r, [P], [sigma])
+            return self._new(R, r, P, sigma)
         P = 1.0 if weight is None else float(weight)
         if not (np.isfinite(P) and P >= 0):
             raise InputError(f"weight must be finite and non-negative; got {weight!r}.")
-        return self._new(core.stack_r(self.R, P * M), r, [P], [np.nan])
+        if P != 1.0:
+            M *= P
+        return self._new(core.stack_r(self.R, M), r, P, np.nan)
 
     def add_blocks(self, W: Float[Array, "k r p"], y: Float[Array, "k r"],
                    weights: Float[Array, " k"] | str | None = None) -> "Accumulator":
@@ -117,11 +129,11 @@ class Accumulator(eqx.Module):
         see `weights`)."""
         W, y = self._check(W, y, batched=True)
         k, r, _ = W.shape
-        M = jnp.asarray(np.concatenate([W, -y[..., None]], axis=2), self.R.dtype)
+        M = np.concatenate([W, -y[..., None]], axis=2)
         if isinstance(weights, str):
             if weights != "auto":
                 raise InputError(f"weights must be numbers, None or 'auto'; got {weights!r}.")
-            rho, dof, R_i = weights_mod.block_sigmas(M, np.full(k, float(r)),
+            rho, dof, R_i = weights_mod.block_sigmas(jnp.asarray(M), np.full(k, float(r)),
                                                      self.threshold or 0.0)
             sigma = weights_mod.pooled_sigmas(rho, dof)
             P = 1.0 / sigma
@@ -133,7 +145,7 @@ class Accumulator(eqx.Module):
             P = np.broadcast_to(np.asarray(weights, float), (k,)).copy()
             if not np.all(np.isfinite(P) & (P >= 0)):
                 raise InputError("weights must be finite and non-negative.")
-        stacked = (jnp.asarray(P)[:, None, None] * M).reshape(-1, self.p + 1)
+        stacked = (P[:, None, None] * M).reshape(-1, self.p + 1)
         return self._new(core.stack_r(self.R, stacked), k * r, P, np.full(k, np.nan))
 
     def merge(self, other: "Accumulator") -> "Accumulator":
@@ -143,11 +155,15 @@ class Accumulator(eqx.Module):
         return self._new(core.stack_r(self.R, other.R), other.rows, other.block_weights,
                          other.block_sigma)
 
+    def __repr__(self) -> str:
+        return f"Accumulator(p={self.p}, rows={self.rows}, blocks={len(self.block_weights)})"
+
     def problem(self, names=None) -> fit_mod.Problem:
         if self.rows == 0:
             raise InputError("the accumulator is empty: add rows before solving.")
-        w = self.block_weights if len(self.block_weights) else None
-        s = self.block_sigma if np.any(np.isfinite(self.block_sigma)) else None
+        weights, sigma = self.block_weights, self.block_sigma
+        w = weights if np.any(weights != 1.0) else None
+        s = sigma if np.any(np.isfinite(sigma)) else None
         return fit_mod.Problem(R=self.R, n=self.rows, names=fit_mod._names(names, self.p),
                                block_weights=w, block_sigma=s)
 

@@ -6,6 +6,7 @@ relations ("Krx1 + Krx2", "a - 0.07413 b") and formats the report (NumPy/Python)
 """
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import jax
@@ -466,15 +467,14 @@ class Problem:
             i = int(np.nonzero(lo > hi)[0][0])
             raise InputError(f"lower[{names[i]!r}] = {lo[i]} > upper = {hi[i]}.")
         fixed_m = _mask(fixed, names, "fixed")
-        dtype = self.R.dtype
-        sol = core.solve_r(self.R, jnp.asarray(self.n, dtype), *(jnp.asarray(a, dtype) for a in (
-            prior_v, sigma_v, lo, hi)), jnp.asarray(fixed_m),
-            jnp.asarray(0.0 if threshold is None else threshold, dtype),
-            method=method, pivot=pivot, dof=dof)
+        # NumPy arrays straight into the compiled functions (no eager conversions).
+        sol = core.solve_r(self.R, np.float64(self.n), prior_v, sigma_v, lo, hi, fixed_m,
+                           np.float64(0.0 if threshold is None else threshold),
+                           method=method, pivot=pivot, dof=dof)
         return self._to_fit(sol, method, fixed_m)
 
     def _to_fit(self, sol: core.Solution, method: str, fixed: np.ndarray) -> Fit:
-        s = jax.tree.map(np.asarray, sol)
+        s = jax.device_get(sol)
         x = s.x + 0.0  # no -0 in reports
         residuals = None if self.W is None else self.y - self.W @ x
         kept = s.kept.astype(bool)
@@ -579,8 +579,16 @@ class Problem:
         return fit, list(log)
 
 
+def check_x64():
+    if not jax.config.jax_enable_x64:
+        warnings.warn(
+            "jax_enable_x64 is off: lsq's rank decisions and statistics assume float64. Call "
+            "jax.config.update('jax_enable_x64', True) first.", stacklevel=3)
+
+
 def problem(W, y, *, names=None, weights=None, blocks=None, threshold=None) -> Problem:
     """Validate the data, apply the row/block weights and reduce to the R-factor (one QR)."""
+    check_x64()
     W, y = _data(W, y)
     names = _names(names, W.shape[1])
     if threshold is not None:
@@ -591,7 +599,7 @@ def problem(W, y, *, names=None, weights=None, blocks=None, threshold=None) -> P
     # share one compiled QR (at most 1/8 more rows).
     pad = _bucket(W.shape[0]) - W.shape[0]
     Wp, yp, wp = (np.concatenate([a, np.zeros((pad,) + a.shape[1:])]) for a in (W, y, w))
-    R = _weighted_r(jnp.asarray(Wp), jnp.asarray(yp), jnp.asarray(wp))
+    R = _weighted_r(Wp, yp, wp)
     return Problem(R=R, n=W.shape[0], names=names, W=W, y=y, block_weights=block_w,
                    block_sigma=block_sigma)
 
