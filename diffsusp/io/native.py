@@ -195,10 +195,14 @@ class _Source:
                 end = self.headers[h + 1][0] if h + 1 < len(self.headers) else len(self.lines)
                 rest = keys[depth:]
                 if rest:
-                    found = self._key_line(start + (depth > 0 or h > 0), end, rest)
+                    found = self._key_line(start + (h > 0), end, rest)
                     if found is not None:
                         return found
                 if depth > 0:
+                    return start + 1
+            # A table defined only through deeper headers ([a.b] defines a).
+            for start, header in self.headers[1:]:
+                if depth > 0 and header[:depth] == prefix:
                     return start + 1
         return 1
 
@@ -360,8 +364,22 @@ def model_from_toml(data: str | bytes, *, path=None, check: bool = True) -> Mode
 
 
 def _guess_line(text: str, error: Exception) -> int:
+    """Line of a tomlkit error that does not carry one (a duplicate key): ask the standard
+    library's parser, whose messages end with '(at line N, column M)'."""
+    import tomllib
+
     line = getattr(error, "line", None)
-    return int(line) if isinstance(line, int) and line >= 1 else 1
+    if isinstance(line, int) and line >= 1:
+        return line
+    try:
+        tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        match = re.search(r"line (\d+)", str(e))
+        if match:
+            return int(match.group(1))
+    except Exception:  # noqa: S110 - only a hint for the message
+        pass
+    return 1
 
 
 def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
@@ -983,6 +1001,23 @@ def _with_units(tables, old_units):
     return tables
 
 
+def _same(a, b) -> bool:
+    """Equal values, telling -0.0 from 0.0 (an int and the equal float are the same)."""
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    numbers = (int, float)
+    if isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool) \
+            and not isinstance(b, bool):
+        try:
+            x, y = float(a), float(b)
+        except OverflowError:
+            return False
+        return x == y and math.copysign(1.0, x) == math.copysign(1.0, y)
+    return type(a) is type(b) and a == b
+
+
 def _merge_document(old, new):
     """`new`'s content in `old`'s layout: keys and tables that exist in both keep `old`'s
     comments; order follows `new` (marker order matters)."""
@@ -1002,7 +1037,9 @@ def _merge_document(old, new):
                     merge(old_item, new_item)
                     continue
                 if not isinstance(old_item, Table | AoT) and not isinstance(new_item, Table):
-                    if not new_item.trivia.comment and old_item.trivia.comment:
+                    if _same(old_item.unwrap(), new_item.unwrap()):
+                        continue  # unchanged: keep its layout and the comments inside it
+                    if old_item.trivia.comment:  # a human's comment beats the generated one
                         new_item.trivia.comment = old_item.trivia.comment
                         new_item.trivia.comment_ws = old_item.trivia.comment_ws
                 old_t[key] = new_item

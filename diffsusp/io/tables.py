@@ -261,7 +261,7 @@ def _read_csv(data: bytes, path) -> Table:
                 lines.append(reader.line_num)
     except csv.Error as e:
         raise ModelFileError(f"not a valid CSV row ({e}).", path=path,
-                             line=reader.line_num + 1) from None
+                             line=max(reader.line_num, 1)) from None
     if header is None:
         raise ModelFileError(
             "the table is empty; expected a header row of column names, e.g. "
@@ -317,7 +317,6 @@ def _check_unit(unit, path, line, name):
 
 
 def _read_parquet(path) -> Table:
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
     if not os.path.exists(path):
@@ -327,18 +326,32 @@ def _read_parquet(path) -> Table:
     except Exception as e:  # pyarrow raises several types for a damaged file
         raise ModelFileError(f"not a readable Parquet file ({type(e).__name__}: {e}).",
                              path=path) from None
+    try:
+        columns, units = _parquet_columns(arrow, path)
+    except ModelFileError:
+        raise
+    except Exception as e:  # a damaged file can fail on any access (names, metadata, data)
+        raise ModelFileError(f"not a readable Parquet file ({type(e).__name__}: {e}).",
+                             path=path) from None
+    return Table(columns=columns, units=units, path=str(path))
+
+
+def _parquet_columns(arrow, path):
+    import pyarrow as pa
+
     columns, units = {}, {}
     for field, column in zip(arrow.schema, arrow.columns, strict=True):
+        field_name = field.name
         unit = None
-        try:
-            if field.metadata and b"unit" in field.metadata:
+        if field.metadata and b"unit" in field.metadata:
+            try:
                 unit = field.metadata[b"unit"].decode("utf-8").strip() or None
-                name = field.name
-            else:
-                name, unit = split_header(field.name)
-        except UnicodeDecodeError:
-            raise ModelFileError(f"column '{field.name}': its unit is not UTF-8 text.",
-                                 path=path, field=field.name) from None
+            except UnicodeDecodeError:
+                raise ModelFileError(f"column '{field_name}': its unit is not UTF-8 text.",
+                                     path=path, field=field_name) from None
+            name = field_name
+        else:
+            name, unit = split_header(field_name)
         if not name:
             raise ModelFileError("a column has no name.", path=path)
         if name in columns:
@@ -356,7 +369,7 @@ def _read_parquet(path) -> Table:
                                  field=name)
         columns[name] = np.asarray(column.to_numpy(), dtype=np.float64).copy()
         units[name] = unit
-    return Table(columns=columns, units=units, path=str(path))
+    return columns, units
 
 
 def _format(value) -> str:
