@@ -49,7 +49,7 @@ class Accumulator:
         fit_mod.check_x64()
         self.p = int(p)
         self.threshold = threshold
-        self.R = jnp.zeros((self.p + 1, self.p + 1), jnp.result_type(float))
+        self.R = jnp.asarray(np.zeros((self.p + 1, self.p + 1)), jnp.result_type(float))
         self.rows = 0
         self._history = None  # (previous history, weights, sigmas): O(1) per add
 
@@ -113,7 +113,7 @@ class Accumulator:
                 raise InputError("weight='auto': this block fits exactly (zero residual), so "
                                  "its weight would be infinite; pass an explicit weight.")
             P = 1.0 / sigma
-            R = core.stack_r(self.R, P * R_i[0])
+            R = core.stack_r(self.R, P * np.asarray(R_i[0]))
             return self._new(R, r, P, sigma)
         P = 1.0 if weight is None else float(weight)
         if not (np.isfinite(P) and P >= 0):
@@ -137,7 +137,7 @@ class Accumulator:
                                                      self.threshold or 0.0)
             sigma = weights_mod.pooled_sigmas(rho, dof)
             P = 1.0 / sigma
-            stacked = (jnp.asarray(P)[:, None, None] * R_i).reshape(-1, self.p + 1)
+            stacked = (P[:, None, None] * np.asarray(R_i)).reshape(-1, self.p + 1)
             return self._new(core.stack_r(self.R, stacked), k * r, P, sigma)
         if weights is None:
             P = np.ones(k)

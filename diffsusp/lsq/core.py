@@ -16,6 +16,7 @@ result is returned in the original units.
 """
 
 import functools
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -311,12 +312,17 @@ def solve_r(
 
     Statistics (§3.8): σ̂² = ‖ρ‖²/dof (dof = n − rank, or n − p as in the thesis), covariance
     σ̂²·(R′ᵀR′)⁻¹, σ, σ% = 100·σ/|x|, confidence index IC of the kept combinations.
-    The structural identifiability (`identifiability`) and the solve are two compiled
-    functions, so the elimination loop and the solution modes share the first.
+    Compiled in stages (identifiability, reduced model, method, statistics), so the solution
+    modes and the elimination loop share the compiled reduced model.
     """
+    method = "bounded" if method == "nonneg" else method
     identifiable = identifiability(R, n, threshold, pivot=pivot)
-    return _solve_r(R, n, prior, prior_sigma, lower, upper, fixed, threshold, identifiable,
-                    method="bounded" if method == "nonneg" else method, pivot=pivot, dof=dof)
+    base = _base_jit(R, n, prior, fixed, threshold, pivot=pivot, dof=dof)
+    if method == "basic":
+        step = _basic_step(base)
+    else:
+        step = _method_jit(base, prior, prior_sigma, lower, upper, fixed, method=method)
+    return _finish_jit(base, step, identifiable, fixed)
 
 
 def _scaled(R, n, threshold):
@@ -346,111 +352,150 @@ def identifiability(R: Float[Array, "q q"], n: Float[Array, ""], threshold: Floa
     return _identifiability(R, n, threshold, pivot)
 
 
-@functools.partial(jax.jit, static_argnames=("method", "pivot", "dof"))
-def _solve_r(
-    R: Float[Array, "q q"],
-    n: Float[Array, ""],
-    prior: Float[Array, " p"],
-    prior_sigma: Float[Array, " p"],
-    lower: Float[Array, " p"],
-    upper: Float[Array, " p"],
-    fixed: Bool[Array, " p"],
-    threshold: Float[Array, ""],
-    identifiable: Bool[Array, " p"],
-    *,
-    method: str = "basic",
-    pivot: bool = True,
-    dof: str = "n-rank",
-) -> Solution:
-    p = R.shape[0] - 1
-    dtype = R.dtype
-    Rw, B = R[:p, :p], -R[:p, p]
-    rho_full = jnp.abs(R[p, p])
-    A, d, tol = _scaled(R, n, threshold)
-    prior_s = prior / d
+class _Base(NamedTuple):
+    """The reduced model: everything that does not depend on the solution method."""
 
-    # The estimated model: fixed (eliminated) parameters are not candidates.
+    R: Array
+    n: Array
+    A: Array  # R_w with unit-norm columns
+    B: Array
+    d: Array  # column scale
+    tol: Array
+    rho_full: Array
+    prior_s: Array
+    kept: Array
+    x_basic: Array
+    cov_basic: Array  # unit-variance covariance of the basic solution (scaled coordinates)
+    gamma: Array  # regrouping Γ (scaled coordinates)
+    s2_basic: Array
+    dof: Array
+
+
+class _Step(NamedTuple):
+    """A method's solution in scaled coordinates."""
+
+    x_s: Array
+    cov_unit: Array
+    s2_cov: Array  # σ̂² for the covariance (nan: that of x_s's own residual)
+    estimated: Array
+    at_bound: Array
+    iterations: Array
+    converged: Array
+
+
+def _sigma2(base, x_s):
+    r2 = jnp.sum((base.A @ x_s - base.B) ** 2) + base.rho_full**2
+    ok = base.dof > 0
+    return r2, jnp.where(ok, r2 / jnp.where(ok, base.dof, 1.0), jnp.nan)
+
+
+def _base(R, n, prior, fixed, threshold, pivot, dof) -> _Base:
+    p = R.shape[0] - 1
+    A, d, tol = _scaled(R, n, threshold)
+    B = -R[:p, p]
+    prior_s = prior / d
+    # Fixed (eliminated) parameters are not candidates; they stay at their prior.
     kept = select(A, ~fixed, tol, pivot)
     x_basic, cov_basic, QR = _masked_solve(A, B, kept, prior_s)
     gamma = _regrouping(A, QR)
-
     rank = jnp.sum(kept)
-    dof_value = (n - rank if dof == "n-rank" else n - p).astype(dtype)
+    dof_value = (n - rank if dof == "n-rank" else n - p).astype(R.dtype)
+    base = _Base(R, n, A, B, d, tol, jnp.abs(R[p, p]), prior_s, kept, x_basic, cov_basic, gamma,
+                 jnp.asarray(jnp.nan, R.dtype), dof_value)
+    return base._replace(s2_basic=_sigma2(base, x_basic)[1])
 
-    def sigma2_of(x_s):
-        r2 = jnp.sum((A @ x_s - B) ** 2) + rho_full**2
-        return r2, jnp.where(dof_value > 0, r2 / jnp.where(dof_value > 0, dof_value, 1.0), jnp.nan)
 
-    r2_basic, s2_basic = sigma2_of(x_basic)
-    at_bound = jnp.zeros(p, bool)
-    iterations = jnp.asarray(0)
-    converged = jnp.asarray(True)
-    estimated = kept
+def _basic_step(base) -> _Step:
+    p = base.kept.shape[0]
+    return _Step(base.x_basic, base.cov_basic, jnp.asarray(jnp.nan, base.A.dtype), base.kept,
+                 jnp.zeros(p, bool), jnp.asarray(0), jnp.asarray(True))
 
+
+def _method(base, prior, prior_sigma, lower, upper, fixed, method) -> _Step:
+    A, B, d, prior_s = base.A, base.B, base.d, base.prior_s
+    p = A.shape[1]
+    dtype = A.dtype
+    nan = jnp.asarray(jnp.nan, dtype)
+    no_bound = jnp.zeros(p, bool)
     if method == "basic":
-        x_s, cov_unit = x_basic, cov_basic
-    elif method == "min_norm":
+        return _basic_step(base)
+    if method == "min_norm":
         w = jnp.where(fixed, 0.0, prior_sigma / d)
-        G = gamma * w[None, :]
-        U, sinv, Vt = _pinv_apply(G, 1e-12)
-        c = gamma @ x_basic
+        U, sinv, Vt = _pinv_apply(base.gamma * w[None, :], 1e-12)
         T = (w[:, None] * Vt.T) @ (sinv[:, None] * U.T)  # x_s = prior_s + T (c − Γ prior_s)
-        x_s = prior_s + T @ (c - gamma @ prior_s)
-        M = T @ gamma
-        cov_unit = M @ cov_basic @ M.T
-    elif method == "tsvd":
+        x_s = prior_s + T @ (base.gamma @ base.x_basic - base.gamma @ prior_s)
+        M = T @ base.gamma
+        return _Step(x_s, M @ base.cov_basic @ M.T, nan, base.kept, no_bound, jnp.asarray(0),
+                     jnp.asarray(True))
+    if method == "tsvd":
         m = (~fixed).astype(dtype)
-        U, sinv, Vt = _pinv_apply(A * m[None, :], tol)
+        U, sinv, Vt = _pinv_apply(A * m[None, :], base.tol)
         x_s = prior_s + Vt.T @ (sinv * (U.T @ (B - A @ prior_s)))
-        cov_unit = (Vt.T * sinv**2) @ Vt
-    elif method == "tikhonov":
+        return _Step(x_s, (Vt.T * sinv**2) @ Vt, nan, base.kept, no_bound, jnp.asarray(0),
+                     jnp.asarray(True))
+    if method == "tikhonov":
         w = jnp.where(fixed, 0.0, prior_sigma / d)
-        sig = jnp.where(jnp.isfinite(s2_basic), jnp.sqrt(jnp.where(jnp.isfinite(s2_basic),
-                                                                      s2_basic, 0.0)), 0.0)
+        s2 = base.s2_basic
+        sig = jnp.sqrt(jnp.where(jnp.isfinite(s2), s2, 0.0))
         A_aug = jnp.concatenate([A * w[None, :], sig * jnp.eye(p, dtype=dtype)], axis=0)
         rhs = jnp.concatenate([B - A @ prior_s, jnp.zeros(p, dtype)])
         U, sinv, Vt = _pinv_apply(A_aug, 1e-13)
-        u = Vt.T @ (sinv * (U.T @ rhs))
-        x_s = prior_s + w * u
+        x_s = prior_s + w * (Vt.T @ (sinv * (U.T @ rhs)))
         # Posterior covariance σ̂²·diag(w)(AᵀA)⁻¹diag(w) = (R_wᵀR_w/σ̂² + diag(1/σ0²))⁻¹.
         cov_unit = (w[:, None] * (Vt.T * sinv**2) @ Vt) * w[None, :]
-        estimated = ~fixed
-    elif method == "bounded":
+        return _Step(x_s, cov_unit, s2, ~fixed, no_bound, jnp.asarray(0), jnp.asarray(True))
+    if method == "bounded":
         lo = jnp.where(fixed, prior_s, lower / d)
         hi = jnp.where(fixed, prior_s, upper / d)
-        x_s, free, iterations, converged = bvls(A, B, lo, hi, x_basic, max_iter=4 * p + 20)
-        at_bound = ~free & ~fixed
-        estimated = free & kept
+        x_s, free, iterations, converged = bvls(A, B, lo, hi, base.x_basic, max_iter=4 * p + 20)
+        estimated = free & base.kept
         _, cov_unit, _ = _masked_solve(A, B, estimated, x_s)
-    else:  # pragma: no cover - the caller validates
-        raise ValueError(f"unknown method {method!r}")
+        return _Step(x_s, cov_unit, nan, estimated, ~free & ~fixed, iterations, converged)
+    raise ValueError(f"unknown method {method!r}")  # pragma: no cover - the caller validates
 
-    r2, s2 = sigma2_of(x_s)
-    s2_cov = s2_basic if method == "tikhonov" else s2
-    cov_s = cov_unit * jnp.where(jnp.isfinite(s2_cov), s2_cov, jnp.nan)
-    x = x_s * d
+
+def _finish(base, step, identifiable, fixed) -> Solution:
+    R, A, d, kept = base.R, base.A, base.d, base.kept
+    p = A.shape[1]
+    r2, s2 = _sigma2(base, step.x_s)
+    s2_cov = jnp.where(jnp.isnan(step.s2_cov), s2, step.s2_cov)
+    cov_s = step.cov_unit * s2_cov
+    x = step.x_s * d
     cov = cov_s * d[:, None] * d[None, :]
-
-    shown = identifiable & estimated & ~fixed & ~at_bound
+    shown = identifiable & step.estimated & ~fixed & ~step.at_bound
     # Regrouping in original units: c_j = Σ_k Γ_jk x_k with Γ_orig = diag(d) Γ_s diag(1/d).
-    gamma_o = gamma * d[:, None] / d[None, :]
-    gamma_o = jnp.where(jnp.abs(gamma) > COEFFICIENT_TOL, gamma_o, 0.0)
-    sigma, sigma_pct, rel_values, rel_sigma, confidence = statistics(x, cov, shown, kept, gamma_o)
-
+    gamma = base.gamma
+    gamma_o = jnp.where(jnp.abs(gamma) > COEFFICIENT_TOL, gamma * d[:, None] / d[None, :], 0.0)
+    sigma, sigma_pct, rel_values, rel_sigma, confidence = _statistics(x, cov, shown, kept,
+                                                                      gamma_o)
+    Rw = R[:p, :p]
     s_raw = jnp.linalg.svd(Rw, compute_uv=False)
     s_scaled = jnp.linalg.svd(A, compute_uv=False)
-    condition = jnp.where(s_scaled[-1] > 0, s_scaled[0] / jnp.where(s_scaled[-1] > 0,
-                                                                     s_scaled[-1], 1.0), jnp.inf)
+    ok = s_scaled[-1] > 0
+    condition = jnp.where(ok, s_scaled[0] / jnp.where(ok, s_scaled[-1], 1.0), jnp.inf)
     return Solution(
         x=x, covariance=cov, sigma=sigma, sigma_pct=sigma_pct, confidence=confidence,
-        identifiable=identifiable, kept=kept, rank=rank, regrouping=gamma_o,
+        identifiable=identifiable, kept=kept, rank=jnp.sum(kept), regrouping=gamma_o,
         relation_values=rel_values, relation_sigma=rel_sigma,
-        residual_norm=jnp.sqrt(r2), residual_norm_full=rho_full,
-        residual_sigma=jnp.sqrt(s2), dof=dof_value,
+        residual_norm=jnp.sqrt(r2), residual_norm_full=base.rho_full,
+        residual_sigma=jnp.sqrt(s2), dof=base.dof,
         singular_values=s_raw, singular_values_scaled=s_scaled, condition=condition,
-        diagonal=jnp.abs(jnp.diagonal(Rw)) * d, threshold=tol, scale=d, at_bound=at_bound,
-        iterations=iterations, converged=converged, R=R,
+        diagonal=jnp.abs(jnp.diagonal(Rw)) * d, threshold=base.tol, scale=d,
+        at_bound=step.at_bound, iterations=step.iterations, converged=step.converged, R=R,
     )
+
+
+_base_jit = jax.jit(_base, static_argnames=("pivot", "dof"))
+_method_jit = jax.jit(_method, static_argnames=("method",))
+_finish_jit = jax.jit(_finish)
+
+
+def _solve_r(R, n, prior, prior_sigma, lower, upper, fixed, threshold, identifiable, *,
+             method, pivot, dof) -> Solution:
+    """All stages in one traced function (for `solve_arrays`, under jit/vmap)."""
+    base = _base(R, n, prior, fixed, threshold, pivot, dof)
+    step = _method(base, prior, prior_sigma, lower, upper, fixed, method)
+    return _finish(base, step, identifiable, fixed)
 
 
 @functools.partial(jax.jit, static_argnames=("method", "pivot", "dof"))
@@ -492,8 +537,7 @@ def solve_arrays(
                     method="bounded" if method == "nonneg" else method, pivot=pivot, dof=dof)
 
 
-@jax.jit
-def statistics(x, cov, shown, kept, regrouping):
+def _statistics(x, cov, shown, kept, regrouping):
     """σ (nan where not `shown`), σ% = 100·σ/|x|, the values and σ of the kept combinations
     c = Γ x, and their confidence index IC_j = min_k(σ%_k)/σ%_j (spec §3.8 (1-39..1-41))."""
     sigma = jnp.where(shown, jnp.sqrt(jnp.abs(jnp.diagonal(cov))), jnp.nan)
@@ -505,6 +549,9 @@ def statistics(x, cov, shown, kept, regrouping):
     best = jnp.nanmin(jnp.where(kept, rel_pct, jnp.nan))
     confidence = jnp.where(kept, jnp.where(rel_pct > 0, best / rel_pct, 1.0), jnp.nan)
     return sigma, sigma_pct, rel_values, rel_sigma, confidence
+
+
+statistics = jax.jit(_statistics)
 
 
 def fill_defaults(p, dtype, method, prior, prior_sigma, lower, upper, fixed):
@@ -524,8 +571,7 @@ def fill_defaults(p, dtype, method, prior, prior_sigma, lower, upper, fixed):
 # Total least squares
 
 
-@functools.partial(jax.jit, static_argnames=("scale",))
-def tls_r(R: Float[Array, "q q"], n: Float[Array, ""], *, scale: bool = False):
+def _tls(R: Float[Array, "q q"], n: Float[Array, ""], scale: bool = False):
     """Total least squares from the augmented R-factor of a full-rank [W, −Y] (spec §3.7).
 
     v = right singular vector of the smallest singular value of R_m (= of [W, −Y]); since
@@ -552,6 +598,21 @@ def tls_r(R: Float[Array, "q q"], n: Float[Array, ""], *, scale: bool = False):
     # X = diag(d_w / d_y)·X_s: the scaled problem has unknown X_s with X = X_s·d_w/d_y.
     f = d[:p] / d[p]
     return xs * f, cov_s * f[:, None] * f[None, :], smin, s
+
+
+tls_r = jax.jit(_tls, static_argnames=("scale",))
+
+
+@functools.partial(jax.jit, static_argnames=("scale",))
+def tls_reduced(R, n, columns, kept, identifiable, regrouping, *, scale: bool = False):
+    """TLS on the kept columns (`columns`: their indices, then p) of the augmented R-factor:
+    x (p,) (0 elsewhere), covariance, s_min and the statistics of `statistics`."""
+    p = R.shape[0] - 1
+    xk, covk, smin, _ = _tls(qr_r(R[:, columns]), n, scale)
+    cols = columns[:-1]
+    x = jnp.zeros(p, R.dtype).at[cols].set(xk)
+    cov = jnp.zeros((p, p), R.dtype).at[cols[:, None], cols[None, :]].set(covk)
+    return x, cov, smin, _statistics(x, cov, identifiable & kept, kept, regrouping)
 
 
 @jax.jit

@@ -10,7 +10,6 @@ import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
@@ -423,17 +422,40 @@ def _row_weights(W, y, weights, blocks, threshold):
 # The reduced problem (shared by one-shot and streamed fits)
 
 
+CHUNK = 4096  # rows reduced per QR for tall problems
+
+
 def _bucket(m: int) -> int:
-    """The smallest k·2^j ≥ m with 8 ≤ k < 16 (or m itself below 8)."""
-    if m <= 8:
-        return 8
-    shift = max(m.bit_length() - 4, 0)
-    return -(-m // (1 << shift)) << shift
+    """The power of two ≥ m (at least 8)."""
+    return max(8, 1 << (m - 1).bit_length())
 
 
 @jax.jit
 def _weighted_r(W, y, w):
     return core.qr_r(core.augmented(W, y) * w[:, None])
+
+
+@jax.jit
+def _stack_weighted(R, W, y, w):
+    return core.stack_r(R, core.augmented(W, y) * w[:, None])
+
+
+def weighted_r(W: np.ndarray, y: np.ndarray, w: np.ndarray) -> jax.Array:
+    """R-factor of diag(w)·[W, −y]. Zero rows do not change R, so rows are padded to a power of
+    two (up to CHUNK) and taller data are reduced CHUNK rows at a time (spec §3.5): a handful of
+    compiled shapes serve every row count, at the cost of one QR over all rows."""
+    m = W.shape[0]
+
+    def padded(lo, hi, size):
+        pad = size - (hi - lo)
+        return (np.concatenate([a[lo:hi], np.zeros((pad,) + a.shape[1:])]) for a in (W, y, w))
+
+    if m <= CHUNK:
+        return _weighted_r(*padded(0, m, _bucket(m)))
+    R = _weighted_r(*padded(0, CHUNK, CHUNK))
+    for lo in range(CHUNK, m, CHUNK):
+        R = _stack_weighted(R, *padded(lo, min(lo + CHUNK, m), CHUNK))
+    return R
 
 
 @dataclasses.dataclass(frozen=True)
@@ -509,16 +531,10 @@ class Problem:
             raise InputError("TLS: no parameter is identifiable (W is zero).")
         if self.n <= c:
             raise InputError(f"TLS needs more rows than identifiable parameters ({self.n} ≤ {c}).")
-        Rk = core.qr_r(jnp.asarray(self.R)[:, np.append(keep, p)])
-        xk, covk, smin, _ = core.tls_r(Rk, jnp.asarray(self.n, Rk.dtype), scale=scale)
-        x = np.zeros(p)
-        x[keep] = np.asarray(xk)
-        cov = np.zeros((p, p))
-        cov[np.ix_(keep, keep)] = np.asarray(covk)
-        shown = base.identifiable & base.kept
-        sigma, sigma_pct, rv, rs, ic = (np.asarray(a) for a in core.statistics(
-            jnp.asarray(x), jnp.asarray(cov), jnp.asarray(shown), jnp.asarray(base.kept),
-            jnp.asarray(base.regrouping)))
+        x, cov, _, stats = jax.device_get(core.tls_reduced(
+            self.R, np.float64(self.n), np.append(keep, p), base.kept, base.identifiable,
+            base.regrouping, scale=scale))
+        sigma, sigma_pct, rv, rs, ic = stats
         idx = np.nonzero(base._nontrivial())[0]
         # ‖W x − y‖ = ‖R_m [x; 1]‖ (spec §3.3).
         resid = float(np.linalg.norm(np.asarray(self.R) @ np.append(x, 1.0)))
@@ -527,8 +543,7 @@ class Problem:
             relation_values=rv[idx], relation_sigma=rs[idx], combination_values=rv,
             combination_sigma=rs, method="tls",
             residuals=None if self.W is None else self.y - self.W @ x,
-            residual_norm=resid,
-            residual_sigma=float(smin) / np.sqrt(self.n - c))
+            residual_norm=resid, residual_sigma=resid / np.sqrt(self.n - c), dof=float(self.n - c))
 
     def eliminate(self, *, ic_threshold=core.IC_ESSENTIAL, sigma_pct_threshold=None,
                   check=None, keep=(), fixed=None, max_steps=None, **options):
@@ -594,12 +609,7 @@ def problem(W, y, *, names=None, weights=None, blocks=None, threshold=None) -> P
     if threshold is not None:
         _options("basic", threshold, "n-rank")
     row_w, block_w, block_sigma = _row_weights(W, y, weights, blocks, threshold)
-    w = np.ones(W.shape[0]) if row_w is None else row_w
-    # Zero rows do not change R: pad to a few row counts so that data sets of nearby sizes
-    # share one compiled QR (at most 1/8 more rows).
-    pad = _bucket(W.shape[0]) - W.shape[0]
-    Wp, yp, wp = (np.concatenate([a, np.zeros((pad,) + a.shape[1:])]) for a in (W, y, w))
-    R = _weighted_r(Wp, yp, wp)
+    R = weighted_r(W, y, np.ones(W.shape[0]) if row_w is None else row_w)
     return Problem(R=R, n=W.shape[0], names=names, W=W, y=y, block_weights=block_w,
                    block_sigma=block_sigma)
 
