@@ -346,6 +346,15 @@ def test_nonneg_keeps_the_sum_and_reports_bounds(coupler):
     fit = lsq.solve(W, y, names=NAMES5, method="nonneg")
     np.testing.assert_allclose(fit.x[2] + fit.x[3], lsq.solve(W, y).relation_values[0],
                                rtol=1e-10)
+    # Capped: the pair sits at its bounds, the others are re-fitted with it held there.
+    fit = lsq.solve(W, y, names=NAMES5, method="nonneg", upper={"Krx1": 5e5, "Krx2": 5e5})
+    assert fit.x[2] == fit.x[3] == 5e5 and fit.at_bound.tolist() == [False] * 2 + [True] * 2 \
+        + [False]
+    free = [0, 1, 4]
+    ref = np.linalg.lstsq(W[:, free], y - W[:, 2:4] @ fit.x[2:4], rcond=None)[0]
+    np.testing.assert_allclose(fit.x[free], ref, rtol=1e-10)
+    assert np.isnan(fit.relation_sigma[0]) and np.nanmax(fit.confidence) == 1.0
+    assert np.all(fit.confidence[free] > 0.1) and np.isnan(fit.confidence[2])
 
 
 # ---------------------------------------------------------------------------------------------

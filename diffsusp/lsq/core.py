@@ -466,8 +466,8 @@ def _finish(base, step, identifiable, fixed) -> Solution:
     # Regrouping in original units: c_j = Σ_k Γ_jk x_k with Γ_orig = diag(d) Γ_s diag(1/d).
     gamma = base.gamma
     gamma_o = jnp.where(jnp.abs(gamma) > COEFFICIENT_TOL, gamma * d[:, None] / d[None, :], 0.0)
-    sigma, sigma_pct, rel_values, rel_sigma, confidence = _statistics(x, cov, shown, kept,
-                                                                      gamma_o)
+    sigma, sigma_pct, rel_values, rel_sigma, confidence = _statistics(
+        x, cov, shown, kept, gamma_o, step.estimated & ~step.at_bound)
     Rw = R[:p, :p]
     s_raw = jnp.linalg.svd(Rw, compute_uv=False)
     s_scaled = jnp.linalg.svd(A, compute_uv=False)
@@ -537,17 +537,26 @@ def solve_arrays(
                     method="bounded" if method == "nonneg" else method, pivot=pivot, dof=dof)
 
 
-def _statistics(x, cov, shown, kept, regrouping):
+def _statistics(x, cov, shown, kept, regrouping, free=None):
     """σ (nan where not `shown`), σ% = 100·σ/|x|, the values and σ of the kept combinations
-    c = Γ x, and their confidence index IC_j = min_k(σ%_k)/σ%_j (spec §3.8 (1-39..1-41))."""
+    c = Γ x, and their confidence index IC_j = min_k(σ%_k)/σ%_j (spec §3.8 (1-39..1-41)).
+
+    A combination's σ is nan when none of its parameters is `free` (estimated, not at a bound),
+    and its IC is nan when its σ is 0 or undefined (exact data, no residual degree of freedom):
+    IC compares noise levels and means nothing without noise."""
     sigma = jnp.where(shown, jnp.sqrt(jnp.abs(jnp.diagonal(cov))), jnp.nan)
     sigma_pct = 100.0 * sigma / jnp.abs(x)
     rel_values = jnp.where(kept, regrouping @ x, jnp.nan)
+    if free is not None:
+        kept_est = kept & jnp.any((regrouping != 0) & free[None, :], axis=1)
+    else:
+        kept_est = kept
     rel_var = jnp.einsum("jk,kl,jl->j", regrouping, cov, regrouping)
-    rel_sigma = jnp.where(kept, jnp.sqrt(jnp.abs(rel_var)), jnp.nan)
+    rel_sigma = jnp.where(kept_est, jnp.sqrt(jnp.abs(rel_var)), jnp.nan)
     rel_pct = rel_sigma / jnp.abs(rel_values)
-    best = jnp.nanmin(jnp.where(kept, rel_pct, jnp.nan))
-    confidence = jnp.where(kept, jnp.where(rel_pct > 0, best / rel_pct, 1.0), jnp.nan)
+    valid = kept_est & (rel_pct > 0)  # also False for nan
+    best = jnp.min(jnp.where(valid, rel_pct, jnp.inf))
+    confidence = jnp.where(valid, best / jnp.where(valid, rel_pct, 1.0), jnp.nan)
     return sigma, sigma_pct, rel_values, rel_sigma, confidence
 
 

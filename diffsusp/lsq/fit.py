@@ -117,8 +117,9 @@ class Fit:
 
     @property
     def essential(self) -> np.ndarray:
-        """Kept combinations with IC ≥ 0.1 (spec §3.8: the others can be neglected)."""
-        return self.kept & (np.nan_to_num(self.confidence) >= core.IC_ESSENTIAL)
+        """Kept combinations not below IC = 0.1 (spec §3.8: those can be neglected; an
+        undefined IC, e.g. on exact data, does not make a parameter negligible)."""
+        return self.kept & ~(self.confidence < core.IC_ESSENTIAL)
 
     def interval(self, k: float = 1.0) -> np.ndarray:
         """(p, 2) interval x ± k·σ (k = 1: the 68 % Gaussian interval of spec §3.8)."""
@@ -200,8 +201,9 @@ class Fit:
             lines.append("identifiable combinations:")
             for text, v, s in zip(self.relations, self.relation_values, self.relation_sigma,
                                   strict=True):
-                lines.append(f"  {text} = {v:.6g} +- {_num(s, '.3g')} "
-                             f"({_pct(100 * s / abs(v)) if v else '-'})")
+                spread = (f" +- {s:.3g} ({_pct(100 * s / abs(v)) if v else '-'})"
+                          if np.isfinite(s) else "")
+                lines.append(f"  {text} = {v:.6g}{spread}")
         sv = self.singular_values / self.singular_values[0] if self.singular_values[0] > 0 \
             else self.singular_values
         lines.append("singular values of W (% of largest): "
