@@ -33,7 +33,8 @@ class Accumulator:
     fit = acc.solve(names=names, method="basic")   # = lsq.solve on the stacked data
     ```
 
-    **Attributes:** `R` ((p+1)×(p+1) JAX array), `rows` (rows added), `block_weights` and
+    **Attributes:** `R` ((p+1)×(p+1) JAX array), `rows` (rows added with a non-zero weight:
+    the n of the statistics), `block_weights` and
     `block_sigma` (the weight and, for automatic weights, the σ̂ of every block added, in
     order), `p`.
     """
@@ -120,7 +121,7 @@ class Accumulator:
             raise InputError(f"weight must be finite and non-negative; got {weight!r}.")
         if P != 1.0:
             M *= P
-        return self._new(core.stack_r(self.R, M), r, P, np.nan)
+        return self._new(core.stack_r(self.R, M), r if P > 0 else 0, P, np.nan)
 
     def add_blocks(self, W: Float[Array, "k r p"], y: Float[Array, "k r"],
                    weights: Float[Array, " k"] | str | None = None) -> "Accumulator":
@@ -146,7 +147,8 @@ class Accumulator:
             if not np.all(np.isfinite(P) & (P >= 0)):
                 raise InputError("weights must be finite and non-negative.")
         stacked = (P[:, None, None] * M).reshape(-1, self.p + 1)
-        return self._new(core.stack_r(self.R, stacked), k * r, P, np.full(k, np.nan))
+        return self._new(core.stack_r(self.R, stacked), int(np.count_nonzero(P)) * r, P,
+                         np.full(k, np.nan))
 
     def merge(self, other: "Accumulator") -> "Accumulator":
         """The accumulator of both sets of rows (for accumulating in parallel, then combining)."""

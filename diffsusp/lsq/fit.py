@@ -612,7 +612,9 @@ def problem(W, y, *, names=None, weights=None, blocks=None, threshold=None) -> P
         _options("basic", threshold, "n-rank")
     row_w, block_w, block_sigma = _row_weights(W, y, weights, blocks, threshold)
     R = weighted_r(W, y, np.ones(W.shape[0]) if row_w is None else row_w)
-    return Problem(R=R, n=W.shape[0], names=names, W=W, y=y, block_weights=block_w,
+    # Rows of zero weight are not observations: they do not count in the dof.
+    n = W.shape[0] if row_w is None else int(np.count_nonzero(row_w))
+    return Problem(R=R, n=n, names=names, W=W, y=y, block_weights=block_w,
                    block_sigma=block_sigma)
 
 
