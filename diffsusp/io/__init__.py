@@ -103,3 +103,16 @@ def save_model(mech, path, *, load_tables: dict | None = None, units: dict | Non
                              path=path)
     write_model_toml(mech, path, load_tables=load_tables, units=units,
                      keep_comments=keep_comments)
+
+
+def __getattr__(name):
+    # The importers load on first use (they pull in their own parsers).
+    if name == "read_adm":
+        from .adams import read_adm
+
+        return read_adm
+    if name == "read_chrono":
+        from .chrono import read_chrono
+
+        return read_chrono
+    raise AttributeError(f"module 'diffsusp.io' has no attribute '{name}'")

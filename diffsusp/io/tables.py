@@ -39,6 +39,7 @@ import os
 import re
 from collections.abc import Mapping
 
+import equinox as eqx
 import numpy as np
 
 from ..errors import ModelFileError
@@ -533,7 +534,6 @@ def results_table(mech, sol, loads: Table | None = None) -> Table:
     `.tension` (N).
     """
     from ..errors import ModelError
-    from ..statics import bushing_states, spring_states
 
     q = np.asarray(sol.q)
     if q.ndim != 2:
@@ -567,16 +567,27 @@ def results_table(mech, sol, loads: Table | None = None) -> Table:
             add(f"{part}.{axis}", q[:, 6 * p + a], "mm")
         for a, axis in enumerate("xyz"):
             add(f"{part}.g{axis}", q[:, 6 * p + 3 + a], None)
+    bushing, spring = _element_outputs(mech, sol.q)
     if mech.bushings.names:
-        states = [np.asarray(s) for s in bushing_states(mech, sol.q)]
+        states = [np.asarray(s) for s in bushing]
         for e, name in enumerate(mech.bushings.names):
             for state, prefix, unit in zip(states, "daft", ("mm", "rad", "N", "N·mm"),
                                            strict=True):
                 for a, axis in enumerate("xyz"):
                     add(f"{name}.{prefix}{axis}", state[:, e, a], unit)
     if mech.springs.names:
-        length, tension = (np.asarray(s) for s in spring_states(mech, sol.q))
+        length, tension = (np.asarray(s) for s in spring)
         for e, name in enumerate(mech.springs.names):
             add(f"{name}.length", length[:, e], "mm")
             add(f"{name}.tension", tension[:, e], "N")
     return Table(columns=columns, units=units)
+
+
+@eqx.filter_jit
+def _element_outputs(mech, q):
+    """Bushing states and spring states of every case, in one compiled program."""
+    from ..statics import bushing_states, spring_states
+
+    bushing = bushing_states(mech, q) if mech.bushings.names else None
+    spring = spring_states(mech, q) if mech.springs.names else None
+    return bushing, spring
