@@ -1,0 +1,1134 @@
+"""Direct (linear) identification of bushing and spring stiffnesses from measured equilibria.
+
+spec: stiffness §1.8–1.14 (Chapter 4), §7 R1–R4; DESIGN.md "Identification".
+
+**Equations.** At a measured equilibrium q_c (part poses from landmarks) under known loads,
+
+    Q_ext(q_c) + Q_int(q_c; k) + Φ_q(q_c)ᵀ λ = 0                     (spec §1.9, 4.35–4.36)
+
+The internal generalised forces are linear in the stiffnesses: Q_int = D(q_c)·k + Q_known(q_c)
+(bushings: F = −K·δ per axis, so the column of Ktx is the generalised force of a unit
+−δx force; springs: tension = K·ℓ − K·L0, linear in the unknowns (K, K·L0), spec §1.7–1.8,
+4.37–4.42). Here D = ∂Q_int/∂k is obtained by `jax.jacfwd` of the solver's own assembly of the
+generalised forces (`statics.kernel.assemble`), exact because Q_int is linear in k, so the
+identification uses exactly the force laws the forward model solves. The multipliers λ are
+eliminated by projecting onto the admissible motions: L is an orthonormal basis of the null
+space of Φ_q (4.43–4.46), giving n − m rows per case
+
+    Lᵀ D k = −Lᵀ (Q_ext + Q_known)                                   (4.47–4.49)
+
+stacked over the cases and solved by `diffsusp.lsq` (4.51–4.54), which also reports which
+stiffnesses the data determine, the identifiable combinations, σ and σ%.
+
+**Coordinates and scaling.** The rows are built in the solver's coordinates (each part's
+reference point and its Gibbs vector, spec §1.3), with the rotational coordinates scaled by the
+model's length scale ℓ so that every generalised force is a force in N (a moment in N·mm divided
+by ℓ): otherwise N·mm rows would swamp N rows once the data are noisy (spec §1.10, "not invariant
+to the parametrisation of q or to units"). The result is invariant to the choice of the basis L.
+Columns are in the units of the thesis's tables (N/mm, N·mm/deg; spring K in N/mm and K·L0 in
+N; force offsets in N and moment offsets in N·mm), and `lsq` scales them to unit norm inside.
+
+**Bushing convention (Adams vs thesis).** diffsusp's bushings follow the Adams BUSHING
+convention: the law acts on the I marker's part, F_I = −K·δ_T, T_I = −K_T·δ_R (δ: I relative to J,
+in J), and J receives −F_I and −T_I − δ × F_I. The thesis writes the mirrored law on the J side
+(F_{1→2} = K·δ on S2 at O_j, and the δ × F transfer on S1, spec §1.8, 4.31–4.33). Both give the
+same force; the moments differ by δ_T × (K·δ_T), a second-order term that vanishes for an
+isotropic K_T. The identification rows here come from the Adams-convention forces the solver
+uses, so a model identified here reproduces its measurements in diffsusp (and Adams); thesis
+numbers computed with the mirrored law can differ in the second order of the deformation.
+
+**Offsets.** Optional unknown offsets δ0 (spec §1.10, "Offsets", and §0: F = f(T − T0)) are
+identified as the constant force K·δ0 (+ the model's preload), linear like the spring's K·L0.
+"""
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..errors import InputError, ModelError
+from ..measure.measurements import Measurements
+from ..model.mechanism import Mechanism
+
+__all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_system"]
+
+DEG = math.pi / 180.0
+AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
+STIFFNESS_NAMES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
+OFFSET_NAMES = ("Fx0", "Fy0", "Fz0", "Mx0", "My0", "Mz0")
+DEFAULT_THRESHOLD = 1e-5
+"""Default identifiability threshold of the direct method (relative, on unit-norm columns: see
+`lsq.solve`). Far above rounding, so that stiffnesses told apart only by second-order effects of
+large rotations — which no measurement resolves — are reported as combinations (spec §7 R3)."""
+MAX_SIGMA_PCT = 10.0
+"""Identifiable parameters with a relative standard deviation above this (%) are reported as
+not determined by the data (no value in the table). Engineering accuracy rather than the
+statistical limit of spec guaranteed_least_squares §3.8 (beyond 100 % the 68 % interval contains
+0): with noisy poses the regressors themselves are noisy (errors in variables), which biases
+stiff, little-deformed directions toward 0 by more than their σ says; they are the ones with a
+large σ%."""
+
+METHODS = ("basic", "min_norm", "tsvd", "tikhonov", "nonneg")
+
+
+# ----------------------------------------------------------------------------- selection
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """One unknown of the linear system (static description).
+
+    `kind`: 'stiffness' (bushing axis, column ∂Q/∂k), 'constant' (bushing axis: K·δ0 + preload),
+    'spring_k' (spring K, with the model's L0 if `spring_c` is not also unknown), 'spring_c'
+    (K·L0); `element` the bushing/spring index; `axes` the bushing axes it covers (two for an
+    axisymmetric pair); `unit` of the table value; `to_internal` factor from the table unit to
+    the model's (N·mm/deg → N·mm/rad).
+    """
+
+    name: str
+    kind: str
+    element: int
+    axes: tuple[int, ...]
+    unit: str
+    to_internal: float
+
+
+_FIELDS = {
+    "bushings.k_trans": ("bushing", "k", (0, 1, 2)),
+    "bushings.k_rot": ("bushing", "k", (3, 4, 5)),
+    "bushings.offset_trans": ("bushing", "offset", (0, 1, 2)),
+    "bushings.offset_rot": ("bushing", "offset", (3, 4, 5)),
+    "springs.k": ("spring", "k", ()),
+    "springs.free_length": ("spring", "free_length", ()),
+}
+
+
+def _default_where(m: Mechanism):
+    return (m.bushings.k_trans, m.bushings.k_rot, m.springs.k, m.springs.free_length)
+
+
+def _selected_fields(mech: Mechanism, where: Callable) -> set[str]:
+    try:
+        chosen = jax.tree_util.tree_leaves(where(mech))
+    except Exception as e:  # a selector that does not apply to this model
+        raise InputError(f"where= could not be applied to the model: {e}") from None
+    fields = {}
+    for path in _FIELDS:
+        group, name = path.split(".")
+        fields[path] = getattr(getattr(mech, group), name)
+    selected = set()
+    for leaf in chosen:
+        hit = [p for p, v in fields.items() if v is leaf]
+        if not hit:
+            raise InputError(
+                "where= selected something the direct method cannot identify: it identifies "
+                "the parameters the internal forces are linear in, selected as whole fields: "
+                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements with elements=(...); "
+                "for other parameters (hardpoints, nonlinear laws) use a least-squares fit "
+                "through the equilibrium."
+            )
+        selected.update(hit)
+    return selected
+
+
+def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
+                offsets_alone_ok=True) -> tuple[Parameter, ...]:
+    b, s = mech.bushings, mech.springs
+    names = set(b.names) | set(s.names)
+    if elements is None:
+        elements = tuple(b.names) + tuple(s.names)
+    elements = tuple(elements)
+    unknown = [e for e in elements if e not in names]
+    if unknown:
+        raise InputError(
+            f"elements= names {', '.join(map(repr, unknown))}, which model '{mech.name}' does "
+            f"not have; its bushings: {', '.join(b.names) or 'none'}; springs: "
+            f"{', '.join(s.names) or 'none'}."
+        )
+    axisym = tuple(axisymmetric)
+    bad = [e for e in axisym if e not in b.names]
+    if bad:
+        raise InputError(f"axisymmetric= names {', '.join(map(repr, bad))}, which are not "
+                         f"bushings of the model ({', '.join(b.names) or 'none'}).")
+    k_axes = set()
+    c_axes = set()
+    for path in fields:
+        group, kind, axes = _FIELDS[path]
+        if group == "bushing":
+            (k_axes if kind == "k" else c_axes).update(axes)
+    spline = np.asarray(b.spline_axes, dtype=bool).reshape(len(b.names), 6)
+    cubic = np.concatenate([np.asarray(b.cubic_trans), np.asarray(b.cubic_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    params = []
+    for e, name in enumerate(b.names):
+        if name not in elements:
+            continue
+        for a in sorted(k_axes | c_axes):
+            if spline[e, a]:
+                raise ModelError(
+                    f"bushing '{name}' uses a spline law on axis {AXES[a]}; the direct method "
+                    "identifies linear stiffness. Leave it out (elements=...) or replace the "
+                    "spline by its slope."
+                )
+        for a in sorted(c_axes):
+            if cubic[e, a] != 0:
+                raise ModelError(
+                    f"bushing '{name}' has a cubic term on axis {AXES[a]}, which makes its "
+                    "offset enter nonlinearly; identify its offsets with a linear law only."
+                )
+        sym = name in axisym
+        for a in sorted(k_axes):
+            if sym and a in (1, 4):
+                continue
+            rot = a >= 3
+            if sym and a in (0, 3):
+                label, axes = ("Krr" if rot else "Ktr"), (a, a + 1)
+            else:
+                label, axes = STIFFNESS_NAMES[a], (a,)
+            params.append(Parameter(f"{name}.{label}", "stiffness", e, axes,
+                                    "N·mm/deg" if rot else "N/mm", 1.0 / DEG if rot else 1.0))
+        for a in sorted(c_axes):
+            params.append(Parameter(f"{name}.{OFFSET_NAMES[a]}", "constant", e, (a,),
+                                    "N·mm" if a >= 3 else "N", 1.0))
+    spring_k = "springs.k" in fields
+    spring_c = "springs.free_length" in fields
+    for e, name in enumerate(s.names):
+        if name not in elements or not (spring_k or spring_c):
+            continue
+        if s.tabulated[e]:
+            raise ModelError(f"spring '{name}' has a tabulated law; the direct method "
+                             "identifies linear springs (K, L0). Leave it out (elements=...).")
+        if spring_k:
+            params.append(Parameter(f"{name}.K", "spring_k", e, (), "N/mm", 1.0))
+        if spring_c:
+            params.append(Parameter(f"{name}.KL0", "spring_c", e, (), "N", 1.0))
+    if not params:
+        raise InputError("nothing to identify: the selection (where=, elements=) picks no "
+                         "stiffness of this model.")
+    return tuple(params)
+
+
+def _evaluation_model(mech: Mechanism, params: tuple[Parameter, ...]) -> Mechanism:
+    """`mech` with the unknowns removed from its laws: what remains of Q_int is known."""
+    b, s = mech.bushings, mech.springs
+    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    offset = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    preload = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)],
+                             axis=1) if b.names else np.zeros((0, 6))
+    spring_k = np.asarray(s.k).copy()
+    free_length = np.asarray(s.free_length).copy()
+    for p in params:
+        if p.kind == "stiffness":
+            k[p.element, list(p.axes)] = 0.0
+        elif p.kind == "constant":
+            offset[p.element, list(p.axes)] = 0.0
+            preload[p.element, list(p.axes)] = 0.0
+        elif p.kind == "spring_k":
+            spring_k[p.element] = 0.0
+        else:
+            free_length[p.element] = 0.0
+    return eqx.tree_at(
+        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
+                   m.bushings.offset_rot, m.bushings.preload_force, m.bushings.preload_torque,
+                   m.springs.k, m.springs.free_length),
+        mech,
+        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], offset[:, :3], offset[:, 3:],
+                                       preload[:, :3], preload[:, 3:], spring_k, free_length)),
+    )
+
+
+# ----------------------------------------------------------------------------- assembly
+
+
+class _Columns(eqx.Module):
+    """Static gather of the unknowns from the differentiated fields."""
+
+    field: tuple[int, ...] = eqx.field(static=True)  # 0 k, 1 preload, 2 spring k
+    element: tuple[int, ...] = eqx.field(static=True)
+    axes: tuple[tuple[int, ...], ...] = eqx.field(static=True)
+    spring_c: tuple[bool, ...] = eqx.field(static=True)
+    factor: tuple[float, ...] = eqx.field(static=True)
+
+
+def _columns(params: tuple[Parameter, ...]) -> _Columns:
+    field = []
+    for p in params:
+        field.append({"stiffness": 0, "constant": 1}.get(p.kind, 2))
+    return _Columns(
+        field=tuple(field), element=tuple(p.element for p in params),
+        axes=tuple(p.axes for p in params),
+        spring_c=tuple(p.kind == "spring_c" for p in params),
+        factor=tuple(p.to_internal for p in params),
+    )
+
+
+def _scaling(mech: Mechanism) -> np.ndarray:
+    """Per coordinate: 1 for translations, 1/ℓ for the Gibbs coordinates (turns N·mm into N)."""
+    n_parts = len(mech.parts)
+    return np.tile(np.r_[np.ones(3), np.full(3, 1.0 / mech.length_scale)], n_parts)
+
+
+def _null_basis(eval_mech: Mechanism, loads, y, scale):
+    """Orthonormal basis L (n, n − m) of the null space of the scaled Φ_q at y (spec §1.9,
+    4.43–4.44), and the constraint Jacobian Φ_q (m, n) (unscaled)."""
+    from ..statics.kernel import constraint_values, get_layout
+
+    lay = get_layout(eval_mech)
+    n, m = lay.n, lay.m
+    if not m:
+        return jnp.eye(n, dtype=y.dtype), jnp.zeros((0, n), y.dtype)
+    live = np.asarray(eval_mech.independent_rows)
+    phi_q = jax.jacfwd(lambda yy: constraint_values(eval_mech, loads, yy)[live])(y)
+    row_scale = jnp.asarray(np.where(lay.angular_live, eval_mech.length_scale, 1.0), y.dtype)
+    basis, _ = jnp.linalg.qr((phi_q * row_scale[:, None] * scale[None, :]).T, mode="complete")
+    return basis[:, m:], phi_q
+
+
+def _mechanism_at(eval_mech: Mechanism, cols: _Columns, z):
+    """The evaluation model with the unknowns θ = z[:p] added to their fields, and z[p:] added
+    to the springs' K (the auxiliary directions of the K·L0 columns). A spring whose K·L0 = c is
+    an unknown has free length 0 in the evaluation model; `with_constants` puts c back as the
+    free length c/K (for evaluating the forces at a solution)."""
+    b, s = eval_mech.bushings, eval_mech.springs
+    p = len(cols.field)
+    theta, aux = z[:p], z[p:]
+    kb = jnp.zeros((len(b.names), 6), z.dtype)
+    cb = jnp.zeros((len(b.names), 6), z.dtype)
+    ks = aux
+    for i in range(p):
+        e, f = cols.element[i], cols.field[i]
+        if f == 0:
+            for a in cols.axes[i]:
+                kb = kb.at[e, a].add(theta[i] * cols.factor[i])
+        elif f == 1:
+            cb = cb.at[e, cols.axes[i][0]].add(theta[i])
+        elif not cols.spring_c[i]:
+            ks = ks.at[e].add(theta[i])
+    return eqx.tree_at(
+        lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
+                    mm.bushings.preload_torque, mm.springs.k),
+        eval_mech,
+        (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:], b.preload_force + cb[:, :3],
+         b.preload_torque + cb[:, 3:], s.k + ks),
+    )
+
+
+def _with_constants(mech: Mechanism, cols: _Columns, x):
+    """Put the identified K·L0 back into the springs as free lengths (tension K·ℓ − K·L0)."""
+    s = mech.springs
+    free_length = s.free_length
+    for i in range(len(cols.field)):
+        if cols.spring_c[i]:
+            e = cols.element[i]
+            k = s.k[e]
+            free_length = free_length.at[e].add(x[i] / jnp.where(k == 0, 1.0, k))
+    return eqx.tree_at(lambda mm: mm.springs.free_length, mech, free_length)
+
+
+def _case_rows(eval_mech: Mechanism, cols: _Columns, q, loads):
+    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N)."""
+    from ..statics.kernel import assemble, get_layout, to_internal
+    from ..statics.outputs import marker_poses
+
+    lay = get_layout(eval_mech)
+    n, m = lay.n, lay.m
+    y = to_internal(eval_mech, q)
+    lam = jnp.zeros(m, y.dtype)
+    s = eval_mech.springs
+    p = len(cols.field)
+
+    def forces(z):
+        r, _ = assemble(_mechanism_at(eval_mech, cols, z), loads, y, lam, with_jacobian=False)
+        return r[:n]
+
+    z0 = jnp.zeros(p + len(s.names), y.dtype)
+    known = forces(z0)
+    jac = jax.jacfwd(forces)(z0)  # (n, p + springs): exact, the forces are linear in z
+    columns = jac[:, :p]
+    if any(cols.spring_c):
+        # K·L0 column: a tension of −1 N along the spring = −(∂Q/∂K at L0 = 0)/ℓ (spec §1.7).
+        pos, _ = marker_poses(eval_mech, q)
+        length = jnp.linalg.norm(pos[np.asarray(s.i_marker)] - pos[np.asarray(s.j_marker)],
+                                 axis=-1)
+        for i in range(p):
+            if cols.spring_c[i]:
+                e = cols.element[i]
+                columns = columns.at[:, i].set(-jac[:, p + e] / length[e])
+    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
+    null, _ = _null_basis(eval_mech, loads, y, scale)
+    return null.T @ (columns * scale[:, None]), -null.T @ (known * scale)
+
+
+def _case_whitener(eval_mech: Mechanism, cols: _Columns, q, loads, x, pose_cov):
+    """Whitening matrix C⁻¹ (r, r) of one case: Σ_r = C Cᵀ is the covariance of the case's
+    equation residual caused by pose errors of covariance `pose_cov` (n, n, solver
+    coordinates), to first order, at the solution x.
+
+    With the multipliers λ̂ fitted at x, the residual Lᵀ(Q + Φ_qᵀλ̂) moves by Lᵀ·K·dy for a pose
+    error dy, K = ∂(Q + Φ_qᵀλ̂)/∂y the tangent stiffness (the solver's KKT Jacobian block); the
+    change of L itself multiplies the (small) residual and is dropped.
+    """
+    from ..statics.kernel import assemble, get_layout, to_internal
+
+    lay = get_layout(eval_mech)
+    n, m = lay.n, lay.m
+    y = to_internal(eval_mech, q)
+    s = eval_mech.springs
+    z = jnp.concatenate([x, jnp.zeros(len(s.names), y.dtype)])
+    mech_x = _with_constants(_mechanism_at(eval_mech, cols, z), cols, x)
+    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
+    null, phi_q = _null_basis(eval_mech, loads, y, scale)
+    g, _ = assemble(mech_x, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
+    g = g[:n]
+    if m:
+        a = phi_q * scale[None, :]
+        lam = -jnp.linalg.solve(a @ a.T, a @ (scale * g))
+    else:
+        lam = jnp.zeros(0, y.dtype)
+    _, jac = assemble(mech_x, loads, y, lam)
+    sens = null.T @ (scale[:, None] * jac[:n, :n])  # (r, n)
+    cov = sens @ pose_cov @ sens.T
+    r = cov.shape[0]
+    cov = cov + (1e-12 * jnp.trace(cov) / r + 1e-300) * jnp.eye(r, dtype=cov.dtype)
+    chol = jnp.linalg.cholesky(cov)
+    return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
+
+
+@eqx.filter_jit
+def _system_arrays(eval_mech: Mechanism, cols: _Columns, q, loads):
+    return jax.vmap(lambda q_, l_: _case_rows(eval_mech, cols, q_, l_))(q, loads)
+
+
+@eqx.filter_jit
+def _whiteners(eval_mech: Mechanism, cols: _Columns, q, loads, x, pose_cov):
+    return jax.vmap(lambda q_, l_, c_: _case_whitener(eval_mech, cols, q_, l_, x, c_))(
+        q, loads, pose_cov)
+
+
+# ----------------------------------------------------------------------------- the system
+
+
+@dataclasses.dataclass(frozen=True)
+class DirectSystem:
+    """The stacked linear system of the direct method, W x ≈ y (spec §1.10, 4.51–4.53).
+
+    **Fields:** `W` (cases·r, p) and `y` (cases·r,) in N (generalised forces, rotational ones
+    divided by the length scale); `r` rows per case (= n − rank Φ_q, the kinematic degrees of
+    freedom); `parameters` (the unknowns, in column order, with their table units); `cases`
+    (labels); `prior` (p,) the model's values in table units; `notes` (from the measurements);
+    `weighted`: rows whitened by the pose-noise covariance (then W and y are dimensionless).
+    """
+
+    W: np.ndarray
+    y: np.ndarray
+    rows_per_case: int
+    parameters: tuple[Parameter, ...]
+    cases: tuple[str, ...]
+    prior: np.ndarray
+    notes: tuple[str, ...]
+    weighted: bool = False
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """The case index of every row."""
+        return np.repeat(np.arange(len(self.cases)), self.rows_per_case)
+
+
+def _prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
+    b, s = mech.bushings, mech.springs
+    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    off = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    out = []
+    for p in params:
+        if p.kind == "stiffness":
+            out.append(np.mean(k[p.element, list(p.axes)]) / p.to_internal)
+        elif p.kind == "constant":
+            a = p.axes[0]
+            out.append(k[p.element, a] * off[p.element, a] + pre[p.element, a])
+        elif p.kind == "spring_k":
+            out.append(float(s.k[p.element]))
+        else:
+            out.append(float(s.k[p.element] * s.free_length[p.element]))
+    return np.asarray(out, dtype=float)
+
+
+def _check_measurements(mech: Mechanism, meas: Measurements):
+    if not isinstance(meas, Measurements):
+        raise InputError(f"measurements must be a diffsusp.measure.Measurements; got "
+                         f"{type(meas).__name__}.")
+    if meas.rotation.ndim != 4:
+        raise InputError("measurements must have one leading case axis (a batch of measurement "
+                         "sets: identify each with its own call).")
+    loads = meas.loads
+    n_cases = meas.n_cases
+    if loads.force.shape[:1] != (n_cases,):
+        raise InputError(f"the measurements have {n_cases} cases but their loads have "
+                         f"{loads.force.shape[0] if loads.force.ndim == 3 else 'no'} cases.")
+    n_l, n_d = len(mech.load_points.names), len(mech.drivers.names)
+    if loads.force.shape[1:] != (n_l, 3) or loads.driver.shape[1:] != (n_d,):
+        raise InputError(
+            f"the loads are for {loads.force.shape[1]} load points and {loads.driver.shape[1]} "
+            f"drivers, but model '{mech.name}' has {n_l} load points "
+            f"({', '.join(mech.load_points.names) or 'none'}) and {n_d} drivers; build them with "
+            "mech.loads(...)."
+        )
+    q = np.asarray(meas.coordinates(mech))
+    if not np.all(np.isfinite(q)):
+        c = int(np.argwhere(~np.isfinite(q))[0][0])
+        raise InputError(f"the pose of case {meas.cases[c] if meas.cases else c + 1} is not "
+                         "finite (NaN or inf).")
+    for field in ("force", "moment"):
+        value = np.asarray(getattr(loads, field))
+        if not np.all(np.isfinite(value)):
+            c = int(np.argwhere(~np.isfinite(value))[0][0])
+            raise InputError(f"the {field} of case {c + 1} is not finite (NaN or inf).")
+    return q
+
+
+def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
+    """Covariance (cases, n, n) of the measured poses in the solver's coordinates (reference
+    point, Gibbs vector), for landmark noise of unit σ (mm) per coordinate: the first-order
+    covariance of a least-squares rigid registration (centroid translation σ²/k, rotation
+    σ²·(Σ_a |r_a|²I − r_a r_aᵀ)⁻¹ about the landmark centroid, uncorrelated). For poses given
+    without landmarks: unit σ on the reference point (mm) and on ℓ·rotation (mm).
+    Only the structure matters: `lsq` estimates the noise level from the residual."""
+    from ..geometry import gibbs_angular_jacobian, matrix_to_gibbs, skew
+    from ..statics.kernel import get_layout
+
+    lay = get_layout(mech)
+    index = np.asarray([meas.parts.index(p) for p in mech.parts], dtype=int)
+    centre = jnp.asarray(lay.centre[:-1])
+    rot = meas.rotation[:, index]
+    eye = jnp.eye(3, dtype=rot.dtype)
+
+    if meas.landmarks is not None:
+        ref = meas.layout.position[index]  # (P, k, 3)
+        w = meas.weights[:, index]  # (C, P, k)
+
+        def part_cov(r, ref_p, w_p, c):
+            total = jnp.sum(w_p)
+            c0 = (w_p @ ref_p) / total
+            arm_l = (ref_p - c0) @ r.T  # landmarks about their centroid, current axes
+            inertia = jnp.einsum("k,kij->ij", w_p,
+                                 jnp.einsum("ki,ki->k", arm_l, arm_l)[:, None, None] * eye
+                                 - arm_l[:, :, None] * arm_l[:, None, :])
+            cov_t, cov_w = eye / total, jnp.linalg.inv(inertia)
+            arm = r @ (c - c0)
+            return cov_t, cov_w, arm
+
+        cov_t, cov_w, arm = jax.vmap(jax.vmap(part_cov, in_axes=(0, 0, 0, 0)),
+                                     in_axes=(0, None, 0, None))(rot, ref, w, centre)
+    else:
+        n_c, n_p = rot.shape[:2]
+        cov_t = jnp.broadcast_to(eye, (n_c, n_p, 3, 3))
+        cov_w = cov_t / mech.length_scale**2
+        arm = jnp.zeros((n_c, n_p, 3), rot.dtype)
+
+    def block(r, ct, cw, a):
+        g_inv = jnp.linalg.inv(gibbs_angular_jacobian(matrix_to_gibbs(r)))
+        top = jnp.concatenate([eye, -skew(a)], axis=1)
+        bottom = jnp.concatenate([jnp.zeros((3, 3), r.dtype), g_inv], axis=1)
+        t = jnp.concatenate([top, bottom], axis=0)
+        cov = jnp.zeros((6, 6), r.dtype).at[:3, :3].set(ct).at[3:, 3:].set(cw)
+        return t @ cov @ t.T
+
+    blocks = jax.vmap(jax.vmap(block))(rot, cov_t, cov_w, arm)  # (C, P, 6, 6)
+    n_c, n_p = blocks.shape[:2]
+    full = jnp.zeros((n_c, n_p, 6, n_p, 6), blocks.dtype)
+    full = full.at[:, np.arange(n_p), :, np.arange(n_p), :].set(jnp.moveaxis(blocks, 1, 0))
+    return full.reshape(n_c, 6 * n_p, 6 * n_p)
+
+
+_pose_covariance_jit = eqx.filter_jit(_pose_covariance)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Context:
+    mech: Mechanism
+    meas: Measurements
+    q: np.ndarray
+    params: tuple[Parameter, ...]
+    eval_mech: Mechanism
+    cols: _Columns
+    rows: np.ndarray  # (cases, r, p)
+    rhs: np.ndarray  # (cases, r)
+
+    def system(self, whitener=None) -> "DirectSystem":
+        rows, rhs = self.rows, self.rhs
+        if whitener is not None:
+            rows = np.einsum("cij,cjp->cip", whitener, rows)
+            rhs = np.einsum("cij,cj->ci", whitener, rhs)
+        n_cases, r, p = rows.shape
+        cases = self.meas.cases or tuple(str(c + 1) for c in range(n_cases))
+        return DirectSystem(W=rows.reshape(n_cases * r, p), y=rhs.reshape(-1),
+                            rows_per_case=r, parameters=self.params, cases=cases,
+                            prior=_prior(self.mech, self.params), notes=tuple(self.meas.notes),
+                            weighted=whitener is not None)
+
+    def whitener(self, x) -> np.ndarray:
+        cov = _pose_covariance_jit(self.mech, self.meas)
+        return np.asarray(_whiteners(self.eval_mech, self.cols, jnp.asarray(self.q),
+                                     self.meas.loads, jnp.asarray(x, float), cov))
+
+
+def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
+    q = _check_measurements(mech, measurements)
+    fields = _selected_fields(mech, where or _default_where)
+    params = _parameters(mech, fields, elements, axisymmetric)
+    eval_mech = _evaluation_model(mech, params)
+    cols = _columns(params)
+    rows, rhs = _system_arrays(eval_mech, cols, jnp.asarray(q), measurements.loads)
+    return _Context(mech, measurements, q, params, eval_mech, cols, np.asarray(rows),
+                    np.asarray(rhs))
+
+
+def direct_system(
+    mech: Mechanism,
+    measurements: Measurements,
+    *,
+    where: Callable[[Mechanism], object] | None = None,
+    elements: Sequence[str] | None = None,
+    axisymmetric: Sequence[str] = (),
+    weights_at: Float[np.ndarray, " p"] | None = None,
+) -> DirectSystem:
+    """Assemble the direct method's linear system (see `direct` for the arguments).
+
+    One compiled, case-batched evaluation: per case the generalised forces and their exact
+    derivative with respect to the unknowns (`jax.jacfwd` of the solver's assembly), Φ_q, and
+    the orthonormal null-space basis L (complete QR of Φ_qᵀ). With `weights_at` (values of the
+    unknowns, table units), each case's rows are whitened by the covariance that pose errors
+    cause at those values (see `direct`, `weighting="noise"`).
+    """
+    ctx = _prepare(mech, measurements, where, elements, axisymmetric)
+    return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
+
+
+# ----------------------------------------------------------------------------- the report
+
+
+@dataclasses.dataclass(frozen=True)
+class DirectReport:
+    """What the direct identification found (values in the units of the thesis's tables).
+
+    **Per unknown (p,)**, aligned with `names`: `values` (the least-squares solution; for the
+    basic method non-identifiable ones are 0, the thesis's zeros), `sigma`, `sigma_pct`,
+    `identified` (individually determined by the data with σ% ≤ `max_sigma_pct`),
+    `identifiable` (individually determined, whatever its σ%), `status` (a phrase), `units`,
+    `prior` (the model's values).
+
+    **Also:** `relations` [(combination, value, σ)] — the combinations of several unknowns the
+    data determine (e.g. "bushing_1.Krx + bushing_2.Krx"); `derived` {name: (value, σ, unit)}
+    (spring free lengths L0 = K·L0/K, bushing offsets δ0); `case_residuals` (cases,) the norm
+    of each case's equation residual (N) and `case_scale` (cases,) the norm of its right-hand
+    side; `cases` labels; `notes` (measurement exclusions, warnings); `fit` the `lsq.Fit` of
+    the estimate; `method`; `rank` (of the unweighted equations); `n_equations`; `weighted`.
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    sigma: np.ndarray
+    sigma_pct: np.ndarray
+    identified: np.ndarray
+    identifiable: np.ndarray
+    status: tuple[str, ...]
+    units: tuple[str, ...]
+    prior: np.ndarray
+    relations: tuple[tuple[str, float, float], ...]
+    derived: dict
+    case_residuals: np.ndarray
+    case_scale: np.ndarray
+    cases: tuple[str, ...]
+    notes: tuple[str, ...]
+    fit: object
+    method: str
+    rank: int
+    n_equations: int
+    max_sigma_pct: float
+    weighted: bool = False
+
+    def value(self, name: str) -> float:
+        return float(self.values[self._index(name)])
+
+    def _index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise InputError(f"unknown parameter {name!r}; the report has "
+                             f"{', '.join(self.names)}.") from None
+
+    @property
+    def combinations(self) -> list[str]:
+        """The identifiable combinations of several unknowns, as printed."""
+        return [text for text, _, _ in self.relations]
+
+    def rows(self) -> list[dict]:
+        """One dict per unknown (and per derived quantity): for CSV/JSON export."""
+        out = []
+        for i, name in enumerate(self.names):
+            out.append(dict(parameter=name, value=float(self.values[i]),
+                            sigma=_nan_none(self.sigma[i]), sigma_pct=_nan_none(self.sigma_pct[i]),
+                            unit=self.units[i], identified=bool(self.identified[i]),
+                            prior=float(self.prior[i]), status=self.status[i]))
+        for name, (v, s, unit) in self.derived.items():
+            out.append(dict(parameter=name, value=_nan_none(v), sigma=_nan_none(s),
+                            sigma_pct=_nan_none(100 * s / abs(v)) if v else None, unit=unit,
+                            identified=bool(np.isfinite(v)), prior=None, status="derived"))
+        return out
+
+    def to_dict(self) -> dict:
+        return {
+            "method": self.method, "rank": self.rank, "n_equations": self.n_equations,
+            "n_unknowns": len(self.names), "parameters": self.rows(),
+            "relations": [{"combination": t, "value": float(v), "sigma": _nan_none(s)}
+                          for t, v, s in self.relations],
+            "cases": [{"case": c, "residual": float(r), "scale": float(s)} for c, r, s in
+                      zip(self.cases, self.case_residuals, self.case_scale, strict=True)],
+            "notes": list(self.notes),
+        }
+
+    def table(self) -> str:
+        """The report as text: one line per unknown (value, σ%, status), the identifiable
+        combinations, derived quantities, residual per case and notes."""
+        width = max([9] + [len(n) for n in self.names] + [len(n) for n in self.derived])
+        lines = [
+            f"direct identification ({self.method}): {self.n_equations} equations, "
+            f"{len(self.names)} unknowns, rank {self.rank}",
+            f"{'parameter':<{width}}  {'value':>12}  {'sigma%':>8}  {'unit':<9} status",
+        ]
+        for i, name in enumerate(self.names):
+            shown = self.identified[i] or self.status[i].startswith("fixed")
+            value = f"{self.values[i]:12.6g}" if shown else f"{'—':>12}"
+            pct = f"{self.sigma_pct[i]:7.3g}%" if np.isfinite(self.sigma_pct[i]) else f"{'—':>8}"
+            lines.append(f"{name:<{width}}  {value}  {pct:>8}  {self.units[i]:<9} "
+                         f"{self.status[i]}")
+        if self.relations:
+            lines.append("identifiable combinations:")
+            for text, v, s in self.relations:
+                pct = f" ({100 * s / abs(v):.3g}%)" if np.isfinite(s) and v else ""
+                lines.append(f"  {text} = {v:.6g}{pct}")
+        if self.derived:
+            lines.append("derived:")
+            for name, (v, s, unit) in self.derived.items():
+                pct = f" ({100 * s / abs(v):.3g}%)" if np.isfinite(s) and v else ""
+                txt = f"{v:.6g}" if np.isfinite(v) else "—"
+                lines.append(f"  {name:<{width}} = {txt} {unit}{pct}")
+        lines.append("residual per case (N, relative to the case's load terms):")
+        lines.append("  " + ", ".join(
+            f"{c}: {r:.3g} ({r / s:.2g})" if s > 0 else f"{c}: {r:.3g}"
+            for c, r, s in zip(self.cases, self.case_residuals, self.case_scale, strict=True)))
+        for note in self.notes:
+            lines.append(f"note: {note}")
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.table()
+
+    def plot(self, axes=None):
+        """Identified values against the model's (prior) values with ±σ bars, and the residual
+        per case. Returns the matplotlib Figure."""
+        import matplotlib.pyplot as plt
+
+        if axes is None:
+            fig, axes = plt.subplots(1, 2, figsize=(11, 4), width_ratios=(2, 1))
+        else:
+            fig = axes[0].figure
+        idx = np.arange(len(self.names))
+        ax = axes[0]
+        ax.bar(idx - 0.2, np.abs(self.prior), 0.4, label="model (prior)", color="0.75")
+        ok = self.identified
+        ax.bar(idx[ok] + 0.2, np.abs(self.values[ok]), 0.4,
+               yerr=np.nan_to_num(self.sigma[ok]), label="identified", color="C0", capsize=2)
+        ax.set_yscale("log")
+        ax.set_xticks(idx, self.names, rotation=90, fontsize=7)
+        ax.set_ylabel("|value| (table units)")
+        ax.legend(fontsize=8)
+        ax.set_title("direct identification (no bar: not identified)", fontsize=9)
+        ax = axes[1]
+        ax.bar(np.arange(len(self.cases)), self.case_residuals, color="C1")
+        ax.set_xticks(np.arange(len(self.cases)), self.cases, fontsize=7)
+        ax.set_xlabel("case")
+        ax.set_ylabel("equation residual (N)")
+        fig.tight_layout()
+        return fig
+
+
+def _nan_none(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+# ----------------------------------------------------------------------------- identify
+
+
+def _prior_sigma(prior: np.ndarray, params, prior_sigma) -> np.ndarray:
+    names = [p.name for p in params]
+    rel = 0.5 if not isinstance(prior_sigma, int | float) else float(prior_sigma)
+    out = np.abs(prior) * rel
+    for unit in {p.unit for p in params}:
+        same = np.array([p.unit == unit for p in params])
+        floor = rel * np.max(np.abs(prior[same]), initial=0.0)
+        out[same & (out == 0)] = floor if floor > 0 else 1.0
+    if isinstance(prior_sigma, Mapping):
+        for name, value in prior_sigma.items():
+            if name not in names:
+                raise InputError(f"prior_sigma names unknown parameter {name!r}; unknowns: "
+                                 f"{', '.join(names)}.")
+            out[names.index(name)] = float(value)
+    return out
+
+
+RELATION_TOL = 1e-3
+"""Terms of an identifiable combination whose coefficient is below this, on unit-norm columns,
+are dropped from the printed relation: columns dependent only up to the identifiability
+threshold regroup with tiny spurious coefficients on unrelated unknowns."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _Structure:
+    """What the (unweighted) equations determine: the kept (base) unknowns, the unknowns
+    determined alone, and the combinations of several unknowns (kept index, coefficients)."""
+
+    kept: np.ndarray
+    alone: np.ndarray
+    relation_of: list
+    relations: tuple  # (kept index j, coefficient row g)
+
+
+def _structure(fit, negligible: np.ndarray) -> _Structure:
+    """Identifiability from an `lsq.Fit` of the unweighted equations, with the relations
+    cleaned of spurious terms (`RELATION_TOL`) and the no-effect unknowns left out."""
+    p = len(fit.names)
+    kept = np.asarray(fit.kept, bool) & ~negligible
+    scale = np.asarray(fit.scale, float)
+    gamma = np.asarray(fit.regrouping, float)
+    gamma_unit = gamma * scale[None, :] / np.where(scale > 0, scale, 1.0)[:, None]
+    clean = np.where((np.abs(gamma_unit) > RELATION_TOL) & ~negligible[None, :], gamma, 0.0)
+    relation_of = [None] * p
+    relations = []
+    for j in np.flatnonzero(kept):
+        others = [k for k in np.flatnonzero(clean[j]) if k != j]
+        if not others:
+            continue
+        for k in [j, *others]:
+            relation_of[k] = int(j)
+        relations.append((int(j), clean[j]))
+    alone = kept & np.array([relation_of[i] is None for i in range(p)], dtype=bool)
+    return _Structure(kept, alone, relation_of, tuple(relations))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Analysis:
+    identifiable: np.ndarray  # (p,) determined alone (and not eliminated)
+    sigma: np.ndarray  # (p,)
+    sigma_pct: np.ndarray  # (p,)
+    relations: tuple  # (text, value, sigma)
+    status: tuple
+
+
+def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
+             hold) -> _Analysis:
+    """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations."""
+    from ..lsq import format_combination
+
+    p = len(fit.names)
+    x = np.asarray(fit.x, float)
+    cov = np.asarray(fit.covariance, float)
+    at_bound = np.asarray(fit.at_bound, bool)
+    identifiable = structure.alone & ~eliminated & ~at_bound
+    sigma = np.where(identifiable, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pct = np.where(identifiable, 100.0 * sigma / np.abs(x), np.nan)
+    texts = {}
+    relations = []
+    for j, g in structure.relations:
+        text = format_combination(g, fit.names, j)
+        texts[j] = text
+        relations.append((text, float(g @ x), float(np.sqrt(max(g @ cov @ g, 0.0)))))
+    status = []
+    for i in range(p):
+        if negligible[i]:
+            status.append("not identifiable: no effect on the equations")
+        elif eliminated[i]:
+            status.append("not determined: held at "
+                          + ("the model's value" if hold == "model" else "0"))
+        elif at_bound[i]:
+            status.append("at its bound (0)")
+        elif structure.relation_of[i] is not None:
+            status.append(f"not identifiable alone: in {texts[structure.relation_of[i]]}")
+        elif not identifiable[i]:
+            status.append("not identifiable")
+        elif np.nan_to_num(pct[i]) > max_sigma_pct:
+            status.append(f"not determined: sigma {pct[i]:.3g}% > {max_sigma_pct:g}%")
+        else:
+            status.append("identified")
+    return _Analysis(identifiable, sigma, pct, tuple(relations), tuple(status))
+
+
+def _derived(params, values, cov, mech, identified_mask):
+    """Spring free lengths and bushing offsets from (K, K·L0) and (K, K·δ0 + P), with σ by
+    first-order propagation of the covariance."""
+    out = {}
+    index = {p.name: i for i, p in enumerate(params)}
+    b, s = mech.bushings, mech.springs
+    for i, p in enumerate(params):
+        if p.kind == "spring_c":
+            name = s.names[p.element]
+            j = index.get(f"{name}.K")
+            c = values[i]
+            if j is None:
+                k, var = float(s.k[p.element]), cov[i, i] / float(s.k[p.element]) ** 2
+                value = c / k
+            else:
+                k = values[j]
+                value = c / k if k else np.nan
+                grad = np.zeros(len(values))
+                grad[i], grad[j] = 1.0 / k, -c / k**2
+                var = grad @ cov @ grad if k else np.nan
+            ok = identified_mask[i] and (j is None or identified_mask[j])
+            out[f"{name}.L0"] = (value if ok else np.nan, float(np.sqrt(max(var, 0.0)))
+                                 if ok else np.nan, "mm")
+        elif p.kind == "constant":
+            name = b.names[p.element]
+            a = p.axes[0]
+            k_name = f"{name}.{STIFFNESS_NAMES[a]}"
+            j = index.get(k_name)
+            pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)],
+                                 axis=1)[p.element, a]
+            unit_k = 1.0 / DEG if a >= 3 else 1.0  # table K → model K
+            k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)],
+                                     axis=1)[p.element, a] / unit_k
+            k = values[j] if j is not None else k_model
+            c = values[i] - pre
+            value = c / k if k else np.nan
+            grad = np.zeros(len(values))
+            grad[i] = 1.0 / k if k else np.nan
+            if j is not None:
+                grad[j] = -c / k**2 if k else np.nan
+            var = grad @ cov @ grad
+            ok = identified_mask[i] and (j is None or identified_mask[j])
+            unit = "deg" if a >= 3 else "mm"
+            out[f"{name}.d{AXES[a][1]}0" if a < 3 else f"{name}.a{AXES[a][1]}0"] = (
+                value if ok else np.nan, float(np.sqrt(max(var, 0.0))) if ok else np.nan, unit)
+    return out
+
+
+def _apply(mech: Mechanism, params, values, write) -> Mechanism:
+    """The mechanism with the written unknowns replaced (table units → model units)."""
+    b, s = mech.bushings, mech.springs
+    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    off = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    spring_k = np.asarray(s.k).copy()
+    free_length = np.asarray(s.free_length).copy()
+    for i, p in enumerate(params):
+        if write[i] and p.kind == "stiffness":
+            k[p.element, list(p.axes)] = values[i] * p.to_internal
+        if write[i] and p.kind == "spring_k":
+            spring_k[p.element] = values[i]
+    for i, p in enumerate(params):
+        if not write[i]:
+            continue
+        if p.kind == "constant":
+            a = p.axes[0]
+            c = values[i] - pre[p.element, a]
+            if k[p.element, a] > 0:
+                off[p.element, a] = c / k[p.element, a]
+            else:  # no stiffness to turn the constant force into an offset: keep it a preload
+                off[p.element, a] = 0.0
+                pre[p.element, a] = values[i]
+        elif p.kind == "spring_c" and spring_k[p.element] > 0:
+            free_length[p.element] = values[i] / spring_k[p.element]
+    return eqx.tree_at(
+        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
+                   m.bushings.offset_rot, m.bushings.preload_force, m.bushings.preload_torque,
+                   m.springs.k, m.springs.free_length),
+        mech,
+        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], off[:, :3], off[:, 3:], pre[:, :3],
+                                       pre[:, 3:], spring_k, free_length)),
+    )
+
+
+def _negligible(system: DirectSystem, threshold: float) -> np.ndarray:
+    """Unknowns whose columns are rounding noise: at a typical value (the model's, or the
+    largest model value of the same unit when it is 0) their effect on the equations is below
+    `threshold` times the norm of the load terms. A direction that never deforms (the
+    crank-slider's slider, spec §1.12b) gives such a column; scaled to unit norm inside `lsq`
+    it would look like a real one."""
+    prior = np.abs(system.prior)
+    typical = prior.copy()
+    units = [p.unit for p in system.parameters]
+    for unit in set(units):
+        same = np.array([u == unit for u in units])
+        top = np.max(prior[same], initial=0.0)
+        typical[same & (typical == 0)] = top if top > 0 else 1.0
+    effect = typical * np.linalg.norm(system.W, axis=0)
+    reference = np.linalg.norm(system.y)
+    if reference == 0:
+        reference = np.max(effect, initial=0.0)
+    return effect <= threshold * reference
+
+
+def direct(
+    mech: Mechanism,
+    measurements: Measurements,
+    *,
+    where: Callable[[Mechanism], object] | None = None,
+    elements: Sequence[str] | None = None,
+    axisymmetric: Sequence[str] = (),
+    method: str = "basic",
+    hold: str = "zero",
+    eliminate: bool = False,
+    weighting: str = "noise",
+    threshold: float | None = None,
+    prior_sigma: float | Mapping[str, float] = 0.5,
+    max_sigma_pct: float = MAX_SIGMA_PCT,
+) -> tuple[Mechanism, DirectReport]:
+    """Identify bushing and spring stiffnesses from measured equilibria by the direct (linear)
+    method of the thesis's Chapter 4 (spec stiffness §1.8–1.14; see the module docstring).
+
+    Select (`where`, `elements`), partition into the known and unknown parts of the internal
+    forces, solve the stacked linear system with `diffsusp.lsq`, combine the identified values
+    back into the model.
+
+    **Arguments:**
+
+    - `mech`: the model (its geometry is taken as exact; its values of the unknowns are the
+      prior, and are kept where the data do not determine them).
+    - `measurements`: `diffsusp.measure.Measurements` (part poses of every moving part and the
+      loads, per case).
+    - `where`: fields to identify, equinox style, among `m.bushings.k_trans`, `k_rot`
+      (stiffness per axis), `offset_trans`, `offset_rot` (offsets δ0, identified as the
+      constant force K·δ0), `m.springs.k`, `free_length` (with k: the unknowns K and K·L0).
+      Default: all bushing stiffnesses and the springs' K and K·L0.
+    - `elements`: names of the bushings and springs to identify (default all); the others
+      keep their model values (their forces move to the right-hand side).
+    - `axisymmetric`: bushings with Ktx = Kty and Krx = Kry (4 unknowns: Ktr, Ktz, Krr, Krz;
+      spec §1.8, 4.40).
+    - `method`: "basic" (pivoted-QR basic solution, like MATLAB's backslash in the thesis),
+      "min_norm" (the solution nearest the held values), "tsvd", "tikhonov" (toward the model's
+      values with relative σ `prior_sigma`, or absolute σ by name), "nonneg" (stiffnesses ≥ 0).
+    - `hold`: the value of unknowns the data do not determine: "zero" (the thesis's zeros) or
+      "model" (the model's values, so that their forces stay in the equations instead of being
+      shared out among the others — what noisy data need).
+    - `eliminate`: also hold, one at a time (largest σ% first), the unknowns that are
+      identifiable but not determined (σ% > `max_sigma_pct`), and re-estimate the others: the
+      elimination loop of spec guaranteed_least_squares §3.9.
+    - `weighting`: "noise" (default): generalised least squares, each case's equations
+      whitened by the covariance their residual gets from landmark noise (iid per coordinate;
+      from the registration geometry) through the tangent stiffness at the solution, so that
+      noisy stiff directions do not drown the informative ones and σ is meaningful; two
+      reweighting passes. "none": the scaled equations as they are (the thesis).
+    - `threshold`: relative identifiability threshold of `lsq` on unit-norm columns (default
+      `DEFAULT_THRESHOLD` = 1e-5; also the singular-value cut of "tsvd").
+    - `max_sigma_pct`: identifiable unknowns with a larger σ% are reported as not determined.
+
+    **Returns:** `(mech', report)`: the model with the identified values (N/mm, N·mm/rad inside;
+    unknowns the data do not determine keep the model's values, except with "tikhonov" whose
+    solution is complete) and a `DirectReport` (values in N/mm, N·mm/deg, N, N·mm).
+
+    **Raises:** `InputError` for measurements that do not fit the model (a part without a pose,
+    load tables of another shape, non-finite values) or a selection the method cannot identify;
+    `ModelError` for a selected element with a nonlinear (spline, tabulated) law.
+    """
+    if method not in METHODS:
+        raise InputError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
+    if hold not in ("zero", "model"):
+        raise InputError(f"hold must be 'zero' or 'model'; got {hold!r}.")
+    if weighting not in ("noise", "none"):
+        raise InputError(f"weighting must be 'noise' or 'none'; got {weighting!r}.")
+    if not max_sigma_pct > 0:
+        raise InputError(f"max_sigma_pct must be positive; got {max_sigma_pct!r}.")
+    threshold = DEFAULT_THRESHOLD if threshold is None else float(threshold)
+    ctx = _prepare(mech, measurements, where, elements, axisymmetric)
+    raw = ctx.system()
+    # Structure: what the equations determine (unweighted, as the thesis writes them).
+    negligible = _negligible(raw, threshold)
+    structure = _structure(_fit(raw, "basic", "zero", threshold, 0.5, negligible), negligible)
+    # Estimate: the structurally undetermined unknowns held for the basic solution.
+    held = negligible | (~structure.kept if method in ("basic", "nonneg") else negligible)
+    fit, eliminated = _estimate(raw, method, hold, eliminate, threshold, prior_sigma,
+                                max_sigma_pct, held)
+    system = raw
+    if weighting == "noise":
+        for _ in range(2):
+            analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold)
+            good = analysis.identifiable & ~(np.nan_to_num(analysis.sigma_pct) > max_sigma_pct)
+            at = np.where(good, np.asarray(fit.x, float), raw.prior)
+            system = ctx.system(ctx.whitener(at))
+            fit, eliminated = _estimate(system, method, hold, eliminate, threshold, prior_sigma,
+                                        max_sigma_pct, held)
+    analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold)
+    params = raw.parameters
+    identified = analysis.identifiable & ~(np.nan_to_num(analysis.sigma_pct) > max_sigma_pct)
+    values = np.asarray(fit.x, float)
+    cov = np.asarray(fit.covariance, float)
+    n_cases = len(raw.cases)
+    residual = raw.y - raw.W @ values  # in N, whatever the weighting of the solve
+    case_res = np.linalg.norm(residual.reshape(n_cases, -1), axis=1)
+    case_scale = np.linalg.norm(raw.y.reshape(n_cases, -1), axis=1)
+    write = ~negligible if method == "tikhonov" else identified
+    notes = list(raw.notes)
+    for step in getattr(fit, "log", ()):
+        notes.append(f"eliminated {step.removed} ({step.reason.replace('sigma', 'σ')}) and "
+                     "re-estimated the others")
+    report = DirectReport(
+        names=raw.names, values=values, sigma=analysis.sigma, sigma_pct=analysis.sigma_pct,
+        identified=identified, identifiable=analysis.identifiable, status=analysis.status,
+        units=tuple(p.unit for p in params), prior=raw.prior, relations=analysis.relations,
+        derived=_derived(params, values, cov, mech, identified), case_residuals=case_res,
+        case_scale=case_scale, cases=raw.cases, notes=tuple(notes), fit=fit, method=method,
+        rank=int(np.sum(structure.kept)), n_equations=len(raw.y), max_sigma_pct=max_sigma_pct,
+        weighted=system.weighted,
+    )
+    return _apply(mech, params, values, write), report
+
+
+def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,
+         max_sigma_pct=MAX_SIGMA_PCT):
+    """One `lsq` solve (or elimination loop) of `system` with the `fixed` unknowns held."""
+    from .. import lsq
+
+    params = system.parameters
+    names = system.names
+    options = dict(method=method, threshold=threshold,
+                   prior=system.prior if hold == "model" else np.zeros(len(names)))
+    if method == "tikhonov":
+        options.update(prior=system.prior,
+                       prior_sigma=_prior_sigma(system.prior, params, prior_sigma))
+    if method == "nonneg":
+        lower = np.array([0.0 if p.kind in ("stiffness", "spring_k") else -np.inf
+                          for p in params])
+        options.update(method="bounded", lower=lower)
+    fixed_names = [n for n, f in zip(names, fixed, strict=True) if f]
+    if eliminate:
+        fit, _ = lsq.eliminate(system.W, system.y, names=names, fixed=fixed_names,
+                               ic_threshold=0.0, sigma_pct_threshold=max_sigma_pct, **options)
+        return fit
+    return lsq.solve(system.W, system.y, names=names, fixed=fixed_names, **options)
+
+
+def _estimate(system, method, hold, eliminate, threshold, prior_sigma, max_sigma_pct, held):
+    """The estimate and the unknowns the elimination loop removed (beyond `held`)."""
+    fit = _fit(system, method, hold, threshold, prior_sigma, held, eliminate, max_sigma_pct)
+    eliminated = np.zeros(len(system.names), bool)
+    for step in getattr(fit, "log", ()):
+        eliminated[system.names.index(step.removed)] = True
+    return fit, eliminated

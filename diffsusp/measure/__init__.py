@@ -1,0 +1,38 @@
+"""Measurements: landmarks → part poses, landmark re-ordering, noise models, bushing
+deformations, synthetic measurements, and measurement tables (CSV/Parquet).
+
+spec: geometry §3.3–3.7 (landmarks, distance tables, Arun/Kabsch, deformations); stiffness §1.1,
+§1.12, §2.8 (what the direct method needs; the thesis's numerical protocol). Units: mm, N, N·mm,
+rad.
+"""
+
+from .landmarks import (
+    COLLINEAR_RATIO,
+    REORDER_TOLERANCE,
+    LandmarkLayout,
+    Reordering,
+    check_layout,
+    distance_table,
+    landmark_positions,
+    make_layout,
+    place_landmarks,
+    reorder_landmarks,
+)
+from .measurements import (
+    Measurements,
+    add_noise,
+    bushing_deformations,
+    case_subset,
+    from_landmarks,
+    from_poses,
+    reregister,
+    synthesize,
+)
+from .noise import ARM_SIGMA, GaussianNoise
+
+__all__ = [
+    "ARM_SIGMA", "COLLINEAR_RATIO", "REORDER_TOLERANCE", "GaussianNoise", "LandmarkLayout",
+    "Measurements", "Reordering", "add_noise", "bushing_deformations", "case_subset",
+    "check_layout", "distance_table", "from_landmarks", "from_poses", "landmark_positions",
+    "make_layout", "place_landmarks", "reorder_landmarks", "reregister", "synthesize",
+]
