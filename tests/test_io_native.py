@@ -384,6 +384,25 @@ def test_save_is_exact_for_any_driver_direction_and_keeps_comments(feature_rig, 
     assert_same_model(load_model(tmp_path / "si.toml"), stiffer)
 
 
+def test_every_bit_survives_save_and_load(tmp_path, no_validation):
+    """-0.0, subnormals and orientations that z alone does not rebuild are written exactly."""
+    b = MechanismBuilder("bits")
+    b.part("p")
+    tilted = frame_from_axes(z=(0.1, 0.2, 0.97), x=(1.0, 0.0, 0.0))
+    b.marker("m", "p", (-0.0, 5e-324, 1.0 / 3.0),
+             orientation=np.array([[1.0, -0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+    b.marker("n", "ground", (0.0, 0.0, 0.0), orientation=tilted)
+    b.bushing("bu", "m", "n", k_trans=(1.0, 2.0, 3.0), k_rot=1e-300,
+              preload_force=(-0.0, 0.0, 0.0))
+    b.driver("d", marker="m", direction=(0.3, -0.4, 1.1))
+    mech = b.build()
+    save_model(mech, tmp_path / "bits.toml")
+    text = (tmp_path / "bits.toml").read_text()
+    assert "position = [-0.0, 5e-324, 0.3333333333333333]" in text
+    assert "preload_force = [-0.0, 0.0, 0.0]" in text
+    assert_identical(load_model(tmp_path / "bits.toml"), mech)
+
+
 def test_loading_a_commented_shipped_file_edited_by_hand(zoo):
     text = (DATA / "isolated_bushing.toml").read_text(encoding="utf-8")
     edited = text.replace("[bushings.bush]\n", "# the only bushing\n[bushings.bush]  # BUSHING/1\n")

@@ -903,11 +903,12 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
 def _write_orientation(m, rot: np.ndarray):
     from ..model import frame_from_axes
 
-    if np.array_equal(rot, np.eye(3)) and not np.any(np.signbit(rot)):
+    rot = np.ascontiguousarray(rot, dtype=float)
+    if rot.tobytes() == np.eye(3).tobytes():  # bitwise: -0.0 must be written out
         return
     z = rot[:, 2]
     try:
-        if np.array_equal(frame_from_axes(z), rot):
+        if np.ascontiguousarray(frame_from_axes(z)).tobytes() == rot.tobytes():
             m.add("z", _floats(z))
             return
     except ModelError:
