@@ -23,9 +23,18 @@ def _main():
 
 
 def enable_x64():
+    """float64, and a persistent compilation cache so that the second run of a command does
+    not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
+    string to disable)."""
+    import os
+
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
+    if cache and not jax.config.jax_compilation_cache_dir:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
 def console(stderr: bool = False) -> Console:

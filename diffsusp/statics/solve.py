@@ -212,18 +212,20 @@ def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
 
 @_equilibrium.def_jvp
 def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
+    # Implicit function theorem: J·dy = −∂r/∂(mech, loads)·t. Everything here stays
+    # differentiable (y through this same rule, J and ∂r through autodiff), so derivatives of
+    # derivatives — e.g. the sensitivity of bump steer to a stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
-    y, info = _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
     n = get_layout(mech).n
-    y = jax.lax.stop_gradient(y)
 
     def residual(mech_, loads_):
         return assemble(mech_, loads_, y[:n], y[n:], with_jacobian=False)[0]
 
-    _, jac = assemble(jax.lax.stop_gradient(mech), jax.lax.stop_gradient(loads), y[:n], y[n:])
+    _, jac = assemble(mech, loads, y[:n], y[n:])
     _, dr = eqx.filter_jvp(residual, (mech, loads), (t_mech, t_loads))
-    dy = -_scaled_solve(jax.lax.stop_gradient(jac), dr)
+    dy = -_scaled_solve(jac, dr)
     return (y, info), (dy, jnp.zeros_like(info))
 
 
