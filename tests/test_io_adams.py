@@ -447,6 +447,8 @@ def test_expression_errors_and_distance():
     for bad in ("1 +", "1 ** 2", "foo(1)", "sin(1, 2)", "1/0", "DM(1, 2)", "x", "(" * 200):
         with pytest.raises(ExpressionError):
             evaluate_text(bad)
+    with pytest.raises(ExpressionError, match="longer than"):
+        evaluate_text("+".join(["1"] * 5000))  # a bounded tree: no recursion limit reached
     with pytest.raises(ExpressionError, match="deeper"):
         parse_expression("(" * (MAX_DEPTH + 1) + "1" + ")" * (MAX_DEPTH + 1))
     assert distance_constraint(parse_expression("DM(3, 4) - 12.5")) == (3, 4, 12.5)

@@ -223,8 +223,9 @@ def _read_source(source, what: str) -> tuple[str, Path | None]:
         path = Path(source)
         try:
             data = path.read_bytes()
-        except OSError as e:
-            raise ModelFileError(f"cannot read the {what} file: {e.strerror or e}.", path=path,
+        except (OSError, ValueError) as e:
+            raise ModelFileError(f"cannot read the {what} file: "
+                                 f"{getattr(e, 'strerror', None) or e}.", path=path,
                                  line=None) from None
         return _decode(data), path
     if isinstance(source, str):
@@ -1471,8 +1472,9 @@ class TeimBlock:
     blocks: dict = dataclasses.field(default_factory=dict)
 
 
-_TEIM_SECTION = re.compile(r"\[\s*([A-Za-z0-9_ ]+?)\s*\]\s*$")
-_TEIM_SUBSECTION = re.compile(r"\(\s*([A-Za-z0-9_ ]+?)\s*\)\s*$")
+_TEIM_SECTION = re.compile(r"\[([^\[\]]*)\]\s*$")
+_TEIM_SUBSECTION = re.compile(r"\(([^()]*)\)\s*$")
+_TEIM_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_ ]*")
 _TEIM_HEADER = re.compile(r"\{([^{}]*)\}\s*$")
 _TEIM_PAIR = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*?)\s*$")
 _TEIM_CELL = re.compile(r"\s*('[^']*'|\"[^\"]*\"|[^\s'\"]+)")
@@ -1507,17 +1509,18 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
         stripped = line.strip()
         if not stripped or stripped.startswith("$"):
             continue
-        if m := _TEIM_SECTION.match(stripped):
-            name = m.group(1).upper()
+        if (m := _TEIM_SECTION.match(stripped)) and _TEIM_NAME.fullmatch(m.group(1).strip()):
+            name = m.group(1).strip().upper()
             if name in sections:
                 raise _error(f"section [{name}] is given twice (first at line "
                              f"{sections[name].line}).", path, number)
             section = block = sections[name] = TeimBlock(name, number)
             table = None
-        elif m := _TEIM_SUBSECTION.match(stripped):
+        elif (m := _TEIM_SUBSECTION.match(stripped)) and _TEIM_NAME.fullmatch(
+                m.group(1).strip()):
             if section is None:
-                raise _error(f"({m.group(1)}) is outside any [SECTION].", path, number)
-            name = m.group(1).upper()
+                raise _error(f"({m.group(1).strip()}) is outside any [SECTION].", path, number)
+            name = m.group(1).strip().upper()
             block = section.blocks[name] = TeimBlock(name, number)
             table = None
         elif m := _TEIM_HEADER.match(stripped):

@@ -150,8 +150,9 @@ class _Document:
             self.path = Path(source)
             try:
                 raw = self.path.read_bytes()
-            except OSError as e:
-                raise ModelFileError(f"cannot read the Chrono JSON file: {e.strerror or e}.",
+            except (OSError, ValueError) as e:
+                raise ModelFileError(f"cannot read the Chrono JSON file: "
+                                     f"{getattr(e, 'strerror', None) or e}.",
                                      path=self.path) from None
             try:
                 text = raw.decode("utf-8")

@@ -29,6 +29,10 @@ from dataclasses import dataclass
 MAX_DEPTH = 64
 """Deepest nesting of parentheses and unary signs accepted (deeper is an `ExpressionError`)."""
 
+MAX_TOKENS = 600
+"""Longest expression accepted, in tokens (longer is an `ExpressionError`; it also bounds the
+depth of the tree, so evaluating it never exhausts Python's stack)."""
+
 FUNCTIONS = {"SIN": 1, "COS": 1, "STEP": 5, "DM": 2}
 """Functions of the grammar and their number of arguments."""
 
@@ -82,6 +86,8 @@ def _tokens(text: str):
         else:
             out.append(("op", m.group("op"), start))
         pos = m.end()
+        if len(out) > MAX_TOKENS:
+            raise ExpressionError(f"expression longer than {MAX_TOKENS} tokens", start)
     out.append(("end", None, len(text)))
     return out
 
