@@ -25,6 +25,7 @@ Input checks (at least three non-collinear landmarks, finite values) belong to t
 (`diffsusp.measure`), which knows the part and case names to put in the message.
 """
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -137,6 +138,8 @@ def register_landmarks(
 
     **Returns:** a `Registration` (rotation, translation in mm, rms residual in mm).
     """
+    if method not in ("quaternion", "svd"):
+        raise ValueError(f"method must be 'quaternion' or 'svd'; got {method!r}.")
     reference = jnp.asarray(reference)
     measured = jnp.asarray(measured)
     dtype = jnp.result_type(reference, measured, float)
@@ -151,14 +154,14 @@ def register_landmarks(
     if weights is None:
         weights = jnp.ones(shape[:-1], dtype)
     weights = jnp.broadcast_to(jnp.asarray(weights, dtype), shape[:-1])
+    return _register(reference, measured, weights, method)
+
+
+@functools.partial(jax.jit, static_argnames="method")
+def _register(reference, measured, weights, method):
     w, p_bar, q_bar, p, q = _centred(reference, measured, weights)
     h = jnp.einsum("...k,...ki,...kj->...ij", w, q, p)
-    if method == "quaternion":
-        rotation = _rotation_quaternion(h)
-    elif method == "svd":
-        rotation = _rotation_svd(h)
-    else:
-        raise ValueError(f"method must be 'quaternion' or 'svd'; got {method!r}.")
+    rotation = _rotation_quaternion(h) if method == "quaternion" else _rotation_svd(h)
     translation = q_bar - jnp.einsum("...ij,...j->...i", rotation, p_bar)
     residual = jnp.einsum("...ij,...kj->...ki", rotation, reference) + translation[..., None, :]
     residual = residual - measured

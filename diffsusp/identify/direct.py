@@ -42,6 +42,7 @@ identified as the constant force K·δ0 (+ the model's preload), linear like the
 """
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 
@@ -247,26 +248,26 @@ def _evaluation_model(mech: Mechanism, params: tuple[Parameter, ...]) -> Mechani
 # ----------------------------------------------------------------------------- assembly
 
 
-class _Columns(eqx.Module):
-    """Static gather of the unknowns from the differentiated fields."""
-
-    field: tuple[int, ...] = eqx.field(static=True)  # 0 k, 1 preload, 2 spring k
-    element: tuple[int, ...] = eqx.field(static=True)
-    axes: tuple[tuple[int, ...], ...] = eqx.field(static=True)
-    spring_c: tuple[bool, ...] = eqx.field(static=True)
-    factor: tuple[float, ...] = eqx.field(static=True)
-
-
-def _columns(params: tuple[Parameter, ...]) -> _Columns:
-    field = []
-    for p in params:
-        field.append({"stiffness": 0, "constant": 1}.get(p.kind, 2))
-    return _Columns(
-        field=tuple(field), element=tuple(p.element for p in params),
-        axes=tuple(p.axes for p in params),
-        spring_c=tuple(p.kind == "spring_c" for p in params),
-        factor=tuple(p.to_internal for p in params),
-    )
+def _selection(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
+    """Matrix M (table, p) mapping the unknowns (table units) onto the table of unit columns:
+    per bushing 6 stiffness axes (model units) then 6 constants, then per spring K and K·L0.
+    Axisymmetric unknowns feed two axes; N·mm/deg unknowns carry their 180/π. The selection is
+    data (not compiled structure), so every choice of unknowns of one model shares one compiled
+    assembly per number of unknowns."""
+    n_b = len(mech.bushings.names)
+    table = 12 * n_b + 2 * len(mech.springs.names)
+    m = np.zeros((table, len(params)))
+    for i, p in enumerate(params):
+        if p.kind == "stiffness":
+            for a in p.axes:
+                m[12 * p.element + a, i] = p.to_internal
+        elif p.kind == "constant":
+            m[12 * p.element + 6 + p.axes[0], i] = 1.0
+        elif p.kind == "spring_k":
+            m[12 * n_b + 2 * p.element, i] = 1.0
+        else:
+            m[12 * n_b + 2 * p.element + 1, i] = 1.0
+    return m
 
 
 def _scaling(mech: Mechanism) -> np.ndarray:
@@ -275,140 +276,241 @@ def _scaling(mech: Mechanism) -> np.ndarray:
     return np.tile(np.r_[np.ones(3), np.full(3, 1.0 / mech.length_scale)], n_parts)
 
 
+def _mechanism_at(eval_mech: Mechanism, selection, x):
+    """The evaluation model with the unknowns x (table units) put back into their fields: the
+    stiffnesses and constants added, each unknown K·L0 = c turned into the free length c/K
+    (the evaluation model has L0 = 0 there)."""
+    b, s = eval_mech.bushings, eval_mech.springs
+    n_b = len(b.names)
+    t = selection @ x
+    kb = t[: 12 * n_b].reshape(n_b, 12)
+    ks, cs = t[12 * n_b :: 2], t[12 * n_b + 1 :: 2]
+    k_spring = s.k + ks
+    free_length = s.free_length + cs / jnp.where(k_spring == 0, 1.0, k_spring)
+    return eqx.tree_at(
+        lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
+                    mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
+        eval_mech,
+        (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:6], b.preload_force + kb[:, 6:9],
+         b.preload_torque + kb[:, 9:], k_spring, free_length),
+    )
+
+
+def _element_geometry(mech: Mechanism, y):
+    """Solver coordinates of every element's two parts, z (E, 12), with the ground as a virtual
+    part at zero, and the markers' offsets from their parts' reference points."""
+    from ..statics.kernel import get_layout
+
+    lay = get_layout(mech)
+    yfull = jnp.concatenate([y, jnp.zeros(6, y.dtype)])
+    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
+    return lay, yfull, offset
+
+
+def _scatter_vectors(n_full, idx, values):
+    """Σ over elements of (E, 12, k) values into (n_full, k) at coordinate indices (E, 12)."""
+    out = jnp.zeros((n_full,) + values.shape[2:], values.dtype)
+    return out.at[np.asarray(idx)].add(values)
+
+
+def _bushing_unit_forces(mech: Mechanism, y):
+    """Generalised forces (n, nb, 12) of every bushing for a unit stiffness on each axis (first
+    6 of the last axis: force on I = −(δ − δ0) along that J axis, N/mm or N·mm/rad) and a unit
+    constant force on I along each axis (last 6: the preload / K·δ0 columns), Adams convention
+    (spec stiffness §1.8; the same element functions as the solver)."""
+    from ..statics.kernel import _generalised_force, bushing_state
+
+    b = mech.bushings
+    lay, yfull, offset = _element_geometry(mech, y)
+    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+    idx = lay.coords(i, j)
+    mk = mech.markers
+    zero3 = jnp.zeros(3, y.dtype)
+
+    def one(z, x0i, r0i, x0j, r0j, off_t, off_r):
+        params = dict(k_trans=zero3, k_rot=zero3, cubic_trans=zero3, cubic_rot=zero3,
+                      offset_trans=off_t, offset_rot=off_r, preload_force=zero3,
+                      preload_torque=zero3)
+        delta_t, delta_r, _, _, xi, xj, rj = bushing_state(z, x0i, r0i, x0j, r0j, params, None)
+        e = jnp.concatenate([delta_t - off_t, delta_r - off_r])
+        local = jnp.concatenate([-jnp.diag(e), jnp.eye(6, dtype=y.dtype)], axis=0)  # (12, 6)
+
+        def wrench(ft):
+            force, torque = rj @ ft[:3], rj @ ft[3:]
+            return jnp.concatenate([
+                _generalised_force(z[:6], xi, force, torque),
+                _generalised_force(z[6:], xj, -force, -torque - jnp.cross(xi - xj, force)),
+            ])
+
+        return jax.vmap(wrench)(local)  # (12 unknown kinds, 12 coordinates)
+
+    gen = jax.vmap(one)(yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j],
+                        b.offset_trans, b.offset_rot)  # (nb, 12, 12)
+    full = jnp.zeros((yfull.shape[0], len(b.names), 12), y.dtype)
+    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(
+        jnp.swapaxes(gen, 1, 2))
+    return full[: y.shape[0]]
+
+
+def _spring_unit_forces(mech: Mechanism, y):
+    """Generalised forces (n, ns) of a unit tension (1 N pulling the seats together) in every
+    spring, and the springs' lengths (ns,) (mm)."""
+    from ..statics.kernel import _line_force, _pose
+
+    s = mech.springs
+    lay, yfull, offset = _element_geometry(mech, y)
+    i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
+    idx = lay.coords(i, j)
+    eye = jnp.eye(3, dtype=y.dtype)
+
+    def one(z, x0i, x0j):
+        xi, _ = _pose(z[:6], x0i, eye)
+        xj, _ = _pose(z[6:], x0j, eye)
+        return _line_force(z, x0i, x0j, lambda length: 1.0), jnp.linalg.norm(xj - xi)
+
+    gen, length = jax.vmap(one)(yfull[idx], offset[i], offset[j])  # (ns, 12), (ns,)
+    full = jnp.zeros((yfull.shape[0], len(s.names)), y.dtype)
+    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None]].add(gen)
+    return full[: y.shape[0]], length
+
+
+def _constraint_jacobian(mech: Mechanism, loads, y):
+    """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), joint group by
+    joint group with the solver's row functions (Adams definitions, spec stiffness §1.6)."""
+    from ..model.mechanism import JOINT_ROWS, row_blocks
+    from ..statics.kernel import _driver_row, _value_and_jacfwd, joint_rows
+
+    lay, yfull, offset = _element_geometry(mech, y)
+    mk = mech.markers
+    full = jnp.zeros((mech.n_rows, yfull.shape[0]), y.dtype)
+    for kind, idx, offsets in row_blocks(mech.joints):
+        i = np.asarray(mech.joints.i_marker)[idx]
+        j = np.asarray(mech.joints.j_marker)[idx]
+        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
+        d0 = mk.position[i] - mk.position[j]
+        args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
+                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
+        coords = lay.coords(i, j)
+        _, jac = jax.vmap(_value_and_jacfwd(functools.partial(joint_rows, kind)))(
+            yfull[coords], *args)  # (E, r, 12)
+        full = full.at[rows[:, :, None], coords[:, None, :]].add(jac)
+    if mech.drivers.names:
+        mm = np.asarray(mech.drivers.marker)
+        rows = mech.joints.n_rows + np.arange(len(mm))
+        coords = lay.coords(mm, mm)[:, :6]
+        _, jac = jax.vmap(_value_and_jacfwd(_driver_row))(
+            yfull[coords], offset[mm], mk.position[mm], mech.drivers.direction)  # (E, 1, 6)
+        full = full.at[rows[:, None], coords].add(jac[:, 0, :])
+    return full[np.asarray(mech.independent_rows)][:, : y.shape[0]]
+
+
 def _null_basis(eval_mech: Mechanism, loads, y, scale):
     """Orthonormal basis L (n, n − m) of the null space of the scaled Φ_q at y (spec §1.9,
     4.43–4.44), and the constraint Jacobian Φ_q (m, n) (unscaled)."""
-    from ..statics.kernel import constraint_values, get_layout
+    from ..statics.kernel import get_layout
 
     lay = get_layout(eval_mech)
     n, m = lay.n, lay.m
     if not m:
         return jnp.eye(n, dtype=y.dtype), jnp.zeros((0, n), y.dtype)
-    live = np.asarray(eval_mech.independent_rows)
-    phi_q = jax.jacfwd(lambda yy: constraint_values(eval_mech, loads, yy)[live])(y)
+    phi_q = _constraint_jacobian(eval_mech, loads, y)
     row_scale = jnp.asarray(np.where(lay.angular_live, eval_mech.length_scale, 1.0), y.dtype)
     basis, _ = jnp.linalg.qr((phi_q * row_scale[:, None] * scale[None, :]).T, mode="complete")
     return basis[:, m:], phi_q
 
 
-def _mechanism_at(eval_mech: Mechanism, cols: _Columns, z):
-    """The evaluation model with the unknowns θ = z[:p] added to their fields, and z[p:] added
-    to the springs' K (the auxiliary directions of the K·L0 columns). A spring whose K·L0 = c is
-    an unknown has free length 0 in the evaluation model; `with_constants` puts c back as the
-    free length c/K (for evaluating the forces at a solution)."""
-    b, s = eval_mech.bushings, eval_mech.springs
-    p = len(cols.field)
-    theta, aux = z[:p], z[p:]
-    kb = jnp.zeros((len(b.names), 6), z.dtype)
-    cb = jnp.zeros((len(b.names), 6), z.dtype)
-    ks = aux
-    for i in range(p):
-        e, f = cols.element[i], cols.field[i]
-        if f == 0:
-            for a in cols.axes[i]:
-                kb = kb.at[e, a].add(theta[i] * cols.factor[i])
-        elif f == 1:
-            cb = cb.at[e, cols.axes[i][0]].add(theta[i])
-        elif not cols.spring_c[i]:
-            ks = ks.at[e].add(theta[i])
-    return eqx.tree_at(
-        lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
-                    mm.bushings.preload_torque, mm.springs.k),
-        eval_mech,
-        (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:], b.preload_force + cb[:, :3],
-         b.preload_torque + cb[:, 3:], s.k + ks),
-    )
+def _case_rows(eval_mech: Mechanism, selection, q, loads):
+    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N).
 
-
-def _with_constants(mech: Mechanism, cols: _Columns, x):
-    """Put the identified K·L0 back into the springs as free lengths (tension K·ℓ − K·L0)."""
-    s = mech.springs
-    free_length = s.free_length
-    for i in range(len(cols.field)):
-        if cols.spring_c[i]:
-            e = cols.element[i]
-            k = s.k[e]
-            free_length = free_length.at[e].add(x[i] / jnp.where(k == 0, 1.0, k))
-    return eqx.tree_at(lambda mm: mm.springs.free_length, mech, free_length)
-
-
-def _case_rows(eval_mech: Mechanism, cols: _Columns, q, loads):
-    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N)."""
+    D's columns are the generalised forces of each unknown at unit value, element by element
+    (exact: the forces are linear in the unknowns); Q_known is the solver's own assembly of
+    everything else (loads, the elements and axes not identified, cubic terms)."""
     from ..statics.kernel import assemble, get_layout, to_internal
-    from ..statics.outputs import marker_poses
 
     lay = get_layout(eval_mech)
     n, m = lay.n, lay.m
     y = to_internal(eval_mech, q)
-    lam = jnp.zeros(m, y.dtype)
-    s = eval_mech.springs
-    p = len(cols.field)
-
-    def forces(z):
-        r, _ = assemble(_mechanism_at(eval_mech, cols, z), loads, y, lam, with_jacobian=False)
-        return r[:n]
-
-    z0 = jnp.zeros(p + len(s.names), y.dtype)
-    known = forces(z0)
-    jac = jax.jacfwd(forces)(z0)  # (n, p + springs): exact, the forces are linear in z
-    columns = jac[:, :p]
-    if any(cols.spring_c):
-        # K·L0 column: a tension of −1 N along the spring = −(∂Q/∂K at L0 = 0)/ℓ (spec §1.7).
-        pos, _ = marker_poses(eval_mech, q)
-        length = jnp.linalg.norm(pos[np.asarray(s.i_marker)] - pos[np.asarray(s.j_marker)],
-                                 axis=-1)
-        for i in range(p):
-            if cols.spring_c[i]:
-                e = cols.element[i]
-                columns = columns.at[:, i].set(-jac[:, p + e] / length[e])
+    known, _ = assemble(eval_mech, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
+    known = known[:n]
+    parts = []
+    if eval_mech.bushings.names:
+        unit_b = _bushing_unit_forces(eval_mech, y)  # (n, nb, 12)
+        parts.append(unit_b.reshape(n, -1))
+    if eval_mech.springs.names:
+        unit_s, length = _spring_unit_forces(eval_mech, y)  # (n, ns)
+        # K: tension ℓ − L0 (L0 = 0 when K·L0 is an unknown too); K·L0: tension −1 N
+        # (spec §1.7, 4.37–4.38).
+        k_col = unit_s * (length - eval_mech.springs.free_length)[None, :]
+        parts.append(jnp.stack([k_col, -unit_s], axis=2).reshape(n, -1))
+    columns = jnp.concatenate(parts, axis=1) @ selection
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
     null, _ = _null_basis(eval_mech, loads, y, scale)
     return null.T @ (columns * scale[:, None]), -null.T @ (known * scale)
 
 
-def _case_whitener(eval_mech: Mechanism, cols: _Columns, q, loads, x, pose_cov):
+def _elastic_stiffness(mech: Mechanism, y):
+    """Tangent stiffness −∂Q/∂y (n, n) of the bushings and linear springs of `mech` at y."""
+    from ..statics.kernel import _bushing_force, _line_force, bushing_params
+
+    lay, yfull, offset = _element_geometry(mech, y)
+    mk = mech.markers
+    full = jnp.zeros((yfull.shape[0], yfull.shape[0]), y.dtype)
+    b = mech.bushings
+    if b.names:
+        i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+        idx = lay.coords(i, j)
+        params = {k: v for k, v in bushing_params(mech).items() if not k.startswith("spline")}
+        jac = jax.vmap(jax.jacfwd(functools.partial(_bushing_force, spline_mask=None)))(
+            yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j], params)
+        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
+    s = mech.springs
+    if s.names:
+        i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
+        idx = lay.coords(i, j)
+
+        def spring(z, x0i, x0j, k, free_length):
+            return _line_force(z, x0i, x0j, lambda length: k * (length - free_length))
+
+        jac = jax.vmap(jax.jacfwd(spring))(yfull[idx], offset[i], offset[j], s.k, s.free_length)
+        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
+    return full[: y.shape[0], : y.shape[0]]
+
+
+def _case_whitener(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
     """Whitening matrix C⁻¹ (r, r) of one case: Σ_r = C Cᵀ is the covariance of the case's
     equation residual caused by pose errors of covariance `pose_cov` (n, n, solver
     coordinates), to first order, at the solution x.
 
-    With the multipliers λ̂ fitted at x, the residual Lᵀ(Q + Φ_qᵀλ̂) moves by Lᵀ·K·dy for a pose
-    error dy, K = ∂(Q + Φ_qᵀλ̂)/∂y the tangent stiffness (the solver's KKT Jacobian block); the
-    change of L itself multiplies the (small) residual and is dropped.
+    A pose error dy moves the residual Lᵀ(Q + Φ_qᵀλ) by Lᵀ·K·dy with K the tangent stiffness.
+    Only the elastic part of K (bushings, springs at x) is kept: the geometric terms of the loads
+    and of the joint reactions are smaller by the ratio of a part's rotation error (≈ noise /
+    landmark spread) to the bushings' deformations, and the change of L itself multiplies the
+    small residual.
     """
-    from ..statics.kernel import assemble, get_layout, to_internal
+    from ..statics.kernel import get_layout, to_internal
 
     lay = get_layout(eval_mech)
-    n, m = lay.n, lay.m
     y = to_internal(eval_mech, q)
-    s = eval_mech.springs
-    z = jnp.concatenate([x, jnp.zeros(len(s.names), y.dtype)])
-    mech_x = _with_constants(_mechanism_at(eval_mech, cols, z), cols, x)
+    mech_x = _mechanism_at(eval_mech, selection, x)
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
-    null, phi_q = _null_basis(eval_mech, loads, y, scale)
-    g, _ = assemble(mech_x, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
-    g = g[:n]
-    if m:
-        a = phi_q * scale[None, :]
-        lam = -jnp.linalg.solve(a @ a.T, a @ (scale * g))
-    else:
-        lam = jnp.zeros(0, y.dtype)
-    _, jac = assemble(mech_x, loads, y, lam)
-    sens = null.T @ (scale[:, None] * jac[:n, :n])  # (r, n)
+    null, _ = _null_basis(eval_mech, loads, y, scale)
+    sens = null.T @ (scale[:, None] * _elastic_stiffness(mech_x, y))  # (r, n)
     cov = sens @ pose_cov @ sens.T
     r = cov.shape[0]
+    del lay
     cov = cov + (1e-12 * jnp.trace(cov) / r + 1e-300) * jnp.eye(r, dtype=cov.dtype)
     chol = jnp.linalg.cholesky(cov)
     return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
 
 
 @eqx.filter_jit
-def _system_arrays(eval_mech: Mechanism, cols: _Columns, q, loads):
-    return jax.vmap(lambda q_, l_: _case_rows(eval_mech, cols, q_, l_))(q, loads)
+def _system_arrays(eval_mech: Mechanism, selection, q, loads):
+    return jax.vmap(lambda q_, l_: _case_rows(eval_mech, selection, q_, l_))(q, loads)
 
 
 @eqx.filter_jit
-def _whiteners(eval_mech: Mechanism, cols: _Columns, q, loads, x, pose_cov):
-    return jax.vmap(lambda q_, l_, c_: _case_whitener(eval_mech, cols, q_, l_, x, c_))(
+def _whiteners(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
+    return jax.vmap(lambda q_, l_, c_: _case_whitener(eval_mech, selection, q_, l_, x, c_))(
         q, loads, pose_cov)
 
 
@@ -564,7 +666,7 @@ class _Context:
     q: np.ndarray
     params: tuple[Parameter, ...]
     eval_mech: Mechanism
-    cols: _Columns
+    selection: np.ndarray
     rows: np.ndarray  # (cases, r, p)
     rhs: np.ndarray  # (cases, r)
 
@@ -582,7 +684,8 @@ class _Context:
 
     def whitener(self, x) -> np.ndarray:
         cov = _pose_covariance_jit(self.mech, self.meas)
-        return np.asarray(_whiteners(self.eval_mech, self.cols, jnp.asarray(self.q),
+        return np.asarray(_whiteners(self.eval_mech, jnp.asarray(self.selection),
+                                     jnp.asarray(self.q),
                                      self.meas.loads, jnp.asarray(x, float), cov))
 
 
@@ -591,9 +694,10 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
     fields = _selected_fields(mech, where or _default_where)
     params = _parameters(mech, fields, elements, axisymmetric)
     eval_mech = _evaluation_model(mech, params)
-    cols = _columns(params)
-    rows, rhs = _system_arrays(eval_mech, cols, jnp.asarray(q), measurements.loads)
-    return _Context(mech, measurements, q, params, eval_mech, cols, np.asarray(rows),
+    selection = _selection(mech, params)
+    rows, rhs = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
+                               measurements.loads)
+    return _Context(mech, measurements, q, params, eval_mech, selection, np.asarray(rows),
                     np.asarray(rhs))
 
 

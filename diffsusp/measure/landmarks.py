@@ -119,7 +119,7 @@ def check_layout(layout: LandmarkLayout) -> list[str]:
                 "three non-collinear landmarks (the thesis uses four, spread apart: spec geometry "
                 "§3.3). Add landmarks off the line of the others."
             )
-        matches = _matching_permutations(pts, pts, 2 * REORDER_TOLERANCE)
+        matches, _ = _matching_permutations(pts, pts, 2 * REORDER_TOLERANCE)
         if len(matches) > 1:
             notes.append(
                 f"part '{part}': its landmarks are symmetric ({len(matches)} orderings have the "
