@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import diffsusp
-from diffsusp.cli.demo import wheel_angles
 from diffsusp.identify.iterative import _equalise, _regress, iterative
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases
 
@@ -86,8 +85,10 @@ def test_r5_identified_model_overlays_the_reference_steer(r5):
     wc = ref.markers.index("wheel_centre")
 
     def steer(m):
+        """Rotation of the spin axis about the vertical (degrees)."""
         _, rot = diffsusp.marker_poses(m, diffsusp.solve_statics(m, loads).q)
-        return np.degrees(np.asarray(wheel_angles(rot[:, wc, :, 2])[0]))
+        spin = np.asarray(rot[:, wc, :, 2])
+        return np.degrees(np.arctan2(spin[:, 0], -spin[:, 1]))
 
     lateral_and_longitudinal = slice(5, 13)  # cases 6–13 of Table 5-1
     gap = np.abs(steer(fitted) - steer(ref))[lateral_and_longitudinal]

@@ -1,84 +1,111 @@
-"""`diffsusp demo`: the thesis half axle (`pseudo_mcpherson`) under the 13 load cases of Table 5-1,
-solved in one batched, compiled call; prints a table and the timing.
+"""`diffsusp demo`: the main job on the embedded default model.
+
+The thesis half axle (`pseudo_mcpherson`) under the 13 load cases of Table 5-1 and a ±80 mm
+parallel wheel travel (161 points), each solved in one batched, compiled call with every K&C
+metric and its exact derivatives; prints a table and writes the K&C figures to a folder.
 """
 
+import pathlib
 import time
+from typing import Annotated
 
 import typer
 from rich import box
 from rich.table import Table
 
-from .common import EXIT_NOT_CONVERGED, app, console, enable_x64
+from .common import EXIT_NOT_CONVERGED, app, cli_errors, console, enable_x64
 
 
-def wheel_angles(spin_axis):
-    """Steer (rotation of the spin axis about global +z) and inclination of the spin axis out of
-    the ground plane, in radians, from the spin axis (n, 3) in the global frame."""
-    import jax.numpy as jnp
+def _timed(fn):
+    import jax
 
-    steer = jnp.arctan2(spin_axis[..., 0], -spin_axis[..., 1])
-    incline = jnp.arcsin(spin_axis[..., 2] / jnp.linalg.norm(spin_axis, axis=-1))
-    return steer, incline
+    t0 = time.perf_counter()
+    out = fn()
+    jax.block_until_ready(out.solution.q)
+    return out, time.perf_counter() - t0
 
 
 @app.command()
-def demo():
-    """Solve the 13 thesis load cases (Table 5-1) on the pseudo-McPherson half axle."""
+def demo(
+    out: Annotated[pathlib.Path, typer.Option(
+        help="Folder for the figures (PNG and SVG); created if missing.")] = pathlib.Path(
+        "diffsusp-demo"),
+):
+    """Solve the thesis load cases (Table 5-1) and a ±80 mm parallel travel on the
+    pseudo-McPherson half axle; print the K&C table and write the figures."""
     enable_x64()
-    import jax
+    import jax.numpy as jnp
     import numpy as np
 
-    import diffsusp
-    from diffsusp.models import TABLE_5_1, pseudo_mcpherson, thesis_load_cases
+    from diffsusp import kc, plot
+    from diffsusp.models import TABLE_5_1, pseudo_mcpherson
 
-    out = console()
-    with out.status("building the model and compiling the solver..."):
-        mech = pseudo_mcpherson()
-        loads = thesis_load_cases(mech)
-        t0 = time.perf_counter()
-        sol = diffsusp.solve_statics(mech, loads, throw=False)
-        jax.block_until_ready(sol.q)
-        compile_time = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    repeats = 20
-    for _ in range(repeats):
-        sol = diffsusp.solve_statics(mech, loads, throw=False)
-    jax.block_until_ready(sol.q)
-    solve_time = (time.perf_counter() - t0) / repeats
+    term = console()
+    with cli_errors():
+        with term.status("building the model and compiling the solver (first run: ~1 min)..."):
+            mech = pseudo_mcpherson()
+            cases, first_cases = _timed(lambda: kc.load_table(mech, TABLE_5_1, throw=False))
+            travel_x = jnp.linspace(-80.0, 80.0, 161)
+            travel, first_travel = _timed(
+                lambda: kc.parallel_travel(mech, travel=travel_x, throw=False))
+        _, t_cases = _timed(lambda: kc.load_table(mech, TABLE_5_1, throw=False))
+        _, t_travel = _timed(lambda: kc.parallel_travel(mech, travel=travel_x, throw=False))
 
-    wc = mech.markers.index("wheel_centre")
-    pos, rot = diffsusp.marker_poses(mech, sol.q)
-    pos0, rot0 = mech.markers.position[wc], mech.markers.orientation[wc]
-    steer, incline = wheel_angles(rot[:, wc, :, 2])
-    steer0, incline0 = wheel_angles(rot0[:, 2])
-    disp = np.asarray(pos[:, wc] - pos0)
-    d_steer = np.degrees(np.asarray(steer - steer0))
-    d_incline = np.degrees(np.asarray(incline - incline0))
-
+    m = cases.metrics
+    wc = np.stack([np.asarray(m[f"wheel_centre_{a}"]) for a in "xyz"], axis=1)
+    wc0 = np.asarray(mech.markers.position[mech.markers.index("wheel_centre")])
+    disp = wc - wc0
+    sol = cases.solution
     table = Table(title=f"{mech.name}: thesis load cases (Table 5-1) at the contact patch",
                   box=box.SIMPLE_HEAD)
-    for col in ("case", "Fz N", "Fy N", "Fx N", "Δx mm", "Δy mm", "Δz mm", "steer°", "incl°",
+    for col in ("case", "Fz N", "Fy N", "Fx N", "Δx mm", "Δy mm", "Δz mm", "toe°", "camber°",
                 "iter", "status"):
         table.add_column(col, justify="right", no_wrap=True)
-    status_text = {0: "ok", 1: "max steps", 2: "non-finite"}
+    status_text = {0: "ok", 1: "max steps", 2: "non-finite", 3: "stalled"}
     for c in range(len(TABLE_5_1)):
         fv, fl, fx = TABLE_5_1[c]
         table.add_row(
             str(c + 1), f"{fv:.0f}", f"{fl:.0f}", f"{fx:.0f}",
-            *(f"{v:+.2f}" for v in disp[c]), f"{d_steer[c]:+.3f}", f"{d_incline[c]:+.3f}",
-            str(int(sol.iterations[c])), status_text[int(sol.status[c])],
+            *(f"{v:+.2f}" for v in disp[c]),
+            *(f"{kc.display(k, m[k][c]):+.3f}" for k in ("toe", "camber")),
+            str(int(sol.iterations[c])), status_text.get(int(sol.status[c]), "failed"),
         )
-    out.print(table)
-    out.print(
-        "Fz, Fy, Fx: vertical, lateral, longitudinal force at the contact patch (global axes). "
-        "Δ: wheel-centre displacement from design; steer°: rotation of the spin axis about "
-        "global +z; incl°: change of the spin axis's inclination to the ground plane "
-        "(Adams/Car frame: x rearward, y right, z up; left wheel)."
+    term.print(table)
+    term.print(
+        "Fz, Fy, Fx: vertical, lateral, longitudinal force at the contact patch (Adams/Car "
+        "frame: x rearward, y right, z up; left wheel, so Fy > 0 is inboard and Fx > 0 braking). "
+        "Δ: wheel-centre displacement from design. toe: toe-in positive; camber: top outboard "
+        "positive (Adams/Car, per side)."
     )
-    out.print(
-        f"compile + first solve: {compile_time:.2f} s; 13 cases: {solve_time * 1e3:.2f} ms "
-        f"({len(TABLE_5_1) / solve_time:.0f} equilibria/s)"
-    )
-    if not bool(np.all(np.asarray(sol.status) == 0)):
-        raise typer.Exit(code=EXIT_NOT_CONVERGED)
 
+    t = travel.metrics
+    i0 = int(np.argmin(np.abs(travel.x)))
+    summary = Table(title="parallel wheel travel −80…+80 mm (161 points): at design",
+                    box=box.SIMPLE_HEAD)
+    for col in ("metric", "value", "unit", "range over the travel"):
+        summary.add_column(col, justify="right" if col != "metric" else "left", no_wrap=True)
+    for name in ("toe", "camber", "half_track_change", "bump_steer", "bump_camber",
+                 "wheel_rate", "roll_centre_height"):
+        v = np.asarray(kc.display(name, t[name]))
+        summary.add_row(name, f"{v[i0]:+.4g}", kc.display_unit(name),
+                        f"{np.nanmin(v):+.4g} … {np.nanmax(v):+.4g}")
+    term.print(summary)
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = plot.save(plot.kc_curves(travel, ["toe", "camber", "half_track_change"],
+                                       title=f"{mech.name}: parallel wheel travel"),
+                        out / "parallel_travel")
+    written += plot.save(plot.kc_curves(cases, ["toe", "camber"],
+                                        title=f"{mech.name}: Table 5-1 load cases"),
+                         out / "table_5_1")
+    term.print(f"figures: {', '.join(str(p) for p in written)}")
+    term.print(
+        f"compile + first run: {first_cases:.1f} s (load cases), {first_travel:.1f} s (travel); "
+        f"after compile: 13 cases {t_cases * 1e3:.1f} ms, 161-point travel with all metrics and "
+        f"derivatives {t_travel * 1e3:.1f} ms ({(13 + 161) / (t_cases + t_travel):.0f} "
+        "equilibria/s)"
+    )
+    failed = int(np.sum(~cases.converged)) + int(np.sum(~travel.converged))
+    if failed:
+        term.print(f"[red]{failed} case(s) did not converge.[/]")
+        raise typer.Exit(code=EXIT_NOT_CONVERGED)

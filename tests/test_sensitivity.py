@@ -1,0 +1,125 @@
+"""Sensitivities of K&C metrics (exact, second order through the equilibrium where needed) and
+experiment design. spec: stiffness §2.7, §3; guaranteed_least_squares §3.8."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffsusp as ds
+from diffsusp import kc
+from diffsusp.identify.params import Params
+from diffsusp.identify.sensitivity import design_experiment, sensitivity
+from diffsusp.models import isolated_bushing, pseudo_mcpherson, two_bushing_coupler
+
+
+def test_second_derivative_through_the_equilibrium_matches_differences():
+    """d²q/dk²: the implicit JVP rule is itself differentiable (no stop_gradient)."""
+    mech = two_bushing_coupler()
+    loads = mech.loads(forces={"coupler_middle": jnp.array([[300.0, -200, 500],
+                                                            [100, 50, -300]])})
+    k0 = float(mech.bushings.k_trans[0, 0])
+
+    def out(k):
+        m = eqx.tree_at(lambda x: x.bushings.k_trans, mech, mech.bushings.k_trans.at[0, 0].set(k))
+        return ds.solve_statics(m, loads).q.sum(axis=1)
+
+    d1, d2 = jax.jacfwd(out), jax.jacfwd(jax.jacfwd(out))
+    h = 1e-3 * k0
+    fd = (np.asarray(d1(k0 + h)) - np.asarray(d1(k0 - h))) / (2 * h)
+    np.testing.assert_allclose(np.asarray(d2(k0)), fd, rtol=1e-5)
+    assert np.all(np.abs(fd) > 0)
+
+
+@pytest.fixture(scope="module")
+def travel():
+    """Five points of a ±40 mm parallel travel, and the parameters notebooks 01 and 04 use (the
+    same compiled programs: the persistent compilation cache shares them)."""
+    mech = pseudo_mcpherson()
+    ev = kc.parallel_travel(mech, travel=jnp.linspace(-40.0, 40.0, 5))
+    stiffness = (Params.bushing_stiffness(mech, ["bushing_A", "bushing_B", "bushing_F"])
+                 + Params.leaves(mech, lambda m: m.springs.k))
+    mask = np.zeros(mech.markers.position.shape, bool)
+    mask[mech.markers.index("L6_tie_rod_outer"), 2] = True
+    hardpoint = Params.leaves(mech, lambda m: m.markers.position, mask=mask)
+    return ev, stiffness, hardpoint
+
+
+def _finite_differences(rig, loads, params, names, rel=1e-4):
+    """Central differences of the statics (kc.evaluate at θ ± h, one parameter at a time;
+    h = rel·|θ|, or 0.01 mm for `rel=None`)."""
+    theta = np.asarray(params.values(rig.mech))
+    out = {n: np.zeros((loads.n_cases, len(theta))) for n in names}
+    for j in range(len(theta)):
+        h = 0.01 if rel is None else rel * abs(theta[j])
+        vals = []
+        for s in (1, -1):
+            th = theta.copy()
+            th[j] += s * h
+            r = eqx.tree_at(lambda r_: r_.mech, rig, params.apply(rig.mech, jnp.asarray(th)))
+            vals.append(kc.evaluate(r, loads)[1])
+        for n in names:
+            out[n][:, j] = (np.asarray(vals[0][n]) - np.asarray(vals[1][n])) / (2 * h)
+    return out
+
+
+GEOMETRIC = ("toe", "camber", "wheel_centre_x", "wheel_centre_y", "half_track_change",
+             "vertical_force", "caster", "kingpin_inclination", "scrub_radius")
+
+
+def test_metric_sensitivities_match_finite_differences(travel):
+    ev, params, _ = travel
+    rep = sensitivity(ev, params, derivatives=False)
+    fd = _finite_differences(ev.rig, ev.loads, params, GEOMETRIC)
+    for name in GEOMETRIC:
+        scale = np.abs(fd[name]).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(rep.jacobian[name], fd[name], atol=1e-5 * scale,
+                                   err_msg=name)
+    # Elasticities are the Jacobian times θ over the metric's largest magnitude.
+    theta = np.asarray(params.values(ev.rig.mech))
+    np.testing.assert_allclose(rep.elasticity["toe"], rep.jacobian["toe"] * theta
+                               / np.abs(rep.values["toe"]).max(), rtol=1e-12)
+    # The ranking puts the most influential parameter first: toe under travel is set by the
+    # bushings' compliance to the spring force.
+    ranked = rep.ranked("vertical_force")
+    assert ranked[0][0] == "spring.k"
+    assert abs(ranked[0][1]) >= max(abs(v) for _, v in ranked[1:])
+
+
+@pytest.mark.slow
+def test_bump_steer_sensitivity_to_a_hardpoint_matches_finite_differences(travel):
+    """A derivative metric (bump steer) differentiated with respect to a hardpoint (the tie rod's
+    outer ball joint height): second order through the equilibrium, exact."""
+    ev, _, hardpoint = travel
+    rep = sensitivity(ev, hardpoint, metrics=["bump_steer", "toe"])
+    fd = _finite_differences(ev.rig, ev.loads, hardpoint, ("bump_steer", "toe"), rel=None)
+    for name in ("bump_steer", "toe"):
+        scale = np.abs(fd[name]).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(rep.jacobian[name], fd[name], atol=1e-5 * scale,
+                                   err_msg=name)
+
+
+def test_experiment_design_picks_one_case_per_direction_with_closed_form_sigma():
+    """Isolated bushing (K = 100 N/mm): a force at the bushing centre along one axis of the
+    bushing's J frame informs only that axis's stiffness. Candidates: 100 N and 300 N along each
+    axis. Three cases suffice; the 300 N ones are chosen, and σ(K)/K = σ / (δ·√m) with
+    δ = 3 mm the deformation and m the markers on the part (all translate by δ)."""
+    mech = isolated_bushing()
+    r_j = np.asarray(mech.markers.orientation[mech.bushings.j_marker[0]])
+    forces = [f * r_j[:, a] for f in (100.0, 300.0) for a in range(3)]
+    candidates = mech.loads(forces={"centre": jnp.asarray(np.array(forces))})
+    params = Params.leaves(mech, lambda m: m.bushings.k_trans)
+    rep = design_experiment(mech, candidates, params, 3, sigma=0.05)
+    assert sorted(rep.chosen) == [3, 4, 5]
+    assert np.isinf(rep.sigma[0]).sum() == 2  # two axes undetermined after the first case
+    m = int(np.sum(np.asarray(mech.markers.part) >= 0))
+    np.testing.assert_allclose(rep.sigma[-1], 0.05 / (3.0 * np.sqrt(m)), rtol=1e-9)
+    assert rep.relative.all() and "%" in rep.table()
+    # By the σ criterion, the same three.
+    rep = design_experiment(mech, candidates, params, 3, criterion="sigma")
+    assert sorted(rep.chosen) == [3, 4, 5]
+    with pytest.raises(ds.InputError, match="criterion"):
+        design_experiment(mech, candidates, params, 3, criterion="A")
