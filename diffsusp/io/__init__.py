@@ -107,10 +107,11 @@ def save_model(mech, path, *, load_tables: dict | None = None, units: dict | Non
 
 def __getattr__(name):
     # The importers load on first use (they pull in their own parsers).
-    if name == "read_adm":
-        from .adams import read_adm
+    if name in ("read_adm", "parse_adm", "write_adm", "read_lcf", "write_lcf",
+                "read_bushing_property", "write_bushing_property"):
+        from . import adams
 
-        return read_adm
+        return getattr(adams, name)
     if name == "read_chrono":
         from .chrono import read_chrono
 

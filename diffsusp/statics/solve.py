@@ -333,6 +333,10 @@ def _check_validity(mech: Mechanism, sol: StaticSolution):
         return
     angles = np.abs(np.asarray(_bushing_angles(mech, sol.q)))
     angles = angles.reshape(-1, len(mech.bushings.names), 3)
+    b = mech.bushings
+    carries = (np.asarray(b.k_rot) != 0) | (np.asarray(b.cubic_rot) != 0) | np.asarray(
+        b.spline_axes, dtype=bool).reshape(-1, 6)[:, 3:]
+    angles = np.where(carries, angles, 0.0)  # an axis with no law has no validity to leave
     limits = np.radians([15.0, 15.0, 90.0])
     ratio = angles / limits
     if np.any(ratio > 1.0):
