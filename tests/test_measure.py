@@ -227,3 +227,64 @@ def test_case_subset(synthetic):
     assert sub.cases == ("3", "1") and sub.n_cases == 2
     np.testing.assert_array_equal(sub.rotation[0], meas.rotation[2])
     np.testing.assert_array_equal(sub.loads.force[1], meas.loads.force[0])
+
+
+# ----------------------------------------------------------------------------- tables
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_tables_round_trip(bushing, synthetic, tmp_path, suffix):
+    _, meas = synthetic
+    marks = tmp_path / f"landmarks{suffix}"
+    measure.write_measurements(meas, marks, bushing)
+    back = measure.read_measurements(marks, bushing)
+    assert back.cases == meas.cases and back.parts == meas.parts
+    np.testing.assert_allclose(back.landmarks, meas.landmarks, atol=1e-12)
+    np.testing.assert_allclose(back.rotation, meas.rotation, atol=1e-13)
+    np.testing.assert_allclose(back.loads.force, meas.loads.force, atol=1e-12)
+    np.testing.assert_allclose(back.loads.moment, meas.loads.moment, atol=1e-9)
+    poses = measure.from_poses(meas.parts, meas.rotation, meas.translation, meas.loads)
+    pose_path = tmp_path / f"poses{suffix}"
+    measure.write_measurements(poses, pose_path, bushing)
+    back = measure.read_measurements(pose_path, bushing)
+    np.testing.assert_allclose(back.rotation, meas.rotation, atol=1e-13)
+    np.testing.assert_allclose(back.translation, meas.translation, atol=1e-12)
+
+
+def _csv(tmp_path, text):
+    path = tmp_path / "table.csv"
+    path.write_text(text)
+    return path
+
+
+def test_table_conventions_and_errors(bushing, tmp_path):
+    from diffsusp.errors import ModelFileError
+
+    header = "case,part,landmark,x,y,z,x0,y0,z0,tip.fz [kN]\n"
+    rows = ["A,arm,p1,0,0,0,0,0,0,1.5", "A,arm,p2,100,0,0,100,0,0,", "A,arm,p3,0,80,5,0,80,5,",
+            "A,arm,p4,40,30,90,40,30,90,", "B,arm,p1,1,0,0,0,0,0,2", "B,arm,p2,101,0,0,100,0,0,2",
+            "B,arm,p3,1,80,5,0,80,5,2"]  # B lacks p4: not measured
+    meas = measure.read_measurements(_csv(tmp_path, header + "\n".join(rows)), bushing)
+    assert meas.cases == ("A", "B")
+    np.testing.assert_allclose(meas.loads.force[:, 0, 2], [1500.0, 2000.0])  # kN, repeated
+    np.testing.assert_allclose(meas.translation[:, 0], [[0, 0, 0], [1, 0, 0]], atol=1e-12)
+    assert float(meas.weights[1, 0, 3]) == 0.0 and any("p4" in n for n in meas.notes)
+    bad = rows.copy()
+    bad[5] = "B,arm,p2,101,0,0,100,0,0,3"
+    with pytest.raises(ModelFileError, match="has 2 and 3 in case 'B'"):
+        measure.read_measurements(_csv(tmp_path, header + "\n".join(bad)), bushing)
+    bad = [*rows, "B,arm,p1,1,0,0,0,0,0,2"]
+    with pytest.raises(ModelFileError, match="appears twice in case 'B'"):
+        measure.read_measurements(_csv(tmp_path, header + "\n".join(bad)), bushing)
+    bad = rows.copy()
+    bad[4] = "B,arm,p1,1,0,0,0,0,7,2"
+    with pytest.raises(ModelFileError, match="same on every row"):
+        measure.read_measurements(_csv(tmp_path, header + "\n".join(bad)), bushing)
+    no_loads = "\n".join(",".join(r.split(",")[:-1]) for r in [header.strip(), *rows])
+    with pytest.raises(ModelFileError, match="no load columns"):
+        measure.read_measurements(_csv(tmp_path, no_loads), bushing)
+    with pytest.raises(ModelFileError, match="unknown table format"):
+        measure.read_measurements(tmp_path / "table.xlsx", bushing)
+    poses = "case,part,x,y,z,psi,theta,phi [rad],fz\n1,arm,0,0,1,90,0,0,10\n2,hub,0,0,0,0,0,0,5\n"
+    with pytest.raises(InputError, match="no pose of part 'hub' in case '1'"):
+        measure.read_measurements(_csv(tmp_path, poses), bushing)

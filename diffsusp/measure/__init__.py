@@ -1,5 +1,5 @@
 """Measurements: landmarks → part poses, landmark re-ordering, noise models, bushing
-deformations, synthetic measurements, and measurement tables (CSV/Parquet).
+deformations, synthetic measurements, and measurement tables (CSV/Parquet: see `table`).
 
 spec: geometry §3.3–3.7 (landmarks, distance tables, Arun/Kabsch, deformations); stiffness §1.1,
 §1.12, §2.8 (what the direct method needs; the thesis's numerical protocol). Units: mm, N, N·mm,
@@ -29,10 +29,12 @@ from .measurements import (
     synthesize,
 )
 from .noise import ARM_SIGMA, GaussianNoise
+from .table import read_measurements, write_measurements
 
 __all__ = [
     "ARM_SIGMA", "COLLINEAR_RATIO", "REORDER_TOLERANCE", "GaussianNoise", "LandmarkLayout",
     "Measurements", "Reordering", "add_noise", "bushing_deformations", "case_subset",
     "check_layout", "distance_table", "from_landmarks", "from_poses", "landmark_positions",
-    "make_layout", "place_landmarks", "reorder_landmarks", "reregister", "synthesize",
+    "make_layout", "place_landmarks", "read_measurements", "reorder_landmarks", "reregister",
+    "synthesize", "write_measurements",
 ]

@@ -1,0 +1,116 @@
+"""`diffsusp identify direct` (Typer's test runner): success with landmark and pose tables,
+report and model outputs, and bad input (exit code 2)."""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import oracle  # tests/oracle.py
+import pytest
+from typer.testing import CliRunner
+
+import diffsusp.cli.identify  # noqa: F401  (registers `identify` on the app)
+from diffsusp import measure
+from diffsusp.cli import app
+from diffsusp.io import load_model
+from diffsusp.models import isolated_bushing
+
+
+@pytest.fixture(scope="module")
+def tables(tmp_path_factory):
+    """A pose table (CSV) and a landmark table (Parquet) of three equilibria of the isolated
+    bushing (independent NumPy solver), and the landmark table as CSV."""
+    mech = isolated_bushing()
+    force = np.array([[30.0, -20.0, 50.0], [-12.0, 8.0, 4.0], [6.0, 3.0, -9.0]])
+    moment = np.array([[2e4, -1e4, 3e4], [-5e3, 1e4, 2e3], [3e3, 4e3, -6e3]])
+    loads = mech.loads(forces={"tip": force}, moments={"tip": moment})
+    sols = oracle.solve_loads(mech, loads, rtol=1e-12, atol=1e-12)
+    rot = np.stack([s.R for s in sols])
+    trans = np.stack([s.p for s in sols])
+    poses = measure.from_poses(mech.parts, rot, trans, loads)
+    layout = measure.place_landmarks(mech, seed=1)
+    points = measure.landmark_positions(layout, jnp.asarray(rot), jnp.asarray(trans))
+    marks = measure.from_landmarks(layout, points, loads)
+    root = tmp_path_factory.mktemp("identify")
+    paths = dict(poses=root / "poses.csv", marks=root / "landmarks.parquet",
+                 marks_csv=root / "landmarks.csv")
+    measure.write_measurements(poses, paths["poses"], mech)
+    measure.write_measurements(marks, paths["marks"], mech)
+    measure.write_measurements(marks, paths["marks_csv"], mech)
+    return paths
+
+
+def _run(*args):
+    return CliRunner().invoke(app, ["identify", "direct", *map(str, args)])
+
+
+def _text(result) -> str:
+    """The output with Rich's line wrapping undone."""
+    return " ".join(result.output.split())
+
+
+def test_identify_direct_from_a_pose_table(tables, tmp_path):
+    out, model = tmp_path / "report.json", tmp_path / "identified.toml"
+    result = _run("isolated_bushing", "--measurements", tables["poses"], "--out", out,
+                  "--write-model", model)
+    assert result.exit_code == 0, result.output
+    for name in ("bush.Ktx", "bush.Krz", "identified", "N·mm/deg"):
+        assert name in result.output
+    report = json.loads(out.read_text())
+    values = {p["parameter"]: p["value"] for p in report["parameters"]}
+    np.testing.assert_allclose([values[f"bush.K{a}"] for a in ("tx", "ty", "tz")], 100.0,
+                               rtol=1e-8)
+    np.testing.assert_allclose([values[f"bush.K{a}"] for a in ("rx", "ry", "rz")], 1e4,
+                               rtol=1e-8)
+    fitted = load_model(model)
+    np.testing.assert_allclose(fitted.bushings.k_rot, 1e4 * 180 / np.pi, rtol=1e-8)
+
+
+def test_identify_direct_from_landmarks_json_and_csv(tables, tmp_path):
+    out = tmp_path / "report.csv"
+    result = _run("isolated_bushing", "-m", tables["marks"], "--json", "--out", out,
+                  "--method", "min_norm")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["method"] == "min_norm" and report["rank"] == 6
+    assert report["parameters"][0]["value"] == pytest.approx(100.0, rel=1e-8)
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("parameter,value,sigma") and len(lines) == 7
+    assert _run("isolated_bushing", "-m", tables["marks_csv"]).exit_code == 0
+
+
+def test_bad_measurement_path(tmp_path):
+    result = _run("isolated_bushing", "--measurements", tmp_path / "missing.csv")
+    assert result.exit_code == 2
+    assert "missing.csv" in _text(result)
+
+
+def test_malformed_tables(tables, tmp_path):
+    text = tables["poses"].read_text().splitlines()
+    header = text[0].split(",")
+    # a missing column
+    drop = header.index("psi [deg]")
+    missing = tmp_path / "missing_column.csv"
+    missing.write_text("\n".join(",".join(c for k, c in enumerate(line.split(",")) if k != drop)
+                                 for line in text) + "\n")
+    result = _run("isolated_bushing", "-m", missing)
+    assert result.exit_code == 2
+    assert "missing column 'psi'" in _text(result)
+    # text in a number column
+    rows = [line.split(",") for line in text]
+    rows[2][header.index("x [mm]")] = "twelve"
+    bad = tmp_path / "text_in_number.csv"
+    bad.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    result = _run("isolated_bushing", "-m", bad)
+    assert result.exit_code == 2
+    assert "'twelve' in column 'x' is not a number" in _text(result)
+    assert "text_in_number.csv:3" in _text(result)  # the line
+    # an unknown load column, and a bad option
+    rows = [line.split(",") for line in text]
+    rows[0][-1] = "hub.fz [N]"
+    unknown = tmp_path / "unknown_load.csv"
+    unknown.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    result = _run("isolated_bushing", "-m", unknown)
+    assert result.exit_code == 2 and "hub.fz" in _text(result)
+    result = _run("isolated_bushing", "-m", tables["poses"], "--method", "qr")
+    assert result.exit_code == 2 and "--method must be one of" in _text(result)
