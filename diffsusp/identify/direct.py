@@ -503,6 +503,25 @@ def _case_whitener(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
     return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
 
 
+_QR_CHUNK = 1024
+
+
+@jax.jit
+def _r_factor(W, y):
+    """R-factor (positive diagonal) of [W, −y], by a tall-skinny QR: chunks of rows reduced
+    separately, then their R's (one tall QR is several times slower for 10⁵ rows)."""
+    from ..lsq import qr_r
+
+    m = jnp.concatenate([W, -y[:, None]], axis=1)
+    n, q = m.shape
+    if n > 2 * _QR_CHUNK:
+        k = -(-n // _QR_CHUNK)
+        m = jnp.concatenate([m, jnp.zeros((k * _QR_CHUNK - n, q), m.dtype)])
+        m = jax.vmap(lambda x: jnp.linalg.qr(x, mode="r"))(m.reshape(k, _QR_CHUNK, q))
+        m = m.reshape(-1, q)
+    return qr_r(m)
+
+
 @eqx.filter_jit
 def _system_arrays(eval_mech: Mechanism, selection, q, loads):
     return jax.vmap(lambda q_, l_: _case_rows(eval_mech, selection, q_, l_))(q, loads)
@@ -525,7 +544,8 @@ class DirectSystem:
     divided by the length scale); `r` rows per case (= n − rank Φ_q, the kinematic degrees of
     freedom); `parameters` (the unknowns, in column order, with their table units); `cases`
     (labels); `prior` (p,) the model's values in table units; `notes` (from the measurements);
-    `weighted`: rows whitened by the pose-noise covariance (then W and y are dimensionless).
+    `weighted`: rows whitened by the pose-noise covariance (then W and y are dimensionless);
+    `R` the (p+1)×(p+1) R-factor of [W, −y] (what `lsq` works from).
     """
 
     W: np.ndarray
@@ -536,6 +556,7 @@ class DirectSystem:
     prior: np.ndarray
     notes: tuple[str, ...]
     weighted: bool = False
+    R: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -677,10 +698,14 @@ class _Context:
             rhs = np.einsum("cij,cj->ci", whitener, rhs)
         n_cases, r, p = rows.shape
         cases = self.meas.cases or tuple(str(c + 1) for c in range(n_cases))
-        return DirectSystem(W=rows.reshape(n_cases * r, p), y=rhs.reshape(-1),
-                            rows_per_case=r, parameters=self.params, cases=cases,
+        W, y = rows.reshape(n_cases * r, p), rhs.reshape(-1)
+        if not (np.all(np.isfinite(W)) and np.all(np.isfinite(y))):
+            raise InputError("the identification equations are not finite: check that the "
+                             "measured poses are sensible (no part rotated by 180°).")
+        return DirectSystem(W=W, y=y, rows_per_case=r, parameters=self.params, cases=cases,
                             prior=_prior(self.mech, self.params), notes=tuple(self.meas.notes),
-                            weighted=whitener is not None)
+                            weighted=whitener is not None,
+                            R=np.asarray(_r_factor(jnp.asarray(W), jnp.asarray(y))))
 
     def whitener(self, x) -> np.ndarray:
         cov = _pose_covariance_jit(self.mech, self.meas)
@@ -1222,11 +1247,12 @@ def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, elim
                           for p in params])
         options.update(method="bounded", lower=lower)
     fixed_names = [n for n, f in zip(names, fixed, strict=True) if f]
+    problem = lsq.Problem(R=jnp.asarray(system.R), n=len(system.y), names=names)
     if eliminate:
-        fit, _ = lsq.eliminate(system.W, system.y, names=names, fixed=fixed_names,
-                               ic_threshold=0.0, sigma_pct_threshold=max_sigma_pct, **options)
+        fit, _ = problem.eliminate(fixed=fixed_names, ic_threshold=0.0,
+                                   sigma_pct_threshold=max_sigma_pct, **options)
         return fit
-    return lsq.solve(system.W, system.y, names=names, fixed=fixed_names, **options)
+    return problem.fit(fixed=fixed_names, **options)
 
 
 def _estimate(system, method, hold, eliminate, threshold, prior_sigma, max_sigma_pct, held):

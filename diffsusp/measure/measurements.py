@@ -11,6 +11,7 @@ has gone and R the rotation from design (DESIGN.md "Reference configuration").
 """
 
 import dataclasses
+import functools
 
 import equinox as eqx
 import jax
@@ -91,11 +92,16 @@ class Measurements(eqx.Module):
                 f"model '{mech.name}' does not have (its parts: {', '.join(mech.parts)}); check "
                 "the part names."
             )
-        idx = np.asarray(index, dtype=int)
-        rot = self.rotation[..., idx, :, :]
-        gibbs = jax.vmap(matrix_to_gibbs)(rot.reshape(-1, 3, 3)).reshape(*rot.shape[:-2], 3)
-        q = jnp.concatenate([self.translation[..., idx, :], gibbs], axis=-1)
-        return q.reshape(*q.shape[:-2], -1)
+        return _coordinates(self.rotation, self.translation, tuple(index))
+
+
+@functools.partial(jax.jit, static_argnames="index")
+def _coordinates(rotation, translation, index):
+    idx = np.asarray(index, dtype=int)
+    rot = rotation[..., idx, :, :]
+    gibbs = jax.vmap(matrix_to_gibbs)(rot.reshape(-1, 3, 3)).reshape(*rot.shape[:-2], 3)
+    q = jnp.concatenate([translation[..., idx, :], gibbs], axis=-1)
+    return q.reshape(*q.shape[:-2], -1)
 
 
 def _case_labels(n: int, cases) -> tuple[str, ...]:
