@@ -31,8 +31,7 @@ def demo(
         help="Folder for the figures (PNG and SVG); created if missing.")] = pathlib.Path(
         "diffsusp-demo"),
 ):
-    """Solve the thesis load cases (Table 5-1) and a ±80 mm parallel travel on the
-    pseudo-McPherson half axle; print the K&C table and write the figures."""
+    """Thesis half axle: Table 5-1 load cases and ±80 mm travel; K&C table and figures."""
     enable_x64()
     import jax.numpy as jnp
     import numpy as np
