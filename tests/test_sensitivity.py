@@ -38,7 +38,7 @@ def travel():
     same compiled programs: the persistent compilation cache shares them)."""
     mech = pseudo_mcpherson()
     ev = kc.parallel_travel(mech, travel=jnp.linspace(-40.0, 40.0, 5))
-    stiffness = (Params.bushing_stiffness(mech, ["bushing_A", "bushing_B", "bushing_F"])
+    stiffness = (Params.bushing_stiffness(mech, ["bushing_A", "bushing_B"])
                  + Params.leaves(mech, lambda m: m.springs.k))
     mask = np.zeros(mech.markers.position.shape, bool)
     mask[mech.markers.index("L6_tie_rod_outer"), 2] = True
