@@ -98,14 +98,15 @@ for name in ("longitudinal_compliance_steer", "longitudinal_compliance_camber"):
 # %% [markdown]
 # ## The exact derivative of bump steer with respect to a hardpoint
 #
-# Raising the tie rod's outer ball joint (L6 on the hub carrier) changes the bump steer. Its
+# Raising the tie rod's outer ball joint (L6 on the hub carrier: the marker `tie_rod.j` of the
+# tie-rod joint; the marker `L6_tie_rod_outer` only labels the point) changes the bump steer. Its
 # derivative with respect to the joint's height is a second derivative of the equilibrium
 # (bump steer is already a derivative along the travel): `identify.sensitivity` computes it
 # exactly by nested forward-mode differentiation through the implicit equilibrium. We check it
 # against a central difference of two full re-analyses.
 
 # %%
-L6 = mech.markers.index("L6_tie_rod_outer")
+L6 = mech.markers.index("tie_rod.j")
 mask = np.zeros(mech.markers.position.shape, bool)
 mask[L6, 2] = True
 hardpoint = Params.leaves(mech, lambda m: m.markers.position, mask=mask)

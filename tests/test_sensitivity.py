@@ -41,7 +41,7 @@ def travel():
     stiffness = (Params.bushing_stiffness(mech, ["bushing_A", "bushing_B"])
                  + Params.leaves(mech, lambda m: m.springs.k))
     mask = np.zeros(mech.markers.position.shape, bool)
-    mask[mech.markers.index("L6_tie_rod_outer"), 2] = True
+    mask[mech.markers.index("tie_rod.j"), 2] = True
     hardpoint = Params.leaves(mech, lambda m: m.markers.position, mask=mask)
     return ev, stiffness, hardpoint
 
