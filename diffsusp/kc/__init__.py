@@ -1,0 +1,48 @@
+"""K&C (kinematics and compliance) events and metrics, with exact derivatives.
+
+```python
+from diffsusp import kc
+ev = kc.parallel_travel(mech, travel=jnp.linspace(-80, 80, 161))
+ev.metrics["toe"], ev.metrics["bump_steer"]        # rad, rad/mm (internal units)
+kc.derivative_metrics(ev)                          # the derivative subset
+fz = kc.vertical_force(mech, fz=[3000.0, 4500.0, 6000.0])
+kc.compliance_matrix(fz)                           # (cases, 6, 6) at the wheel centre
+```
+
+Definitions and signs (Adams/Car, per side): `diffsusp.kc.metrics`. Which markers are the wheel:
+`Corner` (defaults registered for the built-in models). Events: `diffsusp.kc.events`.
+"""
+
+from .corner import DEFAULT_CORNERS, Corner, ResolvedCorner, corners_of, default_corner
+from .events import (
+    TABLES,
+    KCEvent,
+    Rig,
+    aligning_torque,
+    anti_pitch,
+    braking,
+    compliance_matrix,
+    derivative_metrics,
+    evaluate,
+    force_rig,
+    lateral_force,
+    load_table,
+    longitudinal_force,
+    opposite_travel,
+    parallel_travel,
+    steering,
+    traction,
+    travel_rig,
+    vertical_force,
+)
+from .metrics import DERIVATIVE_METRICS, METRICS, corner_geometry, display, display_unit
+from .rig import add_driver, remove_drivers, with_rack
+
+__all__ = [
+    "DEFAULT_CORNERS", "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent",
+    "ResolvedCorner", "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking",
+    "compliance_matrix", "corner_geometry", "corners_of", "default_corner",
+    "derivative_metrics", "display", "display_unit", "evaluate", "force_rig", "lateral_force",
+    "load_table", "longitudinal_force", "opposite_travel", "parallel_travel", "remove_drivers",
+    "steering", "traction", "travel_rig", "vertical_force", "with_rack",
+]

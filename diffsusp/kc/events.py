@@ -1,0 +1,648 @@
+"""K&C events: batched statics runs on a rig around the model, with every metric and its exact
+derivatives.
+
+An event builds a `Rig` (the model plus motion drivers: wheel travel, rack), a table of load
+cases (one per point of the event), and calls `evaluate`: one compiled call that solves every
+case at once (`solve_statics`, vmapped over cases, from the design position or `q0`), computes
+the geometric metrics and differentiates them in forward mode through the implicitly
+differentiated equilibrium with respect to a few rig inputs (jax.jacfwd through solve_statics's
+custom JVP: one extra linear solve per case, no finite differences). Metrics and signs:
+`diffsusp.kc.metrics`. Per-side load components (vertical up, lateral inboard, longitudinal
+rearward = braking, aligning torque toe-out): `ResolvedCorner.load_vectors`.
+
+One compiled program per rig structure and number of cases: events of one kind reuse it for new
+values, and `evaluate` can be `eqx.filter_vmap`ped over designs.
+"""
+
+import dataclasses
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..errors import ConvergenceError, InputError
+from ..model import GROUND, Loads, Mechanism
+from ..models.loadcases import TABLE_4_4, TABLE_5_1
+from ..statics import StaticSolution, solve_statics
+from ..statics.kernel import assemble, to_internal, to_public
+from ..statics.solve import STATUS_TEXT, _scaled_solve
+from .corner import Corner, ResolvedCorner, corners_of
+from .metrics import corner_geometry
+from .rig import add_driver, remove_drivers
+
+TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
+"""The thesis load tables (F_vert, F_lat, F_long) in N: Table 5-1 (13 cases, spec stiffness
+§2.7) and Table 4.4 (17 K&C bench cases, §1.13). `load_table` applies them per side."""
+
+class Rig(eqx.Module):
+    """A model on a K&C rig: the mechanism with its rig drivers and the corners to measure.
+
+    **Fields:** `mech` (with drivers), `pattern` (per corner, the sign of the primary input:
+    +1 parallel, ±1 opposite travel; an array so that parallel and opposite travel share one
+    compiled program), static `corners` (resolved), `mode` ('travel': wheel heights driven;
+    'force': wheels free, loaded by forces), `travel_drivers` (per corner, index of its
+    wheel-travel driver or −1), `rack_driver` (index of the steering rack's driver, or −1:
+    the rack is then an input of every event on the rig, steering or not).
+    """
+
+    mech: Mechanism
+    pattern: Float[Array, " corners"]
+    corners: tuple[ResolvedCorner, ...] = eqx.field(static=True)
+    mode: str = eqx.field(static=True)
+    travel_drivers: tuple[int, ...] = eqx.field(static=True)
+    rack_driver: int = eqx.field(static=True, default=-1)
+
+    def multiplier_index(self, driver: int) -> int:
+        """Position of driver `driver`'s row among the solution's multipliers."""
+        return self.mech.independent_rows.index(self.mech.joints.n_rows + driver)
+
+    @property
+    def n_inputs(self) -> int:
+        n = 4
+        if self.mode == "force":
+            n += 6 * sum(c.wheel_centre_load >= 0 for c in self.corners)
+        return n + (self.rack_driver >= 0)
+
+    @property
+    def is_axle(self) -> bool:
+        """Two corners, a left and a right one, in a travel rig (roll metrics apply)."""
+        return (self.mode == "travel" and len(self.corners) == 2
+                and sorted(c.side for c in self.corners) == ["left", "right"])
+
+
+def _resolve(mech: Mechanism, corner) -> tuple[ResolvedCorner, ...]:
+    if corner is None:
+        corners = corners_of(mech)
+    elif isinstance(corner, Corner):
+        corners = {corner.prefix: corner}
+    elif isinstance(corner, dict):
+        corners = {}
+        for key, c in corner.items():
+            prefix = key if key == "" or key.endswith("/") else key + "/"
+            corners[prefix] = c if c.prefix == prefix else dataclasses.replace(c, prefix=prefix)
+    else:
+        raise InputError(f"corner must be a Corner, a dict of them, or None; got {type(corner)}.")
+    out = []
+    for c in corners.values():
+        rc = c.resolve(mech)
+        for lp in (rc.contact_point, rc.wheel_centre_load):
+            if lp >= 0 and mech.load_points.frame[lp] != GROUND:
+                raise InputError(
+                    f"load point '{mech.load_points.names[lp]}' has components in a marker "
+                    "frame; K&C events need global components (load_point(..., frame=None))."
+                )
+        out.append(rc)
+    return tuple(out)
+
+
+def _wheel_markers(mech: Mechanism, rc: ResolvedCorner) -> set[int]:
+    return {rc.wheel_centre, mech.load_points.marker[rc.contact_point]}
+
+
+def _strip_wheel_drivers(mech: Mechanism, corners) -> Mechanism:
+    wheel = set().union(*(_wheel_markers(mech, rc) for rc in corners))
+    names = [n for n, m in zip(mech.drivers.names, mech.drivers.marker, strict=True)
+             if m in wheel]
+    return remove_drivers(mech, names)
+
+
+def _rack(mech: Mechanism, rack: str, required: bool) -> int:
+    if rack in mech.drivers.names:
+        return mech.drivers.names.index(rack)
+    if required:
+        raise InputError(
+            f"steering needs a rack driver '{rack}'; the model has "
+            f"{', '.join(mech.drivers.names) or 'no drivers'}. Add one with "
+            "diffsusp.kc.with_rack(mech) (a tie rod whose inner end is on the ground)."
+        )
+    return -1
+
+
+def travel_rig(mech: Mechanism, corner=None, *, drive: str = "wheel_centre",
+               pattern=None, rack: str = "rack_travel", require_rack: bool = False) -> Rig:
+    """The model with each wheel's height driven (a vertical driver on the wheel centre, or on
+    the contact point with `drive='contact_patch'`), named '<prefix>wheel_travel'. Drivers the
+    model already had on those markers are replaced. `pattern`: per corner sign of the travel
+    (default all +1, parallel travel). A driver named `rack` (see `with_rack`) is the rig's
+    steering input (held at the load case's value, and differentiated: steer gain)."""
+    if drive not in ("wheel_centre", "contact_patch"):
+        raise InputError(f"drive must be 'wheel_centre' or 'contact_patch'; got '{drive}'.")
+    corners = _resolve(mech, corner)
+    mech = _strip_wheel_drivers(mech, corners)
+    drivers = []
+    for rc in corners:
+        marker = (mech.markers.names[rc.wheel_centre] if drive == "wheel_centre"
+                  else mech.markers.names[mech.load_points.marker[rc.contact_point]])
+        mech = add_driver(mech, rc.prefix + "wheel_travel", marker, rc.up)
+        drivers.append(len(mech.drivers.names) - 1)
+    pattern = np.ones(len(corners)) if pattern is None else np.asarray(pattern, dtype=float)
+    return Rig(mech=mech, pattern=jnp.asarray(pattern), corners=corners, mode="travel",
+               travel_drivers=tuple(drivers), rack_driver=_rack(mech, rack, require_rack))
+
+
+def force_rig(mech: Mechanism, corner=None, *, rack: str = "rack_travel") -> Rig:
+    """The model with its wheels free and loaded by forces (drivers on the wheel markers are
+    removed; others, e.g. a rack, stay at the load case's value)."""
+    corners = _resolve(mech, corner)
+    mech = _strip_wheel_drivers(mech, corners)
+    return Rig(mech=mech, pattern=jnp.ones(len(corners)), corners=corners, mode="force",
+               travel_drivers=tuple(-1 for _ in corners), rack_driver=_rack(mech, rack, False))
+
+
+# ----------------------------------------------------------------------------- the kernel
+
+
+def _basis(rig: Rig) -> Loads:
+    """Tangent directions of the rig inputs: `Loads` with a leading axis of n_u inputs.
+
+    0: primary input (travel drivers × pattern, or vertical forces × pattern);
+    1, 2, 3: per-side lateral (inboard) force, longitudinal (rearward) force and aligning
+    torque (toe-out) at every contact point; force mode: then 6 per corner at its wheel-centre
+    load point (global Fx, Fy, Fz, Mx, My, Mz); last, if the rig has a rack: its driver."""
+    mech = rig.mech
+    n_l, n_d = len(mech.load_points.names), len(mech.drivers.names)
+    n_u = rig.n_inputs
+    force = jnp.zeros((n_u, n_l, 3))
+    moment = jnp.zeros((n_u, n_l, 3))
+    driver = jnp.zeros((n_u, n_d))
+    k = 4
+    for c, rc in enumerate(rig.corners):
+        cp = rc.contact_point
+        if rig.mode == "travel":
+            driver = driver.at[0, rig.travel_drivers[c]].set(rig.pattern[c])
+        elif rig.mode == "force":
+            force = force.at[0, cp].add(rig.pattern[c] * jnp.asarray(rc.up))
+        force = force.at[1, cp].add(-jnp.asarray(rc.outboard))
+        force = force.at[2, cp].add(jnp.asarray(rc.rearward))
+        moment = moment.at[3, cp].add(jnp.asarray(rc.toe_out))
+        if rig.mode == "force" and rc.wheel_centre_load >= 0:
+            for a in range(3):
+                force = force.at[k + a, rc.wheel_centre_load, a].set(1.0)
+                moment = moment.at[k + 3 + a, rc.wheel_centre_load, a].set(1.0)
+            k += 6
+    if rig.rack_driver >= 0:
+        driver = driver.at[n_u - 1, rig.rack_driver].set(1.0)
+    return Loads(force=force, moment=moment, driver=driver)
+
+
+def _raw_metrics(rig: Rig, loads: Loads, q, multipliers) -> dict:
+    """Geometric metrics and per-side loads of every corner, one case (scalars)."""
+    mech = rig.mech
+    out = {}
+    design = jnp.zeros(mech.n_coordinates)
+    for c, rc in enumerate(rig.corners):
+        geo = corner_geometry(mech, rc, q)
+        geo0 = corner_geometry(mech, rc, design)
+        up, o, r, a = (jnp.asarray(v) for v in (rc.up, rc.outboard, rc.rearward, rc.toe_out))
+
+        def vec(g, what):
+            return jnp.stack([g[f"{what}_{x}"] for x in "xyz"])
+
+        w, cpt = vec(geo, "wheel_centre"), vec(geo, "contact_patch")
+        geo["wheel_travel"] = (w - vec(geo0, "wheel_centre")) @ up
+        geo["half_track_change"] = (cpt - vec(geo0, "contact_patch")) @ o
+        geo["wheelbase_change"] = (w - vec(geo0, "wheel_centre")) @ r
+        force = loads.force[rc.contact_point]
+        moment = loads.moment[rc.contact_point]
+        if rc.wheel_centre_load >= 0:
+            force = force + loads.force[rc.wheel_centre_load]
+        vertical = force @ up
+        if rig.travel_drivers[c] >= 0:
+            d = rig.travel_drivers[c]
+            vertical = vertical + multipliers[rig.multiplier_index(d)] * (
+                mech.drivers.direction[d] @ up)
+        geo["vertical_force"] = vertical
+        geo["lateral_force"] = 0.0 - force @ o  # (0.0 − x: no negative zeros)
+        geo["longitudinal_force"] = force @ r
+        geo["aligning_torque"] = moment @ a
+        geo["_lateral_position"] = cpt @ o  # distance of C from the centreline (y = 0)
+        for key, value in geo.items():
+            out[rc.prefix + key] = value
+    if rig.is_axle:
+        left, right = sorted(rig.corners, key=lambda rc: rc.side)
+        mk = mech.markers
+        lateral = jnp.asarray(right.outboard)  # the vehicle's right
+        track = jnp.abs((mk.position[right.wheel_centre] - mk.position[left.wheel_centre])
+                        @ lateral)
+        zl, zr = out[left.prefix + "wheel_travel"], out[right.prefix + "wheel_travel"]
+        out["roll_angle"] = jnp.arctan2(zr - zl, track)
+        out["_track"] = track
+    return out
+
+
+def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
+    """Derivative metrics of one case from the derivatives (n_u,) of the raw metrics."""
+    out, compliance = {}, {}
+    k = 4
+    for rc in rig.corners:
+        p = rc.prefix
+        o, up, r = (jnp.asarray(v) for v in (rc.outboard, rc.up, rc.rearward))
+
+        def d(key, u, p=p):
+            return jac[p + key][u]
+
+        dz = d("wheel_travel", 0)
+        out[p + "bump_steer"] = d("toe", 0) / dz
+        out[p + "bump_camber"] = d("camber", 0) / dz
+        out[p + "wheel_rate"] = d("vertical_force", 0) / dz
+        v = jnp.stack([d(f"contact_patch_{a}", 0) for a in "xyz"])
+        vw = jnp.stack([d(f"wheel_centre_{a}", 0) for a in "xyz"])
+        out[p + "roll_centre_height"] = m[p + "_lateral_position"] * (v @ o) / (v @ up)
+        out[p + "contact_recession_rate"] = (v @ r) / dz
+        out[p + "wheel_centre_recession_rate"] = (vw @ r) / dz
+        if rig.rack_driver >= 0:
+            out[p + "steer_gain"] = d("steer", rig.n_inputs - 1)
+            out[p + "camber_steer_gain"] = d("camber", rig.n_inputs - 1)
+        for u, what in ((1, "lateral"), (2, "longitudinal"), (3, "aligning_torque")):
+            out[p + f"{what}_compliance_steer"] = d("toe", u)
+            out[p + f"{what}_compliance_camber"] = d("camber", u)
+        if rig.mode == "force" and rc.wheel_centre_load >= 0:
+            cols = slice(k, k + 6)
+            dw = jnp.stack([jac[p + f"wheel_centre_{a}"][cols] for a in "xyz"])  # (3, 6)
+            rot = m[p + "_orientation"]
+            omega = jnp.einsum("nik,jk->nij", jac[p + "_orientation"][cols], rot)  # dR Rᵀ
+            w = jnp.stack([omega[:, 2, 1], omega[:, 0, 2], omega[:, 1, 0]])  # (3, 6)
+            compliance[p] = jnp.concatenate([dw, w])
+            k += 6
+    if "roll_angle" in m:
+        left, right = sorted(rig.corners, key=lambda rc: rc.side)
+        dfl = jac[left.prefix + "vertical_force"][0]
+        dfr = jac[right.prefix + "vertical_force"][0]
+        out["roll_stiffness"] = -0.5 * m["_track"] * (dfl - dfr) / jac["roll_angle"][0]
+    return out, compliance
+
+
+@eqx.filter_jit
+def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
+    """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
+    dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
+    solve as `solve_statics`'s custom JVP rule)."""
+    mech = rig.mech
+    n = mech.n_coordinates
+    basis = _basis(rig)
+
+    def one(loads_c, q, lam):
+        y = to_internal(mech, q)
+        _, jac = assemble(mech, loads_c, y, lam)
+
+        def residual(l):
+            return assemble(mech, l, y, lam, with_jacobian=False)[0]
+
+        def tangent(b):
+            dr = jax.jvp(residual, (loads_c,), (b,))[1]
+            return -_scaled_solve(jac, dr)
+
+        dy = jax.vmap(tangent)(basis)  # (n_u, n + m): internal coordinates and multipliers
+
+        def metrics(y_, lam_, l_):
+            return _raw_metrics(rig, l_, to_public(mech, y_), lam_)
+
+        m = metrics(y, lam, loads_c)
+        jac_m = jax.vmap(lambda dy_u, b_u: jax.jvp(metrics, (y, lam, loads_c),
+                                                   (dy_u[:n], dy_u[n:], b_u))[1])(dy, basis)
+        return m, jac_m
+
+    m, jac = jax.vmap(one)(loads, sol.q, sol.multipliers)
+    derived, compliance = jax.vmap(lambda m_, j_: _derived(rig, m_, j_))(m, jac)
+    metrics = {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
+    metrics.update(derived)
+    ok = sol.status == 0
+    metrics = {k: jnp.where(ok, v, jnp.nan) for k, v in metrics.items()}
+    compliance = {k: jnp.where(ok[:, None, None], v, jnp.nan) for k, v in compliance.items()}
+    return metrics, compliance
+
+
+def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = None,
+             rtol: float = 1e-12, atol: float = 1e-10, max_steps: int = 50):
+    """Solve every load case of `loads` on `rig` and compute all metrics and derivative metrics.
+
+    Two compiled programs: `solve_statics` on the rig's mechanism (the same program any batched
+    solve of that structure and number of cases uses) and the metrics with their forward-mode
+    derivatives through the equilibrium. Pure: differentiate it, or `eqx.filter_vmap` it over
+    designs (e.g. stiffness values in `rig.mech`). Non-converged cases get NaN metrics and a
+    non-zero status.
+
+    **Arguments:** `rig` (`travel_rig`, `force_rig`), `loads` with a leading case axis (for
+    `rig.mech`), `q0` start coordinates (default: design), solver tolerances as
+    `solve_statics`.
+
+    **Returns:** (`StaticSolution`, metrics: name → (cases,) arrays, compliance: corner prefix →
+    (cases, 6, 6)). `solve_statics` warns (`ModelWarning`) when a bushing rotates beyond its
+    law's validity.
+    """
+    if loads.n_cases is None:
+        raise InputError("evaluate needs loads with a leading case axis.")
+    with warnings.catch_warnings():
+        # Failed cases are reported by status (and by the events); keep the validity warning.
+        warnings.filterwarnings("ignore", message=r"solve_statics: \d+ of \d+ cases did not")
+        sol = solve_statics(rig.mech, loads, q0=q0, rtol=rtol, atol=atol, max_steps=max_steps,
+                            throw=False)
+    return (sol, *_metrics_kernel(rig, loads, sol))
+
+
+# ----------------------------------------------------------------------------- events
+
+
+@dataclasses.dataclass
+class KCEvent:
+    """The result of a K&C event.
+
+    **Fields:** `name` (event), `x` (the event's input per case), `x_name`, `x_unit`, `metrics`
+    (name → (cases,) array in internal units; for axles each corner's names carry its prefix,
+    e.g. 'left/toe'), `compliance` (corner prefix → (cases, 6, 6), force events),
+    `solution` (`StaticSolution`), `loads` (the load table, for `rig.mech`), `rig`, `label`
+    (for legends), `held` (what the derivative metrics hold fixed).
+    """
+
+    name: str
+    x: np.ndarray
+    x_name: str
+    x_unit: str
+    metrics: dict
+    compliance: dict
+    solution: StaticSolution
+    loads: Loads
+    rig: Rig
+    label: str
+    held: str
+
+    @property
+    def converged(self) -> np.ndarray:
+        return np.asarray(self.solution.status) == 0
+
+    @property
+    def prefixes(self) -> tuple[str, ...]:
+        return tuple(rc.prefix for rc in self.rig.corners)
+
+    def corner_metrics(self, prefix: str) -> dict:
+        """The metrics of one corner of an axle, without its prefix."""
+        prefix = prefix if prefix.endswith("/") or prefix == "" else prefix + "/"
+        return {k[len(prefix):]: v for k, v in self.metrics.items()
+                if k.startswith(prefix) and "/" not in k[len(prefix):]}
+
+
+def _cases(values, what: str) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(values, dtype=float))
+    if arr.ndim != 1 or arr.size == 0:
+        raise InputError(f"{what} must be a 1-D sequence of values; got shape {arr.shape}.")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{what} contains non-finite values.")
+    return arr
+
+
+def _loads(rig: Rig, n: int, *, vertical=0.0, lateral=0.0, longitudinal=0.0, aligning=0.0,
+           at: str = "contact_patch", travel=0.0, rack=0.0) -> Loads:
+    """The event's load table: per-side components applied at every corner (× pattern for the
+    primary input)."""
+    mech = rig.mech
+    n_l, n_d = len(mech.load_points.names), len(mech.drivers.names)
+    force = np.zeros((n, n_l, 3))
+    moment = np.zeros((n, n_l, 3))
+    driver = np.zeros((n, n_d))
+    b = [np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in
+         (vertical, lateral, longitudinal, aligning, travel, rack)]
+    vertical, lateral, longitudinal, aligning, travel, rack = b
+    pattern = np.asarray(rig.pattern)
+    for c, rc in enumerate(rig.corners):
+        sign = pattern[c]
+        f_v, _ = rc.load_vectors(vertical * (sign if rig.mode == "force" else 1.0), 0, 0, 0)
+        f_h, m = rc.load_vectors(0, lateral, longitudinal, aligning)
+        force[:, rc.contact_point] += f_v
+        if at == "wheel_centre":
+            if rc.wheel_centre_load < 0:
+                raise InputError("this event loads the wheel centre, but the corner has no "
+                                 "wheel_centre_load load point.")
+            force[:, rc.wheel_centre_load] += f_h
+        else:
+            force[:, rc.contact_point] += f_h
+        moment[:, rc.contact_point] += m
+        if rig.travel_drivers[c] >= 0:
+            driver[:, rig.travel_drivers[c]] = sign * travel
+    if rig.rack_driver >= 0:
+        driver[:, rig.rack_driver] = rack
+    return Loads(force=jnp.asarray(force), moment=jnp.asarray(moment), driver=jnp.asarray(driver))
+
+
+def _run(name, rig, loads, x, x_name, x_unit, held, q0=None, throw=True, label=None,
+         **solver) -> KCEvent:
+    sol, metrics, compliance = evaluate(rig, loads, q0=q0, **solver)
+    status = np.asarray(sol.status)
+    bad = np.flatnonzero(status != 0)
+    if bad.size and throw:
+        c = int(bad[0])
+        raise ConvergenceError(
+            f"{name}: case {c} ({x_name} = {x[c]:g} {x_unit}) did not converge "
+            f"({STATUS_TEXT.get(int(status[c]), 'failed')}, relative force residual "
+            f"{float(np.asarray(sol.residual)[c]):.3g}; {bad.size} of {status.size} cases "
+            "failed). The load or travel is probably beyond what the model can carry (no bump "
+            "stops): reduce the range, or pass throw=False to get NaN metrics for those cases."
+        )
+    if bad.size:
+        warnings.warn(f"{name}: {bad.size} of {status.size} cases did not converge (NaN "
+                      "metrics).", stacklevel=3)
+    return KCEvent(name=name, x=x, x_name=x_name, x_unit=x_unit, metrics=metrics,
+                   compliance=compliance, solution=sol, loads=loads, rig=rig,
+                   label=label or rig.mech.name, held=held)
+
+
+def _fz(rig: Rig, fz) -> float:
+    return float(rig.corners[0].design_load if fz is None else fz)
+
+
+def parallel_travel(mech: Mechanism, travel, *, corner=None, drive: str = "wheel_centre",
+                    q0=None, throw: bool = True, label: str | None = None,
+                    **solver) -> KCEvent:
+    """Parallel wheel travel: every wheel's height driven by `travel` (mm, bump positive).
+
+    The wheel-centre (or, with `drive='contact_patch'`, the contact point's) vertical position
+    is prescribed by a driver; nothing else is loaded. Derivative metrics hold the wheel height
+    fixed (compliances) and differentiate along the travel (bump steer, wheel rate, ...).
+
+    **Arguments:** `mech` (a half axle or a `combine`d axle), `travel` (mm, e.g.
+    `jnp.linspace(-80, 80, 161)`), `corner` (default: the model's registered corner(s)),
+    `drive`, `q0`, `throw` (raise `ConvergenceError` on a failed case; else NaN metrics),
+    `label` (legend), solver options (`rtol`, `atol`, `max_steps`).
+
+    **Returns:** a `KCEvent` (x = travel).
+    """
+    x = _cases(travel, "travel")
+    rig = travel_rig(mech, corner, drive=drive)
+    loads = _loads(rig, x.size, travel=x)
+    ev = _run("parallel_travel", rig, loads, x, "wheel_travel", "mm", "wheel height", q0,
+              throw, label, **solver)
+    ev.metrics.pop("roll_stiffness", None)  # no roll in parallel travel (0/0)
+    return ev
+
+
+def opposite_travel(axle: Mechanism, travel, *, corner=None, drive: str = "wheel_centre",
+                    q0=None, throw: bool = True, label: str | None = None,
+                    **solver) -> KCEvent:
+    """Opposite wheel travel (roll) on an axle with a left and a right corner (`combine`): the
+    left wheel travels +`travel`, the right −`travel` (mm). Adds `roll_angle` and
+    `roll_stiffness` to the per-corner metrics."""
+    x = _cases(travel, "travel")
+    corners = _resolve(axle, corner)
+    sides = sorted(rc.side for rc in corners)
+    if sides != ["left", "right"]:
+        raise InputError(
+            f"opposite_travel needs an axle with one left and one right corner (combine "
+            f"{{'left': m, 'right': mirror(m)}}); got sides {sides}."
+        )
+    pattern = [1.0 if rc.side == "left" else -1.0 for rc in corners]
+    rig = travel_rig(axle, corner, drive=drive, pattern=pattern)
+    loads = _loads(rig, x.size, travel=x)
+    return _run("opposite_travel", rig, loads, x, "wheel_travel", "mm", "wheel heights", q0,
+                throw, label, **solver)
+
+
+def vertical_force(mech: Mechanism, fz, *, corner=None, q0=None, throw: bool = True,
+                   label: str | None = None, **solver) -> KCEvent:
+    """Vertical force sweep: `fz` (N, up) at every contact point, wheels free. Derivative
+    metrics hold the vertical load and differentiate along it (wheel rate = 1/(dz/dF_z))."""
+    x = _cases(fz, "fz")
+    rig = force_rig(mech, corner)
+    loads = _loads(rig, x.size, vertical=x)
+    return _run("vertical_force", rig, loads, x, "vertical_force", "N", "vertical load", q0,
+                throw, label, **solver)
+
+
+def lateral_force(mech: Mechanism, fy, *, fz=None, corner=None, q0=None, throw: bool = True,
+                  label: str | None = None, **solver) -> KCEvent:
+    """Lateral force sweep `fy` (N, inboard positive) at the contact point under the vertical
+    load `fz` (N; default the corner's design load)."""
+    x = _cases(fy, "fy")
+    rig = force_rig(mech, corner)
+    loads = _loads(rig, x.size, vertical=_fz(rig, fz), lateral=x)
+    return _run("lateral_force", rig, loads, x, "lateral_force", "N", "vertical load", q0,
+                throw, label, **solver)
+
+
+def longitudinal_force(mech: Mechanism, fx, *, fz=None, at: str = "contact_patch",
+                       corner=None, q0=None, throw: bool = True, label: str | None = None,
+                       **solver) -> KCEvent:
+    """Longitudinal force sweep `fx` (N, rearward positive: braking) at the contact point
+    (outboard brakes) or the wheel centre (`at='wheel_centre'`: traction reacted by the body
+    through the drive shaft), under the vertical load `fz`."""
+    if at not in ("contact_patch", "wheel_centre"):
+        raise InputError(f"at must be 'contact_patch' or 'wheel_centre'; got '{at}'.")
+    x = _cases(fx, "fx")
+    rig = force_rig(mech, corner)
+    loads = _loads(rig, x.size, vertical=_fz(rig, fz), longitudinal=x, at=at)
+    return _run("longitudinal_force", rig, loads, x, "longitudinal_force", "N",
+                "vertical load", q0, throw, label, **solver)
+
+
+def braking(mech: Mechanism, force, *, fz=None, **kwargs) -> KCEvent:
+    """Braking force `force` (N, positive = braking, i.e. rearward on the tyre) at the contact
+    patch (outboard brakes), under the vertical load `fz`."""
+    ev = longitudinal_force(mech, force, fz=fz, at="contact_patch", **kwargs)
+    ev.name, ev.x_name = "braking", "braking_force"
+    return ev
+
+
+def traction(mech: Mechanism, force, *, fz=None, **kwargs) -> KCEvent:
+    """Traction force `force` (N, positive = driving forward) at the wheel centre (drive torque
+    reacted by the body), under the vertical load `fz`."""
+    x = _cases(force, "force")
+    ev = longitudinal_force(mech, -x, fz=fz, at="wheel_centre", **kwargs)
+    ev.name, ev.x, ev.x_name = "traction", x, "traction_force"
+    return ev
+
+
+def aligning_torque(mech: Mechanism, mz, *, fz=None, corner=None, q0=None, throw: bool = True,
+                    label: str | None = None, **solver) -> KCEvent:
+    """Aligning torque sweep `mz` (N·mm, toe-out sense) at the contact point under the vertical
+    load `fz`."""
+    x = _cases(mz, "mz")
+    rig = force_rig(mech, corner)
+    loads = _loads(rig, x.size, vertical=_fz(rig, fz), aligning=x)
+    return _run("aligning_torque", rig, loads, x, "aligning_torque", "N·mm", "vertical load",
+                q0, throw, label, **solver)
+
+
+def steering(mech: Mechanism, rack_travel, *, travel: float = 0.0, rack: str = "rack_travel",
+             corner=None, q0=None, throw: bool = True, label: str | None = None,
+             **solver) -> KCEvent:
+    """Steering: rack travel `rack_travel` (mm, see `with_rack`: positive toward the vehicle's
+    left) with the wheel height held at `travel` (mm). The model needs a rack driver `rack`
+    (`diffsusp.kc.with_rack`)."""
+    x = _cases(rack_travel, "rack_travel")
+    rig = travel_rig(mech, corner, rack=rack, require_rack=True)
+    loads = _loads(rig, x.size, travel=travel, rack=x)
+    return _run("steering", rig, loads, x, "rack_travel", "mm", "wheel height", q0, throw,
+                label, **solver)
+
+
+def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw: bool = True,
+               label: str | None = None, **solver) -> KCEvent:
+    """A table of (F_vert, F_lat, F_long) load cases (N) at the contact point, per side
+    (vertical up, lateral inboard, longitudinal rearward = braking), e.g. `TABLES['table_5_1']`
+    (13 cases) or `TABLES['table_4_4']` (17). On the pseudo-McPherson (Adams/Car frame, left
+    wheel) this is exactly `diffsusp.models.thesis_load_cases`. x = case number (1-based)."""
+    table = np.asarray(table, dtype=float)
+    if table.ndim != 2 or table.shape[1] != 3 or not np.all(np.isfinite(table)):
+        raise InputError(
+            f"table must be a finite (cases, 3) array of (F_vert, F_lat, F_long) in N; got "
+            f"shape {table.shape}."
+        )
+    rig = force_rig(mech, corner)
+    loads = _loads(rig, table.shape[0], vertical=table[:, 0], lateral=table[:, 1],
+                   longitudinal=table[:, 2])
+    x = np.arange(1.0, table.shape[0] + 1)
+    return _run("load_table", rig, loads, x, "case", "", "vertical load", q0, throw, label,
+                **solver)
+
+
+def derivative_metrics(ev: KCEvent) -> dict:
+    """The derivative metrics of an event (bump steer, wheel rate, compliances, ...)."""
+    from .metrics import DERIVATIVE_METRICS
+
+    return {k: v for k, v in ev.metrics.items() if k.rsplit("/", 1)[-1] in DERIVATIVE_METRICS}
+
+
+def compliance_matrix(ev: KCEvent, prefix: str = "") -> np.ndarray:
+    """The 6×6 wheel-centre compliance matrix per case of a force event (see
+    `diffsusp.kc.metrics`)."""
+    if prefix not in ev.compliance:
+        raise InputError(
+            f"event '{ev.name}' has no compliance matrix for corner '{prefix}' (force events "
+            "with a wheel-centre load point have one)."
+        )
+    return ev.compliance[prefix]
+
+
+def anti_pitch(ev: KCEvent, *, cg_height: float, wheelbase: float, axle: str = "front",
+               brake_front_fraction: float = 0.6, drive_front_fraction: float = 0.0,
+               prefix: str = "") -> dict:
+    """Anti-dive, anti-lift and anti-squat percentages from the side-view path slopes.
+
+    With tan θ the slope of the side-view instant centre seen from the contact point (outboard
+    brakes) or wheel centre (drive torque reacted by the body): front axle, tan θ = −(contact or
+    wheel-centre recession rate); rear axle, tan θ = +rate. Then (classic single-axle formulas):
+    anti-dive (front, braking) = tan θ_c · (L/h) · β_f; anti-lift (rear, braking) = tan θ_c ·
+    (L/h) · (1 − β_f); anti-squat (rear, traction) = tan θ_w · (L/h) · (1 − δ_f); anti-lift
+    (front, traction) = tan θ_w · (L/h) · δ_f; all × 100 %.
+
+    **Arguments:** `ev` (a travel or force event), `cg_height` h and `wheelbase` L (mm),
+    `axle` ('front' or 'rear'), brake and drive fractions on the front axle.
+
+    **Returns:** {'anti_dive' or 'anti_lift_braking', 'anti_squat' or 'anti_lift_traction'}
+    → (cases,) percentages.
+    """
+    m = ev.corner_metrics(prefix) if prefix else ev.metrics
+    if "contact_recession_rate" not in m:
+        raise InputError("anti_pitch needs a travel or force event (recession rates).")
+    if axle not in ("front", "rear"):
+        raise InputError(f"axle must be 'front' or 'rear'; got '{axle}'.")
+    sign = -1.0 if axle == "front" else 1.0
+    ratio = wheelbase / cg_height * 100.0
+    tan_c = sign * np.asarray(m["contact_recession_rate"])
+    tan_w = sign * np.asarray(m["wheel_centre_recession_rate"])
+    if axle == "front":
+        return {"anti_dive": tan_c * ratio * brake_front_fraction,
+                "anti_lift_traction": tan_w * ratio * drive_front_fraction}
+    return {"anti_lift_braking": tan_c * ratio * (1.0 - brake_front_fraction),
+            "anti_squat": tan_w * ratio * (1.0 - drive_front_fraction)}
