@@ -164,6 +164,8 @@ def main():
         rows.append(dict(what=what, cases=cases, compile_s=compile_s, run_s=run_s,
                          baseline_s=baseline_s,
                          ratio=None if baseline_s is None else baseline_s / run_s))
+        print(f"  {what}, {cases} cases: compile {compile_s:.2f} s, run {1e3 * run_s:.2f} ms",
+              flush=True)
 
     # 13 cases
     for label, kw in (("direct, unweighted", dict(weighting="none")),

@@ -420,7 +420,8 @@ def _null_basis(eval_mech: Mechanism, loads, y, scale):
 
 
 def _case_rows(eval_mech: Mechanism, selection, q, loads):
-    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N).
+    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N), and
+    the null-space basis L (n, r).
 
     D's columns are the generalised forces of each unknown at unit value, element by element
     (exact: the forces are linear in the unknowns); Q_known is the solver's own assembly of
@@ -445,7 +446,7 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     columns = jnp.concatenate(parts, axis=1) @ selection
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
     null, _ = _null_basis(eval_mech, loads, y, scale)
-    return null.T @ (columns * scale[:, None]), -null.T @ (known * scale)
+    return null.T @ (columns * scale[:, None]), -null.T @ (known * scale), null
 
 
 def _elastic_stiffness(mech: Mechanism, y):
@@ -476,7 +477,7 @@ def _elastic_stiffness(mech: Mechanism, y):
     return full[: y.shape[0], : y.shape[0]]
 
 
-def _case_whitener(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
+def _case_whitener(eval_mech: Mechanism, selection, q, null, x, pose_cov):
     """Whitening matrix C⁻¹ (r, r) of one case: Σ_r = C Cᵀ is the covariance of the case's
     equation residual caused by pose errors of covariance `pose_cov` (n, n, solver
     coordinates), to first order, at the solution x.
@@ -487,17 +488,14 @@ def _case_whitener(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
     landmark spread) to the bushings' deformations, and the change of L itself multiplies the
     small residual.
     """
-    from ..statics.kernel import get_layout, to_internal
+    from ..statics.kernel import to_internal
 
-    lay = get_layout(eval_mech)
     y = to_internal(eval_mech, q)
     mech_x = _mechanism_at(eval_mech, selection, x)
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
-    null, _ = _null_basis(eval_mech, loads, y, scale)
     sens = null.T @ (scale[:, None] * _elastic_stiffness(mech_x, y))  # (r, n)
     cov = sens @ pose_cov @ sens.T
     r = cov.shape[0]
-    del lay
     cov = cov + (1e-12 * jnp.trace(cov) / r + 1e-300) * jnp.eye(r, dtype=cov.dtype)
     chol = jnp.linalg.cholesky(cov)
     return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
@@ -528,9 +526,9 @@ def _system_arrays(eval_mech: Mechanism, selection, q, loads):
 
 
 @eqx.filter_jit
-def _whiteners(eval_mech: Mechanism, selection, q, loads, x, pose_cov):
-    return jax.vmap(lambda q_, l_, c_: _case_whitener(eval_mech, selection, q_, l_, x, c_))(
-        q, loads, pose_cov)
+def _whiteners(eval_mech: Mechanism, selection, q, null, x, pose_cov):
+    return jax.vmap(lambda q_, n_, c_: _case_whitener(eval_mech, selection, q_, n_, x, c_))(
+        q, null, pose_cov)
 
 
 # ----------------------------------------------------------------------------- the system
@@ -630,7 +628,7 @@ def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
     σ²·(Σ_a |r_a|²I − r_a r_aᵀ)⁻¹ about the landmark centroid, uncorrelated). For poses given
     without landmarks: unit σ on the reference point (mm) and on ℓ·rotation (mm).
     Only the structure matters: `lsq` estimates the noise level from the residual."""
-    from ..geometry import gibbs_angular_jacobian, matrix_to_gibbs, skew
+    from ..geometry import gibbs_angular_jacobian, skew
     from ..statics.kernel import get_layout
 
     lay = get_layout(mech)
@@ -663,7 +661,10 @@ def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
         arm = jnp.zeros((n_c, n_p, 3), rot.dtype)
 
     def block(r, ct, cw, a):
-        g_inv = jnp.linalg.inv(gibbs_angular_jacobian(matrix_to_gibbs(r)))
+        # Gibbs vector b = vee(R − Rᵀ)/(1 + tr R) (the poses were checked by `coordinates`).
+        b = jnp.stack([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (
+            1.0 + jnp.trace(r))
+        g_inv = jnp.linalg.inv(gibbs_angular_jacobian(b))
         top = jnp.concatenate([eye, -skew(a)], axis=1)
         bottom = jnp.concatenate([jnp.zeros((3, 3), r.dtype), g_inv], axis=1)
         t = jnp.concatenate([top, bottom], axis=0)
@@ -690,6 +691,7 @@ class _Context:
     selection: np.ndarray
     rows: np.ndarray  # (cases, r, p)
     rhs: np.ndarray  # (cases, r)
+    null: object  # (cases, n, r) null-space bases (device array)
 
     def system(self, whitener=None) -> "DirectSystem":
         rows, rhs = self.rows, self.rhs
@@ -710,8 +712,8 @@ class _Context:
     def whitener(self, x) -> np.ndarray:
         cov = _pose_covariance_jit(self.mech, self.meas)
         return np.asarray(_whiteners(self.eval_mech, jnp.asarray(self.selection),
-                                     jnp.asarray(self.q),
-                                     self.meas.loads, jnp.asarray(x, float), cov))
+                                     jnp.asarray(self.q), self.null, jnp.asarray(x, float),
+                                     cov))
 
 
 def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
@@ -720,10 +722,10 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
     params = _parameters(mech, fields, elements, axisymmetric)
     eval_mech = _evaluation_model(mech, params)
     selection = _selection(mech, params)
-    rows, rhs = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
-                               measurements.loads)
+    rows, rhs, null = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
+                                     measurements.loads)
     return _Context(mech, measurements, q, params, eval_mech, selection, np.asarray(rows),
-                    np.asarray(rhs))
+                    np.asarray(rhs), null)
 
 
 def direct_system(

@@ -20,8 +20,8 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..errors import InputError
-from ..geometry import matrix_to_gibbs
 from ..geometry.registration import register_landmarks
+from ..geometry.rotations import GIBBS_SINGULARITY_TOL, _matrix_to_quaternion
 from ..model.mechanism import Loads, Mechanism
 from .landmarks import (
     MIN_LANDMARKS,
@@ -92,14 +92,26 @@ class Measurements(eqx.Module):
                 f"model '{mech.name}' does not have (its parts: {', '.join(mech.parts)}); check "
                 "the part names."
             )
+        if not isinstance(self.rotation, jax.core.Tracer):
+            trace = np.trace(np.asarray(self.rotation), axis1=-2, axis2=-1)
+            if np.any(1.0 + trace < GIBBS_SINGULARITY_TOL):
+                c, p = np.argwhere(1.0 + trace < GIBBS_SINGULARITY_TOL)[0][-2:]
+                raise InputError(
+                    f"part '{self.parts[p]}' is rotated by 180° from design in case "
+                    f"{self.cases[c] if self.cases else c + 1}, where Gibbs vectors are "
+                    "singular; check the measured pose (parts of a suspension turn little).")
         return _coordinates(self.rotation, self.translation, tuple(index))
 
 
 @functools.partial(jax.jit, static_argnames="index")
 def _coordinates(rotation, translation, index):
+    # Gibbs vectors from the quaternion (Shepperd), without `matrix_to_gibbs`'s runtime check:
+    # the 180° singularity is checked on the host above (a runtime check over 10⁴ cases hung
+    # repeated calls with jax 0.10 / equinox 0.13).
     idx = np.asarray(index, dtype=int)
     rot = rotation[..., idx, :, :]
-    gibbs = jax.vmap(matrix_to_gibbs)(rot.reshape(-1, 3, 3)).reshape(*rot.shape[:-2], 3)
+    quat = jax.vmap(_matrix_to_quaternion)(rot.reshape(-1, 3, 3))
+    gibbs = (quat[:, 1:] / quat[:, :1]).reshape(*rot.shape[:-2], 3)
     q = jnp.concatenate([translation[..., idx, :], gibbs], axis=-1)
     return q.reshape(*q.shape[:-2], -1)
 
