@@ -46,8 +46,8 @@ class Corner:
       (part, (forward, outboard, up) design offset from the wheel centre in mm, see
       `PointRef`); None when the model has no steering axis (caster, KPI, scrub radius and
       trail are then not reported).
-    - `side`: 'left', 'right', or 'auto' (from the sign of the wheel centre's design y in the
-      model's frame).
+    - `side`: 'left', 'right', or 'auto' (the side of the vehicle's centreline, y = 0 of the
+      model's frame, that the wheel centre is on at design).
     - `frame`: 'adams' (x rearward, y right, z up) or 'iso' (Chrono, ISO 8855: x forward,
       y left, z up).
     - `loaded_radius`: wheel-centre height above the ground at design (mm), for the geometric

@@ -2,16 +2,24 @@
 derivatives.
 
 An event builds a `Rig` (the model plus motion drivers: wheel travel, rack), a table of load
-cases (one per point of the event), and calls `evaluate`: one compiled call that solves every
-case at once (`solve_statics`, vmapped over cases, from the design position or `q0`), computes
-the geometric metrics and differentiates them in forward mode through the implicitly
-differentiated equilibrium with respect to a few rig inputs (jax.jacfwd through solve_statics's
-custom JVP: one extra linear solve per case, no finite differences). Metrics and signs:
-`diffsusp.kc.metrics`. Per-side load components (vertical up, lateral inboard, longitudinal
-rearward = braking, aligning torque toe-out): `ResolvedCorner.load_vectors`.
+cases (one per point of the event), and calls `evaluate`: `solve_statics` solves every case at
+once (vmapped over cases, from the design position or `q0`), then one compiled call computes the
+geometric metrics and differentiates them in forward mode through the equilibrium with respect
+to a few rig inputs u (travel, vertical load, lateral and longitudinal force, aligning torque,
+wheel-centre loads, rack). The derivative is the implicit one, dy/du = −J⁻¹ ∂r/∂u at the
+solution, with the KKT Jacobian J and ∂r/∂u by autodiff of the solver's own residual
+(`statics.kernel.assemble`) and the solver's own equilibrated linear solve — the same formula
+as `solve_statics`'s custom JVP rule, evaluated without re-running Newton inside the derivative
+(jax.jacfwd through `solve_statics` traces the Newton loop again under the JVP: 82–125 s of
+tracing against 27 + 14 s for this split on the project's loaded 2-core machine, and a Newton
+program that is not shared with plain solves of the same model). No finite differences.
+Metrics and signs: `diffsusp.kc.metrics`. Per-side load components (vertical up, lateral
+inboard, longitudinal rearward = braking, aligning torque toe-out):
+`ResolvedCorner.load_vectors`.
 
-One compiled program per rig structure and number of cases: events of one kind reuse it for new
-values, and `evaluate` can be `eqx.filter_vmap`ped over designs.
+Two compiled programs per rig structure and number of cases (the batched solve, shared with any
+other `solve_statics` of that model and shape, and the metrics): events of one kind reuse them
+for new values, and `evaluate` can be `jax.vmap`ped over designs.
 """
 
 import dataclasses
@@ -37,6 +45,7 @@ TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
 """The thesis load tables (F_vert, F_lat, F_long) in N: Table 5-1 (13 cases, spec stiffness
 §2.7) and Table 4.4 (17 K&C bench cases, §1.13). `load_table` applies them per side."""
 
+
 class Rig(eqx.Module):
     """A model on a K&C rig: the mechanism with its rig drivers and the corners to measure.
 
@@ -44,8 +53,8 @@ class Rig(eqx.Module):
     +1 parallel, ±1 opposite travel; an array so that parallel and opposite travel share one
     compiled program), static `corners` (resolved), `mode` ('travel': wheel heights driven;
     'force': wheels free, loaded by forces), `travel_drivers` (per corner, index of its
-    wheel-travel driver or −1), `rack_driver` (index of the steering rack's driver, or −1:
-    the rack is then an input of every event on the rig, steering or not).
+    wheel-travel driver or −1), `rack_driver` (index of the steering rack's driver, or −1;
+    a rack is an input of every event on the rig, steering or not: steer gain).
     """
 
     mech: Mechanism
