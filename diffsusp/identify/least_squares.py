@@ -1,0 +1,825 @@
+"""Least-squares identification through the differentiable static equilibrium.
+
+spec: stiffness §6 item 8 (gradient-based alternative: minimise model − measured residuals
+through the equilibrium; covariance from marker noise; the equivalent-solution manifold), §3
+perspectives 2–4 (joint geometric + stiffness identification, sensitivities, uncertainty), §2.8
+(σ = 0.05 mm landmark noise), §7 R5; DESIGN.md "Identification"; STYLE.md "Identification:
+select, partition, solve, combine".
+
+Problem: with θ(u) the parameters (`Params`: log scale for stiffnesses, bounds by
+reparametrisation), q_c(θ) the equilibrium of load case c, and the measurements' whitened
+residuals r = mask·(model(θ, q_c) − measured)/σ,
+
+    minimise  ½ Σ ρ(r_i)  +  ½ Σ_j ((u_j − u_prior,j)·w_j)²          (Tikhonov prior, optional)
+
+with ρ the plain square, Huber or Cauchy loss (applied as r̃ = sign(r)·√(2ρ(r)), so the
+Gauss–Newton model of the robust cost is exact at r = 0 and down-weights outliers). The
+minimiser is optimistix's Levenberg–Marquardt. Its Jacobian is forward mode through
+`solve_statics`, whose custom JVP differentiates the equilibrium implicitly (one more linear
+solve per direction, the Newton loop never unrolled).
+
+Inner non-convergence: a load case whose equilibrium fails at a trial point gets residuals of
+1e8 (finite), so the trust region rejects the step and shrinks; the history records it. The start
+point must converge.
+
+The LM iteration is driven from Python one step at a time around one compiled step (the same
+program for every loss, prior and data set of the same shapes), which records the history, calls
+the progress callback, and warm-starts each step's equilibria from the last accepted ones.
+`least_squares_batch` runs the same step vmapped over many data sets (one compiled call per
+step).
+"""
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from ..errors import InputError
+from ..model.mechanism import Loads, Mechanism
+from ..statics import solve_statics
+from .data import Measurement
+from .params import Params
+
+LOSSES = {"linear": 0, "huber": 1, "cauchy": 2}
+"""Loss names → codes (a runtime value: every loss shares one compiled program)."""
+
+DEFAULT_LOSS_SCALE = {"linear": 1.0, "huber": 1.345, "cauchy": 2.385}
+"""Default robust-loss scales in units of σ (95 % efficiency under Gaussian noise)."""
+
+FAILED_RESIDUAL = 1e8
+"""Whitened residual given to every entry of a load case whose equilibrium failed."""
+
+_TAGS = frozenset()
+
+
+# ----------------------------------------------------------------------------- problem
+
+
+TANGENT_BLOCK = 16
+"""Parameter directions are padded to a multiple of this, so that fits of up to 16 parameters
+of one model (and 17–32, and so on) share the compiled equilibrium program, the one that is
+costly to compile."""
+
+INITIAL_DAMPING = 1e-3
+"""First LM damping λ0 = this × max diag(JᵀJ) at the start (Madsen, Nielsen & Tingleff's τ)."""
+
+
+class _Problem(eqx.Module):
+    """Everything the residual needs; arrays are traced, structure static."""
+
+    mech: Mechanism
+    params: Params
+    data: tuple[Measurement, ...]
+    loads: Loads
+    loss: Array
+    loss_scale: Array
+    prior_u: Array
+    prior_w: Array
+    slices: tuple[tuple[int, int], ...] = eqx.field(static=True)
+    inner_max_steps: int = eqx.field(static=True)
+
+    @property
+    def n_tangents(self) -> int:
+        return TANGENT_BLOCK * max(1, -(-len(self.params) // TANGENT_BLOCK))
+
+
+def _robust(z, kind, c):
+    """r̃ = sign(r)·√(2ρ(r)) for ρ linear (kind 0), Huber (1) or Cauchy (2) with scale c."""
+    a = jnp.abs(z)
+    big = a > c
+    a_big = jnp.where(big, a, 2.0 * c)
+    huber = jnp.where(big, jnp.sign(z) * jnp.sqrt(2.0 * c * a_big - c * c), z)
+    x2 = (z / c) ** 2
+    small = x2 < 1e-8
+    x2s = jnp.where(small, 1.0, x2)
+    cauchy = z * jnp.sqrt(jnp.where(small, 1.0 - 0.5 * x2, jnp.log1p(x2s) / x2s))
+    return jnp.where(kind == 0, z, jnp.where(kind == 1, huber, cauchy))
+
+
+# The residual is evaluated in three separately compiled pieces, so that the costly one (the
+# equilibria and their tangents, which contains the Newton loop) depends only on the model, the
+# load table and the padded number of parameters, and is shared by every fit of that model:
+#   setup:      u -> mechanism at θ(u) and its tangents ∂mech/∂u_j (Params.apply is linear)
+#   equilibria: mechanism, tangents -> q, status and ∂q/∂u_j (implicit, forward mode)
+#   rows:       whitened robust residuals and their Jacobian (measurement models, prior)
+# The LM step itself is a fourth, small program.
+
+
+def _setup_impl(problem: _Problem, u, n_tangents: int):
+    params = problem.params
+
+    def mech_of(v):
+        return params.apply(problem.mech, params.to_physical(v))
+
+    basis = jnp.eye(n_tangents, len(params), dtype=u.dtype)
+    tangents = jax.vmap(lambda e: jax.jvp(mech_of, (u,), (e,))[1])(basis)
+    return mech_of(u), tangents
+
+
+def _equilibria_impl(mech, loads, q0, tangents, max_steps: int):
+    def solve(m):
+        sol = solve_statics(m, loads, q0=q0, max_steps=max_steps, throw=False)
+        return sol.q, sol.status.astype(sol.q.dtype)
+
+    (q, status), (dq, _) = jax.vmap(lambda t: jax.jvp(solve, (mech,), (t,)))(tangents)
+    return q[0], status[0].astype(int), dq
+
+
+def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents):
+    ok = status == 0
+
+    def rows(m, qq):
+        zs, raws = [], []
+        for meas, (a, b) in zip(problem.data, problem.slices, strict=True):
+            raw = meas.residual(m, qq[a:b])
+            z = _robust(raw * meas.weight, problem.loss, problem.loss_scale)
+            good = ok[a:b].reshape((-1,) + (1,) * (raw.ndim - 1)) & jnp.isfinite(z)
+            zs.append(jnp.where(good, z, FAILED_RESIDUAL).reshape(-1))
+            raws.append(raw.reshape(-1))
+        return jnp.concatenate(zs), jnp.concatenate(raws)
+
+    z, jz, raw = jax.vmap(lambda t, d: jax.jvp(rows, (mech, q), (t, d), has_aux=True))(
+        tangents, dq)
+    p = len(problem.params)
+    z_prior = (u - problem.prior_u) * problem.prior_w
+    residual = jnp.concatenate([z[0], z_prior])
+    jacobian = jnp.concatenate([jz[:p].T, jnp.diag(problem.prior_w)])
+    return residual, jacobian, raw[0]
+
+
+def _predict_impl(data, mech, q, slices):
+    return tuple(m.predict(mech, q[a:b]) for m, (a, b) in zip(data, slices, strict=True))
+
+
+def _quiet(**kwargs):
+    pass
+
+
+class _LevenbergMarquardt(optx.AbstractGaussNewton):
+    """optimistix's Levenberg–Marquardt (damped Newton descent, classical trust region) with
+    the trust region grown after any step that achieves 3/4 of its predicted reduction (the
+    default, 0.99, keeps a far start crawling for dozens of steps)."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent()
+    search: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion(high_cutoff=0.75)
+    verbose: Callable = _quiet
+
+
+def _model(y, args):
+    """The residual's first-order model about the point it was evaluated at: exact value and
+    Jacobian there, which is all a Gauss–Newton step asks of the function."""
+    residual, jacobian, y0 = args
+    return residual + jacobian @ (y - y0), None
+
+
+def _lm_state(solver, u, n_rows: int):
+    args = (jnp.zeros(n_rows, u.dtype), jnp.zeros((n_rows, u.size), u.dtype), u)
+    f_struct, aux_struct = eqx.filter_eval_shape(_model, u, args)
+    return solver.init(_model, u, args, {}, f_struct, aux_struct, _TAGS)
+
+
+def _lm_init_impl(u, n_rows: int, rtol: float, atol: float):
+    return eqx.filter(_lm_state(_LevenbergMarquardt(rtol, atol), u, n_rows), eqx.is_array)
+
+
+def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: float,
+                  ftol: float):
+    """One LM step, given the residual and Jacobian at the state's trial point `y_eval`."""
+    solver = _LevenbergMarquardt(rtol, atol)
+    static = eqx.filter(_lm_state(solver, u, residual.size), eqx.is_array, inverse=True)
+    state = eqx.combine(dyn_state, static)
+    # optimistix starts its trust region at λ = 1, far too little damping for residuals whitened
+    # by 0.05 mm: start from λ0 = τ·max diag(JᵀJ) instead (the first step is always accepted,
+    # so the step size is only used after it).
+    lam0 = INITIAL_DAMPING * jnp.max(jnp.sum(jacobian ** 2, axis=0))
+    state = eqx.tree_at(lambda s: s.search_state.step_size, state,
+                        jnp.where(state.first_step, 1.0 / jnp.maximum(lam0, 1e-300),
+                                  state.search_state.step_size))
+    args = (residual, jacobian, state.y_eval)
+    new_u, new_state, _ = solver.step(_model, u, args, {}, state, _TAGS)
+    terminate, result = solver.terminate(_model, new_u, args, {}, new_state, _TAGS)
+    accepted = new_state.num_accepted_steps > state.num_accepted_steps
+    # Also stop once an accepted step lowers the loss by less than ftol relatively (scipy's
+    # ftol): with noisy data, Gauss–Newton creeps linearly along weakly determined directions
+    # long after the loss has settled to many digits.
+    loss_before = jnp.sum(state.f_info.residual ** 2)
+    loss_after = jnp.sum(residual ** 2)
+    settled = accepted & ~state.first_step & (loss_before - loss_after <= ftol * loss_after)
+    terminate = terminate | settled
+    new_dyn = eqx.filter(new_state, eqx.is_array)
+    new_u, new_dyn = jax.tree.map(lambda n, o: jnp.where(active, n, o), (new_u, new_dyn),
+                                  (u, dyn_state))
+    record = dict(accepted=active & accepted,
+                  step_size=new_state.search_state.step_size, terminate=terminate,
+                  failed=result != optx.RESULTS.successful)
+    return new_u, new_dyn, record
+
+
+_setup = eqx.filter_jit(_setup_impl)
+_setup_batch = eqx.filter_jit(
+    lambda problem, u, n: jax.vmap(lambda v: _setup_impl(problem, v, n))(u))
+_equilibria = eqx.filter_jit(_equilibria_impl)
+_equilibria_batch = eqx.filter_jit(
+    lambda mech, loads, q0, tangents, max_steps: jax.vmap(
+        lambda m, q, t: _equilibria_impl(m, loads, q, t, max_steps))(mech, q0, tangents))
+_rows = eqx.filter_jit(_rows_impl)
+_rows_batch = eqx.filter_jit(
+    lambda problem, values, u, mech, q, status, dq, tangents: jax.vmap(
+        lambda v, *a: _rows_impl(_with_values(problem, v), *a))(
+            values, u, mech, q, status, dq, tangents))
+_predict = eqx.filter_jit(_predict_impl)
+_lm_init = eqx.filter_jit(
+    lambda u, n_rows, rtol, atol: jax.vmap(lambda v: _lm_init_impl(v, n_rows, rtol, atol))(u))
+_lm_step = eqx.filter_jit(
+    lambda u, dyn, residual, jacobian, active, rtol, atol, ftol: jax.vmap(
+        lambda *a: _lm_step_impl(*a, rtol, atol, ftol))(u, dyn, residual, jacobian, active))
+
+
+@eqx.filter_jit
+def _bookkeep(params, accepted, trial_u, u, new, last, q, status, q0):
+    """After an LM step: keep the evaluation of accepted trials, warm starts, physical values."""
+    last = new if last is None else _select(accepted, new, last)
+    q0 = _select(accepted, jnp.where((status == 0)[..., None], q, q0), q0)
+    to_physical = jax.vmap(params.to_physical)
+    loss = 0.5 * jnp.sum(new[0] ** 2, axis=1)
+    return last, q0, to_physical(trial_u), to_physical(u), loss, jnp.sum(status != 0, axis=1)
+
+
+def _values_of(data: Sequence[Measurement]):
+    return tuple(tuple(getattr(m, f) for f in m._values) for m in data)
+
+
+def _with_values(problem: _Problem, values) -> _Problem:
+    data = tuple(eqx.tree_at(lambda m: tuple(getattr(m, f) for f in m._values), m, v)
+                 for m, v in zip(problem.data, values, strict=True))
+    return dataclasses.replace(problem, data=data)
+
+
+def _evaluate(problem: _Problem, values, u, q0, batched: bool):
+    """Residuals, Jacobian (internal coordinates), raw residuals, q and status at u."""
+    n = problem.n_tangents
+    if batched:
+        mech, tangents = _setup_batch(problem, u, n)
+        q, status, dq = _equilibria_batch(mech, problem.loads, q0, tangents,
+                                          problem.inner_max_steps)
+        z, jac, raw = _rows_batch(problem, values, u, mech, q, status, dq, tangents)
+    else:
+        mech, tangents = _setup(problem, u, n)
+        q, status, dq = _equilibria(mech, problem.loads, q0, tangents, problem.inner_max_steps)
+        z, jac, raw = _rows(problem, u, mech, q, status, dq, tangents)
+    return z, jac, raw, q, status
+
+
+# ----------------------------------------------------------------------------- setup
+
+
+def _as_data(data) -> tuple[Measurement, ...]:
+    data = (data,) if isinstance(data, Measurement) else tuple(data)
+    if not data or not all(isinstance(m, Measurement) for m in data):
+        raise InputError("data must be a measurement (Landmarks, Poses, Deformations, Channel) "
+                         "or a sequence of them.")
+    names = [m.name for m in data]
+    if len(set(names)) != len(names):
+        raise InputError(f"measurement names {names} repeat; give each a distinct name=.")
+    return data
+
+
+def _combined_loads(data) -> tuple[Loads, tuple[tuple[int, int], ...]]:
+    tables, slices, seen, start = [], [], {}, 0
+    for m in data:
+        key = id(m.loads)
+        if key not in seen:
+            n = m.loads.n_cases
+            seen[key] = (start, start + n)
+            tables.append(m.loads)
+            start += n
+        slices.append(seen[key])
+    if len(tables) == 1:
+        return tables[0], tuple(slices)
+    shapes = {(t.force.shape[1:], t.driver.shape[1:]) for t in tables}
+    if len(shapes) != 1:
+        raise InputError("the measurements' load tables have different load points or drivers; "
+                         "build them all with the same mechanism's Mechanism.loads.")
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *tables), tuple(slices)
+
+
+def _as_params(mech, params) -> Params:
+    if isinstance(params, Params):
+        return params
+    if callable(params):
+        return Params.leaves(mech, params)
+    raise InputError("params must be a Params or a `where` function selecting leaves of the "
+                     "mechanism, e.g. lambda m: (m.bushings.k_trans, m.bushings.k_rot).")
+
+
+def _per_param(value, params: Params, what: str, default=None) -> np.ndarray:
+    p = len(params)
+    if value is None:
+        return np.full(p, np.nan if default is None else default)
+    if isinstance(value, Mapping):
+        out = np.full(p, np.nan if default is None else default)
+        for name, v in value.items():
+            out[params.index(name)] = float(v)
+        return out
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        return np.full(p, float(arr))
+    if arr.shape != (p,):
+        raise InputError(f"{what} must be a scalar, a ({p},) array in the order of "
+                         f"params.names, or a mapping name → value; got shape {arr.shape}.")
+    return arr
+
+
+def _prior(params: Params, prior, prior_sigma):
+    """(u_prior, w) with prior rows (u − u_prior)·w: w = dθ/du at the prior / σ (physical σ;
+    for a log-scaled parameter that is a relative σ/θ_prior on log θ). No prior: w = 0."""
+    p = len(params)
+    if prior is None:
+        if prior_sigma is not None:
+            raise InputError("prior_sigma given without a prior; pass prior= (a Mechanism, a "
+                             "(p,) array or a mapping name → value).")
+        return jnp.zeros(p), jnp.zeros(p)
+    if prior_sigma is None:
+        raise InputError("a prior needs prior_sigma (physical units, one per parameter or a "
+                         "scalar or a mapping name → σ).")
+    if isinstance(prior, Mechanism):
+        theta = np.asarray(params.values(prior))
+    else:
+        theta = _per_param(prior, params, "prior")
+        theta = np.where(np.isnan(theta), np.asarray(params.start), theta)
+    sigma = _per_param(prior_sigma, params, "prior_sigma", default=np.inf)
+    if np.any(~(sigma > 0)):
+        raise InputError("prior_sigma must be > 0 (use inf for no prior on a parameter).")
+    checked = params.with_start(theta)  # checks bounds and positivity
+    u = checked.to_internal(checked.start)
+    w = jnp.abs(checked.derivative(u)) / jnp.asarray(sigma)
+    return u, jnp.where(jnp.isfinite(w), w, 0.0)
+
+
+def _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps):
+    if loss not in LOSSES:
+        raise InputError(f"unknown loss '{loss}'; use one of {', '.join(LOSSES)}.")
+    scale = DEFAULT_LOSS_SCALE[loss] if loss_scale is None else float(loss_scale)
+    if not scale > 0:
+        raise InputError("loss_scale must be > 0 (in units of the measurements' σ).")
+    for meas in data:
+        meas.check(mech)
+    loads, slices = _combined_loads(data)
+    prior_u, prior_w = _prior(params, prior, prior_sigma)
+    return _Problem(mech=mech, params=params, data=data, loads=loads,
+                    loss=jnp.asarray(LOSSES[loss]), loss_scale=jnp.asarray(scale),
+                    prior_u=prior_u, prior_w=prior_w, slices=slices,
+                    inner_max_steps=int(inner_max_steps))
+
+
+# ----------------------------------------------------------------------------- report
+
+
+@dataclasses.dataclass(frozen=True)
+class StepRecord:
+    """One LM step: the trial parameters evaluated (physical units), their loss ½Σr̃² and how
+    many load cases failed to reach equilibrium there (their residuals are set to 1e8, so the
+    step is rejected), whether the step was accepted, the estimate after it, and the
+    trust-region step size that follows."""
+
+    step: int
+    trial: np.ndarray
+    trial_loss: float
+    failed_cases: int
+    accepted: bool
+    estimate: np.ndarray
+    step_size: float
+
+
+@dataclasses.dataclass(frozen=True)
+class NullDirection:
+    """A parameter combination the data cannot see: unit vector `coefficients` in internal
+    coordinates (log θ for stiffnesses, mm for positions), its singular value in the whitened
+    data Jacobian and the σ (1/singular value) it would have, and a readable `text`."""
+
+    singular_value: float
+    sigma: float
+    coefficients: np.ndarray
+    text: str
+
+
+@dataclasses.dataclass(frozen=True)
+class MeasurementResiduals:
+    """Residuals of one measurement at the estimate: `raw` model − measured (physical units,
+    the measured shape; 0 where masked) and `whitened` (mask·raw/σ)."""
+
+    raw: np.ndarray
+    whitened: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class FitReport:
+    """Result of `least_squares`.
+
+    - `names`, `estimate` and `start` (physical units: N/mm, N·mm/rad, mm), `sigma` (1σ,
+      linearised: the whitened Jacobian's covariance, including the prior when there is one),
+      `sigma_percent` (100·σ/θ for log-scaled parameters such as stiffnesses, NaN for
+      positions), `covariance` and `correlation` `(p, p)`.
+    - `identifiable` `(p,)`: the data alone determine the parameter to better than
+      `identifiable_sigma` (internal units: relative for log-scaled, mm for positions);
+      `unidentifiable` the names of the others; their `sigma` is inf when the data have no
+      information at all.
+    - `singular_values` of the whitened data Jacobian in internal coordinates; `null_space`:
+      the combinations the data cannot see (the thesis's "equivalent solutions", §2.7).
+    - `residuals`: measurement name → `MeasurementResiduals`; `loss` ½Σr̃² (robust, with the
+      prior), `chi2` Σr² of the data (non-robust), `n_residuals` (unmasked entries), `dof`.
+    - `converged`, `steps`, `accepted_steps`, `history` (one `StepRecord` per LM step),
+      `message`.
+    """
+
+    names: tuple[str, ...]
+    estimate: np.ndarray
+    start: np.ndarray
+    sigma: np.ndarray
+    sigma_percent: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    identifiable: np.ndarray
+    singular_values: np.ndarray
+    null_space: tuple[NullDirection, ...]
+    residuals: dict[str, MeasurementResiduals]
+    loss: float
+    chi2: float
+    n_residuals: int
+    dof: int
+    converged: bool
+    steps: int
+    accepted_steps: int
+    history: tuple[StepRecord, ...]
+    message: str
+    loss_name: str
+
+    @property
+    def unidentifiable(self) -> tuple[str, ...]:
+        return tuple(n for n, ok in zip(self.names, self.identifiable, strict=True) if not ok)
+
+    def outliers(self, threshold: float = 5.0) -> list[tuple[str, tuple[int, ...], float]]:
+        """(measurement, index, whitened residual) of every entry with |r| > threshold σ."""
+        out = []
+        for name, res in self.residuals.items():
+            for idx in np.argwhere(np.abs(res.whitened) > threshold):
+                idx = tuple(int(i) for i in idx)
+                out.append((name, idx, float(res.whitened[idx])))
+        return out
+
+    def table(self) -> str:
+        """Estimates with σ and σ %; `*` marks parameters the data do not determine."""
+        width = max(len(n) for n in self.names) + 2
+        lines = [f"{'parameter':<{width}}{'start':>14}{'estimate':>14}{'sigma':>12}{'sigma %':>9}"]
+        for k, name in enumerate(self.names):
+            mark = " " if self.identifiable[k] else "*"
+            pct = self.sigma_percent[k]
+            pct = f"{pct:>8.3g}" if np.isfinite(pct) else f"{'-':>8}"
+            lines.append(f"{name:<{width}}{self.start[k]:>14.6g}{self.estimate[k]:>14.6g}"
+                         f"{self.sigma[k]:>12.3g}{pct}{mark}")
+        state = "converged" if self.converged else "NOT converged"
+        lines.append(f"{state} in {self.steps} steps ({self.accepted_steps} accepted), loss "
+                     f"{self.loss_name}; chi2 {self.chi2:.4g} for {self.n_residuals} residuals.")
+        if self.null_space:
+            lines.append("not seen by the data (σ of the combination):")
+            lines += [f"  {d.text}  (σ {d.sigma:.3g})" for d in self.null_space]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "names": list(self.names), "estimate": self.estimate.tolist(),
+            "start": self.start.tolist(), "sigma": self.sigma.tolist(),
+            "sigma_percent": self.sigma_percent.tolist(),
+            "identifiable": self.identifiable.tolist(),
+            "singular_values": self.singular_values.tolist(),
+            "null_space": [d.text for d in self.null_space],
+            "chi2": self.chi2, "n_residuals": self.n_residuals, "converged": self.converged,
+            "steps": self.steps, "loss": self.loss_name,
+        }
+
+
+def _combination_text(v: np.ndarray, names: Sequence[str], floor: float = 0.1) -> str:
+    order = np.argsort(-np.abs(v))
+    v = v * (1.0 if v[order[0]] > 0 else -1.0)
+    terms = [(v[k], names[k]) for k in order if abs(v[k]) >= floor]
+    text = " ".join(f"{'-' if c < 0 else '+'} {abs(c):.2f}·{n}" for c, n in terms)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def _report(params: Params, problem: _Problem, u, last, history, converged, steps,
+            accepted_steps, message, loss_name, identifiable_sigma) -> FitReport:
+    names = params.names
+    p = len(names)
+    z, jac, raw_all = (np.asarray(a, dtype=float) for a in last)
+    n_data = z.size - p
+    j_data = jac[:n_data]
+
+    # Data-only identifiability (SVD of the whitened data Jacobian, internal coordinates).
+    _, s, vt = np.linalg.svd(j_data, full_matrices=False)
+    s_max = s[0] if s.size and s[0] > 0 else 1.0
+    floor = s_max * 1e-12
+    s_safe = np.maximum(s, floor)
+    data_var = (vt.T ** 2) @ (1.0 / s_safe ** 2)
+    identifiable = np.sqrt(data_var) <= identifiable_sigma
+    null = tuple(
+        NullDirection(float(s[i]), float(1.0 / s_safe[i]), vt[i].copy(),
+                      _combination_text(vt[i], names))
+        for i in range(s.size) if 1.0 / s_safe[i] > identifiable_sigma)
+
+    # Posterior covariance (prior rows included) in u, then in θ.
+    _, s_all, vt_all = np.linalg.svd(jac, full_matrices=False)
+    hopeless = s_all <= max(s_all[0], 1e-300) * 1e-12
+    inv = np.where(hopeless, 0.0, 1.0 / np.maximum(s_all, 1e-300) ** 2)
+    cov_u = (vt_all.T * inv) @ vt_all
+    var_u = np.diag(cov_u).copy()
+    no_info = ((vt_all.T ** 2) @ hopeless.astype(float)) > 1e-6
+    var_u[no_info] = np.inf
+    d = np.asarray(params.derivative(jnp.asarray(u)))
+    theta = np.asarray(params.to_physical(jnp.asarray(u)))
+    cov = cov_u * np.outer(d, d)
+    cov[no_info, :] = np.nan
+    cov[:, no_info] = np.nan
+    sigma = np.abs(d) * np.sqrt(var_u)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sd = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(sd, sd)
+        sigma_pct = np.where(params.log_scaled, 100.0 * sigma / np.abs(theta), np.nan)
+
+    residuals, offset = {}, 0
+    chi2, n_res = 0.0, 0
+    for meas in problem.data:
+        shape = meas.weight.shape
+        size = int(np.prod(shape))
+        weight = np.asarray(meas.weight)
+        raw = raw_all[offset:offset + size].reshape(shape) * (weight > 0)
+        white = raw * weight
+        residuals[meas.name] = MeasurementResiduals(raw=raw, whitened=white)
+        chi2 += float(np.sum(white ** 2))
+        n_res += int(np.count_nonzero(weight))
+        offset += size
+    rank = int(np.sum(s > floor))
+    return FitReport(
+        names=names, estimate=theta, start=np.asarray(params.start), sigma=sigma,
+        sigma_percent=sigma_pct, covariance=cov, correlation=corr, identifiable=identifiable,
+        singular_values=s, null_space=null, residuals=residuals,
+        loss=float(0.5 * np.sum(z ** 2)), chi2=chi2, n_residuals=n_res, dof=n_res - rank,
+        converged=converged, steps=steps, accepted_steps=accepted_steps,
+        history=tuple(history), message=message, loss_name=loss_name)
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+def _select(mask, new, old):
+    """Per data set (leading axis): new where mask, else old."""
+    return jax.tree.map(
+        lambda n, o: jnp.where(jnp.reshape(mask, (-1,) + (1,) * (n.ndim - 1)), n, o), new, old)
+
+
+def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol, callback):
+    """Step the LM of every data set until each terminates. Returns the final u `(sets, p)`,
+    the last accepted (residual, Jacobian, raw residual) per set, histories, and per set
+    (converged, steps, accepted steps, message)."""
+    n_sets, p = u0.shape
+    n_rows = sum(int(np.prod(m.weight.shape)) for m in problem.data) + p
+    q0 = jnp.zeros((n_sets, problem.loads.n_cases, problem.mech.n_coordinates))
+    dyn = _lm_init(u0, n_rows, rtol, atol)
+    u, last = u0, None
+    active = np.ones(n_sets, bool)
+    histories = [[] for _ in range(n_sets)]
+    steps = np.zeros(n_sets, int)
+    accepted_steps = np.zeros(n_sets, int)
+    converged = np.zeros(n_sets, bool)
+    failed = np.zeros(n_sets, bool)
+    for k in range(max_steps + 1):
+        trial_u = dyn.y_eval
+        if batched:
+            z, jac, raw, q, status = _evaluate(problem, values, trial_u, q0, True)
+        else:
+            out = _evaluate(problem, values, trial_u[0], q0[0], False)
+            z, jac, raw, q, status = (a[None] for a in out)
+        if k == 0:
+            status_np = np.asarray(status)
+            bad = np.flatnonzero(np.any(status_np != 0, axis=1))
+            if bad.size:
+                cases = np.flatnonzero(status_np[bad[0]] != 0)
+                raise InputError(
+                    "the start parameters give no equilibrium in load case(s) "
+                    f"{cases.tolist()} (numbered across the measurements' load tables"
+                    f"{'' if n_sets == 1 else f', data set {int(bad[0])}'}); start from "
+                    "values closer to plausible ones or drop those cases.")
+        u, dyn, rec = _lm_step(u, dyn, z, jac, jnp.asarray(active), rtol, atol, ftol)
+        last, q0, trial, estimate, trial_loss, failed_cases = (
+            _bookkeep(problem.params, rec["accepted"], trial_u, u, (z, jac, raw), last, q,
+                      status, q0))
+        accepted, trial, estimate, trial_loss, failed_cases, step_size = (
+            np.asarray(a) for a in (rec["accepted"], trial, estimate, trial_loss, failed_cases,
+                                    rec["step_size"]))
+        for b in np.flatnonzero(active):
+            steps[b] = k
+            accepted_steps[b] += int(accepted[b] and k > 0)
+            histories[b].append(StepRecord(
+                step=k, trial=trial[b], trial_loss=float(trial_loss[b]),
+                failed_cases=int(failed_cases[b]), accepted=bool(accepted[b]),
+                estimate=estimate[b], step_size=float(step_size[b])))
+        if callback is not None:
+            callback(k, histories[0][-1] if n_sets == 1 else
+                     dict(active=active.copy(), trial_loss=trial_loss, accepted=accepted))
+        terminate, bad_solve = np.asarray(rec["terminate"]), np.asarray(rec["failed"])
+        converged |= active & terminate & ~bad_solve
+        failed |= active & bad_solve
+        active &= ~(terminate | bad_solve)
+        if not active.any():
+            break
+    messages = [
+        "converged" if converged[b] else
+        ("the LM linear solve failed" if failed[b] else f"max_steps={max_steps} reached")
+        for b in range(n_sets)]
+    return u, last, histories, converged, steps, accepted_steps, messages
+
+
+def least_squares(
+    mech: Mechanism,
+    data: Measurement | Sequence[Measurement],
+    params: Params | Callable[[Mechanism], object],
+    *,
+    loss: str = "linear",
+    loss_scale: float | None = None,
+    prior: Mechanism | Float[Array, " p"] | Mapping[str, float] | None = None,
+    prior_sigma: float | Float[Array, " p"] | Mapping[str, float] | None = None,
+    max_steps: int = 100,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    ftol: float = 1e-8,
+    inner_max_steps: int = 50,
+    identifiable_sigma: float = 1.0,
+    callback: Callable[[int, StepRecord], None] | None = None,
+) -> tuple[Mechanism, FitReport]:
+    """Identify parameters of `mech` by nonlinear least squares through the equilibrium.
+
+    **Arguments:**
+    - `mech`: the model, holding the start values and every parameter not identified.
+    - `data`: one measurement or several (`Landmarks`, `Poses`, `Deformations`, `Channel`),
+      each with its own load table; one data set each (see `least_squares_batch` for many).
+    - `params`: a `Params`, or a `where` function (`lambda m: (m.bushings.k_trans, ...)`,
+      every entry of the selected leaves; stiffnesses log-scaled).
+    - `loss`: `'linear'`, `'huber'` or `'cauchy'`; `loss_scale` in units of σ (default 1.345
+      Huber, 2.385 Cauchy).
+    - `prior`, `prior_sigma`: Tikhonov prior θ_prior (a Mechanism, a `(p,)` array or a mapping
+      name → value; missing names: the start) with σ in physical units (scalar, `(p,)`, or a
+      mapping; inf = none). For a log-scaled parameter it acts on log θ with relative σ/θ_prior.
+    - `max_steps`: LM steps; `rtol`, `atol`: LM stop on the step in internal coordinates and
+      the change of the residuals (optimistix Cauchy criterion); `ftol`: also stop when an
+      accepted step lowers the loss by less than this, relatively.
+    - `inner_max_steps`: Newton iterations of each equilibrium (a case that needs more fails,
+      and the step that led there is rejected).
+    - `identifiable_sigma`: a parameter (or combination) whose σ from the data alone exceeds
+      this, in internal units (relative for log-scaled parameters, mm for positions), is
+      reported as not identifiable.
+    - `callback(step, record)`: called after every LM step with its `StepRecord`.
+
+    **Returns:** `(mech', report)`: the mechanism at the estimate and a `FitReport`.
+    """
+    data = _as_data(data)
+    if {m.n_sets for m in data} != {None}:
+        raise InputError("the measured values have a data-set axis: use least_squares_batch.")
+    params = _as_params(mech, params)
+    problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
+    u0 = params.to_internal(params.start)[None]
+    u, last, hist, conv, steps, acc, msg = _run(problem, None, u0, batched=False,
+                                                max_steps=max_steps, rtol=rtol, atol=atol,
+                                                ftol=ftol, callback=callback)
+    report = _report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
+                     int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma)
+    return params.apply(mech, jnp.asarray(report.estimate)), report
+
+
+@dataclasses.dataclass(frozen=True)
+class BatchFitReport:
+    """Result of `least_squares_batch`: `estimates` and linearised `sigma` `(sets, p)`,
+    `converged` and `steps` `(sets,)`, and the full `FitReport` of every data set."""
+
+    names: tuple[str, ...]
+    estimates: np.ndarray
+    sigma: np.ndarray
+    converged: np.ndarray
+    steps: np.ndarray
+    reports: tuple[FitReport, ...]
+
+
+def least_squares_batch(
+    mech: Mechanism,
+    data: Measurement | Sequence[Measurement],
+    params: Params | Callable[[Mechanism], object],
+    *,
+    start: Float[Array, "sets p"] | None = None,
+    loss: str = "linear",
+    loss_scale: float | None = None,
+    prior=None,
+    prior_sigma=None,
+    max_steps: int = 100,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    ftol: float = 1e-8,
+    inner_max_steps: int = 50,
+    identifiable_sigma: float = 1.0,
+    callback: Callable[[int, dict], None] | None = None,
+) -> BatchFitReport:
+    """Identify the same parameters from many data sets at once (e.g. 100 axles of one design,
+    or 100 noise draws for a Monte-Carlo check of the reported σ).
+
+    The measured values of every measurement carry a leading data-set axis (same loads, σ and
+    mask); each LM step of all data sets is one compiled, vmapped call. Arguments as
+    `least_squares`, plus `start` `(sets, p)` physical start values (default: `params.start`
+    for every set). `callback(step, arrays)` gets the per-set step arrays.
+
+    **Returns:** a `BatchFitReport`.
+    """
+    data = _as_data(data)
+    sets = {m.n_sets for m in data}
+    if len(sets) != 1 or None in sets:
+        raise InputError("every measurement needs the same leading data-set axis for a batch; "
+                         f"got {sorted(str(s) for s in sets)}.")
+    n_sets = sets.pop()
+    params = _as_params(mech, params)
+    problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
+    if start is None:
+        u0 = jnp.broadcast_to(params.to_internal(params.start), (n_sets, len(params)))
+    else:
+        start = np.asarray(start, dtype=float)
+        if start.shape != (n_sets, len(params)):
+            raise InputError(f"start must have shape ({n_sets}, {len(params)}); got "
+                             f"{start.shape}.")
+        for row in start:
+            params.with_start(row)
+        u0 = jax.vmap(params.to_internal)(jnp.asarray(start))
+    values = _values_of(data)
+    u, last, hist, conv, steps, acc, msg = _run(problem, values, u0, batched=True,
+                                                max_steps=max_steps, rtol=rtol, atol=atol,
+                                                ftol=ftol, callback=callback)
+    reports = []
+    for b in range(n_sets):
+        one_problem = _with_values(problem, jax.tree.map(lambda a, b=b: a[b], values))
+        reports.append(_report(params, one_problem, u[b], [a[b] for a in last], hist[b],
+                               bool(conv[b]), int(steps[b]), int(acc[b]), msg[b], loss,
+                               identifiable_sigma))
+    return BatchFitReport(
+        names=params.names, estimates=np.stack([r.estimate for r in reports]),
+        sigma=np.stack([r.sigma for r in reports]), converged=conv.copy(), steps=steps.copy(),
+        reports=tuple(reports))
+
+
+def whitened_residuals(
+    mech: Mechanism,
+    data: Measurement | Sequence[Measurement],
+    params: Params,
+    theta: Float[Array, " p"],
+    *,
+    loss: str = "linear",
+    loss_scale: float | None = None,
+) -> tuple[Float[Array, " n"], Float[Array, "n p"]]:
+    """The residual vector the fit minimises (one data set, without prior rows) at physical
+    parameters θ, and its Jacobian with respect to θ (implicit differentiation through the
+    equilibria, forward mode). Uses the same compiled programs as `least_squares`."""
+    data = _as_data(data)
+    params = _as_params(mech, params)
+    problem = _problem(mech, data, params, loss, loss_scale, None, None, 50)
+    u = params.to_internal(jnp.asarray(theta, dtype=float))
+    q0 = jnp.zeros((problem.loads.n_cases, mech.n_coordinates))
+    z, jac, _, _, status = _evaluate(problem, None, u, q0, False)
+    if np.any(np.asarray(status) != 0):
+        raise InputError(f"no equilibrium in load case(s) "
+                         f"{np.flatnonzero(np.asarray(status) != 0).tolist()} at these "
+                         "parameters.")
+    n = z.size - len(params)
+    return z[:n], jac[:n] / params.derivative(u)[None, :]
+
+
+def predict(mech: Mechanism, data: Measurement | Sequence[Measurement],
+            *, inner_max_steps: int = 50) -> dict[str, Array]:
+    """What the model predicts for each measurement (its measured shape and units, one data
+    set): e.g. synthetic landmarks. Uses the equilibrium program of `least_squares`.
+
+    **Raises:** `InputError` if a load case has no equilibrium.
+    """
+    data = _as_data(data)
+    for meas in data:
+        meas.check(mech)
+    loads, slices = _combined_loads(data)
+    tangents = jax.tree.map(lambda a: jnp.zeros((TANGENT_BLOCK, *a.shape), a.dtype), mech)
+    q0 = jnp.zeros((loads.n_cases, mech.n_coordinates))
+    q, status, _ = _equilibria(mech, loads, q0, tangents, int(inner_max_steps))
+    if np.any(np.asarray(status) != 0):
+        raise InputError(f"no equilibrium in load case(s) "
+                         f"{np.flatnonzero(np.asarray(status) != 0).tolist()}.")
+    single = tuple(m.select(0) if m.n_sets else m for m in data)
+    out = _predict(single, mech, q, slices)
+    return {m.name: v for m, v in zip(data, out, strict=True)}
