@@ -59,7 +59,7 @@ def bench_model(name, mech, rng, sizes, baseline_cases):
         sol = ds.solve_statics(mech, loads, throw=False)
         jax.block_until_ready(sol.q)
         first = time.perf_counter() - t0
-        dt, sol = timed(lambda: ds.solve_statics(mech, loads, throw=False),
+        dt, sol = timed(lambda loads=loads: ds.solve_statics(mech, loads, throw=False),
                         repeats=3 if n >= 1000 else 10)
         rows.append(dict(model=name, cases=n, seconds=dt, per_second=n / dt,
                          compile_and_first=first, mean_iterations=float(np.mean(sol.iterations)),
