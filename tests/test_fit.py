@@ -156,6 +156,12 @@ def test_robust_loss_rejects_a_gross_outlier_that_ruins_the_plain_fit(mcpherson)
     _, masked = least_squares(m.ref, m.landmarks(measured, mask=mask), start, **kw)
     assert plain.converged and robust.converged and masked.converged
     good = _well_determined(clean)
+    # The prior holds what the data cannot see: B's Krx stays within its prior σ of the
+    # nominal value, and its posterior σ is at most the prior's.
+    k = clean.names.index("bushing_B.Krx")
+    assert not clean.identifiable[k]
+    assert abs(math.log(clean.estimate[k] / m.truth[k])) < 1.0
+    assert clean.sigma[k] / clean.estimate[k] <= 1.0 + 1e-9
 
     def shift(report):  # distance from the outlier-free fit, in σ of log θ
         sig = clean.sigma / clean.estimate
@@ -301,9 +307,11 @@ def test_residual_jacobian_matches_finite_differences(arm, loss):
 
 
 def test_small_model_fit_recovers_the_generating_parameters(arm):
-    """Every measurement type at once; stiffnesses started up to 20 % off, the centre 1.2 mm."""
+    """Every measurement type at once; stiffnesses started up to 20 % off, the centre 1.2 mm
+    off and kept in a ±5 mm box (bounds by reparametrisation)."""
     c = arm
-    _, report = least_squares(c.mech, c.data, c.params)
+    params = c.params.with_bounds({f"bush.{a}": (-5.0, 5.0) for a in "xyz"})
+    _, report = least_squares(c.mech, c.data, params)
     assert report.converged and report.chi2 < 1e-10
     assert report.identifiable.all() and not report.null_space
     np.testing.assert_allclose(report.estimate, c.theta_other, rtol=1e-6, atol=1e-6)

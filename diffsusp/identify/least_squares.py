@@ -14,19 +14,28 @@ residuals r = mask·(model(θ, q_c) − measured)/σ,
 
 with ρ the plain square, Huber or Cauchy loss (applied as r̃ = sign(r)·√(2ρ(r)), so the
 Gauss–Newton model of the robust cost is exact at r = 0 and down-weights outliers). The
-minimiser is optimistix's Levenberg–Marquardt. Its Jacobian is forward mode through
-`solve_statics`, whose custom JVP differentiates the equilibrium implicitly (one more linear
-solve per direction, the Newton loop never unrolled).
+minimiser is optimistix's Levenberg–Marquardt (damped Newton descent, classical trust region).
+The Jacobian is forward mode through `solve_statics`, whose custom JVP differentiates the
+equilibrium implicitly (one more linear solve per direction; the Newton loop is never unrolled).
 
-Inner non-convergence: a load case whose equilibrium fails at a trial point gets residuals of
-1e8 (finite), so the trust region rejects the step and shrinks; the history records it. The start
-point must converge.
+How it runs. The LM iteration is driven from Python one step at a time, which records the
+history, calls the progress callback, and warm-starts each step's equilibria from the last
+accepted ones. Each step is four compiled calls: the mechanism at the trial point and its
+parameter tangents; the equilibria of all load cases and their tangents (the program that holds
+the Newton loop, costly to compile: it depends only on the model, the load table and the number
+of parameters padded to `TANGENT_BLOCK`, so every fit of one model shares it); the whitened
+residuals and their Jacobian; and the optimistix step itself, handed the residual's first-order
+model about the trial point (its value and Jacobian there are all a Gauss–Newton step asks of
+the function). Losses, priors and data values are runtime arrays: they never recompile.
+`least_squares_batch` vmaps the same four calls over many data sets.
 
-The LM iteration is driven from Python one step at a time around one compiled step (the same
-program for every loss, prior and data set of the same shapes), which records the history, calls
-the progress callback, and warm-starts each step's equilibria from the last accepted ones.
-`least_squares_batch` runs the same step vmapped over many data sets (one compiled call per
-step).
+Stopping: optimistix's Cauchy criterion (`rtol`, `atol` on the step and on the residuals), or an
+accepted step that lowers the loss by less than `ftol` relatively. The first damping is
+λ0 = 10⁻³·max diag(JᵀJ) (optimistix starts at λ = 1, negligible for whitened residuals).
+
+Inner non-convergence: every residual of a load case whose equilibrium fails at a trial point
+is set to 1e8 (finite), so the trust region rejects the step and shrinks; the history records
+the trial and its failed cases. The start point must converge in every case.
 """
 
 import dataclasses
