@@ -1,22 +1,26 @@
-"""`diffsusp kc` (Typer's test runner): metrics table, JSON, figures, and exit codes.
+"""`diffsusp kc` (Typer's test runner): metrics table, JSON, figures, and exit codes; and the
+pseudo-McPherson's force events against the NumPy oracle.
 
-Every run uses the pseudo-McPherson with 13 cases, structures and shapes that test_kc.py and
-test_cli.py's demo compile too (steering on the rack-mounted half axle, the thesis load table,
-a 13-case vertical-force sweep), so nothing is compiled twice in one process.
+Every run here is a 13-case force event on the pseudo-McPherson (the thesis load table, a
+vertical-force sweep), one compiled program (the same as `thesis_load_cases` with the demo):
+the library checks of those events live here too, with the helpers of test_kc.py, so that the
+program is compiled once per worker (pytest-xdist gives each file to one worker).
 """
 
 import json
 
 import numpy as np
 import pytest
+from test_kc import assert_compliance_matrix, assert_derivatives, assert_geometry, pm_spec
 from typer.testing import CliRunner
 
 import diffsusp.cli.kc  # noqa: F401  (registers `kc`)
 from diffsusp import kc
 from diffsusp.cli import app
-from diffsusp.models import pseudo_mcpherson
+from diffsusp.models import TABLE_5_1, pseudo_mcpherson, thesis_load_cases
 
-STEERING = ["--event", "steering", "--rack", "-20:20:13"]
+TABLE = ["--event", "table-5-1"]
+N = 13
 
 
 @pytest.fixture(scope="module")
@@ -24,31 +28,46 @@ def runner():
     return CliRunner()
 
 
+@pytest.fixture(scope="module")
+def pm():
+    return pseudo_mcpherson()
+
+
+@pytest.fixture(scope="module")
+def pm_table(pm):
+    return kc.load_table(pm, TABLE_5_1)
+
+
+@pytest.fixture(scope="module")
+def pm_vertical(pm):
+    return kc.vertical_force(pm, np.linspace(3000.0, 6000.0, N))
+
+
 def test_kc_prints_metrics_and_writes_figures(runner, tmp_path):
-    result = runner.invoke(app, ["kc", "pseudo_mcpherson", *STEERING, "--out", str(tmp_path)])
+    result = runner.invoke(app, ["kc", "pseudo_mcpherson", *TABLE, "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     out = result.stdout
-    assert "steering, 13 cases; reference rack travel = 0 mm" in out
+    assert "load table, 13 cases; reference case = 1" in out
     rows = {line.split()[0]: line.split()[1:] for line in out.splitlines()
             if len(line.split()) == 5}
-    assert rows["toe"][0] == "deg" and rows["steer_gain"][0] == "deg/mm"
-    assert 0.3 < float(rows["steer_gain"][1]) < 0.5  # deg of steer per mm of rack
-    assert float(rows["steer"][2]) < -5.0 < 5.0 < float(rows["steer"][3])
-    assert abs(float(rows["wheel_travel"][1])) < 1e-9  # the wheel height is held
-    assert "Held fixed by the derivative metrics: wheel height" in out
-    for stem in ("kc_steering", "kc_steering_derivatives"):
+    assert rows["toe"][0] == "deg" and rows["bump_steer"][0] == "deg/m"
+    assert rows["wheel_rate"][0] == "N/mm" and 15.0 < float(rows["wheel_rate"][1]) < 30.0
+    assert rows["vertical_force"][1:] == ["1500", "1500", "7500"]
+    assert rows["lateral_force"][2:] == ["-4000", "4000"]
+    assert "Held fixed by the derivative metrics: vertical load" in out
+    for stem in ("kc_load_table", "kc_load_table_derivatives"):
         for suffix in ("png", "svg"):
             path = tmp_path / f"{stem}.{suffix}"
             assert path.exists() and path.stat().st_size > 10_000, path
 
 
-def test_kc_json_matches_the_library(runner):
-    result = runner.invoke(app, ["kc", "pseudo_mcpherson", "--event", "table-5-1", "--json"])
+def test_kc_json_matches_the_library(runner, pm_table):
+    result = runner.invoke(app, ["kc", "pseudo_mcpherson", *TABLE, "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["event"] == "load_table" and data["x"]["values"] == list(range(1, 14))
     assert data["status"] == [0] * 13
-    ev = kc.load_table(pseudo_mcpherson(), kc.TABLES["table_5_1"])
+    ev = pm_table
     for name in ("toe", "camber", "bump_steer", "lateral_compliance_steer", "wheel_rate",
                  "vertical_force"):
         assert data["metrics"][name]["unit"] == kc.display_unit(name)
@@ -87,3 +106,23 @@ def test_non_converging_load_exits_3(runner):
                                  "--fz", "20000:20000:13"])
     assert result.exit_code == 3, result.output
     assert "vertical_force: case 0 (vertical_force = 20000 N) did not converge" in result.output
+
+
+# ----------------------------------------------------------------------------- library
+
+
+def test_pm_load_table_matches_thesis_mapping_and_oracle(pm, pm_table):
+    """On the left pseudo-McPherson (Adams/Car frame) the per-side mapping (lateral inboard,
+    longitudinal rearward) is exactly `thesis_load_cases`; metrics against the oracle."""
+    loads = thesis_load_cases(pm, TABLE_5_1)
+    np.testing.assert_array_equal(pm_table.loads.force, loads.force)
+    np.testing.assert_array_equal(pm_table.metrics["vertical_force"], TABLE_5_1[:, 0])
+    np.testing.assert_array_equal(pm_table.metrics["lateral_force"], TABLE_5_1[:, 1])
+    np.testing.assert_array_equal(pm_table.metrics["longitudinal_force"], TABLE_5_1[:, 2])
+    assert_geometry(pm_table, (0, 5, 9), pm_spec())
+
+
+def test_pm_vertical_force_derivatives_and_compliance_matrix(pm_vertical):
+    assert_derivatives(pm_vertical, 6, pm_spec())
+    assert_compliance_matrix(pm_vertical, 6, pm_spec())
+    assert 20.0 < float(pm_vertical.metrics["wheel_rate"][6]) < 30.0  # ≈ 24 N/mm (documented)

@@ -7,11 +7,12 @@ equilibria for every derivative metric (bump steer, wheel rate, roll centre, com
 compliance matrix, roll stiffness, steer gain; 1e-5 relative), hand-computed design angles
 and pure rotations of the wheel carrier for the sign conventions on left and right corners.
 
-Compile budget: every event uses 13 cases and one of four rig structures, each built once per
+Compile budget: every event uses 13 cases and one of three rig structures, each built once per
 module: the pseudo-McPherson with its tie rod on a rack (parallel travel with the rack held at
-0, and steering), the pseudo-McPherson in force events (the same solve as
-`thesis_load_cases`), the double wishbone in force events, and a double-wishbone axle in
-travel (opposite and parallel travel: the travel pattern is data).
+0, and steering), the double wishbone in force events, and a double-wishbone axle in travel
+(opposite and parallel travel: the travel pattern is data). The pseudo-McPherson's force events
+(Table 5-1, vertical-force sweep, compliance matrix) are tested in test_cli_kc.py, next to the
+command-line runs that compile the same program (pytest-xdist gives each file to one worker).
 """
 
 import jax.numpy as jnp
@@ -25,10 +26,8 @@ from diffsusp.model.combine import combine
 from diffsusp.model.mirror import mirror
 from diffsusp.models import (
     DOUBLE_WISHBONE_DESIGN_LOAD,
-    TABLE_5_1,
     double_wishbone,
     pseudo_mcpherson,
-    thesis_load_cases,
 )
 from diffsusp.models.double_wishbone import HARDPOINTS
 from diffsusp.models.pseudo_mcpherson import JOINT_POSITIONS, JOINT_REULER_DEG
@@ -294,17 +293,6 @@ def pm_travel(pm_rack):
 
 
 @pytest.fixture(scope="module")
-def pm_table(pm):
-    # 13 cases on the model itself: the same compiled solve as thesis_load_cases(pm).
-    return kc.load_table(pm, TABLE_5_1)
-
-
-@pytest.fixture(scope="module")
-def pm_vertical(pm):
-    return kc.vertical_force(pm, np.linspace(3000.0, 6000.0, N))
-
-
-@pytest.fixture(scope="module")
 def dw():
     return double_wishbone(bushings=True)
 
@@ -340,23 +328,6 @@ def test_pm_parallel_travel_metrics_match_oracle(pm_travel):
 
 def test_pm_parallel_travel_derivatives_match_oracle_differences(pm_travel):
     assert_derivatives(pm_travel, 9, pm_spec())
-
-
-def test_pm_load_table_matches_thesis_mapping_and_oracle(pm, pm_table):
-    """On the left pseudo-McPherson (Adams/Car frame) the per-side mapping (lateral inboard,
-    longitudinal rearward) is exactly `thesis_load_cases`."""
-    loads = thesis_load_cases(pm, TABLE_5_1)
-    np.testing.assert_array_equal(pm_table.loads.force, loads.force)
-    np.testing.assert_array_equal(pm_table.metrics["vertical_force"], TABLE_5_1[:, 0])
-    np.testing.assert_array_equal(pm_table.metrics["lateral_force"], TABLE_5_1[:, 1])
-    np.testing.assert_array_equal(pm_table.metrics["longitudinal_force"], TABLE_5_1[:, 2])
-    assert_geometry(pm_table, (0, 5, 9), pm_spec())
-
-
-def test_pm_vertical_force_derivatives_and_compliance_matrix(pm_vertical):
-    assert_derivatives(pm_vertical, 6, pm_spec())
-    assert_compliance_matrix(pm_vertical, 6, pm_spec())
-    assert 20.0 < float(pm_vertical.metrics["wheel_rate"][6]) < 30.0  # ≈ 24 N/mm (documented)
 
 
 def test_pm_design_angles_by_hand(pm_travel):
@@ -559,15 +530,17 @@ def test_opposite_travel_needs_two_sides_and_steering_needs_a_rack(pm):
         kc.with_rack(pm, tie_rod="strut_slide")
 
 
-def test_non_converging_case_raises_or_gives_nan(pm, pm_vertical):
-    """20 kN on a corner without bump stops has no equilibrium within the travel: the event
-    names the case; with throw=False the metrics are NaN and a warning says how many failed."""
-    fz = np.full(N, 4500.0)
-    fz[4] = 20000.0
+def test_non_converging_case_raises_or_gives_nan(dw, dw_vertical):
+    """100 kN (11 times the design load) has no equilibrium within the double wishbone's
+    travel: the event names the case; with throw=False the metrics are NaN and a warning says
+    how many failed, the other cases are unaffected."""
+    fz = np.full(N, DOUBLE_WISHBONE_DESIGN_LOAD)
+    fz[4] = 1e5
     with pytest.raises(ConvergenceError, match=r"vertical_force: case 4 \(vertical_force = "
-                                               r"20000 N\) did not converge"):
-        kc.vertical_force(pm, fz)
+                                               r"100000 N\) did not converge"):
+        kc.vertical_force(dw, fz)
     with pytest.warns(UserWarning, match="1 of 13 cases did not converge"):
-        ev = kc.vertical_force(pm, fz, throw=False)
+        ev = kc.vertical_force(dw, fz, throw=False)
     assert np.isnan(ev.metrics["toe"][4]) and np.isnan(ev.metrics["bump_steer"][4])
-    np.testing.assert_allclose(ev.metrics["toe"][5], pm_vertical.metrics["toe"][6], atol=1e-12)
+    assert np.isnan(kc.compliance_matrix(ev)[4]).all()
+    np.testing.assert_allclose(ev.metrics["toe"][5], dw_vertical.metrics["toe"][6], atol=1e-12)

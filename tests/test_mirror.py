@@ -3,11 +3,14 @@
 The references are the NumPy oracle's equilibria (tests/oracle.py), which read the mechanisms'
 arrays directly: the mirrored model under mirrored loads must settle in the mirror image of the
 original's equilibrium (R' = M R M, p' = M p with M = diag(1, −1, 1)), for the thesis half axle
-and for a small model that exercises every mirrored field (bushing offsets, preloads, cubic
-terms, splines on the flipped axes, a tilted driver, a load in a marker frame); a combined axle
+and for the same axle with every mirrored field set (bushing offsets, preloads, cubic terms,
+splines on the flipped axes, a tilted driver, a load in a marker frame); a combined axle
 settles in each side's own equilibrium. No JAX solve here (the JAX side is in test_kc.py's axle
-events), so nothing is compiled but one model's validation.
+events), and the featureful model is edited in place, so nothing is compiled but the two
+built-in models' validation.
 """
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -15,7 +18,6 @@ import numpy as np
 import oracle
 import pytest
 
-from diffsusp import MechanismBuilder
 from diffsusp.errors import ModelError
 from diffsusp.kc import add_driver
 from diffsusp.model.combine import combine, component_names
@@ -25,28 +27,36 @@ from diffsusp.models import TABLE_5_1, double_wishbone, pseudo_mcpherson, thesis
 M = np.diag([1.0, -1.0, 1.0])
 
 
-def featureful():
-    """Two parts with every field that mirroring must transform."""
-    b = MechanismBuilder("mirror test")
-    b.part("arm")
-    b.part("link")
-    b.bushing("bush", parts=("arm", "ground"), at=(100.0, 50.0, 20.0), reuler_deg=(30, 20, 10),
-              k_trans=(1000.0, 2000.0, 300.0), k_rot=(4e5, 2e5, 1e5),
-              cubic_trans=(1.0, 2.0, 3.0), offset_trans=(0.1, -0.2, 0.3),
-              offset_rot=(0.01, 0.02, -0.03), preload_force=(10.0, -20.0, 30.0),
-              preload_torque=(1e3, -2e3, 3e3),
-              splines={"ty": ([-2.0, -0.5, 0.0, 1.0, 3.0], [4500.0, 900.0, 0.0, -2100.0, -7000.0]),
-                       "rz": ([-0.2, 0.0, 0.1, 0.3, 0.5], [3e4, 0.0, -1.2e4, -4.5e4, -8e4])})
-    b.joint("ball", "spherical", parts=("link", "arm"), at=(200.0, 80.0, 0.0))
-    b.bushing("bush2", parts=("link", "ground"), at=(260.0, 140.0, 40.0), z=(0.2, 1.0, 0.3),
-              k_trans=(800.0, 500.0, 900.0), k_rot=(3e5, 3e5, 2e5))
-    b.spring("spring", parts=("ground", "arm"), at=((90.0, 40.0, 300.0), (120.0, 60.0, 30.0)),
-             k=25.0, free_length=300.0)
-    b.marker("tip", "arm", (160.0, 90.0, 10.0), z=(0.3, -0.5, 0.8), x=(1.0, 0.0, 0.0))
-    b.load_point("tip_local", marker="tip", frame="tip")
-    b.load_point("end", part="link", at=(240.0, 120.0, 30.0))
-    b.driver("drive", "tip", direction=(0.2, 0.9, 0.4))
-    return b.build()
+def featureful(pm):
+    """The half axle with every field that mirroring must transform, set directly on its arrays
+    (no new build, so nothing is compiled): bushing offsets, preloads and cubic terms, Akima
+    splines on bushing B's ty and rz axes (the axes whose deformation changes sign), a driver
+    along a tilted direction and a load point whose components are in a marker's frame."""
+    b = pm.bushings
+    n = len(b.names)
+    x = np.tile(np.linspace(-1.0, 1.0, 5), (n, 6, 1))
+    y = np.zeros((n, 6, 5))
+    k = b.names.index("bushing_B")
+    x[k, 1] = [-3.0, -1.0, 0.0, 0.5, 2.0]  # ty (mm → N, A/Car: force on I = −k·x)
+    y[k, 1] = [9000.0, 2600.0, 0.0, -1200.0, -5500.0]
+    x[k, 5] = [-0.2, -0.05, 0.0, 0.1, 0.3]  # rz (rad → N·mm)
+    y[k, 5] = [6e4, 1.4e4, 0.0, -3.1e4, -1.0e5]
+    axes = [[False] * 6 for _ in range(n)]
+    axes[k][1] = axes[k][5] = True
+    bushings = dataclasses.replace(
+        b, cubic_trans=b.cubic_trans + 2.0,
+        offset_trans=b.offset_trans + jnp.array([0.1, -0.2, 0.3]),
+        offset_rot=b.offset_rot + jnp.array([0.002, 0.004, -0.003]),
+        preload_force=b.preload_force + jnp.array([30.0, -50.0, 20.0]),
+        preload_torque=b.preload_torque + jnp.array([2e3, -1e3, 3e3]),
+        spline_x=jnp.asarray(x), spline_y=jnp.asarray(y),
+        spline_axes=tuple(tuple(a) for a in axes))
+    lp = pm.load_points
+    wc = pm.markers.index("wheel_centre")
+    load_points = dataclasses.replace(lp, frame=tuple(
+        wc if name == "wheel_centre" else f for name, f in zip(lp.names, lp.frame, strict=True)))
+    mech = dataclasses.replace(pm, bushings=bushings, load_points=load_points)
+    return add_driver(mech, "tilted", "L8_front_arm_ball", (0.2, 0.9, 0.4))
 
 
 def solve(mech, loads, c):
@@ -79,23 +89,24 @@ def test_mirrored_half_axle_settles_in_the_mirror_image(pm, case):
     assert np.abs(sol.p).max() > 1.0
 
 
-def test_every_mirrored_field():
-    mech = featureful()
+def test_every_mirrored_field(pm):
+    mech = featureful(pm)
     mirrored = mirror(mech, suffix="_r")
-    assert mirrored.name == "mirror test (mirrored)"
-    assert mirrored.markers.names[0].endswith("_r") and mirrored.parts == ("arm_r", "link_r")
-    loads = mech.loads(forces={"tip_local": jnp.array([[150.0, -80.0, 60.0]] * 2),
-                               "end": jnp.array([[-40.0, 120.0, 90.0]] * 2)},
-                       moments={"tip_local": jnp.array([[2e3, 3e3, -1e3]] * 2)},
-                       drivers={"drive": jnp.array([1.5, -2.0])})
+    assert mirrored.name == "pseudo-McPherson half axle (mirrored)"
+    assert mirrored.markers.names[0].endswith("_r") and mirrored.parts[0] == "front_arm_r"
+    loads = mech.loads(forces={"contact_patch": jnp.array([[800.0, 1500.0, 4500.0]] * 2),
+                               "wheel_centre": jnp.array([[150.0, -300.0, 60.0]] * 2)},
+                       moments={"wheel_centre": jnp.array([[2e4, 3e4, -1e4]] * 2)},
+                       drivers={"tilted": jnp.array([1.5, -2.0])})
+    k = mech.bushings.names.index("bushing_B")
     for c in range(2):
         sol = solve(mech, loads, c)
         sol_m = solve(mirrored, mirror_loads(loads), c)
         assert sol.converged and sol_m.converged
         assert_mirror_image(sol, sol_m)
-        # The bushing works on its spline and preloaded axes (not a trivial equilibrium).
+        # Bushing B works on its spline axes (not a trivial equilibrium).
         dt, dr = oracle.bushing_deformations(mech, sol.p, sol.R)
-        assert np.abs(dt[0, 1]) > 1e-3 and np.abs(dr[0, 2]) > 1e-4
+        assert np.abs(dt[k, 1]) > 1e-2 and np.abs(dr[k, 2]) > 1e-4, (dt[k], dr[k])
 
 
 def test_mirror_twice_is_the_identity(pm):
