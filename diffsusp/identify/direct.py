@@ -9,9 +9,10 @@ spec: stiffness §1.8–1.14 (Chapter 4), §7 R1–R4; DESIGN.md "Identification
 The internal generalised forces are linear in the stiffnesses: Q_int = D(q_c)·k + Q_known(q_c)
 (bushings: F = −K·δ per axis, so the column of Ktx is the generalised force of a unit
 −δx force; springs: tension = K·ℓ − K·L0, linear in the unknowns (K, K·L0), spec §1.7–1.8,
-4.37–4.42). Here D = ∂Q_int/∂k is obtained by `jax.jacfwd` of the solver's own assembly of the
-generalised forces (`statics.kernel.assemble`), exact because Q_int is linear in k, so the
-identification uses exactly the force laws the forward model solves. The multipliers λ are
+4.37–4.42). Here D = ∂Q_int/∂k is `jax.jacfwd` of the solver's own element force functions
+(the ones `statics.kernel.assemble` sums), element by element — exact because Q_int is linear in
+k — so the identification uses exactly the force laws the forward model solves; Q_known is the
+solver's assembly of everything not identified (loads, other elements). The multipliers λ are
 eliminated by projecting onto the admissible motions: L is an orthonormal basis of the null
 space of Φ_q (4.43–4.46), giving n − m rows per case
 
@@ -27,6 +28,21 @@ by ℓ): otherwise N·mm rows would swamp N rows once the data are noisy (spec �
 to the parametrisation of q or to units"). The result is invariant to the choice of the basis L.
 Columns are in the units of the thesis's tables (N/mm, N·mm/deg; spring K in N/mm and K·L0 in
 N; force offsets in N and moment offsets in N·mm), and `lsq` scales them to unit norm inside.
+
+**What the data determine.** Identifiability is decided on the unweighted equations (a
+property of the model and the load cases): unknowns whose columns are rounding noise have "no
+effect"; columns dependent up to `threshold` give the identifiable combinations (e.g.
+`bushing_1.Krx + bushing_2.Krx`, spec §7 R3). The estimate and its σ then come from the
+weighted equations.
+
+**Noisy data.** Pose errors enter the regressors themselves (errors in variables): a direction
+that deforms little compared with the landmark noise is biased toward 0 and its share of the
+forces is pushed onto the others. The default generalised least squares whitens each case by the
+covariance its equations get from iid landmark noise (registration geometry × tangent
+stiffness), so that σ and σ% agree with the actual scatter; `hold="model"` keeps the
+undetermined unknowns at the model's values (their forces stay in the equations) and
+`eliminate=True` holds, one at a time, those whose σ% exceeds `max_sigma_pct` (the guaranteed
+least squares' elimination loop, spec guaranteed_least_squares §3.9).
 
 **Bushing convention (Adams vs thesis).** diffsusp's bushings follow the Adams BUSHING
 convention: the law acts on the I marker's part, F_I = −K·δ_T, T_I = −K_T·δ_R (δ: I relative to J,
@@ -314,11 +330,11 @@ def _scatter_vectors(n_full, idx, values):
 
 
 def _bushing_unit_forces(mech: Mechanism, y):
-    """Generalised forces (n, nb, 12) of every bushing for a unit stiffness on each axis (first
-    6 of the last axis: force on I = −(δ − δ0) along that J axis, N/mm or N·mm/rad) and a unit
-    constant force on I along each axis (last 6: the preload / K·δ0 columns), Adams convention
-    (spec stiffness §1.8; the same element functions as the solver)."""
-    from ..statics.kernel import _generalised_force, bushing_state
+    """D of the bushings: ∂Q/∂θ (n, nb, 12) for θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and
+    N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
+    of the solver's own element force function (`statics.kernel._bushing_force`, Adams
+    convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
+    from ..statics.kernel import _bushing_force
 
     b = mech.bushings
     lay, yfull, offset = _element_geometry(mech, y)
@@ -328,50 +344,43 @@ def _bushing_unit_forces(mech: Mechanism, y):
     zero3 = jnp.zeros(3, y.dtype)
 
     def one(z, x0i, r0i, x0j, r0j, off_t, off_r):
-        params = dict(k_trans=zero3, k_rot=zero3, cubic_trans=zero3, cubic_rot=zero3,
-                      offset_trans=off_t, offset_rot=off_r, preload_force=zero3,
-                      preload_torque=zero3)
-        delta_t, delta_r, _, _, xi, xj, rj = bushing_state(z, x0i, r0i, x0j, r0j, params, None)
-        e = jnp.concatenate([delta_t - off_t, delta_r - off_r])
-        local = jnp.concatenate([-jnp.diag(e), jnp.eye(6, dtype=y.dtype)], axis=0)  # (12, 6)
+        def force(theta):
+            params = dict(k_trans=theta[:3], k_rot=theta[3:6], cubic_trans=zero3,
+                          cubic_rot=zero3, offset_trans=off_t, offset_rot=off_r,
+                          preload_force=theta[6:9], preload_torque=theta[9:])
+            return _bushing_force(z, x0i, r0i, x0j, r0j, params, None)
 
-        def wrench(ft):
-            force, torque = rj @ ft[:3], rj @ ft[3:]
-            return jnp.concatenate([
-                _generalised_force(z[:6], xi, force, torque),
-                _generalised_force(z[6:], xj, -force, -torque - jnp.cross(xi - xj, force)),
-            ])
-
-        return jax.vmap(wrench)(local)  # (12 unknown kinds, 12 coordinates)
+        return jax.jacfwd(force)(jnp.zeros(12, y.dtype))  # (12 coordinates, 12 unknowns)
 
     gen = jax.vmap(one)(yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j],
                         b.offset_trans, b.offset_rot)  # (nb, 12, 12)
     full = jnp.zeros((yfull.shape[0], len(b.names), 12), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(
-        jnp.swapaxes(gen, 1, 2))
+    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(gen)
     return full[: y.shape[0]]
 
 
 def _spring_unit_forces(mech: Mechanism, y):
-    """Generalised forces (n, ns) of a unit tension (1 N pulling the seats together) in every
-    spring, and the springs' lengths (ns,) (mm)."""
-    from ..statics.kernel import _line_force, _pose
+    """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
+    model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
+    function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
+    from ..statics.kernel import _line_force
 
     s = mech.springs
     lay, yfull, offset = _element_geometry(mech, y)
     i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
     idx = lay.coords(i, j)
-    eye = jnp.eye(3, dtype=y.dtype)
 
-    def one(z, x0i, x0j):
-        xi, _ = _pose(z[:6], x0i, eye)
-        xj, _ = _pose(z[6:], x0j, eye)
-        return _line_force(z, x0i, x0j, lambda length: 1.0), jnp.linalg.norm(xj - xi)
+    def one(z, x0i, x0j, free_length):
+        def force(kc):
+            return _line_force(z, x0i, x0j,
+                               lambda length: kc[0] * (length - free_length) - kc[1])
 
-    gen, length = jax.vmap(one)(yfull[idx], offset[i], offset[j])  # (ns, 12), (ns,)
-    full = jnp.zeros((yfull.shape[0], len(s.names)), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None]].add(gen)
-    return full[: y.shape[0]], length
+        return jax.jacfwd(force)(jnp.zeros(2, y.dtype))  # (12, 2)
+
+    gen = jax.vmap(one)(yfull[idx], offset[i], offset[j], s.free_length)  # (ns, 12, 2)
+    full = jnp.zeros((yfull.shape[0], len(s.names), 2), y.dtype)
+    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None], :].add(gen)
+    return full[: y.shape[0]]
 
 
 def _constraint_jacobian(mech: Mechanism, loads, y):
@@ -423,9 +432,9 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N), and
     the null-space basis L (n, r).
 
-    D's columns are the generalised forces of each unknown at unit value, element by element
-    (exact: the forces are linear in the unknowns); Q_known is the solver's own assembly of
-    everything else (loads, the elements and axes not identified, cubic terms)."""
+    D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
+    onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
+    everything else: the loads, the elements and axes not identified, cubic terms."""
     from ..statics.kernel import assemble, get_layout, to_internal
 
     lay = get_layout(eval_mech)
@@ -435,14 +444,9 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     known = known[:n]
     parts = []
     if eval_mech.bushings.names:
-        unit_b = _bushing_unit_forces(eval_mech, y)  # (n, nb, 12)
-        parts.append(unit_b.reshape(n, -1))
+        parts.append(_bushing_unit_forces(eval_mech, y).reshape(n, -1))
     if eval_mech.springs.names:
-        unit_s, length = _spring_unit_forces(eval_mech, y)  # (n, ns)
-        # K: tension ℓ − L0 (L0 = 0 when K·L0 is an unknown too); K·L0: tension −1 N
-        # (spec §1.7, 4.37–4.38).
-        k_col = unit_s * (length - eval_mech.springs.free_length)[None, :]
-        parts.append(jnp.stack([k_col, -unit_s], axis=2).reshape(n, -1))
+        parts.append(_spring_unit_forces(eval_mech, y).reshape(n, -1))
     columns = jnp.concatenate(parts, axis=1) @ selection
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
     null, _ = _null_basis(eval_mech, loads, y, scale)
