@@ -23,15 +23,16 @@ def _main():
 
 
 def enable_x64():
-    """float64, and a persistent compilation cache so that the second run of a command does
-    not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
-    string to disable)."""
+    """float64, and, when `$DIFFSUSP_CACHE` names a folder, JAX's persistent compilation cache
+    there so that the second run of a command does not compile again. Off by default: a cache
+    write (XLA serialising an executable) once crashed a process with a segmentation fault on
+    this project's CI machine."""
     import os
 
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
+    cache = os.environ.get("DIFFSUSP_CACHE", "")
     if cache and not jax.config.jax_compilation_cache_dir:
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
