@@ -1,4 +1,5 @@
-"""Figures (matplotlib): K&C curves of models and measurements, sensitivity bars.
+"""Figures (matplotlib): K&C curves of models and measurements, sensitivity bars, and the
+identification figures (convergence histories, measured vs model per load case).
 
 Every function returns a `matplotlib.figure.Figure` (made without pyplot, so nothing is kept in a
 global figure list; in a notebook it displays as the cell's value) and accepts `ax=` to draw into
@@ -163,6 +164,63 @@ def sensitivity_bars(values, names, *, ax=None, title: str | None = None,
     ax.grid(True, axis="x", alpha=0.3)
     if title:
         ax.set_title(title)
+    return fig
+
+
+def convergence(histories: dict, *, ylabel: str, log: bool = True, xlabel: str = "iteration",
+                title: str | None = None, ax=None) -> Figure:
+    """Convergence of an identification: one line per named history (label → values per
+    iteration or step), e.g. each stiffness relative to its final value, or the loss.
+
+    **Returns:** the Figure.
+    """
+    if ax is None:
+        fig = Figure(figsize=(6.4, 3.6), layout="constrained")
+        ax = fig.subplots()
+    else:
+        fig = ax.figure
+    for label, values in histories.items():
+        values = np.asarray(values, dtype=float)
+        ax.plot(np.arange(1, values.size + 1), values, marker=".", label=str(label))
+    if log:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    if len(histories) <= 16:
+        ax.legend(fontsize="x-small", ncols=2 if len(histories) > 6 else 1)
+    if title:
+        ax.set_title(title)
+    return fig
+
+
+def case_comparison(series: dict, channels: Sequence[tuple[str, str]], *, measured: str =
+                    "measured", title: str | None = None, ax=None) -> Figure:
+    """Measured vs model, load case by load case: one panel per channel, the measured values as
+    markers and each model (e.g. start and identified) as a line.
+
+    **Arguments:** `series`: label → {channel: (cases,) values, in the units shown}; the entry
+    labelled `measured` is drawn as markers. `channels`: (key, axis label with unit) pairs.
+
+    **Returns:** the Figure.
+    """
+    fig, axes = _new_axes(len(channels), ax)
+    for a, (key, label) in zip(axes, channels, strict=True):
+        for name, values in series.items():
+            if key not in values:
+                continue
+            v = np.asarray(values[key], dtype=float)
+            x = np.arange(1, v.size + 1)
+            if name == measured:
+                a.plot(x, v, "o", mfc="none", label=name)
+            else:
+                a.plot(x, v, marker=".", lw=1.0, label=name)
+        a.set_ylabel(label)
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize="small")
+    axes[-1].set_xlabel("load case")
+    if title:
+        fig.suptitle(title)
     return fig
 
 

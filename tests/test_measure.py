@@ -221,6 +221,34 @@ def test_poses_for_the_wrong_parts(bushing, synthetic):
         measure.from_poses(("arm",), meas.rotation, nan, meas.loads)
 
 
+def test_deformations_of_bushings_between_measured_parts_only():
+    """With the strut unmeasured, the deformations of the bushings between measured parts are
+    those of the full measurement; a bushing on the strut is refused by name."""
+    from diffsusp.geometry import gibbs_to_matrix
+    from diffsusp.models import pseudo_mcpherson
+
+    mech = pseudo_mcpherson()
+    rng = np.random.default_rng(0)
+    rot = np.asarray(jax.vmap(gibbs_to_matrix)(jnp.asarray(rng.normal(0, 0.02, (8, 3)))))
+    rot, trans = rot.reshape(2, 4, 3, 3), rng.normal(0, 2.0, (2, 4, 3))
+    loads = mech.loads(forces={"contact_patch": jnp.zeros((2, 3))})
+    full = measure.from_poses(mech.parts, rot, trans, loads)
+    keep = [p for p in range(4) if mech.parts[p] != "strut"]
+    part = measure.from_poses(tuple(mech.parts[p] for p in keep), rot[:, keep], trans[:, keep],
+                              loads)
+    ref = measure.bushing_deformations(mech, full)
+    names = ("bushing_A", "bushing_B")
+    got = measure.bushing_deformations(mech, part, names)
+    idx = [mech.bushings.index(n) for n in names]
+    for a, b in zip(got, ref, strict=True):
+        np.testing.assert_allclose(a, np.asarray(b)[:, idx], atol=1e-12)
+    strut_bushings = [n for n in mech.bushings.names if n not in names]
+    with pytest.raises(InputError, match="has no measured pose"):
+        measure.bushing_deformations(mech, part, strut_bushings)
+    with pytest.raises(InputError, match="no pose for part 'strut'"):
+        measure.bushing_deformations(mech, part)
+
+
 def test_case_subset(synthetic):
     _, meas = synthetic
     sub = measure.case_subset(meas, [2, 0])

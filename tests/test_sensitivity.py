@@ -1,6 +1,8 @@
 """Sensitivities of K&C metrics (exact, second order through the equilibrium where needed) and
 experiment design. spec: stiffness §2.7, §3; guaranteed_least_squares §3.8."""
 
+import json
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -123,3 +125,38 @@ def test_experiment_design_picks_one_case_per_direction_with_closed_form_sigma()
     assert sorted(rep.chosen) == [3, 4, 5]
     with pytest.raises(ds.InputError, match="criterion"):
         design_experiment(mech, candidates, params, 3, criterion="A")
+
+
+def test_sensitivity_command(tmp_path):
+    """`diffsusp sensitivity`: ranked table, JSON Jacobians equal to the library's, figures,
+    and bad input (exit 2)."""
+    from typer.testing import CliRunner
+
+    from diffsusp.cli import app
+
+    args = ["sensitivity", "pseudo_mcpherson", "--travel", "-40:40:5", "--no-derivatives",
+            "--metric", "toe", "--metric", "camber"]
+    runner = CliRunner()
+    result = runner.invoke(app, [*args, "--out", str(tmp_path), "--top", "3"])
+    assert result.exit_code == 0, result.output
+    assert "bushing_A.Ktx" in result.output or "bushing_B.Ktx" in result.output
+    assert (tmp_path / "sensitivity_toe.png").stat().st_size > 0
+    out = json.loads(runner.invoke(app, [*args, "--json"]).output)
+    assert set(out["metrics"]) == {"toe", "camber"}
+    mech = pseudo_mcpherson()
+    # The spring rate's column against a central difference of two re-runs of the event (the
+    # same compiled program).
+    j = out["params"].index("spring.k")
+    k = float(mech.springs.k[0])
+    toe = [np.asarray(kc.parallel_travel(
+        eqx.tree_at(lambda m: m.springs.k, mech, mech.springs.k.at[0].set(k + s * 1e-4 * k)),
+        travel=jnp.linspace(-40.0, 40.0, 5)).metrics["toe"]) for s in (1, -1)]
+    fd = (toe[0] - toe[1]) / (2e-4 * k)
+    np.testing.assert_allclose(np.asarray(out["metrics"]["toe"]["jacobian"])[:, j], fd,
+                               rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+    for bad, message in ((["--params", "all"], "--params must be one of"),
+                         (["--metric", "nope"], "unknown metric(s) ['nope']")):
+        result = runner.invoke(app, ["sensitivity", "pseudo_mcpherson", "--no-derivatives",
+                                     "--travel", "-40:40:5", *bad])
+        assert result.exit_code == 2, result.output
+        assert message in " ".join(result.output.split())

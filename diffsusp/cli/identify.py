@@ -169,3 +169,472 @@ def _print(report, mech, measurements, out, write_model):
     for label, path in (("report", out), ("identified model", write_model)):
         if path is not None:
             con.print(f"{label} written to {path}", highlight=False)
+
+
+# ----------------------------------------------------------------------------- shared
+
+
+_DEG = 3.141592653589793 / 180.0
+_ROTATIONAL = ("Krx", "Kry", "Krz")
+
+
+def _check_paths(out, write_model):
+    for path, kinds in ((out, (".csv", ".json")), (write_model, (".toml", ".adm"))):
+        if path is not None and path.suffix.lower() not in kinds:
+            raise fail(f"{path}: use a {' or '.join(kinds)} file.", EXIT_BAD_INPUT)
+
+
+def _measured_bushings(mech, meas, names):
+    """The bushings to identify: as named, or every bushing whose parts are all measured."""
+    from ..errors import InputError
+
+    if names:
+        for n in names:
+            if n not in mech.bushings.names:
+                raise InputError(f"model '{mech.name}' has no bushing '{n}'; its bushings: "
+                                 f"{', '.join(mech.bushings.names) or 'none'}.")
+        return tuple(names)
+    out = []
+    for b, name in enumerate(mech.bushings.names):
+        parts = {mech.markers.part[mech.bushings.i_marker[b]],
+                 mech.markers.part[mech.bushings.j_marker[b]]}
+        if all(p < 0 or mech.parts[p] in meas.parts for p in parts):
+            out.append(name)
+    if not out:
+        raise InputError("no bushing of the model connects measured parts only; measure the "
+                         "parts of the bushings to identify, or name them with --bushing.")
+    return tuple(out)
+
+
+def _with_start(mech, names, start):
+    """`mech` with every stiffness of the bushings `names` set to `start` (N/mm and N·mm/deg,
+    the thesis's start: 10⁴ for both)."""
+    import equinox as eqx
+    import numpy as np
+
+    if start is None:
+        return mech
+    if not start > 0:
+        raise fail(f"--start must be a positive stiffness; got {start}.", EXIT_BAD_INPUT)
+    kt, kr = np.array(mech.bushings.k_trans), np.array(mech.bushings.k_rot)
+    for n in names:
+        b = mech.bushings.index(n)
+        kt[b], kr[b] = start, start / _DEG
+    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech, (kt, kr))
+
+
+def _case_channels(mech, q):
+    """Per-case channels for the measured-vs-model figure: toe, camber (deg) and wheel-centre
+    height (mm) of the model's wheel corner when it has one, else the displacement of each
+    part's frame origin (mm). `q`: (cases, n) public coordinates."""
+    import jax
+    import numpy as np
+
+    from .. import kc
+    from ..errors import InputError
+    from ..kc.metrics import corner_geometry
+    from ..statics import part_poses
+
+    try:
+        rc = kc.default_corner(mech).resolve(mech)
+    except (InputError, KeyError, ValueError):
+        rc = None
+    if rc is not None:
+        geo = jax.vmap(lambda qq: corner_geometry(mech, rc, qq))(q)
+        return ({"toe": np.degrees(np.asarray(geo["toe"])),
+                 "camber": np.degrees(np.asarray(geo["camber"])),
+                 "wheel_centre_z": np.asarray(geo["wheel_centre_z"])},
+                [("toe", "toe (deg, in +)"), ("camber", "camber (deg)"),
+                 ("wheel_centre_z", "wheel centre z (mm)")], mech.markers.part[rc.wheel_centre])
+    _, trans = part_poses(mech, q)
+    trans = np.asarray(trans)
+    channels, values = [], {}
+    for p, part in enumerate(mech.parts[:3]):
+        values[part] = np.linalg.norm(trans[:, p], axis=-1)
+        channels.append((part, f"{part} displacement (mm)"))
+    return values, channels, None
+
+
+def _comparison_figure(mech_start, mech_fitted, meas, title):
+    """Measured vs start vs identified model per load case."""
+    from .. import plot
+    from ..statics import solve_statics
+
+    series = {}
+    values, channels, wheel_part = _case_channels(mech_fitted, meas.coordinates(
+        mech_fitted, unmeasured="design"))
+    measured_parts = {p for p in meas.parts}
+    if wheel_part is not None and mech_fitted.parts[wheel_part] in measured_parts:
+        series["measured"] = values
+    elif wheel_part is None:
+        series["measured"] = {k: v for k, v in values.items() if k in measured_parts}
+    for label, m in (("start model", mech_start), ("identified", mech_fitted)):
+        sol = solve_statics(m, meas.loads, throw=False)
+        series[label] = _case_channels(m, sol.q)[0]
+    return plot.case_comparison(series, channels, title=title)
+
+
+def _progress():
+    """A transient progress bar on stderr (bounded loops: iterations, LM steps)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                    console=console(stderr=True), transient=True)
+
+
+# ----------------------------------------------------------------------------- iterative
+
+
+@identify_app.command("iterative")
+def iterative_command(
+    model: Annotated[str, typer.Argument(
+        help="Model file (.toml, .adm, .json) or built-in name.")],
+    measurements: Annotated[Path, typer.Option(
+        "--measurements", "-m",
+        help="Landmark or pose table with the loads of each case (.csv or .parquet).")],
+    bushing: Annotated[list[str] | None, typer.Option(
+        "--bushing", "-b", help="Bushing to identify (repeatable; default: every bushing "
+        "between measured parts).")] = None,
+    axisymmetric: Annotated[list[str] | None, typer.Option(
+        help="Bushing whose x and y stiffnesses are merged (repeatable).")] = None,
+    start: Annotated[float | None, typer.Option(
+        help="Start every stiffness of the identified bushings here (N/mm and N·mm/deg; the "
+        "thesis: 1e4). Default: the model's values.")] = None,
+    r_min: Annotated[float, typer.Option(help="Correlation gate.")] = 0.75,
+    eps: Annotated[float, typer.Option(help="Relative-change stop.")] = 0.01,
+    resolution: Annotated[str, typer.Option(
+        help="Measurement resolution 'mm,deg': a direction whose deformation varies less is "
+        "not identified ('none': no such gate).")] = "0.001,0.01",
+    max_iterations: Annotated[int, typer.Option(help="Bound on the loop.")] = 100,
+    reorder: Annotated[bool, typer.Option(
+        help="Match landmarks probed in any order by their distance tables.")] = False,
+    out: Annotated[Path | None, typer.Option(help="Write the report (.csv or .json).")] = None,
+    write_model: Annotated[Path | None, typer.Option(
+        help="Write the identified model (.toml, or .adm).")] = None,
+    figures: Annotated[Path | None, typer.Option(
+        help="Write the convergence and measured-vs-identified figures (PNG, SVG) here.")]
+    = None,
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable report.")] = False,
+):
+    """Identify bushing stiffnesses by the thesis's iterative correlation loop (spec stiffness
+    §2): each pass solves every load case with the current stiffnesses and regresses each
+    direction's bushing force on its measured deformation.
+    """
+    import numpy as np
+
+    _check_paths(out, write_model)
+    res = None
+    if resolution.strip().lower() != "none":
+        try:
+            mm, deg = (float(v) for v in resolution.split(","))
+        except ValueError:
+            raise fail(f"--resolution must be 'mm,deg' or 'none'; got '{resolution}'.",
+                       EXIT_BAD_INPUT) from None
+        res = (mm, deg * _DEG)
+    enable_x64()
+    from .. import measure
+    from ..identify.iterative import iterative
+    from ..io import load_model_file
+
+    with cli_errors():
+        model_file = load_model_file(model)
+        mech = model_file.mechanism
+        meas = measure.read_measurements(measurements, mech, reorder=reorder)
+        names = _measured_bushings(mech, meas, bushing)
+        d_t, d_r = measure.bushing_deformations(mech, meas, names)
+        measured = np.concatenate([np.asarray(d_t), np.asarray(d_r)], axis=-1)
+        mech0 = _with_start(mech, names, start)
+        with _progress() as progress:
+            task = progress.add_task("iteration", total=max_iterations)
+
+            def step(i, record):
+                progress.update(task, completed=i,
+                                description=f"iteration {i}: largest change "
+                                f"{100 * record.max_change:.3g}%")
+
+            fitted, report = iterative(
+                mech0, meas.loads, measured, bushings=names,
+                axisymmetric=tuple(axisymmetric or ()), r_min=r_min, resolution=res, eps=eps,
+                max_iterations=max_iterations, callback=step)
+        if out is not None:
+            _write_iterative(report, out)
+        if write_model is not None:
+            _write_model(fitted, write_model, model_file)
+        paths = []
+        if figures is not None:
+            paths = _iterative_figures(report, mech0, fitted, meas, figures)
+    if json_output:
+        print_json(report.to_dict())
+        return
+    con = console()
+    con.print(f"{mech.name}: iterative identification from {measurements.name} "
+              f"({meas.n_cases} cases)", highlight=False)
+    con.print(report.table(), highlight=False)
+    for label, path in (("report", out), ("identified model", write_model)):
+        if path is not None:
+            con.print(f"{label} written to {path}", highlight=False)
+    if paths:
+        con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+
+
+def _iterative_rows(report):
+    from ..identify.iterative import AXES
+
+    rows = []
+    for b, name in enumerate(report.bushings):
+        for a, axis in enumerate(AXES):
+            scale = _DEG if axis in _ROTATIONAL else 1.0
+            rows.append(dict(
+                parameter=f"{name}.{axis}", value=float(report.stiffness[b, a] * scale),
+                unit="N*mm/deg" if axis in _ROTATIONAL else "N/mm",
+                start=float(report.start[b, a] * scale),
+                identified=bool(report.identified[b, a]),
+                equalised=bool(report.equalised[b, a]), r=float(report.r[b, a])))
+    return rows
+
+
+def _write_iterative(report, path: Path):
+    import json
+
+    if path.suffix.lower() == ".json":
+        path.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+        return
+    _write_rows(_iterative_rows(report), path)
+
+
+def _write_rows(rows, path: Path):
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _iterative_figures(report, mech0, fitted, meas, folder: Path):
+    import numpy as np
+
+    from .. import plot
+    from ..identify.iterative import AXES
+
+    k = np.stack([r.stiffness for r in report.history])  # (iterations, n, 6)
+    histories = {}
+    for b, name in enumerate(report.bushings):
+        for a, axis in enumerate(AXES):
+            if report.identified[b, a]:
+                histories[f"{name}.{axis}"] = np.abs(k[:, b, a] / report.stiffness[b, a] - 1.0
+                                                     ) + 1e-16
+    fig = plot.convergence(histories, ylabel="|K / K_final − 1|",
+                           title=f"{fitted.name}: iterative identification")
+    paths = plot.save(fig, folder / "iterative_convergence")
+    fig = _comparison_figure(mech0, fitted, meas, f"{fitted.name}: measured vs identified")
+    return paths + plot.save(fig, folder / "iterative_cases")
+
+
+# ----------------------------------------------------------------------------- fit
+
+
+def _fit_data(meas, sigma, sigma_rotation):
+    """Least-squares measurements from a measurement table: the landmarks themselves (any
+    subset of the parts), or the poses of a pose table."""
+    import numpy as np
+
+    from ..identify.data import Landmarks, Poses
+
+    if meas.landmarks is not None:
+        layout = meas.layout
+        present = layout.present
+        parts, points, cols = [], [], []
+        for p, part in enumerate(layout.parts):
+            for a in np.flatnonzero(present[p]):
+                parts.append(part)
+                points.append(np.asarray(layout.position[p, a]))
+                cols.append((p, a))
+        pi, ai = (np.array(v) for v in zip(*cols, strict=True))
+        measured = np.asarray(meas.landmarks)[:, pi, ai]
+        weight = np.asarray(meas.weights)[:, pi, ai]
+        mask = (weight > 0) & np.all(np.isfinite(measured), axis=-1)
+        measured = np.where(mask[..., None], measured, 0.0)
+        return Landmarks(meas.loads, parts, np.array(points), measured, sigma, mask=mask)
+    return Poses(meas.loads, meas.parts, np.asarray(meas.rotation), np.asarray(meas.translation),
+                 sigma, sigma_rotation)
+
+
+def _fit_params(mech, bushings, axes, centres, springs, start):
+    from ..errors import InputError
+    from ..identify.params import AXES, Params
+
+    axes = tuple(a.strip() for a in axes.split(",")) if axes else AXES
+    names = tuple(bushings or mech.bushings.names)
+    params = None
+    if names and axes:
+        params = Params.bushing_stiffness(mech, names, axes=axes)
+    if centres:
+        c = Params.bushing_centres(mech, names)
+        params = c if params is None else params + c
+    if springs and mech.springs.names:
+        s = Params.leaves(mech, lambda m: m.springs.k)
+        params = s if params is None else params + s
+    if params is None:
+        raise InputError("nothing to identify: the model has no bushings (or --axes is empty) "
+                         "and neither --centres nor --springs was asked.")
+    if start is not None:
+        import numpy as np
+
+        values = np.array(params.start, dtype=float)
+        for k, name in enumerate(params.names):
+            axis = name.rsplit(".", 1)[-1]
+            if axis in AXES:
+                values[k] = start / _DEG if axis in _ROTATIONAL else start
+        params = params.with_start(values)
+    return params
+
+
+def _display(name, value):
+    """Value in the thesis's units: rotational stiffness per degree."""
+    axis = name.rsplit(".", 1)[-1]
+    if axis in _ROTATIONAL:
+        return value * _DEG, "N*mm/deg"
+    if axis in ("Ktx", "Kty", "Ktz") or name.endswith(".k"):
+        return value, "N/mm"
+    return value, "mm"
+
+
+def _fit_rows(report):
+    rows = []
+    for k, name in enumerate(report.names):
+        value, unit = _display(name, report.estimate[k])
+        scale = value / report.estimate[k] if report.estimate[k] else 1.0
+        rows.append(dict(parameter=name, value=float(value), sigma=float(report.sigma[k] * scale),
+                         sigma_pct=float(report.sigma_percent[k]), unit=unit,
+                         start=float(_display(name, report.start[k])[0]),
+                         identifiable=bool(report.identifiable[k])))
+    return rows
+
+
+@identify_app.command("fit")
+def fit_command(
+    model: Annotated[str, typer.Argument(
+        help="Model file (.toml, .adm, .json) or built-in name.")],
+    measurements: Annotated[Path, typer.Option(
+        "--measurements", "-m",
+        help="Landmark or pose table with the loads of each case (.csv or .parquet); any "
+        "subset of the parts.")],
+    bushing: Annotated[list[str] | None, typer.Option(
+        "--bushing", "-b", help="Bushing whose stiffnesses are identified (repeatable; default: "
+        "all).")] = None,
+    axes: Annotated[str | None, typer.Option(
+        help="Stiffness axes, e.g. 'Ktx,Ktz,Krz' (default: all six).")] = None,
+    centres: Annotated[bool, typer.Option(
+        help="Also identify the bushings' centres (hardpoints, mm).")] = False,
+    springs: Annotated[bool, typer.Option(help="Also identify the spring rates.")] = False,
+    start: Annotated[float | None, typer.Option(
+        help="Start every identified stiffness here (N/mm and N·mm/deg). Default: the model's "
+        "values.")] = None,
+    sigma: Annotated[float, typer.Option(
+        help="Measurement σ (mm): landmark or pose translation (the thesis's arm: 0.05).")]
+    = 0.05,
+    sigma_rotation: Annotated[float, typer.Option(
+        help="Pose rotation σ (deg), pose tables only.")] = 0.01,
+    loss: Annotated[str, typer.Option(help="linear | huber | cauchy.")] = "linear",
+    max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 100,
+    reorder: Annotated[bool, typer.Option(
+        help="Match landmarks probed in any order by their distance tables.")] = False,
+    out: Annotated[Path | None, typer.Option(help="Write the report (.csv or .json).")] = None,
+    write_model: Annotated[Path | None, typer.Option(
+        help="Write the identified model (.toml, or .adm).")] = None,
+    figures: Annotated[Path | None, typer.Option(
+        help="Write the convergence and measured-vs-identified figures (PNG, SVG) here.")]
+    = None,
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable report.")] = False,
+):
+    """Identify stiffnesses (and hardpoints) by least squares through the equilibrium: the
+    model's landmarks or poses are fitted to the measured ones (Levenberg–Marquardt, exact
+    derivatives), with σ, σ% and the combinations the data cannot see.
+    """
+    from ..identify.least_squares import LOSSES
+
+    _check_paths(out, write_model)
+    if loss not in LOSSES:
+        raise fail(f"--loss must be one of {', '.join(LOSSES)}; got '{loss}'.", EXIT_BAD_INPUT)
+    if not (sigma > 0 and sigma_rotation > 0):
+        raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
+    enable_x64()
+    from .. import measure
+    from ..identify.least_squares import least_squares
+    from ..io import load_model_file
+
+    with cli_errors():
+        model_file = load_model_file(model)
+        mech = model_file.mechanism
+        meas = measure.read_measurements(measurements, mech, reorder=reorder)
+        data = _fit_data(meas, sigma, sigma_rotation * _DEG)
+        params = _fit_params(mech, bushing, axes, centres, springs, start)
+        with _progress() as progress:
+            task = progress.add_task("step", total=max_steps)
+
+            def step(i, record):
+                progress.update(task, completed=i, description=f"step {i}: loss "
+                                f"{record.trial_loss:.4g}")
+
+            fitted, report = least_squares(mech, data, params, loss=loss, max_steps=max_steps,
+                                           callback=step)
+        if out is not None:
+            if out.suffix.lower() == ".json":
+                import json
+
+                out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+            else:
+                _write_rows(_fit_rows(report), out)
+        if write_model is not None:
+            _write_model(fitted, write_model, model_file)
+        paths = []
+        if figures is not None:
+            paths = _fit_figures(report, params.apply(mech, params.start), fitted, meas,
+                                 figures)
+    if json_output:
+        print_json(report.to_dict())
+        return
+    _print_fit(report, mech, measurements, meas, out, write_model, paths)
+
+
+def _fit_figures(report, mech0, fitted, meas, folder: Path):
+    from .. import plot
+
+    losses = {"loss ½Σr² at the estimate": [max(r.trial_loss, 1e-300) if r.accepted else
+                                            float("nan") for r in report.history]}
+    fig = plot.convergence(losses, ylabel="loss", xlabel="LM step",
+                           title=f"{fitted.name}: least-squares fit")
+    paths = plot.save(fig, folder / "fit_convergence")
+    fig = _comparison_figure(mech0, fitted, meas, f"{fitted.name}: measured vs identified")
+    return paths + plot.save(fig, folder / "fit_cases")
+
+
+def _print_fit(report, mech, measurements, meas, out, write_model, paths):
+    con = console()
+    table = RichTable(
+        title=f"{mech.name}: least-squares fit to {measurements.name} ({meas.n_cases} cases, "
+        f"{report.n_residuals} residuals, loss {report.loss_name})", box=box.SIMPLE_HEAD)
+    for col in ("parameter", "start", "estimate", "sigma", "sigma%", "unit", "status"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit", "status")
+                         else "right", no_wrap=col != "status")
+    for row in _fit_rows(report):
+        pct = row["sigma_pct"]
+        table.add_row(row["parameter"], f"{row['start']:.6g}", f"{row['value']:.6g}",
+                      f"{row['sigma']:.3g}", f"{pct:.3g}" if pct == pct else "—", row["unit"],
+                      "identified" if row["identifiable"] else "not identifiable")
+    con.print(table)
+    if report.null_space:
+        con.print("combinations the data cannot see (internal coordinates: log K, mm):")
+        for d in report.null_space:
+            con.print(f"  {d.text}  (σ {d.sigma:.3g})", highlight=False)
+    state = "converged" if report.converged else "NOT converged"
+    con.print(f"{state} in {report.steps} steps ({report.accepted_steps} accepted); chi2/dof "
+              f"{report.chi2 / max(report.dof, 1):.3g}.", highlight=False)
+    outliers = report.outliers(threshold=5.0)
+    if outliers:
+        con.print(f"{len(outliers)} residual(s) beyond 5σ, largest "
+                  f"{max(abs(o[2]) for o in outliers):.3g}σ (try --loss huber).", highlight=False)
+    for label, path in (("report", out), ("identified model", write_model)):
+        if path is not None:
+            con.print(f"{label} written to {path}", highlight=False)
+    if paths:
+        con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)

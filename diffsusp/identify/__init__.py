@@ -1,8 +1,36 @@
 """Identification of model parameters from measurements (spec stiffness ch. 4–5, geometry
-ch. 2–3): `direct` (linear, from measured equilibria), with `iterative`, `least_squares` and
-`sensitivity` alongside. Each takes a mechanism and measurements and returns the identified
-mechanism and a report."""
+ch. 2–3, guaranteed least squares):
 
+- `direct`: linear, from measured equilibria (every part's pose; milliseconds).
+- `iterative`: the thesis's correlation loop on the solver (measured bushing deformations).
+- `least_squares` / `least_squares_batch`: nonlinear least squares through the differentiable
+  equilibrium, from any measurements (`Landmarks`, `Poses`, `Deformations`, `Channel`) of any
+  parameters (`Params`: stiffnesses, hardpoints), with σ, identifiability and the directions the
+  data cannot see; batched over many data sets.
+- `sensitivity` and `design_experiment`: exact ∂(K&C metric)/∂(parameter), and the choice of
+  load cases that best determine chosen parameters.
+
+Each identification takes a mechanism and measurements and returns the identified mechanism and
+a report.
+"""
+
+from .data import Channel, Deformations, Landmarks, Measurement, Poses
 from .direct import DirectReport, DirectSystem, direct, direct_system
+from .iterative import IterativeReport, iterative
+from .least_squares import (
+    BatchFitReport,
+    FitReport,
+    least_squares,
+    least_squares_batch,
+    predict,
+    whitened_residuals,
+)
+from .params import Params
+from .sensitivity import DesignReport, SensitivityReport, design_experiment, sensitivity
 
-__all__ = ["DirectReport", "DirectSystem", "direct", "direct_system"]
+__all__ = [
+    "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
+    "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
+    "SensitivityReport", "design_experiment", "direct", "direct_system", "iterative",
+    "least_squares", "least_squares_batch", "predict", "sensitivity", "whitened_residuals",
+]

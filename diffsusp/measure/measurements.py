@@ -22,7 +22,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..errors import InputError
 from ..geometry.registration import register_landmarks
 from ..geometry.rotations import GIBBS_SINGULARITY_TOL, _matrix_to_quaternion
-from ..model.mechanism import Loads, Mechanism
+from ..model.mechanism import GROUND, Loads, Mechanism
 from .landmarks import (
     MIN_LANDMARKS,
     REORDER_TOLERANCE,
@@ -67,13 +67,34 @@ class Measurements(eqx.Module):
     def n_cases(self) -> int:
         return self.rotation.shape[-4]
 
-    def coordinates(self, mech: Mechanism) -> Float[Array, "cases n"]:
+    def coordinates(self, mech: Mechanism, *, unmeasured: str = "error"
+                    ) -> Float[Array, "cases n"]:
         """Public generalised coordinates q (cases, 6·parts) of `mech` at the measured poses:
         per part the translation T (mm) and the Gibbs vector of R (spec stiffness §1.3).
+
+        `unmeasured='design'` puts parts without a measured pose at their design pose (q = 0),
+        for quantities that depend on the measured parts only (e.g. the deformation of a bushing
+        between two measured parts); the default raises.
 
         **Raises:** `InputError` if a moving part of `mech` has no measured pose (the direct
         method needs every part: spec stiffness §1.1, §1.14).
         """
+        if unmeasured not in ("error", "design"):
+            raise InputError(f"unmeasured must be 'error' or 'design'; got '{unmeasured}'.")
+        meas = self
+        if unmeasured == "design":
+            missing = [p for p in mech.parts if p not in self.parts]
+            if missing:
+                n = self.n_cases
+                eye = jnp.broadcast_to(jnp.eye(3), (n, len(missing), 3, 3))
+                meas = Measurements(
+                    rotation=jnp.concatenate([self.rotation, eye], axis=1),
+                    translation=jnp.concatenate(
+                        [self.translation, jnp.zeros((n, len(missing), 3))], axis=1),
+                    loads=self.loads, parts=self.parts + tuple(missing), cases=self.cases)
+        return meas._coordinates_of(mech)
+
+    def _coordinates_of(self, mech: Mechanism):
         index = []
         for part in mech.parts:
             if part not in self.parts:
@@ -357,14 +378,32 @@ def synthesize(
     return meas
 
 
-def bushing_deformations(mech: Mechanism, meas: Measurements):
+def bushing_deformations(mech: Mechanism, meas: Measurements, bushings=None):
     """Bushing deformations at the measured poses (spec stiffness §1.8, geometry §2.6):
     δ_T (cases, bushings, 3) in mm and the projected angles (cases, bushings, 3) in rad, of
-    each bushing's I marker relative to its J marker, in J axes (Adams convention)."""
+    each bushing's I marker relative to its J marker, in J axes (Adams convention).
+
+    `bushings`: names (default: all, and every moving part must be measured); with names, only
+    the parts those bushings connect need a measured pose, and the result follows their order.
+
+    **Raises:** `InputError` if a part of a requested bushing has no measured pose.
+    """
     from ..statics import bushing_states
 
-    delta_t, delta_r, _, _ = bushing_states(mech, meas.coordinates(mech))
-    return delta_t, delta_r
+    if bushings is None:
+        delta_t, delta_r, _, _ = bushing_states(mech, meas.coordinates(mech))
+        return delta_t, delta_r
+    index = [mech.bushings.index(n) for n in bushings]
+    for name, b in zip(bushings, index, strict=True):
+        for marker in (mech.bushings.i_marker[b], mech.bushings.j_marker[b]):
+            part = mech.markers.part[marker]
+            if part != GROUND and mech.parts[part] not in meas.parts:
+                raise InputError(
+                    f"bushing '{name}' connects part '{mech.parts[part]}', which has no "
+                    f"measured pose (measured parts: {', '.join(meas.parts) or 'none'}).")
+    q = meas.coordinates(mech, unmeasured="design")
+    delta_t, delta_r, _, _ = bushing_states(mech, q)
+    return delta_t[:, np.asarray(index)], delta_r[:, np.asarray(index)]
 
 
 def case_subset(meas: Measurements, cases) -> Measurements:

@@ -1,0 +1,168 @@
+"""`diffsusp sensitivity MODEL --event NAME`: exact sensitivities of K&C metrics to parameters.
+
+Runs a K&C event (the events and range options of `diffsusp kc`), differentiates every metric
+with respect to the chosen parameters through the implicit equilibrium
+(`diffsusp.identify.sensitivity`, spec stiffness §3 perspective 3) and prints, per metric, the
+parameters ranked by elasticity (relative change of the metric, in units of its largest
+magnitude over the event, per relative change of a stiffness or per mm of a hardpoint).
+`--json` prints the full Jacobians; `--out DIR` writes one bar chart per metric (PNG, SVG).
+"""
+
+import pathlib
+import time
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.table import Table
+
+from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+from .kc import EVENTS, _corner, _model, _nan_to_none, _run_event
+
+PARAMETER_SETS = {
+    "stiffness": "every non-zero bushing stiffness and spring rate (log-scaled: per relative "
+                 "change)",
+    "centres": "the centre of every bushing (x, y, z in mm)",
+    "hardpoints": "the position of every marker on a moving part (x, y, z in mm)",
+}
+
+_DEFAULT_METRICS = ("toe", "camber", "half_track_change", "bump_steer", "bump_camber",
+                    "wheel_rate", "lateral_compliance_steer", "steer_gain")
+
+
+def _params(mech, which: str):
+    import numpy as np
+
+    from diffsusp.identify.params import Params
+
+    if which == "stiffness":
+        where = [lambda m: m.bushings.k_trans, lambda m: m.bushings.k_rot,
+                 lambda m: m.springs.k]
+        leaves = [np.asarray(w(mech)) for w in where]
+        picked = [(w, v > 0) for w, v in zip(where, leaves, strict=True) if np.any(v > 0)]
+        return Params.leaves(mech, lambda m: tuple(w(m) for w, _ in picked),
+                             tuple(mask for _, mask in picked))
+    if which == "centres":
+        return Params.bushing_centres(mech, mech.bushings.names)
+    moving = np.asarray(mech.markers.part) >= 0
+    mask = np.repeat(moving[:, None], 3, axis=1)
+    return Params.leaves(mech, lambda m: m.markers.position, mask)
+
+
+@app.command("sensitivity")
+def sensitivity_command(
+    model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
+    event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
+                                       + ", ".join(EVENTS))] = "parallel-travel",
+    params: Annotated[str, typer.Option(
+        "--params", "-p", help="parameters: " + "; ".join(f"{k}: {v}" for k, v in
+                                                         PARAMETER_SETS.items()))]
+    = "stiffness",
+    metric: Annotated[list[str] | None, typer.Option(
+        "--metric", help="metric to report (repeatable; default: toe, camber, half-track "
+        "change and the derivative metrics the event has)")] = None,
+    top: Annotated[int, typer.Option(help="parameters shown per metric")] = 5,
+    derivatives: Annotated[bool, typer.Option(
+        help="include the derivative metrics (bump steer, wheel rate, compliance steer...: "
+        "second derivatives of the equilibrium, a longer compile)")] = True,
+    travel: Annotated[str, typer.Option(help="wheel travel range (mm) start:stop:count")]
+    = "-80:80:17",
+    fz: Annotated[str | None, typer.Option(help="vertical load (N), as for `diffsusp kc`")]
+    = None,
+    force: Annotated[str, typer.Option(help="lateral / braking / traction force range (N)")]
+    = "-4000:4000:9",
+    torque: Annotated[str, typer.Option(help="aligning torque range (N·m)")] = "-200:200:9",
+    rack: Annotated[str, typer.Option(help="rack travel range (mm)")] = "-30:30:13",
+    out: Annotated[pathlib.Path | None, typer.Option(
+        help="write one sensitivity bar chart per metric (PNG and SVG) to this folder")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output on stdout")]
+    = False,
+):
+    """Exact sensitivities of MODEL's K&C metrics over an event to its stiffnesses or
+    hardpoints, ranked by elasticity."""
+    if event not in EVENTS:
+        raise fail(f"unknown event '{event}'; known events: {', '.join(EVENTS)}.",
+                   EXIT_BAD_INPUT)
+    if params not in PARAMETER_SETS:
+        raise fail(f"--params must be one of {', '.join(PARAMETER_SETS)}; got '{params}'.",
+                   EXIT_BAD_INPUT)
+    if top < 1:
+        raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
+    enable_x64()
+    from diffsusp.identify.sensitivity import sensitivity
+
+    err = console(stderr=True)
+    with cli_errors():
+        mech = _model(model)
+        corner = _corner(mech, None, None, None, None)
+        t0 = time.perf_counter()
+        with err.status(f"running {event} on {mech.name} and differentiating (the first run "
+                        "compiles, 1–3 min)..."):
+            ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
+            selection = _params(ev.rig.mech, params)
+            names = _metric_names(ev, metric, derivatives)
+            report = sensitivity(ev, selection, metrics=names, derivatives=derivatives)
+        elapsed = time.perf_counter() - t0
+        paths = []
+        if out is not None:
+            from diffsusp import plot
+
+            for name in names:
+                fig = report.plot(name, top=max(top, 12))
+                paths += plot.save(fig, out / f"sensitivity_{name.replace('/', '_')}")
+    if as_json:
+        print_json(_nan_to_none(_json(report, mech.name, ev)))
+        return
+    con = console()
+    con.print(_table(report, mech.name, ev, params, top))
+    con.print(f"elasticity: ∂metric/∂θ · θ / max|metric| over the event (θ → 1 mm for "
+              f"positions); sign + means the metric grows with the parameter. {len(ev.x)} "
+              f"cases, {len(report.params)} parameters, {elapsed:.1f} s.", highlight=False)
+    if paths:
+        con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+
+
+def _metric_names(ev, asked, derivatives: bool) -> tuple[str, ...]:
+    from diffsusp.errors import InputError
+    from diffsusp.kc.metrics import DERIVATIVE_METRICS
+
+    available = {k for k in ev.metrics if not k.rsplit("/", 1)[-1].startswith("_")}
+    if not derivatives:
+        available = {k for k in available if k.rsplit("/", 1)[-1] not in DERIVATIVE_METRICS}
+    if asked:
+        unknown = sorted(set(asked) - available)
+        if unknown:
+            raise InputError(f"unknown metric(s) {unknown} for the {ev.name} event; available: "
+                             f"{', '.join(sorted(available))}.")
+        return tuple(asked)
+    return tuple(k for k in sorted(available) if k.rsplit("/", 1)[-1] in _DEFAULT_METRICS)
+
+
+def _table(report, mech_name, ev, params, top) -> Table:
+    table = Table(title=f"{mech_name}: sensitivities over {ev.name.replace('_', ' ')} "
+                  f"({params})", box=box.SIMPLE_HEAD)
+    table.add_column("metric", no_wrap=True)
+    for k in range(top):
+        table.add_column(f"#{k + 1}", no_wrap=True)
+    for name in report.elasticity:
+        ranks = report.ranked(name)[:top]
+        table.add_row(name, *[f"{p} {v:+.3g}" for p, v in ranks])
+    return table
+
+
+def _json(report, mech_name, ev) -> dict:
+    from diffsusp import kc
+
+    return {
+        "model": mech_name, "event": ev.name, "x": {"name": ev.x_name, "values": ev.x.tolist()},
+        "params": list(report.params), "theta": report.theta.tolist(),
+        "metrics": {
+            name: {"unit": kc.display_unit(name),
+                   "values": kc.display(name, report.values[name]).tolist(),
+                   "jacobian": report.jacobian[name].tolist(),
+                   "elasticity": report.elasticity[name].tolist(),
+                   "ranked": [[p, v] for p, v in report.ranked(name)]}
+            for name in report.elasticity},
+        "units": "jacobian: metric internal units (mm, N, rad) per parameter unit (N/mm, "
+                 "N·mm/rad, mm)",
+    }
