@@ -42,7 +42,6 @@ from matplotlib.figure import Figure
 
 import diffsusp
 from diffsusp import identify, kc, measure, plot
-from diffsusp.geometry import matrix_to_gibbs
 from diffsusp.identify.data import Landmarks
 from diffsusp.identify.iterative import AXES, iterative
 from diffsusp.identify.least_squares import least_squares
@@ -93,29 +92,15 @@ print("registration rms (mm) per part, mean over the cases:",
 #
 # It needs the measured deformation of each bushing to identify, over the cases. Bushings A
 # and B connect the ground to the arms, so their deformations come from the arms' measured
-# poses alone: the strut's coordinates stay at design (0) in q, which these two bushings do
-# not see. Each iteration solves the 13 equilibria with the current stiffnesses and regresses
-# each direction's model force on its measured deformation; a direction is updated only when
+# poses alone (`measure.bushing_deformations` with their names needs only their parts).
+# Each iteration solves the 13 equilibria with the current stiffnesses and regresses each
+# direction's model force on its measured deformation; a direction is updated only when
 # the correlation passes r > 0.75 and its measured deformation varies by more than the
 # measurement's resolution (1 µm, 0.01°).
 
 # %%
-def deformations_from_poses(mech, meas, names):
-    """Deformations (cases, n, 6) of bushings `names` at the measured poses: Tx, Ty, Tz (mm),
-    AX, AY, AZ (rad), I relative to J in J axes. Unmeasured parts stay at design (q = 0): only
-    valid for bushings between measured parts and the ground."""
-    q = np.zeros((meas.n_cases, mech.n_coordinates))
-    gibbs = np.asarray(jax.vmap(jax.vmap(matrix_to_gibbs))(meas.rotation))
-    for p, part in enumerate(meas.parts):
-        k = 6 * mech.part_index(part)
-        q[:, k:k + 3] = np.asarray(meas.translation)[:, p]
-        q[:, k + 3:k + 6] = gibbs[:, p]
-    d_t, ang, _, _ = diffsusp.bushing_states(mech, jnp.asarray(q))
-    idx = np.array([mech.bushings.index(n) for n in names])
-    return np.concatenate([np.asarray(d_t), np.asarray(ang)], axis=-1)[:, idx]
-
-
-measured_deformations = deformations_from_poses(ref, measured3, A_B)
+d_t, d_r = measure.bushing_deformations(ref, measured3, A_B)  # only their parts needed
+measured_deformations = np.concatenate([np.asarray(d_t), np.asarray(d_r)], axis=-1)
 spread = measured_deformations.std(axis=0)
 print("spread of the measured deformations over the cases (mm; deg):")
 print(f"{'bushing':<10}" + "".join(f"{a:>9}" for a in ("Tx", "Ty", "Tz", "AX", "AY", "AZ")))

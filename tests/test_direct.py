@@ -69,6 +69,22 @@ def test_r1_isolated_bushing_one_case(bushing_cases, k_trans):
         np.testing.assert_allclose(fitted.bushings.k_rot, 1e4 * DEG, rtol=1e-10)
 
 
+def test_negative_stiffness_is_not_reported_as_identified(bushing_cases):
+    """Loads of the wrong sign give exactly negative stiffnesses, with small σ: the report says
+    they are not physical and the model keeps its values."""
+    mech = isolated_bushing()
+    force, moment = bushing_cases
+    meas = measure.synthesize(mech, mech.loads(forces={"tip": force}, moments={"tip": moment}))
+    flipped = eqx.tree_at(lambda m: (m.loads.force, m.loads.moment), meas,
+                          (-meas.loads.force, -meas.loads.moment))
+    fitted, report = identify.direct(mech, flipped, weighting="none")
+    np.testing.assert_allclose(report.values, [-100.0] * 3 + [-1e4] * 3, rtol=1e-8)
+    assert not report.identified.any()
+    assert set(report.status) == {"not physical: negative stiffness"}
+    assert any("came out negative" in n for n in report.notes)
+    np.testing.assert_array_equal(fitted.bushings.k_trans, mech.bushings.k_trans)
+
+
 def test_r1_offsets_and_preloads_are_identified(bushing_cases):
     """Offsets δ0 (spec §1.10, 'Offsets'): identified as constants K·δ0 next to K; with three
     cases (18 equations, 12 unknowns) both come out exactly, and the identified model

@@ -1214,6 +1214,16 @@ def direct(
     params = raw.parameters
     identified = analysis.identifiable & ~(np.nan_to_num(analysis.sigma_pct) > max_sigma_pct)
     values = np.asarray(fit.x, float)
+    # A negative stiffness is not a result, however small its σ: typically the forces of
+    # unknowns held at wrong values (hold="model" with a poor model) or noisy deformations used
+    # as regressors were pushed onto it. Not written to the model.
+    negative = identified & (values < 0) & np.array([p.kind in ("stiffness", "spring_k")
+                                                     for p in params])
+    status = analysis.status
+    if negative.any():
+        identified = identified & ~negative
+        status = tuple("not physical: negative stiffness" if negative[i] else st
+                       for i, st in enumerate(status))
     cov = np.asarray(fit.covariance, float)
     n_cases = len(raw.cases)
     residual = raw.y - raw.W @ values  # in N, whatever the weighting of the solve
@@ -1221,12 +1231,16 @@ def direct(
     case_scale = np.linalg.norm(raw.y.reshape(n_cases, -1), axis=1)
     write = ~negligible if method == "tikhonov" else identified
     notes = list(raw.notes)
+    if negative.any():
+        notes.append(f"{', '.join(np.asarray(raw.names)[negative])} came out negative and "
+                     "were not kept: check the values held for the other unknowns and the "
+                     "loads' signs, or use method='nonneg'.")
     for step in getattr(fit, "log", ()):
         notes.append(f"eliminated {step.removed} ({step.reason.replace('sigma', 'σ')}) and "
                      "re-estimated the others")
     report = DirectReport(
         names=raw.names, values=values, sigma=analysis.sigma, sigma_pct=analysis.sigma_pct,
-        identified=identified, identifiable=analysis.identifiable, status=analysis.status,
+        identified=identified, identifiable=analysis.identifiable, status=status,
         units=tuple(p.unit for p in params), prior=raw.prior, relations=analysis.relations,
         derived=_derived(params, values, cov, mech, identified), case_residuals=case_res,
         case_scale=case_scale, cases=raw.cases, notes=tuple(notes), fit=fit, method=method,
