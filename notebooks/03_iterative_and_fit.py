@@ -207,7 +207,8 @@ print(direct_report.table())
 # at the model's values. That works when the model's values are the nominal ones; here they are
 # the start's 10⁴, and every unknown held there puts a wrong force into the equations, which
 # the remaining unknowns absorb (the regressors are noisy measured deformations: errors in
-# variables). What that gives on the same data:
+# variables). What that gives on the same data (a stiffness pushed negative is reported as not
+# physical, and not written to the model):
 
 # %%
 _, eliminated = identify.direct(start, noisy, elements=A_B, hold="model", eliminate=True)
@@ -215,6 +216,8 @@ print("with eliminate=True, identified:", ", ".join(
     f"{n} = {v:.5g} ({s:.2g} %)" for n, v, s, ok in zip(
         eliminated.names, eliminated.values, eliminated.sigma_pct, eliminated.identified,
         strict=True) if ok))
+for note in eliminated.notes:
+    print("note:", note)
 
 # %% [markdown]
 # ## Comparison
