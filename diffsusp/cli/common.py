@@ -23,16 +23,15 @@ def _main():
 
 
 def enable_x64():
-    """float64, and, when `$DIFFSUSP_CACHE` names a folder, JAX's persistent compilation cache
-    there so that the second run of a command does not compile again. Off by default: a cache
-    write (XLA serialising an executable) once crashed a process with a segmentation fault on
-    this project's CI machine."""
+    """float64, and a persistent compilation cache so that the second run of a command does
+    not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
+    string to disable)."""
     import os
 
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    cache = os.environ.get("DIFFSUSP_CACHE", "")
+    cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
     if cache and not jax.config.jax_compilation_cache_dir:
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
