@@ -212,9 +212,9 @@ def case_comparison(series: dict, channels: Sequence[tuple[str, str]], *, measur
             v = np.asarray(values[key], dtype=float)
             x = np.arange(1, v.size + 1)
             if name == measured:
-                a.plot(x, v, "o", mfc="none", label=name)
-            else:
-                a.plot(x, v, marker=".", lw=1.0, label=name)
+                a.plot(x, v, "o", mfc="none", ms=8, label=name)
+            else:  # load cases are categorical: a tick per case, no line between them
+                a.plot(x, v, ls="none", marker="_", ms=12, mew=2, label=name)
         a.set_ylabel(label)
         a.grid(True, alpha=0.3)
         a.legend(fontsize="small")
