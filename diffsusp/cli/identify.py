@@ -31,6 +31,21 @@ _CHOICES = {
 }
 
 
+# Options shared by the identify verbs.
+ModelArg = Annotated[str, typer.Argument(help="Model file (.toml, .adm, .json) or built-in name.")]
+MeasurementsOpt = Annotated[Path, typer.Option(
+    "--measurements", "-m",
+    help="Landmark or pose table with the loads of each case (.csv or .parquet).")]
+OutOpt = Annotated[Path | None, typer.Option(help="Write the report (.csv or .json).")]
+WriteModelOpt = Annotated[Path | None, typer.Option(
+    help="Write the identified model (.toml, or .adm).")]
+FiguresOpt = Annotated[Path | None, typer.Option(
+    help="Write the convergence and measured-vs-identified figures (PNG, SVG) here.")]
+ReorderOpt = Annotated[bool, typer.Option(
+    help="Match landmarks probed in any order by their distance tables.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable report.")]
+
+
 def _check_choice(name: str, value: str):
     if value not in _CHOICES[name]:
         raise fail(f"--{name} must be one of {', '.join(_CHOICES[name])}; got '{value}'.",
@@ -39,15 +54,10 @@ def _check_choice(name: str, value: str):
 
 @identify_app.command("direct")
 def direct(
-    model: Annotated[str, typer.Argument(
-        help="Model file (.toml, .adm, .json) or built-in name.")],
-    measurements: Annotated[Path, typer.Option(
-        "--measurements", "-m",
-        help="Landmark or pose table with the loads of each case (.csv or .parquet).")],
-    out: Annotated[Path | None, typer.Option(
-        help="Write the report (.csv or .json).")] = None,
-    write_model: Annotated[Path | None, typer.Option(
-        help="Write the identified model (.toml, or .adm).")] = None,
+    model: ModelArg,
+    measurements: MeasurementsOpt,
+    out: OutOpt = None,
+    write_model: WriteModelOpt = None,
     method: Annotated[str, typer.Option(
         help="basic | min_norm | tsvd | tikhonov | nonneg.")] = "basic",
     hold: Annotated[str, typer.Option(
@@ -63,13 +73,12 @@ def direct(
         help="Bushing with Ktx = Kty and Krx = Kry (repeatable).")] = None,
     offsets: Annotated[bool, typer.Option(
         help="Also identify the bushings' offsets.")] = False,
-    reorder: Annotated[bool, typer.Option(
-        help="Match landmarks probed in any order by their distance tables.")] = False,
+    reorder: ReorderOpt = False,
     max_sigma_pct: Annotated[float, typer.Option(
         help="Largest sigma% still called identified.")] = 10.0,
     threshold: Annotated[float | None, typer.Option(
         help="Relative identifiability threshold (default 1e-5).")] = None,
-    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable report.")] = False,
+    json_output: JsonOpt = False,
 ):
     """Identify bushing and spring stiffnesses by the direct (linear) method.
 
@@ -77,9 +86,7 @@ def direct(
     """
     for name, value in (("method", method), ("hold", hold), ("weighting", weighting)):
         _check_choice(name, value)
-    for path, kinds in ((out, (".csv", ".json")), (write_model, (".toml", ".adm"))):
-        if path is not None and path.suffix.lower() not in kinds:
-            raise fail(f"{path}: use a {' or '.join(kinds)} file.", EXIT_BAD_INPUT)
+    _check_paths(out, write_model)
     enable_x64()
     from .. import identify, measure
     from ..io import load_model_file
@@ -287,11 +294,8 @@ def _progress():
 
 @identify_app.command("iterative")
 def iterative_command(
-    model: Annotated[str, typer.Argument(
-        help="Model file (.toml, .adm, .json) or built-in name.")],
-    measurements: Annotated[Path, typer.Option(
-        "--measurements", "-m",
-        help="Landmark or pose table with the loads of each case (.csv or .parquet).")],
+    model: ModelArg,
+    measurements: MeasurementsOpt,
     bushing: Annotated[list[str] | None, typer.Option(
         "--bushing", "-b", help="Bushing to identify (repeatable; default: every bushing "
         "between measured parts).")] = None,
@@ -306,15 +310,11 @@ def iterative_command(
         help="Measurement resolution 'mm,deg': a direction whose deformation varies less is "
         "not identified ('none': no such gate).")] = "0.001,0.01",
     max_iterations: Annotated[int, typer.Option(help="Bound on the loop.")] = 100,
-    reorder: Annotated[bool, typer.Option(
-        help="Match landmarks probed in any order by their distance tables.")] = False,
-    out: Annotated[Path | None, typer.Option(help="Write the report (.csv or .json).")] = None,
-    write_model: Annotated[Path | None, typer.Option(
-        help="Write the identified model (.toml, or .adm).")] = None,
-    figures: Annotated[Path | None, typer.Option(
-        help="Write the convergence and measured-vs-identified figures (PNG, SVG) here.")]
-    = None,
-    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable report.")] = False,
+    reorder: ReorderOpt = False,
+    out: OutOpt = None,
+    write_model: WriteModelOpt = None,
+    figures: FiguresOpt = None,
+    json_output: JsonOpt = False,
 ):
     """Identify bushing stiffnesses by the thesis's iterative correlation loop (spec stiffness
     §2): each pass solves every load case with the current stiffnesses and regresses each
@@ -512,8 +512,7 @@ def _fit_rows(report):
 
 @identify_app.command("fit")
 def fit_command(
-    model: Annotated[str, typer.Argument(
-        help="Model file (.toml, .adm, .json) or built-in name.")],
+    model: ModelArg,
     measurements: Annotated[Path, typer.Option(
         "--measurements", "-m",
         help="Landmark or pose table with the loads of each case (.csv or .parquet); any "
@@ -536,15 +535,11 @@ def fit_command(
         help="Pose rotation σ (deg), pose tables only.")] = 0.01,
     loss: Annotated[str, typer.Option(help="linear | huber | cauchy.")] = "linear",
     max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 100,
-    reorder: Annotated[bool, typer.Option(
-        help="Match landmarks probed in any order by their distance tables.")] = False,
-    out: Annotated[Path | None, typer.Option(help="Write the report (.csv or .json).")] = None,
-    write_model: Annotated[Path | None, typer.Option(
-        help="Write the identified model (.toml, or .adm).")] = None,
-    figures: Annotated[Path | None, typer.Option(
-        help="Write the convergence and measured-vs-identified figures (PNG, SVG) here.")]
-    = None,
-    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable report.")] = False,
+    reorder: ReorderOpt = False,
+    out: OutOpt = None,
+    write_model: WriteModelOpt = None,
+    figures: FiguresOpt = None,
+    json_output: JsonOpt = False,
 ):
     """Identify stiffnesses (and hardpoints) by least squares through the equilibrium: the
     model's landmarks or poses are fitted to the measured ones (Levenberg–Marquardt, exact
