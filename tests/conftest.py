@@ -28,3 +28,10 @@ def _release_compiled_programs():
     yield
     jax.clear_caches()
     gc.collect()
+
+
+def pytest_collection_modifyitems(items):
+    """The notebooks first: they are the longest file (one kernel after another), and
+    pytest-xdist hands files out in collection order, so starting them first lets the other
+    worker take the rest of the suite meanwhile instead of waiting at the end."""
+    items.sort(key=lambda item: item.path.name != "test_notebooks.py")
