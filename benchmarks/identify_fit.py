@@ -15,9 +15,10 @@ factor 20) that keeps the four the landmarks cannot see bounded.
 - baseline, same process: `scipy.optimize.least_squares` (TRF, 2-point finite-difference
   Jacobian) on the same residuals (same parameters, log scale, prior, whitening), each residual
   computed by the independent NumPy/SciPy equilibrium of tests/oracle.py, case by case, warm
-  started from the previous evaluation. Run to convergence for the single fit (about 20 min; with
-  --quick: two iterations, compared per iteration); the batched baseline is the single-fit time
-  × the number of data sets (stated as extrapolated).
+  started from the previous evaluation. Run to convergence for the single fit by default (each
+  SciPy Jacobian is 13 oracle fits of 13 cases, ~20 s: it can take an hour); with --quick or
+  `--baseline-steps N` a few iterations, compared per iteration. The batched baseline is the
+  single-fit time × the number of data sets (stated as extrapolated).
 """
 
 import argparse
@@ -101,6 +102,9 @@ class OracleResiduals:
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--baseline-steps", type=int, default=None,
+                        help="SciPy's max_nfev (default: 2 with --quick, else 200 = run to "
+                        "convergence; each of its Jacobians costs 13 oracle fits of 13 cases)")
     args = parser.parse_args()
     n_sets = 20 if args.quick else 100
     rng = np.random.default_rng(0)
@@ -163,7 +167,10 @@ def main():
     fn = OracleResiduals(ref, params, loads, parts, points, measured, np.log(start),
                          np.full(12, 1.0 / PRIOR_LOG_SIGMA))
     # scipy's max_nfev counts residual evaluations outside the finite-difference Jacobians.
-    budget = 2 if args.quick else 200
+    budget = args.baseline_steps or (2 if args.quick else 200)
+    print(f"single fit {results['single']['after_compile_s']:.2f} s, batched "
+          f"{results['batched']['after_compile_s']:.2f} s after compile; SciPy baseline...",
+          flush=True)
     t0 = time.perf_counter()
     sp = scipy.optimize.least_squares(fn, u0, method="trf", jac="2-point", max_nfev=budget,
                                       x_scale="jac")
