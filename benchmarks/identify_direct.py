@@ -20,7 +20,6 @@ Timings are never asserted anywhere.
 
 import argparse
 import dataclasses
-import json
 import pathlib
 import sys
 import time
@@ -40,6 +39,7 @@ from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
+from _common import save_results  # noqa: E402
 
 DEG = 180.0 / np.pi
 
@@ -239,10 +239,7 @@ def main():
     if "baseline_agreement" in results:
         print(f"NumPy baseline vs diffsusp least squares (13 cases): max relative difference "
               f"{results['baseline_agreement']:.2e}")
-    out = pathlib.Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    name = "identify_direct_quick.json" if args.quick else "identify_direct.json"
-    (out / name).write_text(json.dumps(results, indent=2))
+    save_results("identify_direct", results, args.quick)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ factor 20) that keeps the four the landmarks cannot see bounded.
 """
 
 import argparse
-import json
 import pathlib
 import sys
 import time
@@ -45,6 +44,7 @@ from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
+from _common import save_results  # noqa: E402
 
 DEG = np.pi / 180
 SIGMA = 0.05
@@ -211,9 +211,7 @@ def main():
           f"evaluations ({bl['per_evaluation_s']:.2f} s each), status {bl['status']}")
     print(f"ratio single: {ratio_single:.0f}× ({note}); ratio batched: "
           f"{results['ratio_batched']['value']:.0f}× (extrapolated)")
-    out = pathlib.Path(__file__).parent / "results" / (
-        "identify_fit_quick.json" if args.quick else "identify_fit.json")
-    out.write_text(json.dumps(results, indent=2))
+    save_results("identify_fit", results, args.quick)
 
 
 if __name__ == "__main__":

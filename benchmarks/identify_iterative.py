@@ -9,7 +9,6 @@ benchmarks/results/identify_iterative.json. Timings are never asserted anywhere.
 """
 
 import argparse
-import json
 import pathlib
 import sys
 import time
@@ -26,6 +25,7 @@ from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
+from _common import save_results  # noqa: E402
 
 NAMES = ("bushing_A", "bushing_B")
 DEG = np.pi / 180
@@ -105,8 +105,7 @@ def main():
                    max_rel_diff=float(np.max(np.abs(k - report.stiffness) / report.stiffness)))
         print(f"NumPy/SciPy oracle loop: {its} iterations, {base:.2f} s → {base / run:.0f}× "
               f"(stiffnesses agree to {row['max_rel_diff']:.1e} relative)")
-    out = pathlib.Path(__file__).parent / "results" / "identify_iterative.json"
-    out.write_text(json.dumps(row, indent=2) + "\n")
+    save_results("identify_iterative", row)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,6 @@ benchmarks/results/kc.json (kc_quick.json with --quick). Measures, after compila
 """
 
 import argparse
-import json
 import pathlib
 import resource
 import sys
@@ -40,16 +39,7 @@ from diffsusp.models import TABLE_5_1, pseudo_mcpherson  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
-
-
-def timed(fn, repeats):
-    out = fn()
-    jax.block_until_ready(out)
-    t0 = time.perf_counter()
-    for _ in range(repeats):
-        out = fn()
-    jax.block_until_ready(out)
-    return (time.perf_counter() - t0) / repeats, out
+from _common import save_results, timed  # noqa: E402
 
 
 def baseline_point(mech, force, moment, driver, directions, steps, warm=None):
@@ -190,10 +180,7 @@ def main():
     print(f"  NumPy/SciPy baseline (21 solves per case): {d['baseline_per_design']:.1f} s per "
           f"design, {d['baseline_estimate'] / 60:.0f} min for all; ratio {d['ratio']:.0f}x")
     print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
-    out = pathlib.Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    (out / ("kc_quick.json" if args.quick else "kc.json")).write_text(
-        json.dumps(results, indent=2))
+    save_results("kc", results, args.quick)
 
 
 if __name__ == "__main__":

@@ -19,9 +19,7 @@ compilation (compile time reported separately):
 """
 
 import argparse
-import json
 import os
-import pathlib
 import time
 
 # One BLAS thread for NumPy and for JAX's LAPACK calls alike (both use OpenBLAS here): on the
@@ -34,19 +32,10 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.linalg  # noqa: E402
+from _common import save_results, timed  # noqa: E402
 
 from diffsusp import lsq  # noqa: E402
 from diffsusp.lsq import core  # noqa: E402
-
-
-def timed(fn, repeats):
-    out = fn()
-    jax.block_until_ready(out)
-    t0 = time.perf_counter()
-    for _ in range(repeats):
-        out = fn()
-    jax.block_until_ready(out)
-    return (time.perf_counter() - t0) / repeats, out
 
 
 def first_call(fn):
@@ -169,9 +158,7 @@ def main(quick: bool):
     print(f"agreement: streaming vs one-shot {results['stream_vs_one_shot_max_rel_dx']:.1e}, "
           f"one-shot vs numpy lstsq {results['one_shot_vs_numpy_max_rel_dx']:.1e}, "
           f"vmap vs numpy {results['vmap_vs_numpy_max_rel_dx']:.1e} (max relative dx)")
-    out = pathlib.Path(__file__).parent / "results" / ("lsq_quick.json" if quick else "lsq.json")
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(results, indent=2))
+    save_results("lsq", results, quick)
     return results
 
 

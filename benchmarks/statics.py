@@ -10,7 +10,6 @@ as a ratio. Timings are never asserted anywhere.
 """
 
 import argparse
-import json
 import pathlib
 import resource
 import sys
@@ -28,6 +27,7 @@ from diffsusp.models import double_wishbone, pseudo_mcpherson, thesis_load_cases
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
+from _common import save_results, timed  # noqa: E402
 
 
 def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
@@ -39,16 +39,6 @@ def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
     h = rng.uniform(-horizontal, horizontal, n) * np.minimum(1.0, fz / 4500.0)
     lateral = rng.random(n) < 0.5
     return np.stack([np.where(lateral, 0.0, h), np.where(lateral, h, 0.0), fz], axis=1)
-
-
-def timed(fn, repeats):
-    out = fn()
-    jax.block_until_ready(out)
-    t0 = time.perf_counter()
-    for _ in range(repeats):
-        out = fn()
-    jax.block_until_ready(out)
-    return (time.perf_counter() - t0) / repeats, out
 
 
 def bench_model(name, mech, rng, sizes, baseline_cases):
@@ -135,10 +125,7 @@ def main():
     if "batch_100k" in results:
         print(f"100 000 cases (chunks of 4096): {results['batch_100k']['seconds']:.1f} s")
     print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
-    out = pathlib.Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    (out / ("statics_quick.json" if args.quick else "statics.json")).write_text(
-        json.dumps(results, indent=2))
+    save_results("statics", results, args.quick)
 
 
 if __name__ == "__main__":
