@@ -186,3 +186,31 @@ def test_identify_iterative_and_fit_bad_input(tables, tmp_path):
         result = _invoke(*args)
         assert result.exit_code == 2, (args, result.output)
         assert message in _text(result), (args, _text(result))
+
+
+def test_from_measurements_keeps_every_landmark_and_masks_the_missing(tables):
+    """A landmark table becomes `Landmarks` point by point (design positions from the layout),
+    with excluded (weight 0) and unmeasured (NaN) landmarks masked; a pose table becomes
+    `Poses`."""
+    import equinox as eqx
+
+    from diffsusp.identify import Landmarks, Poses, from_measurements
+
+    mech = isolated_bushing()
+    meas = measure.read_measurements(tables["marks_csv"], mech)
+    weights = np.array(meas.weights)
+    weights[0, 0, 1] = 0.0
+    marks = np.array(meas.landmarks)
+    marks[1, 0, 2] = np.nan
+    meas = eqx.tree_at(lambda m: (m.weights, m.landmarks), meas,
+                       (jnp.asarray(weights), jnp.asarray(marks)))
+    data = from_measurements(meas, 0.05, 1e-4)
+    k = len(meas.layout.names[0])
+    assert isinstance(data, Landmarks) and data.parts == ("arm",) * k
+    np.testing.assert_array_equal(data.points, np.asarray(meas.layout.position)[0, :k])
+    masked = np.argwhere(np.asarray(data.weight)[..., 0] == 0).tolist()
+    assert masked == [[0, 1], [1, 2]]
+    np.testing.assert_array_equal(np.asarray(data.measured)[2], marks[2, 0, :k])
+    np.testing.assert_allclose(np.asarray(data.weight)[2], 1 / 0.05)
+    poses = from_measurements(measure.read_measurements(tables["poses"], mech), 0.05, 1e-4)
+    assert isinstance(poses, Poses) and poses.parts == ("arm",)

@@ -1,12 +1,18 @@
-"""`diffsusp identify direct MODEL --measurements TABLE`: the direct (linear) stiffness
-identification from measured equilibria (spec stiffness §1.8–1.14).
+"""`diffsusp identify direct|iterative|fit MODEL --measurements TABLE`: stiffness (and
+hardpoint) identification from measured equilibria.
+
+- `direct`: the linear method (spec stiffness §1.8–1.14); every moving part measured.
+- `iterative`: the thesis's correlation loop (spec stiffness §2); the parts of the identified
+  bushings measured.
+- `fit`: least squares through the equilibrium (spec stiffness §3, §6 item 8); any subset of
+  the parts, with σ, identifiability and the combinations the data cannot see.
 
 MODEL is anything `diffsusp.io.load_model` reads (a `.toml`, `.adm`, `.json` file or a built-in
 name). TABLE is a landmark or pose table with the loads, CSV or Parquet (format in
 `diffsusp.measure.table`). The report goes to the terminal (or `--json`), optionally to `--out`
-(.csv: one row per unknown; .json: the whole report), and the identified model to
-`--write-model` (.toml native file; .adm: the stiffnesses written into the Adams dataset the
-model came from, or a complete dataset).
+(.csv: one row per unknown; .json: the whole report), the identified model to `--write-model`
+(.toml native file; .adm: the stiffnesses written into the Adams dataset the model came from,
+or a complete dataset), and for `iterative` and `fit` the figures to `--figures`.
 """
 
 import csv
@@ -270,7 +276,7 @@ def _comparison_figure(mech_start, mech_fitted, meas, title):
     series = {}
     values, channels, wheel_part = _case_channels(mech_fitted, meas.coordinates(
         mech_fitted, unmeasured="design"))
-    measured_parts = {p for p in meas.parts}
+    measured_parts = set(meas.parts)
     if wheel_part is not None and mech_fitted.parts[wheel_part] in measured_parts:
         series["measured"] = values
     elif wheel_part is None:
@@ -432,32 +438,6 @@ def _iterative_figures(report, mech0, fitted, meas, folder: Path):
 # ----------------------------------------------------------------------------- fit
 
 
-def _fit_data(meas, sigma, sigma_rotation):
-    """Least-squares measurements from a measurement table: the landmarks themselves (any
-    subset of the parts), or the poses of a pose table."""
-    import numpy as np
-
-    from ..identify.data import Landmarks, Poses
-
-    if meas.landmarks is not None:
-        layout = meas.layout
-        present = layout.present
-        parts, points, cols = [], [], []
-        for p, part in enumerate(layout.parts):
-            for a in np.flatnonzero(present[p]):
-                parts.append(part)
-                points.append(np.asarray(layout.position[p, a]))
-                cols.append((p, a))
-        pi, ai = (np.array(v) for v in zip(*cols, strict=True))
-        measured = np.asarray(meas.landmarks)[:, pi, ai]
-        weight = np.asarray(meas.weights)[:, pi, ai]
-        mask = (weight > 0) & np.all(np.isfinite(measured), axis=-1)
-        measured = np.where(mask[..., None], measured, 0.0)
-        return Landmarks(meas.loads, parts, np.array(points), measured, sigma, mask=mask)
-    return Poses(meas.loads, meas.parts, np.asarray(meas.rotation), np.asarray(meas.translation),
-                 sigma, sigma_rotation)
-
-
 def _fit_params(mech, bushings, axes, centres, springs, start):
     from ..errors import InputError
     from ..identify.params import AXES, Params
@@ -554,6 +534,7 @@ def fit_command(
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
     enable_x64()
     from .. import measure
+    from ..identify.data import from_measurements
     from ..identify.least_squares import least_squares
     from ..io import load_model_file
 
@@ -561,7 +542,7 @@ def fit_command(
         model_file = load_model_file(model)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        data = _fit_data(meas, sigma, sigma_rotation * _DEG)
+        data = from_measurements(meas, sigma, sigma_rotation * _DEG)
         params = _fit_params(mech, bushing, axes, centres, springs, start)
         with _progress() as progress:
             task = progress.add_task("step", total=max_steps)

@@ -14,7 +14,7 @@ Each identification takes a mechanism and measurements and returns the identifie
 a report.
 """
 
-from .data import Channel, Deformations, Landmarks, Measurement, Poses
+from .data import Channel, Deformations, Landmarks, Measurement, Poses, from_measurements
 from .direct import DirectReport, DirectSystem, direct, direct_system
 from .iterative import IterativeReport, iterative
 from .least_squares import (
@@ -32,5 +32,6 @@ __all__ = [
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
     "SensitivityReport", "design_experiment", "direct", "direct_system", "iterative",
-    "least_squares", "least_squares_batch", "predict", "sensitivity", "whitened_residuals",
+    "from_measurements", "least_squares", "least_squares_batch", "predict", "sensitivity",
+    "whitened_residuals",
 ]

@@ -311,6 +311,28 @@ class Channel(Measurement):
         return out[:, None] if out.ndim == 1 else out
 
 
+def from_measurements(meas, sigma: float, sigma_rotation: float) -> Measurement:
+    """The least-squares measurement of a `diffsusp.measure.Measurements` (e.g. a landmark or
+    pose table read by `measure.read_measurements`): its landmarks themselves when it has them
+    (any subset of the parts; a part with fewer than three landmarks still counts; missing or
+    excluded landmarks masked), else its part poses.
+
+    **Arguments:** `sigma` (mm) per landmark coordinate or pose translation; `sigma_rotation`
+    (rad) per pose rotation axis (poses only).
+    """
+    if meas.landmarks is None:
+        return Poses(meas.loads, meas.parts, np.asarray(meas.rotation),
+                     np.asarray(meas.translation), sigma, sigma_rotation)
+    layout = meas.layout
+    part_index, slot = np.nonzero(layout.present)
+    measured = np.asarray(meas.landmarks)[:, part_index, slot]
+    mask = (np.asarray(meas.weights)[:, part_index, slot] > 0) & np.all(np.isfinite(measured),
+                                                                        axis=-1)
+    return Landmarks(meas.loads, [layout.parts[p] for p in part_index],
+                     np.asarray(layout.position)[part_index, slot],
+                     np.where(mask[..., None], measured, 0.0), sigma, mask=mask)
+
+
 def data_axes(data: Sequence[Measurement]):
     """`in_axes` for vmapping over data sets: 0 on the measured values, None elsewhere."""
     batched = set()
