@@ -1,0 +1,298 @@
+"""Tyre property files (`.tir`, MF-Tyre / Adams / Chrono / MFeval format), read and written.
+
+spec: tyre §7 C (MF 5.2 / 6.1 / 6.2 property files); issue 15.
+
+A `.tir` file is a list of sections (`[LATERAL_COEFFICIENTS]`), each holding `NAME = value`
+lines; `$` starts a comment (at the start of a line or after a value), `!` a comment line; a few
+sections hold tables (`[SHAPE]`: a `{radial width}` header and rows of numbers). Values are
+numbers or quoted strings.
+
+The file's own units are kept: a `TirFile` is **SI as written** (m, N, rad, Pa, m/s; the
+`[UNITS]` section must say so), so writing it back reproduces every value exactly (numbers are
+kept as the text that was read and written with `repr` when changed). The conversion to the
+library's units (mm, N, N·mm, rad) happens when a model is built from the file
+(`diffsusp.tyre.MagicFormula6.from_tir`) and back when a model is written
+(`MagicFormula6.to_tir`).
+
+```python
+tir = read_tir("front.tir")
+tir["PCY1"], tir.section_of("PCY1"), tir.fittyp
+tir.set("PCY1", 1.45); write_tir(tir, "fitted.tir")
+```
+Errors (`ModelFileError`, an `InputError`) name the file, the line and the field.
+"""
+
+import dataclasses
+import os
+import re
+
+from ..errors import ModelFileError
+
+__all__ = ["TirEntry", "TirFile", "read_tir", "write_tir", "tir_from_text"]
+
+_SECTION = re.compile(r"^\s*\[\s*([A-Za-z0-9_]+)\s*\]\s*$")
+_ASSIGN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*)$")
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eEdD][+-]?\d+)?$")
+SI_UNITS = {"LENGTH": ("meter", "metre", "m"), "FORCE": ("newton", "n"),
+            "ANGLE": ("radians", "radian", "rad"), "MASS": ("kg", "kilogram"),
+            "TIME": ("second", "s", "sec")}
+
+
+@dataclasses.dataclass
+class TirEntry:
+    """One `NAME = value $comment` line: `value` is a float or a str (quotes removed), `text` the
+    value as written (kept so that an unchanged value is written back byte for byte), `line`
+    1-based (None for an entry added by `set`)."""
+
+    name: str
+    value: float | str
+    text: str
+    comment: str
+    section: str
+    line: int | None
+
+
+@dataclasses.dataclass
+class TirFile:
+    """A parsed `.tir` file, in the file's own (SI) units.
+
+    **Fields:** `entries` (name → `TirEntry`, names upper-case; a name repeated in a later
+    section, like MASS in [UNITS] and [INERTIA], is keyed `SECTION.NAME`),
+    `sections` (section name → tuple of entry names, file order), `lines` (the original text
+    lines, without line ends), `path` (or None), `tables` (section → rows of floats, e.g.
+    `[SHAPE]`).
+    """
+
+    entries: dict[str, TirEntry]
+    sections: dict[str, list[str]]
+    lines: list[str]
+    path: str | None = None
+    tables: dict[str, list[tuple[float, ...]]] = dataclasses.field(default_factory=dict)
+
+    def __contains__(self, name: str) -> bool:
+        return name.upper() in self.entries
+
+    def __getitem__(self, name: str) -> float | str:
+        return self.entry(name).value
+
+    def entry(self, name: str) -> TirEntry:
+        try:
+            return self.entries[name.upper()]
+        except KeyError:
+            raise ModelFileError(f"no {name.upper()} in the file", path=self.path,
+                                 field=name.upper()) from None
+
+    def section_of(self, name: str) -> str:
+        return self.entry(name).section
+
+    def get(self, name: str, default=None):
+        e = self.entries.get(name.upper())
+        return default if e is None else e.value
+
+    def number(self, name: str, *, section: str | None = None, default: float | None = None
+               ) -> float:
+        """The value of `name` as a float. A missing entry is `default` when one is given, else an
+        error naming the section where it belongs; a non-numeric one is always an error."""
+        e = self.entries.get(name.upper())
+        if e is None:
+            if default is not None:
+                return float(default)
+            where = f" in [{section}]" if section else ""
+            raise ModelFileError(f"missing coefficient {name.upper()}{where}; add the line "
+                                 f"'{name.upper()} = <value>' to that section", path=self.path,
+                                 field=name.upper())
+        if not isinstance(e.value, float):
+            raise ModelFileError(f"{name.upper()} in [{e.section}] must be a number, got "
+                                 f"{e.text!r}", path=self.path, line=e.line, field=name.upper())
+        return e.value
+
+    @property
+    def fittyp(self) -> int:
+        """The `[MODEL] FITTYP` (Magic Formula version: 5/6 = MF 5.x, 61 = 6.1, 62 = 6.2)."""
+        v = self.number("FITTYP", section="MODEL")
+        if v != int(v):
+            e = self.entry("FITTYP")
+            raise ModelFileError(f"FITTYP must be an integer, got {e.text}", path=self.path,
+                                 line=e.line, field="FITTYP")
+        return int(v)
+
+    def set(self, name: str, value: float | str, *, section: str | None = None,
+            comment: str = "") -> None:
+        """Set (or add, in `section`) one entry; a float is written with `repr` (exact)."""
+        key = name.upper()
+        text = repr(float(value)) if not isinstance(value, str) else f"'{value}'"
+        val = float(value) if not isinstance(value, str) else value
+        if key in self.entries:
+            e = self.entries[key]
+            e.value, e.text = val, text
+            return
+        if section is None:
+            raise ModelFileError(f"{key} is not in the file: give the section to add it to",
+                                 path=self.path, field=key)
+        sec = section.upper()
+        self.sections.setdefault(sec, [])
+        self.sections[sec].append(key)
+        self.entries[key] = TirEntry(key, val, text, comment, sec, None)
+
+    def check_units(self) -> None:
+        """Raise unless `[UNITS]` is absent or SI (meter, newton, radians, kg, second)."""
+        for key, allowed in SI_UNITS.items():
+            e = next((self.entries[k] for k in self.sections.get("UNITS", ())
+                      if self.entries[k].name == key), None)
+            if e is None:
+                continue
+            if str(e.value).strip().lower() not in allowed:
+                v = e.value
+                raise ModelFileError(f"[UNITS] {key} = {v!r} is not supported: diffsusp reads "
+                                     f".tir files in SI ({allowed[0]})", path=self.path,
+                                     line=e.line, field=key)
+
+    def copy(self) -> "TirFile":
+        return TirFile({k: dataclasses.replace(e) for k, e in self.entries.items()},
+                       {k: list(v) for k, v in self.sections.items()}, list(self.lines),
+                       self.path, {k: list(v) for k, v in self.tables.items()})
+
+
+def _parse_value(raw: str, path, lineno: int, name: str) -> tuple[float | str, str, str]:
+    """(value, text, comment) of the right-hand side of an assignment."""
+    raw = raw.strip()
+    comment = ""
+    if raw.startswith("'") or raw.startswith('"'):
+        q = raw[0]
+        end = raw.find(q, 1)
+        if end < 0:
+            raise ModelFileError(f"unterminated string for {name}", path=path, line=lineno,
+                                 field=name)
+        text, rest = raw[:end + 1], raw[end + 1:].strip()
+        if rest.startswith("$") or rest.startswith("!"):
+            comment = rest[1:].strip()
+        elif rest:
+            raise ModelFileError(f"unexpected text {rest!r} after the value of {name}",
+                                 path=path, line=lineno, field=name)
+        return text[1:-1], text, comment
+    for mark in ("$", "!"):
+        pos = raw.find(mark)
+        if pos >= 0:
+            raw, comment = raw[:pos].strip(), raw[pos + 1:].strip()
+            break
+    text = raw
+    if not text:
+        raise ModelFileError(f"no value for {name}", path=path, line=lineno, field=name)
+    if _NUMBER.match(text):
+        return float(text.replace("d", "e").replace("D", "e")), text, comment
+    return text, text, comment  # unquoted word: kept as a string (numeric use is checked)
+
+
+def tir_from_text(text: str, path: str | None = None) -> TirFile:
+    """Parse the text of a `.tir` file (see the module docstring)."""
+    if not isinstance(text, str):
+        raise ModelFileError("a .tir file must be text", path=path)
+    lines = text.splitlines()
+    entries: dict[str, TirEntry] = {}
+    sections: dict[str, list[str]] = {}
+    tables: dict[str, list[tuple[float, ...]]] = {}
+    section = None
+    for i, line in enumerate(lines, start=1):
+        s = line.strip()
+        if not s or s[0] in "$!":
+            continue
+        m = _SECTION.match(s)
+        if m:
+            section = m.group(1).upper()
+            sections.setdefault(section, [])
+            continue
+        if s.startswith("["):
+            raise ModelFileError(f"malformed section header {s!r}", path=path, line=i)
+        m = _ASSIGN.match(s)
+        if m:
+            if section is None:
+                raise ModelFileError(f"{m.group(1)} is outside any [SECTION]", path=path,
+                                     line=i, field=m.group(1))
+            name = m.group(1).upper()
+            value, vtext, comment = _parse_value(m.group(2), path, i, name)
+            key = name
+            if name in entries:
+                # the same name in another section (MASS in [UNITS] and [INERTIA]) is kept
+                # under SECTION.NAME; twice in one section is an error
+                key = f"{section}.{name}"
+                if entries[name].section == section or key in entries:
+                    raise ModelFileError(f"{name} defined twice in [{section}]", path=path,
+                                         line=i, field=name)
+            entries[key] = TirEntry(name, value, vtext, comment, section, i)
+            sections[section].append(key)
+            continue
+        if section is not None and s.startswith("{") and s.endswith("}"):
+            tables.setdefault(section, [])
+            continue
+        parts = s.split()
+        if section is not None and parts and all(_NUMBER.match(p) for p in parts):
+            tables.setdefault(section, []).append(tuple(float(p) for p in parts))
+            continue
+        raise ModelFileError(f"cannot read {s[:60]!r}: expected '[SECTION]', 'NAME = value', "
+                             "a comment ($ or !) or a table row", path=path, line=i)
+    if not entries:
+        raise ModelFileError("no 'NAME = value' line: not a .tir file", path=path)
+    tir = TirFile(entries, sections, lines, path, tables)
+    tir.check_units()
+    return tir
+
+
+def read_tir(path: str | os.PathLike) -> TirFile:
+    """Read a `.tir` file (any line ends; Latin-1 tolerated). See the module docstring."""
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as exc:
+        raise ModelFileError(f"cannot read the file: {exc.strerror}", path=path) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return tir_from_text(text, path)
+
+
+def _format_line(e: TirEntry) -> str:
+    line = f"{e.name:<26}= {e.text:<22}"
+    if e.comment:
+        line += f" ${e.comment}"
+    return line.rstrip()
+
+
+def to_text(tir: TirFile) -> str:
+    """The file's text: original lines kept, changed entries rewritten, added ones appended at
+    the end of their section (a new section at the end of the file)."""
+    out = list(tir.lines)
+    for e in tir.entries.values():
+        if e.line is not None:
+            m = _ASSIGN.match(out[e.line - 1].strip())
+            old = _parse_value(m.group(2), tir.path, e.line, e.name)[1] if m else None
+            if old != e.text:
+                out[e.line - 1] = _format_line(e)
+    added: dict[str, list[str]] = {}
+    for e in tir.entries.values():
+        if e.line is None:
+            added.setdefault(e.section, []).append(_format_line(e))
+    if added:
+        # the last line of each existing section
+        section_end: dict[str, int] = {}
+        current = None
+        for i, line in enumerate(out):
+            m = _SECTION.match(line.strip())
+            if m:
+                current = m.group(1).upper()
+            if current is not None and line.strip() and not line.strip().startswith("$"):
+                section_end[current] = i
+        for sec in sorted((s for s in added if s in section_end),
+                          key=lambda s: -section_end[s]):
+            pos = section_end[sec] + 1
+            out[pos:pos] = added[sec]
+        for sec in (s for s in added if s not in section_end):
+            out += [f"[{sec}]"] + added[sec]
+    return "\n".join(out) + "\n"
+
+
+def write_tir(tir: TirFile, path: str | os.PathLike) -> None:
+    """Write `tir` (SI, as read; changed values with `repr`, so write → read is exact)."""
+    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as f:
+        f.write(to_text(tir))
