@@ -1,10 +1,23 @@
 """Geometry: rotation parametrisations (Gibbs vectors, rotation vectors, axis-angle, Adams
-REULER z-x-z Euler angles, projected angles) and rigid poses.
+REULER z-x-z Euler angles, projected angles), rigid poses, and primitives fitted to probed
+points with their covariances (`fit`: sphere, line, plane, line–plane intersection, bushing
+frame).
 
 Units: mm and rad (degree helpers only at the I/O edge). Every function acts on one input;
 batch with `jax.vmap`. See `rotations` and `poses` for conventions.
 """
 
+from .fit import (
+    BushingFrame,
+    LineFit,
+    PlaneFit,
+    SphereFit,
+    bushing_frame,
+    fit_line,
+    fit_plane,
+    fit_sphere,
+    intersect_line_plane,
+)
 from .poses import (
     compose_poses,
     from_thesis_operator,
@@ -38,6 +51,15 @@ from .rotations import (
 )
 
 __all__ = [
+    "BushingFrame",
+    "LineFit",
+    "PlaneFit",
+    "SphereFit",
+    "bushing_frame",
+    "fit_line",
+    "fit_plane",
+    "fit_sphere",
+    "intersect_line_plane",
     "GIBBS_SINGULARITY_TOL",
     "PROJECTED_ANGLE_LIMITS",
     "REULER_GIMBAL_LOCK_TOL",

@@ -50,7 +50,8 @@ def pseudo_mcpherson_steering(*, strut: bool = True, rack: bool = True,
     - bushings A (L2, ground ↔ rear arm), B (L1, ground ↔ front arm) as in `pseudo_mcpherson`;
     - `'front_ball_joint'` (L8), `'rear_ball_joint'` (L7): spherical, arm ↔ hub carrier;
     - `'tie_rod_outer'` (L6): spherical, tie rod ↔ hub carrier;
-    - `'tie_rod_inner'` (L3): **universal**, tie rod ↔ rack (or ground without a rack). *Assumption:*
+    - `'tie_rod_inner'` (L3): **universal**, tie rod ↔ rack (or ground without a rack).
+      *Assumption:*
       the physical joint is a ball joint, but with ball joints at both ends the tie rod spins
       freely about its own axis (a mode with neither stiffness nor constraint, which a static
       solver cannot hold); a universal joint whose two pins are orthogonal to the tie rod and to
