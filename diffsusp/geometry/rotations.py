@@ -18,6 +18,7 @@ import math
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
@@ -59,6 +60,12 @@ _GIBBS_SINGULAR_MESSAGE = (
 )
 
 
+_NEG_LEVI_CIVITA = np.zeros((3, 3, 3))
+for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _NEG_LEVI_CIVITA[_i, _k, _j] = 1.0  # skew(v)[i, j] = −ε_ijk v_k
+    _NEG_LEVI_CIVITA[_i, _j, _k] = -1.0
+
+
 def _safe_atan2(y: Float[Array, "*s"], x: Float[Array, "*s"]) -> Float[Array, "*s"]:
     """`atan2(y, x)` returning 0 with zero (not NaN) gradient at the undefined point (0, 0)."""
     undefined = (x == 0.0) & (y == 0.0)
@@ -79,14 +86,13 @@ def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     The 3x3 matrix `[[0, -v3, v2], [v3, 0, -v1], [-v2, v1, 0]]`, in the same frame as `v`.
     """
     v = jnp.asarray(v)
-    zero = jnp.zeros_like(v[0])
-    return jnp.stack(
-        [
-            jnp.stack([zero, -v[2], v[1]]),
-            jnp.stack([v[2], zero, -v[0]]),
-            jnp.stack([-v[1], v[0], zero]),
-        ]
-    )
+    # One contraction with the (negated) Levi-Civita tensor: a small traced program.
+    return jnp.asarray(_NEG_LEVI_CIVITA, dtype=v.dtype) @ v
+
+
+def cross(a: Float[ArrayLike, "3"], b: Float[ArrayLike, "3"]) -> Float[Array, "3"]:
+    """`a × b` as `skew(a) @ b` (two contractions; a smaller traced program than `jnp.cross`)."""
+    return skew(a) @ jnp.asarray(b)
 
 
 def vee(m: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
@@ -492,13 +498,9 @@ def projected_angles(r: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     `(AX, AY, AZ)` in rad, each in (−π, π] (0 with zero gradient if undefined).
     """
     r = jnp.asarray(r)
-    return jnp.stack(
-        [
-            _safe_atan2(-r[1, 2], r[2, 2]),
-            _safe_atan2(r[0, 2], r[2, 2]),
-            _safe_atan2(r[1, 0], r[0, 0]),
-        ]
-    )
+    y = r[jnp.array([1, 0, 1]), jnp.array([2, 2, 0])] * jnp.array([-1.0, 1.0, 1.0], r.dtype)
+    x = r[jnp.array([2, 2, 0]), jnp.array([2, 2, 0])]
+    return _safe_atan2(y, x)
 
 
 def projected_angles_validity(angles: Float[ArrayLike, "3"]) -> Float[Array, "3"]:

@@ -264,6 +264,14 @@ class Mechanism(eqx.Module):
     length_scale: float = eqx.field(static=True)
     reference_points: tuple[tuple[float, float, float], ...] = eqx.field(static=True)
     name: str = eqx.field(static=True, default="mechanism")
+    topology: object = eqx.field(static=True, default=None, init=False, repr=False)
+    """Index data of the solver (`diffsusp.model.topology.Topology`), resolved once here."""
+
+    def __post_init__(self):
+        from .topology import Topology
+
+        self.__check_init__()
+        self.topology = Topology(self)
 
     def __check_init__(self):
         n_markers = len(self.markers.names)

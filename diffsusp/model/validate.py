@@ -57,21 +57,19 @@ def _row_names(mech: Mechanism) -> list[str]:
 
 @eqx.filter_jit
 def _at_design(mech: Mechanism):
-    from ..statics.kernel import assemble, constraint_values, get_layout, to_internal
+    from ..statics.kernel import assemble, constraint_values, to_internal
 
     loads = mech.loads()
     q0 = to_internal(mech, jnp.zeros(mech.n_coordinates))
     phi = constraint_values(mech, loads, q0)
-    _, jac = assemble(mech, loads, q0, jnp.zeros(get_layout(mech).m))
+    _, jac = assemble(mech, loads, q0, jnp.zeros(mech.topology.m))
     return phi, jac
 
 
 def _design_matrices(mech: Mechanism):
     """Constraint values, Φ_q (all rows) and tangent stiffness at q = 0 with no load."""
-    from ..statics.kernel import get_layout
-
     all_rows = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows)))
-    lay = get_layout(all_rows)
+    lay = all_rows.topology
     phi, jac = _at_design(all_rows)
     phi, jac = np.asarray(phi), np.asarray(jac)
     n = mech.n_coordinates

@@ -24,22 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix, projected_angles
+from ..geometry.rotations import cross
 from ..model.laws import akima_eval
-from ..model.mechanism import GROUND, JOINT_ROWS, Loads, Mechanism, row_blocks
-
-# Rows of each joint kind that measure an angle (dimensionless) rather than a length (mm).
-_ANGULAR_ROWS = {
-    "spherical": (),
-    "revolute": (3, 4),
-    "cylindrical": (2, 3),
-    "translational": (2, 3, 4),
-    "universal": (3,),
-    "fixed": (3, 4, 5),
-    "inline": (),
-    "inplane": (),
-    "perpendicular": (0,),
-    "distance": (),
-}
+from ..model.mechanism import Loads, Mechanism
 
 
 def _pose(z6, x0, r0):
@@ -47,8 +34,8 @@ def _pose(z6, x0, r0):
     return z6[:3] + r @ x0, r @ r0
 
 
-def _generalised_force(z6, x, force, torque):
-    moment = torque + jnp.cross(x - z6[:3], force)
+def generalised_force(z6, x, force, torque):
+    moment = torque + cross(x - z6[:3], force)
     return jnp.concatenate([force, gibbs_angular_jacobian(z6[3:]).T @ moment])
 
 
@@ -77,19 +64,19 @@ def bushing_state(z, x0i, r0i, x0j, r0j, p, spline_mask):
     return delta_t, delta_r, f, t, xi, xj, rj
 
 
-def _bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
+def bushing_force(z, x0i, r0i, x0j, r0j, p, spline_mask):
     """Generalised forces (12,) of one bushing on its I part then J part."""
     _, _, f, t, xi, xj, rj = bushing_state(z, x0i, r0i, x0j, r0j, p, spline_mask)
     force, torque = rj @ f, rj @ t
     return jnp.concatenate(
         [
-            _generalised_force(z[:6], xi, force, torque),
-            _generalised_force(z[6:], xj, -force, -torque - jnp.cross(xi - xj, force)),
+            generalised_force(z[:6], xi, force, torque),
+            generalised_force(z[6:], xj, -force, -torque - cross(xi - xj, force)),
         ]
     )
 
 
-def _line_force(z, x0i, x0j, tension):
+def line_force(z, x0i, x0j, tension):
     """Generalised forces of a tension `tension(ℓ)` along the line of two points."""
     eye = jnp.eye(3)
     xi, _ = _pose(z[:6], x0i, eye)
@@ -99,7 +86,7 @@ def _line_force(z, x0i, x0j, tension):
     f = tension(length) * u / length  # pulls I toward J
     zero = jnp.zeros(3)
     return jnp.concatenate(
-        [_generalised_force(z[:6], xi, f, zero), _generalised_force(z[6:], xj, -f, zero)]
+        [generalised_force(z[:6], xi, f, zero), generalised_force(z[6:], xj, -f, zero)]
     )
 
 
@@ -117,14 +104,14 @@ def stop_tension(length, p, kind: str):
     return -force if kind == "bump" else force
 
 
-def _load_force(z, x0m, r0f, force, moment, global_frame: bool):
+def load_force(z, x0m, r0f, force, moment, global_frame: bool):
     """Generalised force of a load at marker m, components in frame f (second part of z)."""
     xm, _ = _pose(z[:6], x0m, jnp.eye(3))
     if global_frame:
         rf = jnp.eye(3)
     else:
         _, rf = _pose(z[6:], jnp.zeros(3), r0f)
-    return jnp.concatenate([_generalised_force(z[:6], xm, rf @ force, rf @ moment), jnp.zeros(6)])
+    return jnp.concatenate([generalised_force(z[:6], xm, rf @ force, rf @ moment), jnp.zeros(6)])
 
 
 # ----------------------------------------------------------------------------- constraints
@@ -162,74 +149,39 @@ def joint_rows(kind: str, z, x0i, r0i, x0j, r0j, length0):
     raise ValueError(f"unknown joint kind '{kind}'")
 
 
-def _driver_row(z6, offset, x0m, direction):
+def _safe_norm(d):
+    """|d| along the last axis, with zero (not NaN) derivatives at d = 0 (a spherical joint's
+    design distance)."""
+    dd = jnp.sum(d * d, axis=-1)
+    positive = dd > 0.0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, dd, 1.0)), 0.0)
+
+
+def selected_joint_rows(z, x0i, r0i, x0j, r0j, length0, select):
+    """Rows of one joint of any kind: `select` (r, 12) picks them (one-hot) among the candidate
+    quantities of `diffsusp.model.topology.JOINT_CANDIDATES`, so that joints of every kind are
+    one vmapped group. Same rows as `joint_rows`."""
+    xi, ri = _pose(z[:6], x0i, r0i)
+    xj, rj = _pose(z[6:], x0j, r0j)
+    d = xi - xj
+    cand = jnp.concatenate([
+        d, d @ rj, ri[:, 2] @ rj[:, :2], ri[:, 0:1].T @ rj[:, 1],
+        (ri[:, 2] @ rj[:, 2])[None], (_safe_norm(d) - length0)[None], jnp.zeros(1, d.dtype),
+    ])
+    return select @ cand
+
+
+def driver_row(z6, offset, x0m, direction):
     xm, _ = _pose(z6, offset, jnp.eye(3))
     return jnp.stack([(xm - x0m) @ direction])
 
 
-# ----------------------------------------------------------------------------- layout
-
-
-class Layout:
-    """Static index bookkeeping of one mechanism: where every element lands in the KKT system.
-
-    Coordinates of part a occupy 6a..6a+5; the ground is a virtual part P at 6P..6P+5.
-    Multiplier k (of `independent_rows`) sits at 6(P+1) + k; redundant rows go to one dummy slot
-    at the end. `keep` extracts the live unknowns in the order (q, λ).
-    """
-
-    def __init__(self, mech: Mechanism):
-        n_parts = len(mech.parts)
-        self.n = 6 * n_parts
-        self.m = len(mech.independent_rows)
-        self.base = base = 6 * (n_parts + 1)
-        self.size = base + self.m + 1
-        dummy = base + self.m
-        position = {r: base + k for k, r in enumerate(mech.independent_rows)}
-        self.row_slot = np.array([position.get(r, dummy) for r in range(mech.n_rows)], dtype=int)
-        self.keep = np.concatenate([np.arange(self.n), base + np.arange(self.m)])
-        marker_part = np.array(mech.markers.part, dtype=int)
-        self.marker_part = np.where(marker_part == GROUND, n_parts, marker_part)
-        self.centre = np.zeros((n_parts + 1, 3))
-        self.centre[:n_parts] = np.asarray(mech.reference_points, dtype=float).reshape(-1, 3)
-        self.angular = np.zeros(mech.n_rows, dtype=bool)
-        for kind, _, offsets in row_blocks(mech.joints):
-            for row in _ANGULAR_ROWS[kind]:
-                self.angular[offsets + row] = True
-        self.angular_live = self.angular[list(mech.independent_rows)]
-
-    def coords(self, markers_i, markers_j) -> np.ndarray:
-        """(E, 12) global coordinate indices of the two parts of each element."""
-        a = self.marker_part[np.asarray(markers_i, dtype=int)]
-        b = self.marker_part[np.asarray(markers_j, dtype=int)]
-        six = np.arange(6)
-        return np.concatenate([6 * a[:, None] + six, 6 * b[:, None] + six], axis=1)
-
-
-@functools.lru_cache(maxsize=64)
-def layout(mech_static_key) -> Layout:
-    return Layout(mech_static_key.mech)
-
-
-class _Key:
-    """Hashable wrapper keyed on the mechanism's static structure (values do not matter)."""
-
-    def __init__(self, mech):
-        self.mech = mech
-        self.key = jax.tree_util.tree_structure(mech)
-
-    def __hash__(self):
-        return hash(self.key)
-
-    def __eq__(self, other):
-        return self.key == other.key
-
-
-def get_layout(mech: Mechanism) -> Layout:
-    return layout(_Key(mech))
-
-
 # ----------------------------------------------------------------------------- assembly
+
+
+def topology(mech: Mechanism):
+    """The mechanism's static index data (`diffsusp.model.topology.Topology`)."""
+    return mech.topology
 
 
 def bushing_params(mech):
@@ -241,138 +193,88 @@ def bushing_params(mech):
     )
 
 
-def _element_terms(mech: Mechanism, loads: Loads, q, lam, lay: Layout, with_jacobian: bool):
-    """All element contributions as a list of (row indices, col indices, values) for the matrix
-    and (indices, values) for the residual vector."""
-    qfull = jnp.concatenate([q, jnp.zeros(6, q.dtype)])
+def marker_offsets(mech: Mechanism):
+    """Every marker's position relative to its part's reference point (mm, at design)."""
+    topo = mech.topology
+    return mech.markers.position - jnp.asarray(topo.centre[topo.marker_part])
+
+
+def force_groups(mech: Mechanism, loads: Loads):
+    """The force element groups as (group, fn, args): `fn(z, *args)` gives the 12 generalised
+    forces of one element (I part, then J part) at the coordinates z of its two parts."""
+    topo = mech.topology
     mk = mech.markers
-    offset = mk.position - jnp.asarray(lay.centre[lay.marker_part])
-    vec_terms, mat_terms = [], []
-
-    def add_force(fn, idx, *args):
-        for sel, side, sub in _ground_split(idx, lay):
-            f = _restrict(fn, side, slice_output=True)
-            a = jax.tree.map(lambda x, sel=sel: x[sel], args)
-            z = qfull[sub]
-            if with_jacobian:
-                val, jac = jax.vmap(_value_and_jacfwd(f))(z, *a)
-                mat_terms.append((sub[:, :, None], sub[:, None, :], jac))
-            else:
-                val = jax.vmap(f)(z, *a)
-            vec_terms.append((sub, val))
-
-    if mech.bushings.names:
-        b = mech.bushings
+    offset = marker_offsets(mech)
+    out = []
+    b = mech.bushings
+    if topo.bushings is not None:
         i, j = np.asarray(b.i_marker), np.asarray(b.j_marker)
         params = bushing_params(mech)
         geometry = (offset[i], mk.orientation[i], offset[j], mk.orientation[j])
         if b.has_splines:
-            add_force(_bushing_force, lay.coords(i, j), *geometry, params,
-                      jnp.asarray(b.spline_axes, dtype=bool))
+            out.append((topo.bushings, bushing_force,
+                        (*geometry, params, jnp.asarray(b.spline_axes, dtype=bool))))
         else:
             params = {k: v for k, v in params.items() if not k.startswith("spline")}
-            add_force(functools.partial(_bushing_force, spline_mask=None), lay.coords(i, j),
-                      *geometry, params)
+            out.append((topo.bushings, functools.partial(bushing_force, spline_mask=None),
+                        (*geometry, params)))
+    s = mech.springs
+    for g in topo.springs:
+        sel = g.members
+        i, j = np.asarray(s.i_marker)[sel], np.asarray(s.j_marker)[sel]
+        p = dict(k=s.k[sel], free_length=s.free_length[sel], table_x=s.table_x[sel],
+                 table_y=s.table_y[sel])
+        out.append((g, functools.partial(_spring_force, tabulated=g.kind),
+                    (offset[i], offset[j], p)))
+    st = mech.stops
+    for g in topo.stops:
+        sel = g.members
+        i, j = np.asarray(st.i_marker)[sel], np.asarray(st.j_marker)[sel]
+        p = dict(length=st.length[sel], k=st.k[sel], cubic=st.cubic[sel])
+        out.append((g, functools.partial(_stop_force, kind=g.kind), (offset[i], offset[j], p)))
+    lp = mech.load_points
+    if topo.loads is not None:
+        mm, ff = np.asarray(lp.marker), np.asarray(lp.frame)
+        axes = jnp.where(jnp.asarray(ff < 0)[:, None, None], jnp.eye(3),
+                         mk.orientation[np.where(ff < 0, mm, ff)])
+        out.append((topo.loads, functools.partial(load_force, global_frame=False),
+                    (offset[mm], axes, loads.force, loads.moment)))
+    return out
 
-    for elements, tension_of in (
-        (mech.springs, lambda e, k: functools.partial(spring_tension, tabulated=k)),
-        (mech.stops, lambda e, k: functools.partial(stop_tension, kind=k)),
-    ):
-        if not elements.names:
-            continue
-        flags = elements.tabulated if elements is mech.springs else elements.kind
-        params = (
-            dict(k=elements.k, free_length=elements.free_length, table_x=elements.table_x,
-                 table_y=elements.table_y)
-            if elements is mech.springs
-            else dict(length=elements.length, k=elements.k, cubic=elements.cubic)
-        )
-        for flag in sorted(set(flags)):
-            sel = np.array([f == flag for f in flags])
-            i = np.asarray(elements.i_marker)[sel]
-            j = np.asarray(elements.j_marker)[sel]
-            tension = tension_of(elements, flag)
-            p_sel = {k: v[sel] for k, v in params.items()}
-            add_force(
-                lambda z, a, c, p, tension=tension: _line_force(
-                    z, a, c, lambda length: tension(length, p)
-                ),
-                lay.coords(i, j), offset[i], offset[j], p_sel,
-            )
 
-    if mech.load_points.names:
-        lp = mech.load_points
-        m_idx = np.asarray(lp.marker)
-        f_idx = np.asarray(lp.frame)
-        for is_global in (True, False):
-            sel = (f_idx == GROUND) == is_global
-            if not sel.any():
-                continue
-            mm, ff = m_idx[sel], np.where(f_idx[sel] < 0, m_idx[sel], f_idx[sel])
-            idx = lay.coords(mm, ff)
-            if is_global:  # the frame is fixed: only the loaded part's coordinates matter
-                idx[:, 6:] = lay.base - 6 + np.arange(6)
-            add_force(
-                functools.partial(_load_force, global_frame=is_global),
-                idx, offset[mm], mk.orientation[ff], loads.force[sel], loads.moment[sel],
-            )
+def _spring_force(z, x0i, x0j, p, tabulated):
+    return line_force(z, x0i, x0j, lambda length: spring_tension(length, p, tabulated))
 
-    # Constraint rows: value, (r, 12) Jacobian and λ-weighted Hessian per joint.
-    row_vals = []
-    lam_rows = jnp.concatenate([lam, jnp.zeros(1, lam.dtype)])[jnp.asarray(lay.row_slot - lay.base)]
-    for kind, idx, offsets in row_blocks(mech.joints):
-        i = np.asarray(mech.joints.i_marker)[idx]
-        j = np.asarray(mech.joints.j_marker)[idx]
-        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
-        fn = functools.partial(joint_rows, kind)
-        d0 = mk.position[i] - mk.position[j]
+
+def _stop_force(z, x0i, x0j, p, kind):
+    return line_force(z, x0i, x0j, lambda length: stop_tension(length, p, kind))
+
+
+def constraint_groups(mech: Mechanism, loads: Loads):
+    """The constraint groups as (group, fn, args, value offset): `fn(z, *args)` gives the rows Φ
+    of one joint (or driver) at the coordinates z of its parts; the offset (driver values) is
+    subtracted from the rows."""
+    topo = mech.topology
+    mk = mech.markers
+    offset = marker_offsets(mech)
+    out = []
+    g = topo.joints
+    if g is not None:
+        i, j = np.asarray(mech.joints.i_marker), np.asarray(mech.joints.j_marker)
         args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
-                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
-        _constraint_terms(fn, lay.coords(i, j), rows, args, qfull, lam_rows, lay,
-                          vec_terms, mat_terms, row_vals, with_jacobian)
-    if mech.drivers.names:
+                _safe_norm(mk.position[i] - mk.position[j]), jnp.asarray(g.select))
+        out.append((g, selected_joint_rows, args, None))
+    if topo.drivers is not None:
         mm = np.asarray(mech.drivers.marker)
-        rows = mech.joints.n_rows + np.arange(len(mm))[:, None]
-        idx = lay.coords(mm, mm)[:, :6]
-        _constraint_terms(_driver_row, idx, rows,
-                          (offset[mm], mk.position[mm], mech.drivers.direction),
-                          qfull, lam_rows, lay, vec_terms, mat_terms, row_vals, with_jacobian,
-                          offset=loads.driver[:, None])
-    return vec_terms, mat_terms, row_vals
+        out.append((topo.drivers, driver_row, (offset[mm], mk.position[mm],
+                                                mech.drivers.direction),
+                    loads.driver[:, None]))
+    return out
 
 
-def _ground_split(idx, lay):
-    """Split a group of two-part elements (E, 12 coordinate indices) by which parts move:
-    yields (selection, side, indices) with side 'both' (12 coordinates), 'a' or 'b' (the 6 of
-    the moving part; the other is the ground). Differentiating only what moves halves the work
-    for the many elements attached to the ground (the body of a K&C rig)."""
-    ground = lay.base - 6
-    a_ground = idx[:, 0] == ground
-    b_ground = idx[:, 6] == ground
-    for sel, side, cols in (
-        (~a_ground & ~b_ground, "both", slice(0, 12)),
-        (~a_ground & b_ground, "a", slice(0, 6)),
-        (a_ground & ~b_ground, "b", slice(6, 12)),
-    ):
-        if sel.any():
-            yield sel, side, idx[sel][:, cols]
-
-
-def _restrict(fn, side: str, slice_output: bool):
-    """`fn(z12, ...)` as a function of the moving part's 6 coordinates (ground ones are zero).
-    With `slice_output`, keep only the moving part's 6 generalised forces."""
-    if side == "both":
-        return fn
-
-    def restricted(z6, *args):
-        zero = jnp.zeros(6, z6.dtype)
-        z = jnp.concatenate([z6, zero] if side == "a" else [zero, z6])
-        out = fn(z, *args)
-        if slice_output:
-            return out[:6] if side == "a" else out[6:]
-        return out
-
-    return restricted
+def _full(mech, y):
+    """Solver coordinates with the ground's six zero coordinates appended (its slot)."""
+    return jnp.concatenate([y, jnp.zeros(6, y.dtype)])
 
 
 def _value_and_jacfwd(fn):
@@ -389,91 +291,106 @@ def _value_and_jacfwd(fn):
     return wrapped
 
 
-def _constraint_terms(fn, idx, rows, args, qfull, lam_rows, lay, vec_terms, mat_terms,
-                      row_vals, with_jacobian, offset=None, split=True):
-    if split and idx.shape[1] == 12:
-        for sel, side, sub in _ground_split(idx, lay):
-            _constraint_terms(_restrict(fn, side, slice_output=False), sub, rows[sel],
-                              jax.tree.map(lambda x, sel=sel: x[sel], args), qfull, lam_rows, lay,
-                              vec_terms, mat_terms, row_vals, with_jacobian,
-                              None if offset is None else offset[sel], split=False)
-        return
-    z = qfull[idx]
-    lam_e = lam_rows[jnp.asarray(rows)]  # (E, r)
-    slots = lay.row_slot[rows]  # (E, r)
-    if with_jacobian:
-        val, jac, g, hess = _vmapped_constraint(fn, z, lam_e, args)
-        mat_terms.append((idx[:, :, None], idx[:, None, :], hess))
-        mat_terms.append((idx[:, :, None], slots[:, None, :], jnp.swapaxes(jac, 1, 2)))
-        mat_terms.append((slots[:, :, None], idx[:, None, :], jac))
-    else:
-        def value_and_reaction(z_, lam_, *a):
-            val, vjp = jax.vjp(lambda zz: fn(zz, *a), z_)
-            return val, vjp(lam_)[0]
+def _rows_and_reaction(fn):
+    """`(z, λ, *args) -> (Φ, Φ_zᵀλ)` of one constraint element (reverse mode inside)."""
 
-        val, g = jax.vmap(value_and_reaction)(z, lam_e, *args)
-    if offset is not None:
-        val = val - offset
-    vec_terms.append((idx, g))
-    vec_terms.append((slots, val))
-    row_vals.append((rows, val))
+    def wrapped(z, lam, *args):
+        val, vjp = jax.vjp(lambda zz: fn(zz, *args), z)
+        return val, vjp(lam)[0]
 
-
-def _vmapped_constraint(fn, z, lam_e, args):
-    """Per joint: rows Φ, Jacobian A (r×k), Aᵀλ and the Hessian Σ λ ∂²Φ (k×k)."""
-
-    def per_element(z_, lam_, *a):
-        def reaction(zz):
-            val, vjp = jax.vjp(lambda z3: fn(z3, *a), zz)
-            return vjp(lam_)[0], val
-
-        hess, _ = jax.jacfwd(reaction, has_aux=True)(z_)
-        val, jac = _value_and_jacfwd(fn)(z_, *a)
-        return val, jac, jac.T @ lam_, hess
-
-    return jax.vmap(per_element)(z, lam_e, *args)
+    return wrapped
 
 
 def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
     """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case.
 
-    All element contributions land in the live unknowns through one scatter-add each for the
-    vector and the matrix (static destinations; ground and redundant-row entries go to a trash
-    slot), which XLA runs far faster than one scatter per element group.
+    Every element group is evaluated once (vmapped over its elements): force elements with their
+    12×12 forward-mode Jacobian, constraints with their rows, Φ_zᵀλ and (one forward-over-
+    reverse pass) their Jacobian A and λ-weighted Hessian Σλ∂²Φ. All contributions land in the
+    live unknowns through one scatter-add for the vector and one for the matrix (static
+    destinations; ground and redundant-row entries go to a trash slot).
     """
-    lay = get_layout(mech)
-    vec_terms, mat_terms, _ = _element_terms(mech, loads, q, lam, lay, with_jacobian)
-    size = lay.n + lay.m
-    pos = np.full(lay.size, size)  # global index → live position; everything else → trash
-    pos[lay.keep] = np.arange(size)
-    dest = np.concatenate([pos[np.asarray(idx)].reshape(-1) for idx, _ in vec_terms])
-    vals = jnp.concatenate([val.reshape(-1) for _, val in vec_terms])
-    r = jnp.zeros(size + 1, q.dtype).at[dest].add(vals)[:size]
+    topo = mech.topology
+    size = topo.n + topo.m
+    yfull = _full(mech, q)
+    lam_slots = jnp.concatenate([lam, jnp.zeros(1, lam.dtype)])
+    live = topo.live
+    vec_idx, vec_val, mat_r, mat_c, mat_val = [], [], [], [], []
+
+    def add_vec(idx, val):
+        vec_idx.append(live[np.asarray(idx)].reshape(-1))
+        vec_val.append(val.reshape(-1))
+
+    def add_mat(ri, ci, val):
+        ri, ci = np.broadcast_arrays(live[np.asarray(ri)], live[np.asarray(ci)])
+        mat_r.append(ri.reshape(-1))
+        mat_c.append(ci.reshape(-1))
+        mat_val.append(val.reshape(-1))
+
+    for g, fn, args in force_groups(mech, loads):
+        z = yfull[g.coords]
+        if with_jacobian:
+            val, jac = jax.vmap(_value_and_jacfwd(fn))(z, *args)
+            add_mat(g.coords[:, :, None], g.coords[:, None, :], jac)
+        else:
+            val = jax.vmap(fn)(z, *args)
+        add_vec(g.coords, val)
+
+    for g, fn, args, value_offset in constraint_groups(mech, loads):
+        z = yfull[g.coords]
+        lam_e = lam_slots[jnp.asarray(g.row_slots - topo.base)]
+        pair = _rows_and_reaction(fn)
+        if with_jacobian:
+            def both(zz, lam_, *a, pair=pair):
+                out = pair(zz, lam_, *a)
+                return out, out
+
+            (jac, hess), (val, react) = jax.vmap(
+                lambda zz, lam_, *a, both=both: jax.jacfwd(both, has_aux=True)(zz, lam_, *a)
+            )(z, lam_e, *args)
+            add_mat(g.coords[:, :, None], g.coords[:, None, :], hess)
+            add_mat(g.coords[:, :, None], g.row_slots[:, None, :], jnp.swapaxes(jac, 1, 2))
+            add_mat(g.row_slots[:, :, None], g.coords[:, None, :], jac)
+        else:
+            val, react = jax.vmap(pair)(z, lam_e, *args)
+        if value_offset is not None:
+            val = val - value_offset
+        add_vec(g.coords, react)
+        add_vec(g.row_slots, val)
+
+    r = jnp.zeros(size + 1, q.dtype).at[np.concatenate(vec_idx)].add(
+        jnp.concatenate(vec_val))[:size]
     if not with_jacobian:
         return r, None
-    dests, vals = [], []
-    for ri, ci, val in mat_terms:
-        ri, ci = np.broadcast_arrays(pos[np.asarray(ri)], pos[np.asarray(ci)])
-        trash = (ri == size) | (ci == size)
-        dests.append(np.where(trash, size * size, ri * size + ci).reshape(-1))
-        vals.append(val.reshape(-1))
-    flat = jnp.zeros(size * size + 1, q.dtype).at[np.concatenate(dests)].add(jnp.concatenate(vals))
+    ri, ci = np.concatenate(mat_r), np.concatenate(mat_c)
+    dest = np.where((ri == size) | (ci == size), size * size, ri * size + ci)
+    flat = jnp.zeros(size * size + 1, q.dtype).at[dest].add(jnp.concatenate(mat_val))
     return r, flat[:-1].reshape(size, size)
 
 
 def constraint_values(mech: Mechanism, loads: Loads, q):
-    """All constraint rows (joints then drivers, redundant ones included) at q."""
-    lay = get_layout(mech)
-    _, _, row_vals = _element_terms(mech, loads, q, jnp.zeros(lay.m, q.dtype), lay, False)
-    out = jnp.zeros(mech.n_rows, q.dtype)
-    for rows, val in row_vals:
-        out = out.at[np.asarray(rows).reshape(-1)].set(val.reshape(-1))
-    return out
+    """All constraint rows (joints then drivers, redundant ones included) at solver coordinates
+    q, without touching the force elements."""
+    yfull = _full(mech, q)
+    out = jnp.zeros(mech.n_rows + 1, q.dtype)  # the last entry takes the padding rows
+    for g, fn, args, value_offset in constraint_groups(mech, loads):
+        val = jax.vmap(fn)(yfull[g.coords], *args)
+        if value_offset is not None:
+            val = val - value_offset
+        out = out.at[np.asarray(g.rows).reshape(-1)].set(val.reshape(-1))
+    return out[:-1]
+
+
+def constraint_jacobian(mech: Mechanism, loads: Loads, q):
+    """Φ_q (m, n) of the independent constraint rows at solver coordinates q (forward mode
+    through the constraint rows only)."""
+    live = np.asarray(mech.independent_rows, dtype=int)
+    return jax.jacfwd(lambda q_: constraint_values(mech, loads, q_)[live])(q)
 
 
 def to_internal(mech: Mechanism, q):
     """Public coordinates (p, b) → solver coordinates (P = p + R(b)·c, b), one case."""
-    c = jnp.asarray(get_layout(mech).centre[:-1])
+    c = jnp.asarray(mech.topology.centre[:-1])
     qb = q.reshape(-1, 6)
     rot = jax.vmap(gibbs_to_matrix)(qb[:, 3:])
     return jnp.concatenate([qb[:, :3] + jnp.einsum("pij,pj->pi", rot, c), qb[:, 3:]], 1).ravel()
@@ -481,7 +398,7 @@ def to_internal(mech: Mechanism, q):
 
 def to_public(mech: Mechanism, y):
     """Solver coordinates (P, b) → public coordinates (p = P − R(b)·c, b), one case."""
-    c = jnp.asarray(get_layout(mech).centre[:-1])
+    c = jnp.asarray(mech.topology.centre[:-1])
     yb = y.reshape(-1, 6)
     rot = jax.vmap(gibbs_to_matrix)(yb[:, 3:])
     return jnp.concatenate([yb[:, :3] - jnp.einsum("pij,pj->pi", rot, c), yb[:, 3:]], 1).ravel()
@@ -515,10 +432,10 @@ def retract(y, dy, n: int):
         b = q6[3:]
         w = gibbs_angular_jacobian(b) @ d6[3:]
         c1, c2, c3 = _screw_coefficients(w @ w)
-        wx = jnp.cross(w, d6[:3])
-        step = d6[:3] + c1 * wx + c2 * jnp.cross(w, wx)
+        wx = cross(w, d6[:3])
+        step = d6[:3] + c1 * wx + c2 * cross(w, wx)
         g = c3 * w  # Gibbs vector of the rotation ω
-        b_new = (g + b + jnp.cross(g, b)) / (1.0 - g @ b)
+        b_new = (g + b + cross(g, b)) / (1.0 - g @ b)
         return jnp.concatenate([q6[:3] + step, b_new])
 
     moved = jax.vmap(one)(q, d).reshape(-1)

@@ -14,13 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix
-from ..model.mechanism import GROUND, JOINT_ROWS, Mechanism, row_blocks
+from ..model.mechanism import GROUND, Mechanism
 from .kernel import (
-    _vmapped_constraint,
     bushing_params,
     bushing_state,
-    get_layout,
-    joint_rows,
+    constraint_groups,
+    marker_offsets,
     spring_tension,
     to_internal,
 )
@@ -64,11 +63,8 @@ def marker_poses(mech: Mechanism, q):
 
 
 def _element_z(mech, q, i_markers, j_markers):
-    lay = get_layout(mech)
     y = jnp.concatenate([to_internal(mech, q), jnp.zeros(6)])
-    idx = lay.coords(i_markers, j_markers)
-    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
-    return y[idx], offset
+    return y[mech.topology.coords(i_markers, j_markers)], marker_offsets(mech)
 
 
 @_batched
@@ -121,33 +117,27 @@ def joint_reactions(mech: Mechanism, sol: StaticSolution):
 
 
 def _joint_reactions(mech: Mechanism, q, lam):
-    lay = get_layout(mech)
-    y = to_internal(mech, q)
-    lam_rows = jnp.concatenate([lam, jnp.zeros(1)])[jnp.asarray(lay.row_slot - lay.base)]
-    mk = mech.markers
-    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
-    yfull = jnp.concatenate([y, jnp.zeros(6)])
+    topo = mech.topology
+    lam_slots = jnp.concatenate([lam, jnp.zeros(1)])
+    yfull = jnp.concatenate([to_internal(mech, q), jnp.zeros(6)])
     pos, _ = marker_poses(mech, q)
     n_joints = len(mech.joints.names)
     force = jnp.zeros((n_joints, 3))
     moment = jnp.zeros((n_joints, 3))
-    for kind, idx, offsets in row_blocks(mech.joints):
-        i = np.asarray(mech.joints.i_marker)[idx]
-        j = np.asarray(mech.joints.j_marker)[idx]
-        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
-        d0 = mk.position[i] - mk.position[j]
-        args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
-                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
-        z = yfull[lay.coords(i, j)]
-        _, _, g, _ = _vmapped_constraint(functools.partial(joint_rows, kind), z,
-                                         lam_rows[jnp.asarray(rows)], args)
-        f_i = g[:, :3]
-        b_i = z[:, 3:6]
+    for g, fn, args, _ in constraint_groups(mech, mech.loads()):
+        if g.kind == "driver":
+            continue
+        z = yfull[g.coords]
+        lam_e = lam_slots[jnp.asarray(g.row_slots - topo.base)]
+        react = jax.vmap(lambda z_, l_, *a, fn=fn: jax.vjp(lambda zz: fn(zz, *a), z_)[1](l_)[0])(
+            z, lam_e, *args)
+        f_i = react[:, :3]
         # Q_b = G(b)ᵀ M about the part's reference point: recover M, move it to the marker.
         m_ref = jax.vmap(lambda b, gb: jnp.linalg.solve(gibbs_angular_jacobian(b).T, gb))(
-            b_i, g[:, 3:6]
+            z[:, 3:6], react[:, 3:6]
         )
+        i = np.asarray(mech.joints.i_marker)[g.members]
         arm = pos[i] - z[:, :3]
-        force = force.at[idx].set(f_i)
-        moment = moment.at[idx].set(m_ref - jnp.cross(arm, f_i))
+        force = force.at[g.members].set(f_i)
+        moment = moment.at[g.members].set(m_ref - jnp.cross(arm, f_i))
     return force, moment

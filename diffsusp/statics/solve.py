@@ -25,14 +25,7 @@ from jaxtyping import Array, Float, Int
 
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .kernel import (
-    assemble,
-    constraint_values,
-    get_layout,
-    retract,
-    to_internal,
-    to_public,
-)
+from .kernel import assemble, retract, to_internal, to_public
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
 STATUS_TEXT = {
@@ -83,126 +76,98 @@ def _scaled_solve(jac, rhs):
     return d_c * jnp.linalg.solve(jac * d_r[:, None] * d_c[None, :], d_r * rhs)
 
 
-class _Weights(eqx.Module):
-    """Per-row scales of the residual: tolerances and the merit function derive from these."""
-
-    force: Array  # (n + m,) multiply the residual to get "relative force" rows (forces only)
-    constraint: Array  # (n + m,) multiply to get constraint rows in mm
-
-
-def _weights(mech: Mechanism, loads: Loads, reaction):
-    lay = get_layout(mech)
-    n, m = lay.n, lay.m
-    length = mech.length_scale
-    rot_col = np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6).astype(bool)
-    f_scale = (
+def _force_scale(mech: Mechanism, loads: Loads, reaction):
+    """Load scale F_s (N) of one case: the largest applied force, applied moment / L and joint
+    reaction force, plus 1 N."""
+    return (
         1.0
         + jnp.max(jnp.abs(loads.force), initial=0.0)
-        + jnp.max(jnp.abs(loads.moment), initial=0.0) / length
-        + jnp.max(jnp.abs(jnp.where(rot_col, 0.0, reaction)), initial=0.0)
+        + jnp.max(jnp.abs(loads.moment), initial=0.0) / mech.length_scale
+        + jnp.max(jnp.abs(reaction.reshape(-1, 6)[:, :3]), initial=0.0)
     )
-    force_w = jnp.concatenate([jnp.where(rot_col, 1.0 / (f_scale * length), 1.0 / f_scale),
-                              jnp.zeros(m)])
-    constraint_w = jnp.concatenate(
-        [jnp.zeros(n), jnp.asarray(np.where(lay.angular_live, length, 1.0))]
-    )
-    return _Weights(force=force_w, constraint=constraint_w)
 
 
-def _measures(r, w: _Weights, length):
-    force = jnp.max(jnp.abs(r * w.force), initial=0.0)
-    constraint = jnp.max(jnp.abs(r * w.constraint), initial=0.0)
-    merit = 0.5 * (jnp.sum((r * w.force) ** 2) + jnp.sum((r * w.constraint / length) ** 2))
-    return force, constraint, merit
+def _measures(mech: Mechanism, r, f_scale):
+    """(largest force row / F_s, largest constraint row in mm, scaled merit ½‖r_s‖²): moment
+    rows are divided by F_s·L and angular constraint rows multiplied by L."""
+    topo = mech.topology
+    n, length = topo.n, mech.length_scale
+    rot = np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6).astype(bool)
+    force = r[:n] / (f_scale * jnp.asarray(np.where(rot, length, 1.0)))
+    constraint = r[n:] * jnp.asarray(np.where(topo.angular_live, length, 1.0))
+    merit = 0.5 * (jnp.sum(force**2) + jnp.sum((constraint / length) ** 2))
+    return (jnp.max(jnp.abs(force), initial=0.0), jnp.max(jnp.abs(constraint), initial=0.0),
+            merit)
 
 
-def _initial_multipliers(a, r, n, length, angular):
-    """Weighted least squares for λ at the start pose: min ‖W(Q + Φ_qᵀλ)‖ (W: moments / L)."""
-    col_w = jnp.asarray(np.tile(np.r_[np.ones(3), np.full(3, 1.0 / length)], n // 6))
-    row_s = jnp.asarray(np.where(angular, 1.0 / length, 1.0))  # λ in N for every row
-    a_s = a * row_s[:, None] * col_w[None, :]
-    rhs = -(r[:n] * col_w)
-    normal = a_s @ a_s.T
-    d = 1.0 / jnp.sqrt(jnp.maximum(jnp.diag(normal), 1e-300))
-    lam_s = d * jnp.linalg.solve(normal * d[:, None] * d[None, :], d * (a_s @ rhs))
-    return lam_s * row_s
+_LINE_SEARCH = 13  # trial steps α = 1, ½, ¼, … before the last one is taken anyway
 
 
 def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
-    lay = get_layout(mech)
-    n, m = lay.n, lay.m
+    """Damped Newton on the KKT system from (q0, λ = 0), one load case.
+
+    One evaluation of the residual and its Jacobian per loop pass: a pass evaluates the trial
+    point; if the scaled merit decreased enough (Armijo) the point is accepted and the next
+    Newton step is solved from the Jacobian just computed, otherwise the step is halved. So a
+    full Newton step costs one assembly and one linear solve, and the program traces the
+    assembly once."""
+    topo = mech.topology
+    n = topo.n
     length = mech.length_scale
-    rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6), np.zeros(m)])
+    rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6), np.zeros(topo.m)])
+    y0 = jnp.concatenate([q0, jnp.zeros(topo.m, q0.dtype)])
 
-    def evaluate(y):
-        return assemble(mech, loads, y[:n], y[n:])
-
-    def residual(y):
-        return assemble(mech, loads, y[:n], y[n:], with_jacobian=False)[0]
-
-    # Multipliers: least squares against the generalised forces at the start pose.
-    r0 = residual(jnp.concatenate([q0, jnp.zeros(m, q0.dtype)]))
-    if m:
-        live = np.asarray(mech.independent_rows)
-        phi_q = jax.jacfwd(lambda q: constraint_values(mech, loads, q)[live])(q0)
-        lam0 = _initial_multipliers(phi_q, r0, n, length, lay.angular_live)
-        reaction = phi_q.T @ lam0
-    else:
-        lam0, reaction = jnp.zeros(0, q0.dtype), jnp.zeros(n, q0.dtype)
-    w = _weights(mech, loads, reaction)
-    y0 = jnp.concatenate([q0, lam0])
-    r_start = r0 + jnp.concatenate([reaction, jnp.zeros(m, q0.dtype)])
-
-    def done(r, step):
+    def done(r, f_scale, step):
         # Converged, or at the round-off floor: within 1000× the tolerances and no longer moving.
-        force, constraint, _ = _measures(r, w, length)
+        force, constraint, _ = _measures(mech, r, f_scale)
         tight = (force <= rtol) & (constraint <= atol)
         floor = (force <= 1e3 * rtol) & (constraint <= 1e3 * atol) & (step <= 1e-13)
         return tight | floor
 
-    def cond(state):
-        y, r, it, status, step, _ = state
-        return (it < max_steps) & (status == MAX_STEPS) & ~done(r, step)
+    def cond(s):
+        return (s["it"] <= max_steps) & (s["status"] == MAX_STEPS) & ~s["done"]
 
-    def body(state):
-        y, _, it, status, _, stall = state
-        r, jac = evaluate(y)
+    def body(s):
+        y_try = retract(s["y"], s["alpha"] * s["dy"], n)
+        r, jac = assemble(mech, loads, y_try[:n], y_try[n:])
+        merit = _measures(mech, r, s["f_scale"])[2]
+        merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
+        first = s["it"] == 0
+        accept = first | (merit <= (1.0 - 1e-4 * s["alpha"]) * s["merit"]) | (
+            s["trial"] >= _LINE_SEARCH - 1)
+        # The next Newton step from the trial point (used only if it is accepted).
+        f_scale = _force_scale(mech, loads, jac[:n, n:] @ y_try[n:])
         dy = _scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, 0.5 / jnp.maximum(cap, 1e-300))
-        merit0 = _measures(r, w, length)[2]
-
-        # Backtracking from α = 1 (the first pass of the loop evaluates the full step).
-        def ls_cond(carry):
-            alpha, _, merit, k = carry
-            return (k < 13) & ~(merit <= (1.0 - 1e-4 * alpha) * merit0)
-
-        def ls_body(carry):
-            alpha, _, _, k = carry
-            alpha = jnp.where(k == 0, 1.0, 0.5 * alpha)
-            r_try = residual(retract(y, alpha * dy, n))
-            merit = _measures(r_try, w, length)[2]
-            return alpha, r_try, jnp.where(jnp.isfinite(merit), merit, jnp.inf), k + 1
-
-        init = (jnp.asarray(1.0), r, jnp.asarray(jnp.inf), jnp.asarray(0))
-        alpha, r_new, _, _ = jax.lax.while_loop(ls_cond, ls_body, init)
-        status = jnp.where(jnp.all(jnp.isfinite(r_new)), status, NONFINITE)
-        # A case whose line search keeps cutting the step to nothing has no equilibrium
-        # nearby (e.g. a suspension pulled past its travel): stop it so that it does not hold
-        # the whole vmapped batch to max_steps.
-        stall = jnp.where(alpha < 0.01, stall + 1, 0)
+        step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
+        # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
+        # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
+        # vmapped batch to max_steps.
+        stall = jnp.where(first, 0, jnp.where(s["alpha"] < 0.01, s["stall"] + 1, 0))
+        status = jnp.where(jnp.all(jnp.isfinite(r)), MAX_STEPS, NONFINITE)
         status = jnp.where(stall >= _STALL_STEPS, STALLED, status)
-        step = jnp.max(jnp.abs(alpha * dy[:n])) / (length + jnp.max(jnp.abs(y[:n])))
-        return retract(y, alpha * dy, n), r_new, it + 1, status, step, stall
+        accepted = dict(
+            y=y_try, r=r, dy=dy, alpha=jnp.ones_like(s["alpha"]),
+            merit=_measures(mech, r, f_scale)[2], f_scale=f_scale, it=s["it"] + 1,
+            trial=jnp.zeros_like(s["trial"]), status=status, stall=stall,
+            done=done(r, f_scale, jnp.where(first, jnp.inf, step)),
+        )
+        rejected = dict(s, alpha=0.5 * s["alpha"], trial=s["trial"] + 1)
+        return jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
 
-    state = (y0, r_start, jnp.asarray(0), jnp.asarray(MAX_STEPS), jnp.asarray(jnp.inf),
-             jnp.asarray(0))
-    y, r, it, status, step, _ = jax.lax.while_loop(cond, body, state)
-    force, constraint, _ = _measures(r, w, length)
-    status = jnp.where(done(r, step), SUCCESS,
-                       jnp.where(jnp.all(jnp.isfinite(r)), status, NONFINITE))
-    info = jnp.stack([status.astype(float), it.astype(float), force, constraint])
-    return y, info
+    size = n + topo.m
+    zero = jnp.zeros((), y0.dtype)
+    state = dict(
+        y=y0, r=jnp.zeros(size, y0.dtype), dy=jnp.zeros(size, y0.dtype), alpha=zero + 1.0,
+        merit=zero + jnp.inf, f_scale=zero + 1.0, it=jnp.asarray(0), trial=jnp.asarray(0),
+        status=jnp.asarray(MAX_STEPS), stall=jnp.asarray(0), done=jnp.asarray(False),
+    )
+    s = jax.lax.while_loop(cond, body, state)
+    force, constraint, _ = _measures(mech, s["r"], s["f_scale"])
+    status = jnp.where(s["done"], SUCCESS, s["status"])
+    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint])
+    return s["y"], info
 
 
 @eqx.filter_custom_jvp
@@ -218,7 +183,7 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
     y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
-    n = get_layout(mech).n
+    n = mech.topology.n
 
     def residual(mech_, loads_):
         return assemble(mech_, loads_, y[:n], y[n:], with_jacobian=False)[0]
@@ -232,7 +197,7 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
 def _solve_one(mech, loads, q0, rtol, atol, max_steps):
     y0 = to_internal(mech, q0)
     y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
-    n = get_layout(mech).n
+    n = mech.topology.n
     return StaticSolution(
         q=to_public(mech, y[:n]),
         multipliers=y[n:],
