@@ -1,0 +1,22 @@
+"""Tyre force models (spec: tyre_contact_model §2, §7 C; issue 15).
+
+- `mf89`: the thesis's Bakker–Pacejka 1989/1991 Magic Formula (Annex B) and its twelve
+  identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);
+- `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
+
+```python
+from diffsusp.io.tir import read_tir
+from diffsusp import tyre
+m = tyre.MagicFormula6.from_tir(read_tir("car.tir"))
+f = tyre.evaluate(m, fz=4000.0, kappa=0.02, alpha=0.05)     # N, N·mm
+m89 = tyre.MagicFormula89.from_thesis("dunlop_r16", 2.0)
+tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
+```
+"""
+
+from . import mf6, mf89, thesis_sets
+from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
+from .mf89 import MagicFormula89
+
+__all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
+           "check_limits", "evaluate", "mf6", "mf89", "thesis_sets"]

@@ -1,0 +1,463 @@
+"""Magic Formula 5.2 / 6.1 / 6.2 steady-state tyre forces from `.tir` property files.
+
+spec: tyre §7 C, issue 15 (item 1, second bullet). The equations are those of Pacejka, *Tyre and
+Vehicle Dynamics* (3rd ed., 2012) §4.3.2 (4.E1–4.E78) for MF 6.1/6.2 and the MF-Tyre 5.2
+equation manual for FITTYP 5/6, with the deviations that TNO's MF-Tyre adopts and MFeval
+reproduces (each listed below: "deviation"). The .tir axis system is ISO-W (TYDEX W).
+
+**Units.** Library units at this interface: F_z [N], κ [-], α [rad], γ [rad], V_x [mm/s],
+pressure [Pa]; forces [N], moments [N·mm]. `from_tir` converts the file's SI values at the
+boundary (UNLOADED_RADIUS m → mm, LONGVL and VXLOW m/s → mm/s; every other coefficient is
+dimensionless or already N, rad, Pa); `to_tir` converts back.
+
+**Modes** (the MF-Tyre USE_MODE switches as MFeval's useMode 1xx/2xx, x1x/x2x):
+- `limits=True` (default, MF-Tyre's "limit checks on"): inputs saturated at the file's ranges
+  (FZMAX, KPUMIN/KPUMAX, ALPMIN/ALPMAX, CAMMIN/CAMMAX, PRESMIN/PRESMAX; a missing range is no
+  limit), F_z < 0 set to 0, the curvature factors E_x, E_y, E_t, E_xα, E_yκ clipped at 1, and
+  F_z raised to FZMIN in D_t and D_r (M_z) only; below FZMIN, M_x uses F_z·(F_z/FZMIN)² and M_y
+  F_z·(F_z/FZMIN) (MF-Tyre's low-load reductions). `check_limits` reports (warns about) the
+  inputs that will be saturated; the traced evaluation saturates silently.
+- `alpha_star=False` (default, as MF-Tyre): α* = α and γ* = γ; True: α* = tan α, γ* = sin γ
+  (the book's (4.E3)–(4.E4)).
+- No turn slip (all ζ = 1) and no low-speed model: the formulas assume V_x > VXLOW > 0.
+
+**Deviations from the book (MF-Tyre / MFeval), for 6.1 and 6.2:**
+- A_μ = 1 in (4.E8) (λ'_μ = λ*_μ) and λ_μV = 0 (not in .tir files);
+- M'_z0 = −t₀·F_y0(γ = 0) (4.E32) and, combined, F'_y = G_yκ·F_y0(γ = 0) (4.E74);
+- D_t = F_z·(R0/F'_z0)(q_Dz1 + q_Dz2·df_z)(1 − p_pz1·dp_i)(1 + q_Dz3·γ + q_Dz4·γ²)λ_t (paper A60,
+  γ not |γ|); B_t with (1 + q_Bz4·γ + q_Bz5·|γ|) (A58; q_Bz6 does not exist in .tir files);
+- D_r carries cos α* and M_zr0 a further cos α' (as MFeval); the combined M_zr has no cos α';
+- α_t,eq = atan(√(tan²α_t + (K_xκ/K'_yα)²κ²))·sgn α_t, same for α_r (A54–A55);
+  s = R0(s_sz1 + s_sz2·F_y/F_z0 + (s_sz3 + s_sz4·df_z)γ)λ_s with F_z0 (A56); t multiplied by
+  λ_Fz0;
+- M_x: the Besselink draft (49) with q_sx12…q_sx14; M_y: paper (A48), negative in ISO-W.
+
+MF 6.2 steady-state forces and moments at a given F_z are the 6.1 equations (6.2 changes the
+vertical model, the loaded and effective radius, not evaluated here). **MF 5.2** (FITTYP 5, 6):
+no pressure terms; K_yα = p_Ky1·F'_z0·sin(p_Ky4·atan(F_z/(p_Ky2·F'_z0)))(1 − p_Ky3|γ|)λ_Kyα
+(p_Ky4 = 2 when absent); S_Hy = (p_Hy1 + p_Hy2·df_z)λ_Hy + p_Hy3·γ·λ_Kyγ; K_yγ0 = (p_Hy3·K_yα0 +
+F_z(p_Vy3 + p_Vy4·df_z))λ_Kyγ; M_z = −t·(F_y − S_Vyκ) + M_zr + s·F_x; M_y =
+−R0·F_z·λ_My(q_sy1 + q_sy2·F_x/F_z0 + q_sy3|V_x/V0| + q_sy4(V_x/V0)⁴). FITTYP 5 (MF-Tyre 5.0 /
+PAC2002 files, e.g. Chrono's) is evaluated with these MF 5.2 equations; the λ_γ scale factors
+(LGAX, LGAY, LGAZ) are read but not applied (as MFeval; they are 1 in every file shipped).
+"""
+
+import math
+import warnings
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ..errors import ModelFileError, ModelWarning
+from ..io.tir import TirFile
+
+__all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
+           "FITTYP_VERSION"]
+
+FITTYP_VERSION = {5: "5.2", 6: "5.2", 52: "5.2", 61: "6.1", 62: "6.2"}
+"""The FITTYP values diffsusp evaluates and the equations it uses for each."""
+
+EPS = 1e-6  # ε_x, ε_y, ε_K, ε_V of (4.E6a) etc., as MF-Tyre
+
+_SCALING = ("LFZO LCX LMUX LEX LKX LHX LVX LCY LMUY LEY LKY LHY LVY LTR LRES LXAL LYKA LVYKA "
+            "LS LKYC LKZC LVMX LMX LMY LMP LGAX LGAY LGAZ").split()
+_SECTIONS = {
+    "MODEL": "FITTYP LONGVL VXLOW".split(),
+    "DIMENSION": ["UNLOADED_RADIUS"],
+    "OPERATING_CONDITIONS": ["INFLPRES", "NOMPRES"],
+    "VERTICAL": ["FNOMIN"],
+    "SCALING_COEFFICIENTS": _SCALING,
+    "LONGITUDINAL_COEFFICIENTS": (
+        "PCX1 PDX1 PDX2 PDX3 PEX1 PEX2 PEX3 PEX4 PKX1 PKX2 PKX3 PHX1 PHX2 PVX1 PVX2 PPX1 PPX2 "
+        "PPX3 PPX4 RBX1 RBX2 RBX3 RCX1 REX1 REX2 RHX1").split(),
+    "OVERTURNING_COEFFICIENTS": ("QSX1 QSX2 QSX3 QSX4 QSX5 QSX6 QSX7 QSX8 QSX9 QSX10 QSX11 "
+                                 "QSX12 QSX13 QSX14 PPMX1").split(),
+    "LATERAL_COEFFICIENTS": (
+        "PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PEY4 PEY5 PKY1 PKY2 PKY3 PKY4 PKY5 PKY6 PKY7 PHY1 "
+        "PHY2 PHY3 PVY1 PVY2 PVY3 PVY4 PPY1 PPY2 PPY3 PPY4 PPY5 RBY1 RBY2 RBY3 RBY4 RCY1 REY1 "
+        "REY2 RHY1 RHY2 RVY1 RVY2 RVY3 RVY4 RVY5 RVY6").split(),
+    "ROLLING_COEFFICIENTS": "QSY1 QSY2 QSY3 QSY4 QSY5 QSY6 QSY7 QSY8".split(),
+    "ALIGNING_COEFFICIENTS": (
+        "QBZ1 QBZ2 QBZ3 QBZ4 QBZ5 QBZ9 QBZ10 QCZ1 QDZ1 QDZ2 QDZ3 QDZ4 QDZ6 QDZ7 QDZ8 QDZ9 QDZ10 "
+        "QDZ11 QEZ1 QEZ2 QEZ3 QEZ4 QEZ5 QHZ1 QHZ2 QHZ3 QHZ4 PPZ1 PPZ2 SSZ1 SSZ2 SSZ3 SSZ4"
+    ).split(),
+}
+SECTION_OF = {name: sec for sec, names in _SECTIONS.items() for name in names}
+COEFFICIENTS = tuple(n for sec, names in _SECTIONS.items() for n in names if n != "FITTYP")
+"""Every coefficient the steady-state equations read (the model's differentiable leaves)."""
+
+REQUIRED = tuple(
+    "UNLOADED_RADIUS FNOMIN PCX1 PDX1 PDX2 PEX1 PEX2 PKX1 PKX2 PKX3 PHX1 PHX2 PVX1 PVX2 PCY1 "
+    "PDY1 PDY2 PDY3 PEY1 PEY2 PKY1 PKY2 PHY1 PHY2 PVY1 PVY2 QBZ1 QBZ2 QCZ1 QDZ1 QDZ2 QEZ1 QEZ2 "
+    "QHZ1 QHZ2".split())
+"""Coefficients every MF file must give (a missing one is an error naming its section); any
+other missing coefficient takes its neutral value (λ = 1, p_Ky4 = 2, others 0)."""
+
+_LIMITS = {"FZMIN": 0.0, "FZMAX": math.inf, "KPUMIN": -math.inf, "KPUMAX": math.inf,
+           "ALPMIN": -math.inf, "ALPMAX": math.inf, "CAMMIN": -math.inf, "CAMMAX": math.inf,
+           "PRESMIN": -math.inf, "PRESMAX": math.inf}
+_LIMIT_SECTION = {"FZMIN": "VERTICAL_FORCE_RANGE", "FZMAX": "VERTICAL_FORCE_RANGE",
+                  "KPUMIN": "LONG_SLIP_RANGE", "KPUMAX": "LONG_SLIP_RANGE",
+                  "ALPMIN": "SLIP_ANGLE_RANGE", "ALPMAX": "SLIP_ANGLE_RANGE",
+                  "CAMMIN": "INCLINATION_ANGLE_RANGE", "CAMMAX": "INCLINATION_ANGLE_RANGE",
+                  "PRESMIN": "INFLATION_PRESSURE_RANGE", "PRESMAX": "INFLATION_PRESSURE_RANGE"}
+_TO_LIBRARY = {"UNLOADED_RADIUS": 1000.0, "LONGVL": 1000.0, "VXLOW": 1000.0}
+"""SI → library factors (m → mm, m/s → mm/s) of the coefficients that carry a length."""
+
+
+class TyreForces(NamedTuple):
+    """Forces [N] and moments [N·mm] at the contact point, ISO-W axes."""
+
+    fx: Array
+    fy: Array
+    mx: Array
+    my: Array
+    mz: Array
+
+
+class MagicFormula6(eqx.Module):
+    """A Magic Formula 5.2 / 6.1 / 6.2 tyre (spec: tyre §7 C; module docstring for equations).
+
+    **Fields:** `coefficients` (name → float64 scalar array, library units: UNLOADED_RADIUS mm,
+    LONGVL mm/s, pressures Pa; differentiable, vmappable), `version` ("5.2", "6.1" or "6.2",
+    static), `limits` (static tuple of (name, value) pairs in SI/rad: FZMIN … PRESMAX).
+    """
+
+    coefficients: dict[str, Float[Array, ""]]
+    version: str = eqx.field(static=True)
+    limits: tuple[tuple[str, float], ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        if self.version not in ("5.2", "6.1", "6.2"):
+            raise ValueError(f"version {self.version!r}: expected '5.2', '6.1' or '6.2'")
+        missing = [n for n in COEFFICIENTS if n not in self.coefficients]
+        if missing:
+            raise ValueError(f"coefficients missing: {', '.join(missing[:8])}; build the model "
+                             "with MagicFormula6.from_tir or from_values")
+
+    @property
+    def limit(self) -> dict[str, float]:
+        return dict(self.limits)
+
+    def __getitem__(self, name: str) -> Array:
+        return self.coefficients[name]
+
+    def replace(self, **values) -> "MagicFormula6":
+        """A copy with some coefficients changed (library units)."""
+        c = dict(self.coefficients)
+        for k, v in values.items():
+            if k not in c:
+                raise ValueError(f"unknown coefficient {k!r}")
+            c[k] = jnp.asarray(v, dtype=float)
+        return MagicFormula6(c, self.version, self.limits)
+
+    @classmethod
+    def from_values(cls, values: dict, version: str = "6.1", limits: dict | None = None
+                    ) -> "MagicFormula6":
+        """From a dict of coefficients in library units (missing: neutral values)."""
+        c = {n: jnp.asarray(float(values.get(n, _default(n, values))), dtype=float)
+             for n in COEFFICIENTS}
+        lim = dict(_LIMITS)
+        lim.update(limits or {})
+        return cls(c, version, tuple(sorted(lim.items())))
+
+    @classmethod
+    def from_tir(cls, tir: TirFile) -> "MagicFormula6":
+        """From a `.tir` file (SI → library units at this boundary; see the module docstring).
+
+        Raises `ModelFileError` for an unknown FITTYP, a missing required coefficient (naming
+        its section) or a non-numeric one (with its line)."""
+        fittyp = tir.fittyp
+        if fittyp not in FITTYP_VERSION:
+            e = tir.entry("FITTYP")
+            raise ModelFileError(
+                f"FITTYP = {fittyp} is not a Magic Formula version diffsusp evaluates "
+                f"(known: {', '.join(map(str, FITTYP_VERSION))}: 5/6 = MF 5.x, 61 = MF 6.1, "
+                "62 = MF 6.2)", path=tir.path, line=e.line, field="FITTYP")
+        version = FITTYP_VERSION[fittyp]
+        values = {}
+        for n in COEFFICIENTS:
+            if n in tir:
+                values[n] = tir.number(n, section=SECTION_OF[n])
+            elif n in REQUIRED:
+                tir.number(n, section=SECTION_OF[n])  # raises, naming the section
+        if "NOMPRES" not in values or values["NOMPRES"] == 0.0:
+            values["NOMPRES"] = values.get("INFLPRES", 1.0) or 1.0
+        values.setdefault("INFLPRES", values["NOMPRES"])
+        for n, f in _TO_LIBRARY.items():
+            if n in values:
+                values[n] = values[n] * f
+        limits = {n: tir.number(n) for n in _LIMITS if n in tir}
+        for n in ("PRESMIN", "PRESMAX"):
+            if limits.get(n) == 0.0:  # some exporters write 0 for "no range"
+                limits.pop(n)
+        return cls.from_values(values, version, limits)
+
+    def to_tir(self, template: TirFile) -> TirFile:
+        """A copy of `template` with this model's coefficients written in (library → SI). Only
+        coefficients that differ from the template or that it lacks are written."""
+        tir = template.copy()
+        for n in COEFFICIENTS:
+            v = float(self.coefficients[n]) / _TO_LIBRARY.get(n, 1.0)
+            if n in tir and isinstance(tir[n], float):
+                if float(tir[n]) != v:
+                    tir.set(n, v)
+            elif v != _default(n, {}):
+                tir.set(n, v, section=SECTION_OF[n])
+        return tir
+
+
+def _default(name: str, values: dict) -> float:
+    if name in _SCALING:
+        return 1.0
+    if name == "PKY4":
+        return 2.0
+    if name == "LONGVL":
+        return 16.7e3
+    if name == "VXLOW":
+        return 1.0e3
+    if name in ("NOMPRES", "INFLPRES"):
+        return float(values.get("INFLPRES", values.get("NOMPRES", 1.0)) or 1.0)
+    return 0.0
+
+
+def _sgn(x):
+    """sign(x) with sign(0) = 1 (MF-Tyre's guard of divisions)."""
+    return jnp.where(x < 0, -1.0, 1.0)
+
+
+def _mf(B, C, E, x):
+    """D-less Magic Formula sin(C·atan(Bx − E(Bx − atan Bx)))."""
+    bx = B * x
+    return jnp.sin(C * jnp.arctan(bx - E * (bx - jnp.arctan(bx))))
+
+
+def _cosmf(B, C, E, x):
+    bx = B * x
+    return jnp.cos(C * jnp.arctan(bx - E * (bx - jnp.arctan(bx))))
+
+
+def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits):
+    """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0."""
+    Fz0p = c["LFZO"] * c["FNOMIN"]
+    if v52:
+        Kya = (c["PKY1"] * Fz0p * jnp.sin(c["PKY4"] * jnp.arctan(fz / (c["PKY2"] * Fz0p)))
+               * (1.0 - c["PKY3"] * jnp.abs(gamma_s)) * c["LKY"])
+        Kya0 = c["PKY1"] * Fz0p * jnp.sin(c["PKY4"] * jnp.arctan(fz / (c["PKY2"] * Fz0p))) \
+            * c["LKYC"]
+        Kyg0 = (c["PHY3"] * Kya0 + fz * (c["PVY3"] + c["PVY4"] * dfz)) * c["LKYC"]
+    else:
+        Kya = (c["PKY1"] * Fz0p * (1.0 + c["PPY1"] * dpi) * (1.0 - c["PKY3"] * jnp.abs(gamma_s))
+               * jnp.sin(c["PKY4"] * jnp.arctan((fz / Fz0p) / ((c["PKY2"] + c["PKY5"] * gamma_s**2)
+                                                              * (1.0 + c["PPY2"] * dpi))))
+               * c["LKY"])
+        Kyg0 = fz * (c["PKY6"] + c["PKY7"] * dfz) * (1.0 + c["PPY5"] * dpi) * c["LKYC"]
+    SVyg = fz * (c["PVY3"] + c["PVY4"] * dfz) * gamma_s * c["LKYC"] * c["LMUY"]
+    if v52:
+        SHy = (c["PHY1"] + c["PHY2"] * dfz) * c["LHY"] + c["PHY3"] * gamma_s * c["LKYC"]
+    else:
+        SHy = (c["PHY1"] + c["PHY2"] * dfz) * c["LHY"] + (Kyg0 * gamma_s - SVyg) / (
+            Kya + EPS * _sgn(Kya))
+    SVy = fz * (c["PVY1"] + c["PVY2"] * dfz) * c["LVY"] * c["LMUY"] + SVyg
+    ay = alpha_s + SHy
+    Cy = c["PCY1"] * c["LCY"]
+    muy = ((c["PDY1"] + c["PDY2"] * dfz) * (1.0 + c["PPY3"] * dpi + c["PPY4"] * dpi**2)
+           * (1.0 - c["PDY3"] * gamma_s**2) * c["LMUY"])
+    Dy = muy * fz
+    Ey = ((c["PEY1"] + c["PEY2"] * dfz)
+          * (1.0 + c["PEY5"] * gamma_s**2 - (c["PEY3"] + c["PEY4"] * gamma_s) * _sgn(ay))
+          * c["LEY"])
+    if limits:
+        Ey = jnp.minimum(Ey, 1.0)
+    By = Kya / (Cy * Dy + EPS * _sgn(Dy))
+    Fy0 = Dy * _mf(By, Cy, Ey, ay) + SVy
+    return Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0
+
+
+def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
+    c = model.coefficients
+    lim = model.limit
+    fz = jnp.maximum(jnp.asarray(fz, dtype=float), 0.0)
+    kappa, alpha, gamma = (jnp.asarray(x, dtype=float) for x in (kappa, alpha, gamma))
+    vx = c["LONGVL"] if vx is None else jnp.asarray(vx, dtype=float)
+    p = c["INFLPRES"] if pressure is None else jnp.asarray(pressure, dtype=float)
+    ufz = fz
+    if limits:
+        fz = jnp.minimum(fz, lim["FZMAX"])
+        kappa = jnp.clip(kappa, lim["KPUMIN"], lim["KPUMAX"])
+        alpha = jnp.clip(alpha, lim["ALPMIN"], lim["ALPMAX"])
+        gamma = jnp.clip(gamma, lim["CAMMIN"], lim["CAMMAX"])
+        p = jnp.clip(p, lim["PRESMIN"], lim["PRESMAX"])
+    return fz, ufz, kappa, alpha, gamma, vx, p
+
+
+def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: ArrayLike,
+             gamma: ArrayLike = 0.0, vx: ArrayLike | None = None, pressure: ArrayLike | None = None,
+             *, combined: bool = True, limits: bool = True, alpha_star: bool = False
+             ) -> TyreForces:
+    """Steady-state forces and moments of a MF 5.2/6.1/6.2 tyre (spec: tyre §7 C; Pacejka 2012
+    §4.3.2; deviations in the module docstring). Elementwise: inputs broadcast together.
+
+    **Arguments:** `fz` [N] vertical load; `kappa` [-] longitudinal slip ratio; `alpha` [rad]
+    slip angle; `gamma` [rad] inclination; `vx` [mm/s] forward speed (default LONGVL, > 0);
+    `pressure` [Pa] (default INFLPRES). `combined=False`: the pure-slip functions F_x0(κ),
+    F_y0(α), M_z0(α) (M_x and M_y then use F_y0 and F_x0). `limits`, `alpha_star`: the modes of
+    the module docstring.
+
+    **Returns:** `TyreForces` (fx, fy [N]; mx, my, mz [N·mm]), ISO-W axes.
+    """
+    c = model.coefficients
+    v52 = model.version == "5.2"
+    lim = model.limit
+    fz, ufz, kappa, alpha, gamma, vx, p = _inputs(model, fz, kappa, alpha, gamma, vx, pressure,
+                                                  limits)
+    Fz0 = c["FNOMIN"]
+    Fz0p = c["LFZO"] * Fz0
+    R0 = c["UNLOADED_RADIUS"]
+    dfz = (fz - Fz0p) / Fz0p
+    dpi = 0.0 * fz if v52 else (p - c["NOMPRES"]) / c["NOMPRES"]
+    if alpha_star:
+        a_s, g_s = jnp.tan(alpha), jnp.sin(gamma)
+    else:
+        a_s, g_s = alpha, gamma
+    # cos α' (4.E6): V_cy = tan α·|V_cx|, with ε_V
+    vc = jnp.sqrt(vx**2 + (jnp.tan(alpha) * vx) ** 2)
+    cos_ap = vx / (vc + EPS * _sgn(vc))
+
+    # pure longitudinal (4.E9–4.E18)
+    Cx = c["PCX1"] * c["LCX"]
+    mux = ((c["PDX1"] + c["PDX2"] * dfz) * (1.0 + c["PPX3"] * dpi + c["PPX4"] * dpi**2)
+           * (1.0 - c["PDX3"] * gamma**2) * c["LMUX"])
+    Dx = mux * fz
+    Kxk = (fz * (c["PKX1"] + c["PKX2"] * dfz) * jnp.exp(c["PKX3"] * dfz)
+           * (1.0 + c["PPX1"] * dpi + c["PPX2"] * dpi**2) * c["LKX"])
+    Bx = Kxk / (Cx * Dx + EPS * _sgn(Dx))
+    SHx = (c["PHX1"] + c["PHX2"] * dfz) * c["LHX"]
+    SVx = fz * (c["PVX1"] + c["PVX2"] * dfz) * c["LVX"] * c["LMUX"]
+    kx = kappa + SHx
+    Ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2) * (1.0 - c["PEX4"] * jnp.sign(kx)) \
+        * c["LEX"]
+    if limits:
+        Ex = jnp.minimum(Ex, 1.0)
+    Fx0 = Dx * _mf(Bx, Cx, Ex, kx) + SVx
+
+    # pure lateral
+    Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits)
+    Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits)[0]
+
+    # pure aligning torque (4.E31–4.E49, A58, A60)
+    fz_mz = jnp.where(fz <= 0.0, 0.0, jnp.maximum(fz, lim["FZMIN"])) if limits else fz
+    SHt = c["QHZ1"] + c["QHZ2"] * dfz + (c["QHZ3"] + c["QHZ4"] * dfz) * g_s
+    Kyap = Kya + EPS * _sgn(Kya)
+    SHf = SHy + SVy / Kyap
+    ar = a_s + SHf
+    at = a_s + SHt
+    Dt = ((c["QDZ1"] + c["QDZ2"] * dfz) * (1.0 - c["PPZ1"] * dpi)
+          * (1.0 + c["QDZ3"] * gamma + c["QDZ4"] * gamma**2) * fz_mz * (R0 / Fz0p) * c["LTR"])
+    Bt = ((c["QBZ1"] + c["QBZ2"] * dfz + c["QBZ3"] * dfz**2)
+          * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
+    Ct = c["QCZ1"]
+    Et = (c["QEZ1"] + c["QEZ2"] * dfz + c["QEZ3"] * dfz**2) * (
+        1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * jnp.arctan(Bt * Ct * at))
+    if limits:
+        Et = jnp.minimum(Et, 1.0)
+    Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
+                        + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
+                           + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
+          * c["LMUY"] * jnp.cos(a_s))
+    Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
+    Cr = 1.0
+
+    if not combined:
+        t0 = Dt * _cosmf(Bt, Ct, Et, at) * cos_ap
+        Mz0 = -t0 * Fy0_g0 + Dr * jnp.cos(Cr * jnp.arctan(Br * ar)) * cos_ap
+        Fx, Fy, Mz = Fx0, Fy0, Mz0
+    else:
+        # combined longitudinal (4.E50–4.E57)
+        Exa = c["REX1"] + c["REX2"] * dfz
+        Eyk = c["REY1"] + c["REY2"] * dfz
+        if limits:
+            Exa, Eyk = jnp.minimum(Exa, 1.0), jnp.minimum(Eyk, 1.0)
+        Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
+            * jnp.cos(jnp.arctan(c["RBX2"] * kappa)) * c["LXAL"]
+        Gxa = _cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"]) / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"])
+        Fx = Gxa * Fx0
+        # combined lateral (4.E58–4.E67)
+        DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
+                * jnp.cos(jnp.arctan(c["RVY4"] * a_s)))
+        SVyk = DVyk * jnp.sin(c["RVY5"] * jnp.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
+        SHyk = c["RHY1"] + c["RHY2"] * dfz
+        Byk = (c["RBY1"] + (0.0 if v52 else c["RBY4"] * g_s**2)) \
+            * jnp.cos(jnp.arctan(c["RBY2"] * (a_s - c["RBY3"]))) * c["LYKA"]
+        Gyk = _cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk) / _cosmf(Byk, c["RCY1"], Eyk, SHyk)
+        Fy = Gyk * Fy0 + SVyk
+        # combined aligning torque (4.E71–4.E78, A54–A56)
+        k2 = (Kxk / Kyap) ** 2 * kappa**2
+        ar_eq = jnp.arctan(jnp.sqrt(jnp.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
+        at_eq = jnp.arctan(jnp.sqrt(jnp.tan(at) ** 2 + k2)) * _sgn_strict(at)
+        s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
+            * c["LS"]
+        Mzr = Dr * jnp.cos(Cr * jnp.arctan(Br * ar_eq))
+        t = Dt * _cosmf(Bt, Ct, Et, at_eq) * cos_ap * c["LFZO"]
+        if v52:
+            Mz = -t * (Fy - SVyk) + Mzr + s * Fx
+        else:
+            Mz = -t * (Gyk * Fy0_g0) + Mzr + s * Fx
+
+    # overturning moment (Besselink draft (49); MF 5.2: manual)
+    fz_mx = jnp.where(fz < lim["FZMIN"], fz * (fz / lim["FZMIN"]) ** 2, fz) if (
+        limits and lim["FZMIN"] > 0) else fz
+    if v52:
+        Mx = R0 * fz_mx * (c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma + c["QSX3"] * Fy / Fz0) \
+            * c["LMX"]
+    else:
+        Mx = (R0 * fz_mx * c["LMX"] * (
+            c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma * (1.0 + c["PPMX1"] * dpi)
+            - c["QSX12"] * gamma * jnp.abs(gamma) + c["QSX3"] * Fy / Fz0
+            + c["QSX4"] * jnp.cos(c["QSX5"] * jnp.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
+            * jnp.sin(c["QSX7"] * gamma + c["QSX8"] * jnp.arctan(c["QSX9"] * Fy / Fz0))
+            + c["QSX10"] * jnp.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
+            + R0 * Fy * c["LMX"] * (c["QSX13"] + c["QSX14"] * jnp.abs(gamma)))
+    # rolling resistance moment (A48; MF 5.2: manual), F_z not saturated at FZMAX
+    fz_my = jnp.where(ufz < lim["FZMIN"], ufz * (ufz / lim["FZMIN"]), ufz) if (
+        limits and lim["FZMIN"] > 0) else ufz
+    V0 = c["LONGVL"]
+    roll = c["QSY1"] + c["QSY2"] * Fx / Fz0 + c["QSY3"] * jnp.abs(vx / V0) + c["QSY4"] * (vx / V0) ** 4
+    if v52:
+        My = -R0 * fz_my * c["LMY"] * roll
+    else:
+        My = -R0 * Fz0 * c["LMY"] * (roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
+            (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
+    return TyreForces(Fx, Fy, Mx, My, Mz)
+
+
+def _sgn_strict(x):
+    return jnp.sign(x)
+
+
+def check_limits(model: MagicFormula6, fz=None, kappa=None, alpha=None, gamma=None,
+                 pressure=None, *, where: str = "") -> dict[str, int]:
+    """Warn (`ModelWarning`) about inputs outside the file's ranges, which `evaluate` saturates
+    as MF-Tyre does; returns {limit name: count of inputs beyond it}. Units as `evaluate`."""
+    lim = model.limit
+    counts = {}
+    for name, x, lo, hi in (("FZ", fz, None, "FZMAX"), ("SL", kappa, "KPUMIN", "KPUMAX"),
+                            ("SA", alpha, "ALPMIN", "ALPMAX"), ("IA", gamma, "CAMMIN", "CAMMAX"),
+                            ("P", pressure, "PRESMIN", "PRESMAX")):
+        if x is None:
+            continue
+        x = np.asarray(x, dtype=float)
+        for key, bad in ((lo, x < lim[lo] if lo else None), (hi, x > lim[hi])):
+            if key is None or bad is None:
+                continue
+            n = int(np.count_nonzero(bad))
+            if n:
+                counts[key] = n
+                first = int(np.flatnonzero(bad.ravel())[0])
+                warnings.warn(f"{where}{n} value(s) of {name} beyond {key} = {lim[key]:g} "
+                              f"[{_LIMIT_SECTION[key]}] (first at row {first}); saturated as "
+                              "MF-Tyre does", ModelWarning, stacklevel=2)
+    return counts
