@@ -315,9 +315,7 @@ def _mechanism_at(eval_mech: Mechanism, selection, x):
 def _element_geometry(mech: Mechanism, y):
     """Solver coordinates of every element's two parts, z (E, 12), with the ground as a virtual
     part at zero, and the markers' offsets from their parts' reference points."""
-    from ..statics.kernel import get_layout
-
-    lay = get_layout(mech)
+    lay = mech.topology
     yfull = jnp.concatenate([y, jnp.zeros(6, y.dtype)])
     offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
     return lay, yfull, offset
@@ -332,9 +330,9 @@ def _scatter_vectors(n_full, idx, values):
 def _bushing_unit_forces(mech: Mechanism, y):
     """D of the bushings: ∂Q/∂θ (n, nb, 12) for θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and
     N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
-    of the solver's own element force function (`statics.kernel._bushing_force`, Adams
+    of the solver's own element force function (`statics.kernel.bushing_force`, Adams
     convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
-    from ..statics.kernel import _bushing_force
+    from ..statics.kernel import bushing_force
 
     b = mech.bushings
     lay, yfull, offset = _element_geometry(mech, y)
@@ -348,7 +346,7 @@ def _bushing_unit_forces(mech: Mechanism, y):
             params = dict(k_trans=theta[:3], k_rot=theta[3:6], cubic_trans=zero3,
                           cubic_rot=zero3, offset_trans=off_t, offset_rot=off_r,
                           preload_force=theta[6:9], preload_torque=theta[9:])
-            return _bushing_force(z, x0i, r0i, x0j, r0j, params, None)
+            return bushing_force(z, x0i, r0i, x0j, r0j, params, None)
 
         return jax.jacfwd(force)(jnp.zeros(12, y.dtype))  # (12 coordinates, 12 unknowns)
 
@@ -363,7 +361,7 @@ def _spring_unit_forces(mech: Mechanism, y):
     """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
     model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
     function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
-    from ..statics.kernel import _line_force
+    from ..statics.kernel import line_force
 
     s = mech.springs
     lay, yfull, offset = _element_geometry(mech, y)
@@ -372,7 +370,7 @@ def _spring_unit_forces(mech: Mechanism, y):
 
     def one(z, x0i, x0j, free_length):
         def force(kc):
-            return _line_force(z, x0i, x0j,
+            return line_force(z, x0i, x0j,
                                lambda length: kc[0] * (length - free_length) - kc[1])
 
         return jax.jacfwd(force)(jnp.zeros(2, y.dtype))  # (12, 2)
@@ -384,41 +382,17 @@ def _spring_unit_forces(mech: Mechanism, y):
 
 
 def _constraint_jacobian(mech: Mechanism, loads, y):
-    """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), joint group by
-    joint group with the solver's row functions (Adams definitions, spec stiffness §1.6)."""
-    from ..model.mechanism import JOINT_ROWS, row_blocks
-    from ..statics.kernel import _driver_row, _value_and_jacfwd, joint_rows
+    """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), from the
+    solver's own constraint rows (Adams definitions, spec stiffness §1.6)."""
+    from ..statics.kernel import constraint_jacobian
 
-    lay, yfull, offset = _element_geometry(mech, y)
-    mk = mech.markers
-    full = jnp.zeros((mech.n_rows, yfull.shape[0]), y.dtype)
-    for kind, idx, offsets in row_blocks(mech.joints):
-        i = np.asarray(mech.joints.i_marker)[idx]
-        j = np.asarray(mech.joints.j_marker)[idx]
-        rows = offsets[:, None] + np.arange(JOINT_ROWS[kind])
-        d0 = mk.position[i] - mk.position[j]
-        args = (offset[i], mk.orientation[i], offset[j], mk.orientation[j],
-                jnp.sqrt(jnp.sum(d0**2, axis=-1)))
-        coords = lay.coords(i, j)
-        _, jac = jax.vmap(_value_and_jacfwd(functools.partial(joint_rows, kind)))(
-            yfull[coords], *args)  # (E, r, 12)
-        full = full.at[rows[:, :, None], coords[:, None, :]].add(jac)
-    if mech.drivers.names:
-        mm = np.asarray(mech.drivers.marker)
-        rows = mech.joints.n_rows + np.arange(len(mm))
-        coords = lay.coords(mm, mm)[:, :6]
-        _, jac = jax.vmap(_value_and_jacfwd(_driver_row))(
-            yfull[coords], offset[mm], mk.position[mm], mech.drivers.direction)  # (E, 1, 6)
-        full = full.at[rows[:, None], coords].add(jac[:, 0, :])
-    return full[np.asarray(mech.independent_rows)][:, : y.shape[0]]
+    return constraint_jacobian(mech, loads, y)
 
 
 def _null_basis(eval_mech: Mechanism, loads, y, scale):
     """Orthonormal basis L (n, n − m) of the null space of the scaled Φ_q at y (spec §1.9,
     4.43–4.44), and the constraint Jacobian Φ_q (m, n) (unscaled)."""
-    from ..statics.kernel import get_layout
-
-    lay = get_layout(eval_mech)
+    lay = eval_mech.topology
     n, m = lay.n, lay.m
     if not m:
         return jnp.eye(n, dtype=y.dtype), jnp.zeros((0, n), y.dtype)
@@ -435,9 +409,9 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
     onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
     everything else: the loads, the elements and axes not identified, cubic terms."""
-    from ..statics.kernel import assemble, get_layout, to_internal
+    from ..statics.kernel import assemble, to_internal
 
-    lay = get_layout(eval_mech)
+    lay = eval_mech.topology
     n, m = lay.n, lay.m
     y = to_internal(eval_mech, q)
     known, _ = assemble(eval_mech, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
@@ -455,7 +429,7 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
 
 def _elastic_stiffness(mech: Mechanism, y):
     """Tangent stiffness −∂Q/∂y (n, n) of the bushings and linear springs of `mech` at y."""
-    from ..statics.kernel import _bushing_force, _line_force, bushing_params
+    from ..statics.kernel import bushing_force, bushing_params, line_force
 
     lay, yfull, offset = _element_geometry(mech, y)
     mk = mech.markers
@@ -465,7 +439,7 @@ def _elastic_stiffness(mech: Mechanism, y):
         i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
         idx = lay.coords(i, j)
         params = {k: v for k, v in bushing_params(mech).items() if not k.startswith("spline")}
-        jac = jax.vmap(jax.jacfwd(functools.partial(_bushing_force, spline_mask=None)))(
+        jac = jax.vmap(jax.jacfwd(functools.partial(bushing_force, spline_mask=None)))(
             yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j], params)
         full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
     s = mech.springs
@@ -474,7 +448,7 @@ def _elastic_stiffness(mech: Mechanism, y):
         idx = lay.coords(i, j)
 
         def spring(z, x0i, x0j, k, free_length):
-            return _line_force(z, x0i, x0j, lambda length: k * (length - free_length))
+            return line_force(z, x0i, x0j, lambda length: k * (length - free_length))
 
         jac = jax.vmap(jax.jacfwd(spring))(yfull[idx], offset[i], offset[j], s.k, s.free_length)
         full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
@@ -633,9 +607,7 @@ def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
     without landmarks: unit σ on the reference point (mm) and on ℓ·rotation (mm).
     Only the structure matters: `lsq` estimates the noise level from the residual."""
     from ..geometry import gibbs_angular_jacobian, skew
-    from ..statics.kernel import get_layout
-
-    lay = get_layout(mech)
+    lay = mech.topology
     index = np.asarray([meas.parts.index(p) for p in mech.parts], dtype=int)
     centre = jnp.asarray(lay.centre[:-1])
     rot = meas.rotation[:, index]

@@ -8,8 +8,8 @@ geometric metrics and differentiates them in forward mode through the equilibriu
 to a few rig inputs u (travel, vertical load, lateral and longitudinal force, aligning torque,
 wheel-centre loads, rack). The derivative is the implicit one, dy/du = −J⁻¹ ∂r/∂u at the
 solution, with the KKT Jacobian J and ∂r/∂u by autodiff of the solver's own residual
-(`statics.kernel.assemble`) and the solver's own equilibrated linear solve — the same formula
-as `solve_statics`'s custom JVP rule, evaluated without re-running Newton inside the derivative
+(`statics.linearize`) — the same formula as `solve_statics`'s custom JVP rule, evaluated
+without re-running Newton inside the derivative
 (jax.jacfwd through `solve_statics` traces the Newton loop again under the JVP: 82–125 s of
 tracing against 27 + 14 s for this split on the project's loaded 2-core machine, and a Newton
 program that is not shared with plain solves of the same model). No finite differences.
@@ -34,9 +34,7 @@ from jaxtyping import Array, Float
 from ..errors import ConvergenceError, InputError
 from ..model import GROUND, Loads, Mechanism
 from ..models.loadcases import TABLE_4_4, TABLE_5_1
-from ..statics import StaticSolution, solve_statics
-from ..statics.kernel import assemble, to_internal, to_public
-from ..statics.solve import STATUS_TEXT, _scaled_solve
+from ..statics import STATUS_TEXT, StaticSolution, linearize, solve_statics, to_public
 from .corner import Corner, ResolvedCorner, corners_of
 from .metrics import corner_geometry
 from .rig import add_driver, remove_drivers
@@ -294,17 +292,10 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     basis = _basis(rig)
 
     def one(loads_c, q, lam):
-        y = to_internal(mech, q)
-        _, jac = assemble(mech, loads_c, y, lam)
-
-        def residual(l):
-            return assemble(mech, l, y, lam, with_jacobian=False)[0]
-
-        def tangent(b):
-            dr = jax.jvp(residual, (loads_c,), (b,))[1]
-            return -_scaled_solve(jac, dr)
-
-        dy = jax.vmap(tangent)(basis)  # (n_u, n + m): internal coordinates and multipliers
+        lin = linearize(mech, loads_c, q, lam)
+        y = lin.y[:n]
+        # (n_u, n + m): solver coordinates and multipliers
+        dy = jax.vmap(lambda b: lin.tangent(d_loads=b))(basis)
 
         def metrics(y_, lam_, l_):
             return _raw_metrics(rig, l_, to_public(mech, y_), lam_)

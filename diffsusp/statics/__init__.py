@@ -1,5 +1,7 @@
 """Static equilibrium (KKT Newton), sweeps and derived outputs."""
 
+from .kernel import to_internal, to_public
+from .linearize import Linearization, linearize, linearize_internal, residual, scaled_solve
 from .outputs import (
     bushing_states,
     joint_reactions,
@@ -7,9 +9,10 @@ from .outputs import (
     part_poses,
     spring_states,
 )
-from .solve import StaticSolution, solve_statics, solve_sweep
+from .solve import STATUS_TEXT, StaticSolution, solve_statics, solve_sweep
 
 __all__ = [
-    "StaticSolution", "bushing_states", "joint_reactions", "marker_poses", "part_poses",
-    "solve_statics", "solve_sweep", "spring_states",
+    "STATUS_TEXT", "Linearization", "StaticSolution", "bushing_states", "joint_reactions",
+    "linearize", "linearize_internal", "marker_poses", "part_poses", "residual", "scaled_solve",
+    "solve_statics", "solve_sweep", "spring_states", "to_internal", "to_public",
 ]

@@ -26,6 +26,7 @@ from jaxtyping import Array, Float, Int
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from .kernel import assemble, retract, to_internal, to_public
+from .linearize import linearize_internal, scaled_solve
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
 STATUS_TEXT = {
@@ -56,24 +57,6 @@ class StaticSolution(eqx.Module):
     @property
     def converged(self):
         return self.status == SUCCESS
-
-
-def _ruiz(jac, sweeps: int = 1):
-    """Row and column scalings (d_r, d_c) with diag(d_r)·J·diag(d_c) equilibrated."""
-    d_r = jnp.ones(jac.shape[0], jac.dtype)
-    d_c = jnp.ones(jac.shape[1], jac.dtype)
-    a = jnp.abs(jac)
-    for _ in range(sweeps):
-        s = a * d_r[:, None] * d_c[None, :]
-        d_r = d_r / jnp.sqrt(jnp.maximum(jnp.max(s, axis=1), 1e-300))
-        s = a * d_r[:, None] * d_c[None, :]
-        d_c = d_c / jnp.sqrt(jnp.maximum(jnp.max(s, axis=0), 1e-300))
-    return d_r, d_c
-
-
-def _scaled_solve(jac, rhs):
-    d_r, d_c = _ruiz(jax.lax.stop_gradient(jac))
-    return d_c * jnp.linalg.solve(jac * d_r[:, None] * d_c[None, :], d_r * rhs)
 
 
 def _force_scale(mech: Mechanism, loads: Loads, reaction):
@@ -137,7 +120,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
         f_scale = _force_scale(mech, loads, jac[:n, n:] @ y_try[n:])
-        dy = _scaled_solve(jac, -r)
+        dy = scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, 0.5 / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
@@ -177,21 +160,14 @@ def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
 
 @_equilibrium.def_jvp
 def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
-    # Implicit function theorem: J·dy = −∂r/∂(mech, loads)·t. Everything here stays
-    # differentiable (y through this same rule, J and ∂r through autodiff), so derivatives of
-    # derivatives — e.g. the sensitivity of bump steer to a stiffness — are exact too.
+    # Implicit function theorem: J·dy = −∂r/∂(mech, loads)·t (`linearize`). Everything here
+    # stays differentiable (y through this same rule, J and ∂r through autodiff), so derivatives
+    # of derivatives — e.g. the sensitivity of bump steer to a stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
     y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
-    n = mech.topology.n
-
-    def residual(mech_, loads_):
-        return assemble(mech_, loads_, y[:n], y[n:], with_jacobian=False)[0]
-
-    _, jac = assemble(mech, loads, y[:n], y[n:])
-    _, dr = eqx.filter_jvp(residual, (mech, loads), (t_mech, t_loads))
-    dy = -_scaled_solve(jac, dr)
-    return (y, info), (dy, jnp.zeros_like(info))
+    lin = linearize_internal(mech, loads, y)
+    return (y, info), (lin.tangent(t_mech, t_loads), jnp.zeros_like(info))
 
 
 def _solve_one(mech, loads, q0, rtol, atol, max_steps):
