@@ -325,7 +325,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         a_s, g_s = alpha, gamma
     # cos α' (4.E6): V_cy = tan α·|V_cx|, with ε_V
     vc = jnp.sqrt(vx**2 + (jnp.tan(alpha) * vx) ** 2)
-    cos_ap = vx / (vc + EPS * _sgn(vc))
+    cos_ap = vx / (vc + 1e3 * EPS * _sgn(vc))  # ε_V = 1e-6 m/s, in mm/s
 
     # pure longitudinal (4.E9–4.E18)
     Cx = c["PCX1"] * c["LCX"]
