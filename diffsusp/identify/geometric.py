@@ -1,0 +1,553 @@
+"""Geometric identification: joint locations from the measured relative motion of parts
+(spec geometry §4, the thesis's chapter 3).
+
+Every part frame coincides with the global frame at design (DESIGN.md), so a measured part pose
+(R, T) is the part's displacement from design. For a pair of parts (S1, S2) and a case c, the
+**relative operator** of S2 with respect to S1 (3.6, 3.9) is
+
+    R^c = R1ᵀ R2,   T^c = R1ᵀ (T2 − T1):
+
+a point of S2 at design position C sits at R^c C + T^c in S1's design frame. A joint forbids
+some of these motions; the solvers below read its location (design coordinates, mm) and, where
+needed, its axis from the c_max operators:
+
+- `'ball'` (a ball joint, or a stiff bushing taken as one): (R^c − I) C = −T^c stacked over
+  the cases, linear least squares (3.11–3.12).
+- `'revolute'` (a revolute joint, or a pair of bushings on one arm): the axis u is the right
+  singular vector of the smallest singular value of M = [R^c − I] (3.14–3.16); the point is
+  solved in the plane orthogonal to u (truncated pseudo-inverse) and its position along u comes
+  from a prior (the thesis fixes x: CORRECTIONS 17).
+- `'ball_known_slide'` (a ball joint on a part sliding along a known u: the tie rod on the
+  rack): [vᵀ; wᵀ]((R^c − I) C + T^c) = 0 with v, w ⟂ u, linear least squares (3.17–3.21).
+- `'ball_unknown_slide'` (a ball joint on a part sliding along an unknown line of S1: the
+  McPherson strut top): the images C^c = R^c C + T^c (and C itself) are collinear; minimise
+  the normalised smallest principal moment (λ₂ + λ₃)/λ₁ of their scatter (3.22–3.25; the
+  normalisation removes the criterion's preference for short trajectories, a digest note) by
+  Levenberg–Marquardt from a 3×3×3 grid of starts around the prior (the thesis's single
+  Nelder–Mead run had local minima); the line's direction is the slide (strut) axis.
+- `'compliant_bushing'` (a bushing at one end of a link whose other end is a ball joint): the
+  bushing centre's displacement δ^c = T^c + (R^c − I) C is along the link's axis at case c,
+  R^c u with u = (C − C_ball)/‖C − C_ball‖: minimise Σ‖δ^c × R^c u‖² by Levenberg–Marquardt
+  from the ball-joint solution (3.26–3.35; the thesis keeps u, the issue asks for R^c u).
+
+**σ and observability.** Every estimate is a smooth function of the measured landmark
+coordinates (registration by Arun's SVD, relative operators, the solver). Its covariance under
+independent landmark noise of σ_L per coordinate is σ_L² J Jᵀ, with J the exact Jacobian of
+the estimate with respect to the landmarks (`jax.jacrev`); the iterative solvers are
+differentiated implicitly (a Newton step of the criterion from its converged minimiser, whose
+derivative is the implicit-function one). A joint is reported **observable** when the largest
+σ of its centre, at the nominal σ_L, stays below `max_sigma`, and the relative singular values
+of its equations are above `rcond`; otherwise the report says "not observable from these
+cases" and gives no centre (the thesis's strut top without steering input was 175 mm off:
+spec geometry §4.8, §4.10).
+
+Units: mm, rad. Every solver is written for one joint and the whole stack of cases; all joints
+of a list are located by one compiled program.
+"""
+
+import dataclasses
+import functools
+import json
+import math
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import InputError
+from ..geometry.registration import register_landmarks
+
+__all__ = [
+    "JOINT_KINDS",
+    "GeometricJoint",
+    "GeometricReport",
+    "JointEstimate",
+    "locate_joints",
+    "relative_operators",
+]
+
+JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
+               "compliant_bushing")
+"""Joint kinds the localisation knows (spec geometry §4.6's joint list)."""
+
+GROUND = "ground"
+START_OFFSETS = 150.0
+"""Half-width (mm) of the 3×3×3 grid of starts around the initial estimate of a
+`'ball_unknown_slide'` joint (the thesis's Nelder–Mead had local minima: §4.4b, §4.10)."""
+LM_STEPS = 60
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometricJoint:
+    """One entry of the joint list: which parts, which kind, and the kind's extra data.
+
+    **Fields:**
+
+    - `name`; `kind`: one of `JOINT_KINDS`; `parts`: (S1, S2), the part names as in the
+      measurements, `'ground'` for the fixed chassis/frame. S2 moves relative to S1; for
+      `'ball_unknown_slide'` S2 is the part carrying the ball (the chassis for the strut top)
+      and S1 the part carrying the slide (the hub carrier); for `'compliant_bushing'` S2 is
+      the link.
+    - `slide`: `'ball_known_slide'`: the slide direction in S1 (e.g. the rack axis (0, 1, 0)).
+    - `prior`: `'revolute'`: a point (mm) whose position along the axis is kept (the thesis
+      fixes x of each bushing of a pair); with `prior_coordinate` ('x', 'y' or 'z') only that
+      coordinate of it is kept, else the point of the axis nearest to `prior` is reported.
+      `'ball_unknown_slide'`: the initial estimate (required).
+    - `link_ball`: `'compliant_bushing'`: name of the ball joint at the link's other end (a
+      `'ball'` joint of the same list, between the link and another part).
+    """
+
+    name: str
+    kind: str
+    parts: tuple[str, str]
+    slide: tuple[float, float, float] | None = None
+    prior: tuple[float, float, float] | None = None
+    prior_coordinate: str | None = None
+    link_ball: str | None = None
+
+    def __post_init__(self):
+        if self.kind not in JOINT_KINDS:
+            raise InputError(f"joint '{self.name}': unknown kind '{self.kind}'; use one of "
+                             f"{', '.join(JOINT_KINDS)}.")
+        if len(self.parts) != 2 or self.parts[0] == self.parts[1]:
+            raise InputError(f"joint '{self.name}': parts must be two different part names; "
+                             f"got {self.parts!r}.")
+        if self.kind == "ball_known_slide" and self.slide is None:
+            raise InputError(f"joint '{self.name}' (ball_known_slide) needs the slide direction"
+                             " slide=(x, y, z), e.g. the rack axis.")
+        if self.kind == "ball_unknown_slide" and self.prior is None:
+            raise InputError(f"joint '{self.name}' (ball_unknown_slide) needs an initial "
+                             "estimate prior=(x, y, z) of the ball centre (mm).")
+        if self.kind == "revolute" and self.prior is None:
+            raise InputError(
+                f"joint '{self.name}' (revolute) needs prior=(x, y, z): motion does not fix "
+                "the point along the axis (spec geometry §4.3, CORRECTIONS 17).")
+        if self.prior_coordinate not in (None, "x", "y", "z"):
+            raise InputError(f"joint '{self.name}': prior_coordinate must be 'x', 'y' or 'z'.")
+        if self.kind == "compliant_bushing" and self.link_ball is None:
+            raise InputError(f"joint '{self.name}' (compliant_bushing) needs link_ball, the "
+                             "name of the ball joint at the link's other end.")
+
+
+@dataclasses.dataclass(frozen=True)
+class JointEstimate:
+    """Located joint. Coordinates are design (reference) coordinates in the global frame (mm).
+
+    **Fields:** `name`, `kind`, `parts`; `centre` (3,) mm (None when not observable); `axis`
+    (3,) unit (revolute: the axis; slides: the slide direction; None otherwise); `sigma` (3,)
+    σ of the centre's coordinates (mm) and `sigma_axis` (3,) of the axis' components, at the
+    nominal landmark noise; `residual`: root-mean-square of the solver's equations (mm; the
+    unknown slide: the trajectory points' distance to their line); `singular_values` of the
+    solver's equations (normal matrix square roots, largest first); `observable`; `note`.
+    `estimate` keeps the raw centre even when not observable (for diagnostics).
+    """
+
+    name: str
+    kind: str
+    parts: tuple[str, str]
+    centre: np.ndarray | None
+    axis: np.ndarray | None
+    sigma: np.ndarray
+    sigma_axis: np.ndarray | None
+    residual: float
+    singular_values: np.ndarray
+    observable: bool
+    note: str
+    estimate: np.ndarray
+
+    def to_dict(self) -> dict:
+        def arr(v):
+            return None if v is None else [float(x) for x in np.asarray(v)]
+
+        return dict(name=self.name, kind=self.kind, parts=list(self.parts),
+                    centre=arr(self.centre), axis=arr(self.axis), sigma=arr(self.sigma),
+                    sigma_axis=arr(self.sigma_axis), residual=float(self.residual),
+                    singular_values=arr(self.singular_values), observable=self.observable,
+                    note=self.note)
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometricReport:
+    """Result of `locate_joints`: one `JointEstimate` per joint of the list, in order, the
+    landmark noise σ_L used for the σ (mm), and the number of cases."""
+
+    joints: tuple[JointEstimate, ...]
+    landmark_sigma: float
+    n_cases: int
+    notes: tuple[str, ...] = ()
+
+    def __getitem__(self, name: str) -> JointEstimate:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(f"no joint named '{name}' (joints: "
+                       f"{', '.join(j.name for j in self.joints)}).")
+
+    def to_json(self) -> str:
+        return json.dumps(dict(landmark_sigma=self.landmark_sigma, n_cases=self.n_cases,
+                               notes=list(self.notes),
+                               joints=[j.to_dict() for j in self.joints]), indent=2)
+
+    def rows(self) -> list[dict]:
+        """One flat row per joint (for tables and CSV): x, y, z, σx, σy, σz, axis, verdict."""
+        out = []
+        for j in self.joints:
+            c = j.centre if j.centre is not None else np.full(3, np.nan)
+            a = j.axis if j.axis is not None else np.full(3, np.nan)
+            out.append(dict(joint=j.name, kind=j.kind, part_1=j.parts[0], part_2=j.parts[1],
+                            x=c[0], y=c[1], z=c[2], sigma_x=j.sigma[0], sigma_y=j.sigma[1],
+                            sigma_z=j.sigma[2], axis_x=a[0], axis_y=a[1], axis_z=a[2],
+                            residual=j.residual, observable=j.observable, note=j.note))
+        return out
+
+    def __str__(self) -> str:
+        lines = [f"Joint locations from {self.n_cases} cases (σ at landmark noise "
+                 f"{self.landmark_sigma:g} mm):"]
+        for j in self.joints:
+            head = f"  {j.name:<24} {j.kind:<19}"
+            if j.centre is None:
+                lines.append(f"{head} not observable from these cases ({j.note})")
+                continue
+            c, s = j.centre, j.sigma
+            text = (f"{head} ({c[0]:9.3f}, {c[1]:9.3f}, {c[2]:9.3f}) mm "
+                    f"± ({s[0]:.3f}, {s[1]:.3f}, {s[2]:.3f})")
+            if j.axis is not None:
+                text += f"  axis ({j.axis[0]:.5f}, {j.axis[1]:.5f}, {j.axis[2]:.5f})"
+            lines.append(text + f"  rms {j.residual:.2e}" + (f"  [{j.note}]" if j.note else ""))
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- solvers
+
+
+def relative_operators(r1, t1, r2, t2):
+    """Relative operators of S2 with respect to S1 over the cases (3.6, 3.9):
+    R^c = R1ᵀ R2, T^c = R1ᵀ (T2 − T1). Shapes (c, 3, 3), (c, 3)."""
+    r = jnp.einsum("cji,cjk->cik", r1, r2)
+    t = jnp.einsum("cji,cj->ci", r1, t2 - t1)
+    return r, t
+
+
+def _ball(r, t):
+    m = (r - jnp.eye(3)).reshape(-1, 3)
+    return jnp.linalg.lstsq(m, -t.reshape(-1))[0], m
+
+
+def _revolute(r, t, prior, coordinate):
+    m = (r - jnp.eye(3)).reshape(-1, 3)
+    u_, s, vt = jnp.linalg.svd(m, full_matrices=False)
+    axis = vt[2]
+    axis = axis * jnp.where(axis[jnp.argmax(jnp.abs(axis))] < 0, -1.0, 1.0)
+    b = -t.reshape(-1)
+    # point in the plane orthogonal to the axis: the two largest singular directions only
+    point = vt[:2].T @ ((u_[:, :2].T @ b) / s[:2])
+    if coordinate is None:
+        point = point + axis * (axis @ (prior - point))
+    else:
+        point = point + axis * (prior[coordinate] - point[coordinate]) / axis[coordinate]
+    return point, axis, m, s
+
+
+def _known_slide(r, t, slide):
+    u = slide / jnp.linalg.norm(slide)
+    v = jnp.cross(u, jnp.eye(3)[jnp.argmin(jnp.abs(u))])
+    v = v / jnp.linalg.norm(v)
+    w = jnp.cross(u, v)
+    vw = jnp.stack([v, w])
+    m = jnp.einsum("ij,cjk->cik", vw, r - jnp.eye(3)).reshape(-1, 3)
+    b = -jnp.einsum("ij,cj->ci", vw, t).reshape(-1)
+    return jnp.linalg.lstsq(m, b)[0], m
+
+
+def _trajectory(c, r, t):
+    """Images of a point of S2 over the cases, with the design position itself (3.22)."""
+    return jnp.concatenate([c[None], jnp.einsum("cij,j->ci", r, c) + t])
+
+
+def _line_residual(c, r, t):
+    pts = _trajectory(c, r, t)
+    d = pts - jnp.mean(pts, axis=0)
+    scatter = d.T @ d
+    w, v = jnp.linalg.eigh(scatter)
+    u = v[:, 2]
+    perp = d - (d @ u)[:, None] * u
+    return perp.ravel() / jnp.sqrt(w[2] / pts.shape[0]), u
+
+
+def _link_residual(c, r, t, ball):
+    u = (c - ball) / jnp.linalg.norm(c - ball)
+    delta = t + jnp.einsum("cij,j->ci", r, c) - c
+    return jnp.cross(delta, jnp.einsum("cij,j->ci", r, u)).ravel()
+
+
+def _lm(residual, x0, steps=LM_STEPS):
+    """Levenberg–Marquardt on a 3-parameter residual, fixed number of steps (vmappable)."""
+    def cost(x):
+        r = residual(x)
+        return r @ r
+
+    def step(_, state):
+        x, lam, f = state
+        r = residual(x)
+        jac = jax.jacfwd(residual)(x)
+        h = jac.T @ jac
+        g = jac.T @ r
+        dx = -jnp.linalg.solve(h + lam * (jnp.diag(jnp.diag(h)) + 1e-12 * jnp.trace(h)
+                                          * jnp.eye(3) + 1e-300), g)
+        trial = x + dx
+        ft = cost(trial)
+        better = jnp.isfinite(ft) & (ft < f)
+        return (jnp.where(better, trial, x), jnp.where(better, lam / 3.0, lam * 4.0),
+                jnp.where(better, ft, f))
+
+    x, _, f = jax.lax.fori_loop(0, steps, step, (x0, jnp.asarray(1e-3, x0.dtype), cost(x0)))
+    return x, f
+
+
+def _implicit(residual, x_star, data):
+    """x* with the derivative of argmin ‖residual(x, data)‖² with respect to `data` (one Newton
+    step from the stopped minimiser: its value is x*, its derivative the implicit one)."""
+    x_star = jax.lax.stop_gradient(x_star)
+
+    def cost(x, d):
+        r = residual(x, d)
+        return 0.5 * r @ r
+
+    h = jax.lax.stop_gradient(jax.hessian(cost)(x_star, data))
+    g = jax.grad(cost)(x_star, data)
+    return x_star - jnp.linalg.lstsq(h, g)[0]
+
+
+def _gn_singular_values(residual, x):
+    return jnp.linalg.svd(jax.jacfwd(residual)(x), compute_uv=False)
+
+
+def _locate(specs, rot, trans, index, slides, priors, starts):
+    """All joints from the poses (cases, parts, 3, 3)/(cases, parts, 3). Returns a dict of
+    per-joint outputs: centre, axis (zeros if none), residual rms, singular values, motion."""
+    n_cases = rot.shape[0]
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=rot.dtype), (n_cases, 3, 3))
+    zero = jnp.zeros((n_cases, 3), rot.dtype)
+
+    def pose(p):
+        return (eye, zero) if p < 0 else (rot[:, p], trans[:, p])
+
+    out, centres = {}, {}
+    order = sorted(range(len(specs)), key=lambda k: specs[k][1] == "compliant_bushing")
+    for k in order:
+        name, kind, (p1, p2), coordinate, link = specs[k]
+        r, t = relative_operators(*pose(index[p1]), *pose(index[p2]))
+        motion = jnp.max(jnp.abs(r - jnp.eye(3)), axis=(0, 1, 2)) + \
+            jnp.max(jnp.abs(t)) / 1000.0
+        axis = jnp.zeros(3, rot.dtype)
+        if kind == "ball":
+            c, m = _ball(r, t)
+            res = (m @ c + t.reshape(-1))
+            sv = jnp.linalg.svd(m, compute_uv=False)
+        elif kind == "revolute":
+            c, axis, m, sv = _revolute(r, t, priors[k], coordinate)
+            res = m @ c + t.reshape(-1)
+        elif kind == "ball_known_slide":
+            c, m = _known_slide(r, t, slides[k])
+            u = slides[k] / jnp.linalg.norm(slides[k])
+            delta = t + jnp.einsum("cij,j->ci", r, c) - c
+            res = (delta - (delta @ u)[:, None] * u).ravel()
+            axis = u
+            sv = jnp.linalg.svd(m, compute_uv=False)
+        elif kind == "ball_unknown_slide":
+            data = (r, t)
+
+            def fn(x, d):
+                return _line_residual(x, *d)[0]
+
+            grid = jnp.asarray([-1.0, 0.0, 1.0], rot.dtype) * START_OFFSETS
+            offsets = jnp.stack(jnp.meshgrid(grid, grid, grid, indexing="ij"), -1).reshape(-1, 3)
+            frozen = functools.partial(fn, d=jax.lax.stop_gradient(data))
+            xs, fs = jax.vmap(lambda x0, f=frozen: _lm(f, x0))(starts[k] + offsets)
+            best = xs[jnp.argmin(jnp.where(jnp.isfinite(fs), fs, jnp.inf))]
+            c = _implicit(fn, best, data)
+            resid, axis = _line_residual(c, r, t)
+            axis = axis * jnp.where(axis[jnp.argmax(jnp.abs(axis))] < 0, -1.0, 1.0)
+            pts = _trajectory(c, r, t)
+            d = pts - jnp.mean(pts, axis=0)
+            res = (d - (d @ axis)[:, None] * axis).ravel()
+            sv = _gn_singular_values(frozen, jax.lax.stop_gradient(c))
+        else:  # compliant_bushing
+            ball = centres[link]
+            data = (r, t, ball)
+
+            def fn(x, d):
+                return _link_residual(x, *d)
+
+            frozen = functools.partial(fn, d=jax.lax.stop_gradient(data))
+            start, _ = _ball(*jax.lax.stop_gradient((r, t)))
+            best, _ = _lm(frozen, start)
+            c = _implicit(fn, best, data)
+            res = fn(c, data)
+            sv = _gn_singular_values(frozen, jax.lax.stop_gradient(c))
+        centres[k] = c
+        out[k] = dict(centre=c, axis=axis, rms=jnp.sqrt(jnp.mean(res**2)), sv=sv,
+                      motion=motion)
+    return [out[k] for k in range(len(specs))]
+
+
+def _estimates(specs, reference, landmarks, weights, index, slides, priors, starts):
+    reg = register_landmarks(reference, landmarks, weights, method="svd")
+    return _locate(specs, reg.rotation, reg.translation, index, slides, priors, starts)
+
+
+def _flat(outputs):
+    return jnp.concatenate([jnp.concatenate([o["centre"], o["axis"]]) for o in outputs])
+
+
+@functools.partial(jax.jit, static_argnames=("specs", "index", "with_sigma"))
+def _run_landmarks(specs, reference, landmarks, weights, index, slides, priors, starts,
+                   with_sigma):
+    outputs = _estimates(specs, reference, landmarks, weights, index, slides, priors, starts)
+    if not with_sigma:
+        return outputs, None
+    jac = jax.jacrev(lambda lm: _flat(_estimates(specs, reference, lm, weights, index, slides,
+                                                 priors, starts)))(landmarks)
+    jac = jac * (weights > 0)[None, ..., None]
+    jac = jac.reshape(jac.shape[0], -1)
+    return outputs, jac @ jac.T
+
+
+@functools.partial(jax.jit, static_argnames=("specs", "index"))
+def _run_poses(specs, rot, trans, index, slides, priors, starts):
+    return _locate(specs, rot, trans, index, slides, priors, starts)
+
+
+def _specs(joints: Sequence[GeometricJoint], parts: tuple[str, ...]):
+    names = [j.name for j in joints]
+    if len(set(names)) != len(names):
+        raise InputError("joint names must be unique in the joint list.")
+    known = set(parts) | {GROUND}
+    used = []
+    for j in joints:
+        for p in j.parts:
+            if p not in known:
+                raise InputError(
+                    f"joint '{j.name}' names part '{p}', which has no measured pose (measured "
+                    f"parts: {', '.join(parts) or 'none'}; the fixed frame is '{GROUND}').")
+            if p != GROUND and p not in used:
+                used.append(p)
+        if j.kind == "compliant_bushing":
+            if j.link_ball not in names:
+                raise InputError(f"joint '{j.name}': link_ball '{j.link_ball}' is not in the "
+                                 "joint list.")
+            ball = joints[names.index(j.link_ball)]
+            if ball.kind != "ball" or j.parts[1] not in ball.parts:
+                raise InputError(
+                    f"joint '{j.name}': link_ball '{j.link_ball}' must be a 'ball' joint of "
+                    f"the link '{j.parts[1]}' (S2 of the bushing).")
+    part_index = {p: i for i, p in enumerate(parts)}
+    specs = tuple(
+        (j.name, j.kind, j.parts,
+         None if j.prior_coordinate is None else "xyz".index(j.prior_coordinate),
+         names.index(j.link_ball) if j.kind == "compliant_bushing" else None)
+        for j in joints)
+    index = {GROUND: -1, **part_index}
+    return specs, tuple(sorted(index.items(), key=lambda kv: kv[0]))
+
+
+def locate_joints(
+    measurements,
+    joints: Sequence[GeometricJoint],
+    *,
+    landmark_sigma: float = 0.05,
+    max_sigma: float = 5.0,
+    rcond: float = 1e-6,
+    with_sigma: bool = True,
+) -> GeometricReport:
+    """Locate joints from the measured motion of the parts (spec geometry §4, chapter 3).
+
+    **Arguments:**
+
+    - `measurements`: `diffsusp.measure.Measurements` over the cases (from landmarks: the σ
+      are then those of the landmark noise; from poses only: no σ). Part poses are
+      displacements from design, so the located centres are design coordinates (mm).
+    - `joints`: the joint list (`GeometricJoint`s).
+    - `landmark_sigma`: σ_L of every landmark coordinate (mm) for the reported σ (the
+      measuring arm's ±0.05 mm: spec geometry §1.6).
+    - `max_sigma`: a joint whose largest centre σ exceeds this (mm) is not observable.
+    - `rcond`: a joint whose equations' smallest singular value is below `rcond` × the
+      largest (after the one the kind leaves free: the revolute axis) is not observable.
+    - `with_sigma`: compute σ (the Jacobian through registration and solvers).
+
+    **Returns:** a `GeometricReport`.
+
+    **Raises:** `InputError` for a joint list naming an unknown part or a wrong link.
+    """
+    parts = tuple(measurements.parts)
+    specs, index = _specs(joints, parts)
+    slides = tuple(jnp.asarray(j.slide if j.slide is not None else (0.0, 0.0, 0.0), float)
+                   for j in joints)
+    priors = tuple(jnp.asarray(j.prior if j.prior is not None else (0.0, 0.0, 0.0), float)
+                   for j in joints)
+    starts = priors
+    lookup = tuple((name, i) for name, i in index)
+    if measurements.landmarks is not None and measurements.layout is not None:
+        outputs, cov = _run_landmarks(
+            specs, jnp.asarray(measurements.layout.position),
+            jnp.asarray(measurements.landmarks), jnp.asarray(measurements.weights),
+            _IndexMap(lookup), slides, priors, starts, bool(with_sigma))
+    else:
+        outputs = _run_poses(specs, jnp.asarray(measurements.rotation),
+                             jnp.asarray(measurements.translation), _IndexMap(lookup), slides,
+                             priors, starts)
+        cov = None
+    cov = None if cov is None else np.asarray(cov) * landmark_sigma**2
+    results = []
+    for k, (j, o) in enumerate(zip(joints, outputs, strict=True)):
+        centre = np.asarray(o["centre"])
+        axis = np.asarray(o["axis"]) if j.kind != "ball" and j.kind != "compliant_bushing" \
+            else None
+        if cov is not None:
+            block = cov[6 * k: 6 * k + 6, 6 * k: 6 * k + 6]
+            sigma = np.sqrt(np.clip(np.diag(block)[:3], 0, None))
+            sigma_axis = None if axis is None else np.sqrt(np.clip(np.diag(block)[3:], 0, None))
+            worst = float(np.sqrt(max(np.linalg.eigvalsh(block[:3, :3]).max(), 0.0)))
+        else:
+            sigma, sigma_axis, worst = np.full(3, np.nan), None, float("nan")
+        sv = np.asarray(o["sv"])
+        if j.kind == "revolute":
+            relative = sv[1] / sv[0] if sv[0] > 0 else 0.0
+        else:
+            relative = sv[-1] / sv[0] if sv[0] > 0 else 0.0
+        moving = float(o["motion"]) > 1e-9
+        note = ""
+        if not moving:
+            observable, note = False, (f"parts '{j.parts[0]}' and '{j.parts[1]}' never move "
+                                       "relative to each other")
+        elif not np.all(np.isfinite(centre)):
+            observable, note = False, "the solver found no finite centre"
+        elif not relative > rcond:
+            observable, note = False, (f"singular equations (relative singular value "
+                                       f"{relative:.1e})")
+        elif math.isfinite(worst) and worst > max_sigma:
+            observable, note = False, (f"σ up to {worst:.3g} mm at landmark noise "
+                                       f"{landmark_sigma:g} mm (limit {max_sigma:g} mm)")
+        elif not math.isfinite(worst) and cov is not None:
+            observable, note = False, "σ is not finite"
+        else:
+            observable = True
+        results.append(JointEstimate(
+            name=j.name, kind=j.kind, parts=tuple(j.parts),
+            centre=centre if observable else None, axis=axis if observable else None,
+            sigma=sigma, sigma_axis=sigma_axis, residual=float(o["rms"]), singular_values=sv,
+            observable=observable, note=note, estimate=centre))
+    return GeometricReport(tuple(results), float(landmark_sigma), int(measurements.n_cases),
+                           tuple(measurements.notes))
+
+
+class _IndexMap(tuple):
+    """Part name → pose index (−1 for ground), hashable for jit's static arguments."""
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            return dict(tuple.__iter__(self))[key]
+        return tuple.__getitem__(self, key)
+
