@@ -80,7 +80,9 @@ def similarity(delta, fy, mz, *, D_y, BCD_y, S_hy, S_vy, BCD_z, S_hz, S_vz):
 def similarity_primitive(X, C, E, S=0.0):
     """P(X̄) = sin(C·atan[(1 − E)(X̄ + S)/C + E·atan((X̄ + S)/C)]) (2-123, 2-124): the F̄_y
     primitive with S = 0, the M̄_z one with S = S̄_hMz. F̄_y = P_Fy(X̄) exactly when C_y and
-    E_y do not vary with load and camber; M̄_z = (D_z/(D_t·D_y))·P_Mz."""
+    E_y do not vary with load and camber. For M_z the identity is M̄_z = P_Mz(r·X̄, S = r·S̄_hMz)/r
+    with r = D_t·D_y/D_z: the printed (2-124) (r = 1) holds only when D_z = D_t·D_y, i.e. when
+    the M_z peak scales like the trail times the F_y peak (checked in the tests)."""
     u = (jnp.asarray(X) + S) / C
     return jnp.sin(C * jnp.arctan((1.0 - E) * u + E * jnp.arctan(u)))
 
