@@ -4,6 +4,8 @@
   identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);
 - `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
 - `spec`: specification quantities (exact derivatives), macro-coefficients, similarity;
+- `fit`: coefficients from bench data (robust Levenberg–Marquardt, exact Jacobians, σ and
+  identifiability through `diffsusp.lsq`), one tyre or many in one batched call;
 
 ```python
 from diffsusp.io.tir import read_tir
@@ -15,10 +17,10 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 ```
 """
 
-from . import mf6, mf89, spec, thesis_sets
+from . import fit, mf6, mf89, spec, thesis_sets
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
 from .spec import specification
 
 __all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
-           "check_limits", "evaluate", "mf6", "mf89", "spec", "specification", "thesis_sets"]
+           "check_limits", "evaluate", "fit", "mf6", "mf89", "spec", "specification", "thesis_sets"]

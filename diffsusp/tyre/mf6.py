@@ -296,8 +296,8 @@ def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
 
 def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: ArrayLike,
              gamma: ArrayLike = 0.0, vx: ArrayLike | None = None, pressure: ArrayLike | None = None,
-             *, combined: bool = True, limits: bool = True, alpha_star: bool = False
-             ) -> TyreForces:
+             *, combined: bool = True, limits: bool = True, alpha_star: bool = False,
+             outputs: tuple[str, ...] = ("fx", "fy", "mx", "my", "mz")) -> TyreForces:
     """Steady-state forces and moments of a MF 5.2/6.1/6.2 tyre (spec: tyre §7 C; Pacejka 2012
     §4.3.2; deviations in the module docstring). Elementwise: inputs broadcast together.
 
@@ -305,10 +305,17 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     slip angle; `gamma` [rad] inclination; `vx` [mm/s] forward speed (default LONGVL, > 0);
     `pressure` [Pa] (default INFLPRES). `combined=False`: the pure-slip functions F_x0(κ),
     F_y0(α), M_z0(α) (M_x and M_y then use F_y0 and F_x0). `limits`, `alpha_star`: the modes of
-    the module docstring.
+    the module docstring. `outputs`: the quantities to compute (the others are returned as NaN;
+    a smaller traced program for fits of one channel).
 
     **Returns:** `TyreForces` (fx, fy [N]; mx, my, mz [N·mm]), ISO-W axes.
     """
+    unknown = set(outputs) - set(TyreForces._fields)
+    if unknown:
+        raise ValueError(f"outputs {sorted(unknown)}: choose among {TyreForces._fields}")
+    want_mx, want_my, want_mz = ("mx" in outputs, "my" in outputs, "mz" in outputs)
+    need_fx = "fx" in outputs or want_my or (want_mz and combined)
+    need_fy = "fy" in outputs or want_mx or want_mz
     c = model.coefficients
     v52 = model.version == "5.2"
     lim = model.limit
@@ -327,110 +334,126 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     vc = jnp.sqrt(vx**2 + (jnp.tan(alpha) * vx) ** 2)
     cos_ap = vx / (vc + 1e3 * EPS * _sgn(vc))  # ε_V = 1e-6 m/s, in mm/s
 
-    # pure longitudinal (4.E9–4.E18)
-    Cx = c["PCX1"] * c["LCX"]
-    mux = ((c["PDX1"] + c["PDX2"] * dfz) * (1.0 + c["PPX3"] * dpi + c["PPX4"] * dpi**2)
-           * (1.0 - c["PDX3"] * gamma**2) * c["LMUX"])
-    Dx = mux * fz
-    Kxk = (fz * (c["PKX1"] + c["PKX2"] * dfz) * jnp.exp(c["PKX3"] * dfz)
-           * (1.0 + c["PPX1"] * dpi + c["PPX2"] * dpi**2) * c["LKX"])
-    Bx = Kxk / (Cx * Dx + EPS * _sgn(Dx))
-    SHx = (c["PHX1"] + c["PHX2"] * dfz) * c["LHX"]
-    SVx = fz * (c["PVX1"] + c["PVX2"] * dfz) * c["LVX"] * c["LMUX"]
-    kx = kappa + SHx
-    Ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2) * (1.0 - c["PEX4"] * jnp.sign(kx)) \
-        * c["LEX"]
-    if limits:
-        Ex = jnp.minimum(Ex, 1.0)
-    Fx0 = Dx * _mf(Bx, Cx, Ex, kx) + SVx
+    nan = jnp.full(jnp.broadcast_shapes(jnp.shape(fz), jnp.shape(kappa), jnp.shape(alpha),
+                                        jnp.shape(gamma)), jnp.nan)
+    Fx = Fy = Mx = My = Mz = nan
+    if need_fx:
+        # pure longitudinal (4.E9–4.E18)
+        Cx = c["PCX1"] * c["LCX"]
+        mux = ((c["PDX1"] + c["PDX2"] * dfz) * (1.0 + c["PPX3"] * dpi + c["PPX4"] * dpi**2)
+               * (1.0 - c["PDX3"] * gamma**2) * c["LMUX"])
+        Dx = mux * fz
+        Kxk = (fz * (c["PKX1"] + c["PKX2"] * dfz) * jnp.exp(c["PKX3"] * dfz)
+               * (1.0 + c["PPX1"] * dpi + c["PPX2"] * dpi**2) * c["LKX"])
+        Bx = Kxk / (Cx * Dx + EPS * _sgn(Dx))
+        SHx = (c["PHX1"] + c["PHX2"] * dfz) * c["LHX"]
+        SVx = fz * (c["PVX1"] + c["PVX2"] * dfz) * c["LVX"] * c["LMUX"]
+        kx = kappa + SHx
+        Ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2) * (1.0 - c["PEX4"] * jnp.sign(kx)) \
+            * c["LEX"]
+        if limits:
+            Ex = jnp.minimum(Ex, 1.0)
+        Fx0 = Dx * _mf(Bx, Cx, Ex, kx) + SVx
 
-    # pure lateral
-    Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits)
-    Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits)[0]
+    if need_fy:
+        # pure lateral
+        Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits)
 
-    # pure aligning torque (4.E31–4.E49, A58, A60)
-    fz_mz = jnp.where(fz <= 0.0, 0.0, jnp.maximum(fz, lim["FZMIN"])) if limits else fz
-    SHt = c["QHZ1"] + c["QHZ2"] * dfz + (c["QHZ3"] + c["QHZ4"] * dfz) * g_s
-    Kyap = Kya + EPS * _sgn(Kya)
-    SHf = SHy + SVy / Kyap
-    ar = a_s + SHf
-    at = a_s + SHt
-    Dt = ((c["QDZ1"] + c["QDZ2"] * dfz) * (1.0 - c["PPZ1"] * dpi)
-          * (1.0 + c["QDZ3"] * gamma + c["QDZ4"] * gamma**2) * fz_mz * (R0 / Fz0p) * c["LTR"])
-    Bt = ((c["QBZ1"] + c["QBZ2"] * dfz + c["QBZ3"] * dfz**2)
-          * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
-    Ct = c["QCZ1"]
-    Et = (c["QEZ1"] + c["QEZ2"] * dfz + c["QEZ3"] * dfz**2) * (
-        1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * jnp.arctan(Bt * Ct * at))
-    if limits:
-        Et = jnp.minimum(Et, 1.0)
-    Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
-                        + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
-                           + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
-          * c["LMUY"] * jnp.cos(a_s))
-    Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
-    Cr = 1.0
+    if want_mz:
+        # pure aligning torque (4.E31–4.E49, A58, A60)
+        Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits)[0]
+        fz_mz = jnp.where(fz <= 0.0, 0.0, jnp.maximum(fz, lim["FZMIN"])) if limits else fz
+        SHt = c["QHZ1"] + c["QHZ2"] * dfz + (c["QHZ3"] + c["QHZ4"] * dfz) * g_s
+        Kyap = Kya + EPS * _sgn(Kya)
+        SHf = SHy + SVy / Kyap
+        ar = a_s + SHf
+        at = a_s + SHt
+        Dt = ((c["QDZ1"] + c["QDZ2"] * dfz) * (1.0 - c["PPZ1"] * dpi)
+              * (1.0 + c["QDZ3"] * gamma + c["QDZ4"] * gamma**2) * fz_mz * (R0 / Fz0p) * c["LTR"])
+        Bt = ((c["QBZ1"] + c["QBZ2"] * dfz + c["QBZ3"] * dfz**2)
+              * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
+        Ct = c["QCZ1"]
+        Et = (c["QEZ1"] + c["QEZ2"] * dfz + c["QEZ3"] * dfz**2) * (
+            1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * jnp.arctan(Bt * Ct * at))
+        if limits:
+            Et = jnp.minimum(Et, 1.0)
+        Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
+                            + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
+                               + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
+              * c["LMUY"] * jnp.cos(a_s))
+        Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
+        Cr = 1.0
 
     if not combined:
-        t0 = Dt * _cosmf(Bt, Ct, Et, at) * cos_ap
-        Mz0 = -t0 * Fy0_g0 + Dr * jnp.cos(Cr * jnp.arctan(Br * ar)) * cos_ap
-        Fx, Fy, Mz = Fx0, Fy0, Mz0
+        Fx = Fx0 if need_fx else nan
+        Fy = Fy0 if need_fy else nan
+        if want_mz:
+            t0 = Dt * _cosmf(Bt, Ct, Et, at) * cos_ap
+            Mz = -t0 * Fy0_g0 + Dr * jnp.cos(Cr * jnp.arctan(Br * ar)) * cos_ap
     else:
-        # combined longitudinal (4.E50–4.E57)
-        Exa = c["REX1"] + c["REX2"] * dfz
-        Eyk = c["REY1"] + c["REY2"] * dfz
-        if limits:
-            Exa, Eyk = jnp.minimum(Exa, 1.0), jnp.minimum(Eyk, 1.0)
-        Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
-            * jnp.cos(jnp.arctan(c["RBX2"] * kappa)) * c["LXAL"]
-        Gxa = _cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"]) / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"])
-        Fx = Gxa * Fx0
-        # combined lateral (4.E58–4.E67)
-        DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
-                * jnp.cos(jnp.arctan(c["RVY4"] * a_s)))
-        SVyk = DVyk * jnp.sin(c["RVY5"] * jnp.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
-        SHyk = c["RHY1"] + c["RHY2"] * dfz
-        Byk = (c["RBY1"] + (0.0 if v52 else c["RBY4"] * g_s**2)) \
-            * jnp.cos(jnp.arctan(c["RBY2"] * (a_s - c["RBY3"]))) * c["LYKA"]
-        Gyk = _cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk) / _cosmf(Byk, c["RCY1"], Eyk, SHyk)
-        Fy = Gyk * Fy0 + SVyk
-        # combined aligning torque (4.E71–4.E78, A54–A56)
-        k2 = (Kxk / Kyap) ** 2 * kappa**2
-        ar_eq = jnp.arctan(jnp.sqrt(jnp.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
-        at_eq = jnp.arctan(jnp.sqrt(jnp.tan(at) ** 2 + k2)) * _sgn_strict(at)
-        s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
-            * c["LS"]
-        Mzr = Dr * jnp.cos(Cr * jnp.arctan(Br * ar_eq))
-        t = Dt * _cosmf(Bt, Ct, Et, at_eq) * cos_ap * c["LFZO"]
-        if v52:
-            Mz = -t * (Fy - SVyk) + Mzr + s * Fx
-        else:
-            Mz = -t * (Gyk * Fy0_g0) + Mzr + s * Fx
+        if need_fx:
+            # combined longitudinal (4.E50–4.E57)
+            Exa = c["REX1"] + c["REX2"] * dfz
+            if limits:
+                Exa = jnp.minimum(Exa, 1.0)
+            Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
+                * jnp.cos(jnp.arctan(c["RBX2"] * kappa)) * c["LXAL"]
+            Gxa = _cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"]) / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"])
+            Fx = Gxa * Fx0
+        if need_fy:
+            # combined lateral (4.E58–4.E67)
+            DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
+                    * jnp.cos(jnp.arctan(c["RVY4"] * a_s)))
+            SVyk = DVyk * jnp.sin(c["RVY5"] * jnp.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
+            SHyk = c["RHY1"] + c["RHY2"] * dfz
+            Eyk = c["REY1"] + c["REY2"] * dfz
+            if limits:
+                Eyk = jnp.minimum(Eyk, 1.0)
+            Byk = (c["RBY1"] + (0.0 if v52 else c["RBY4"] * g_s**2)) \
+                * jnp.cos(jnp.arctan(c["RBY2"] * (a_s - c["RBY3"]))) * c["LYKA"]
+            Gyk = _cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk) / _cosmf(Byk, c["RCY1"], Eyk, SHyk)
+            Fy = Gyk * Fy0 + SVyk
+        if want_mz:
+            # combined aligning torque (4.E71–4.E78, A54–A56)
+            k2 = (Kxk / Kyap) ** 2 * kappa**2
+            ar_eq = jnp.arctan(jnp.sqrt(jnp.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
+            at_eq = jnp.arctan(jnp.sqrt(jnp.tan(at) ** 2 + k2)) * _sgn_strict(at)
+            s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
+                * c["LS"]
+            Mzr = Dr * jnp.cos(Cr * jnp.arctan(Br * ar_eq))
+            t = Dt * _cosmf(Bt, Ct, Et, at_eq) * cos_ap * c["LFZO"]
+            if v52:
+                Mz = -t * (Fy - SVyk) + Mzr + s * Fx
+            else:
+                Mz = -t * (Gyk * Fy0_g0) + Mzr + s * Fx
 
-    # overturning moment (Besselink draft (49); MF 5.2: manual)
-    fz_mx = jnp.where(fz < lim["FZMIN"], fz * (fz / lim["FZMIN"]) ** 2, fz) if (
-        limits and lim["FZMIN"] > 0) else fz
-    if v52:
-        Mx = R0 * fz_mx * (c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma + c["QSX3"] * Fy / Fz0) \
-            * c["LMX"]
-    else:
-        Mx = (R0 * fz_mx * c["LMX"] * (
-            c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma * (1.0 + c["PPMX1"] * dpi)
-            - c["QSX12"] * gamma * jnp.abs(gamma) + c["QSX3"] * Fy / Fz0
-            + c["QSX4"] * jnp.cos(c["QSX5"] * jnp.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
-            * jnp.sin(c["QSX7"] * gamma + c["QSX8"] * jnp.arctan(c["QSX9"] * Fy / Fz0))
-            + c["QSX10"] * jnp.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
-            + R0 * Fy * c["LMX"] * (c["QSX13"] + c["QSX14"] * jnp.abs(gamma)))
-    # rolling resistance moment (A48; MF 5.2: manual), F_z not saturated at FZMAX
-    fz_my = jnp.where(ufz < lim["FZMIN"], ufz * (ufz / lim["FZMIN"]), ufz) if (
-        limits and lim["FZMIN"] > 0) else ufz
-    V0 = c["LONGVL"]
-    roll = c["QSY1"] + c["QSY2"] * Fx / Fz0 + c["QSY3"] * jnp.abs(vx / V0) + c["QSY4"] * (vx / V0) ** 4
-    if v52:
-        My = -R0 * fz_my * c["LMY"] * roll
-    else:
-        My = -R0 * Fz0 * c["LMY"] * (roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
-            (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
+
+    if want_mx:
+        # overturning moment (Besselink draft (49); MF 5.2: manual)
+        fz_mx = jnp.where(fz < lim["FZMIN"], fz * (fz / lim["FZMIN"]) ** 2, fz) if (
+            limits and lim["FZMIN"] > 0) else fz
+        if v52:
+            Mx = R0 * fz_mx * (c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma + c["QSX3"] * Fy / Fz0) \
+                * c["LMX"]
+        else:
+            Mx = (R0 * fz_mx * c["LMX"] * (
+                c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma * (1.0 + c["PPMX1"] * dpi)
+                - c["QSX12"] * gamma * jnp.abs(gamma) + c["QSX3"] * Fy / Fz0
+                + c["QSX4"] * jnp.cos(c["QSX5"] * jnp.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
+                * jnp.sin(c["QSX7"] * gamma + c["QSX8"] * jnp.arctan(c["QSX9"] * Fy / Fz0))
+                + c["QSX10"] * jnp.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
+                + R0 * Fy * c["LMX"] * (c["QSX13"] + c["QSX14"] * jnp.abs(gamma)))
+    if want_my:
+        # rolling resistance moment (A48; MF 5.2: manual), F_z not saturated at FZMAX
+        fz_my = jnp.where(ufz < lim["FZMIN"], ufz * (ufz / lim["FZMIN"]), ufz) if (
+            limits and lim["FZMIN"] > 0) else ufz
+        V0 = c["LONGVL"]
+        roll = c["QSY1"] + c["QSY2"] * Fx / Fz0 + c["QSY3"] * jnp.abs(vx / V0) + c["QSY4"] * (vx / V0) ** 4
+        if v52:
+            My = -R0 * fz_my * c["LMY"] * roll
+        else:
+            My = -R0 * Fz0 * c["LMY"] * (roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
+                (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
     return TyreForces(Fx, Fy, Mx, My, Mz)
 
 
