@@ -60,6 +60,8 @@ from ..geometry.registration import register_landmarks
 
 __all__ = [
     "JOINT_KINDS",
+    "CorrectionReport",
+    "correct_geometry",
     "GeometricJoint",
     "GeometricReport",
     "JointEstimate",
@@ -261,19 +263,21 @@ def _known_slide(r, t, slide):
     return jnp.linalg.lstsq(m, b)[0], m
 
 
-def _trajectory(c, r, t):
-    """Images of a point of S2 over the cases, with the design position itself (3.22)."""
-    return jnp.concatenate([c[None], jnp.einsum("cij,j->ci", r, c) + t])
+def _trajectory(c, r, t, mask):
+    """Images of a point of S2 over the cases, with the design position itself (3.22), and
+    their weights (0 for padding cases)."""
+    pts = jnp.concatenate([c[None], jnp.einsum("cij,j->ci", r, c) + t])
+    return pts, jnp.concatenate([jnp.ones(1, mask.dtype), mask])
 
 
-def _line_residual(c, r, t):
-    pts = _trajectory(c, r, t)
-    d = pts - jnp.mean(pts, axis=0)
-    scatter = d.T @ d
-    w, v = jnp.linalg.eigh(scatter)
+def _line_residual(c, r, t, mask):
+    pts, w = _trajectory(c, r, t, mask)
+    d = pts - (w @ pts) / jnp.sum(w)
+    scatter = (d * w[:, None]).T @ d
+    lam, v = jnp.linalg.eigh(scatter)
     u = v[:, 2]
-    perp = d - (d @ u)[:, None] * u
-    return perp.ravel() / jnp.sqrt(w[2] / pts.shape[0]), u
+    perp = (d - (d @ u)[:, None] * u) * jnp.sqrt(w)[:, None]
+    return perp.ravel() / jnp.sqrt(lam[2] / jnp.sum(w)), u
 
 
 def _link_residual(c, r, t, ball):
@@ -324,10 +328,13 @@ def _gn_singular_values(residual, x):
     return jnp.linalg.svd(jax.jacfwd(residual)(x), compute_uv=False)
 
 
-def _locate(specs, rot, trans, index, slides, priors, starts):
-    """All joints from the poses (cases, parts, 3, 3)/(cases, parts, 3). Returns a dict of
-    per-joint outputs: centre, axis (zeros if none), residual rms, singular values, motion."""
+def _locate(specs, rot, trans, mask, index, slides, priors, starts):
+    """All joints from the poses (cases, parts, 3, 3)/(cases, parts, 3); `mask` (cases,) is 0
+    for padding cases (their relative operators are replaced by the identity, which adds zero
+    rows to every solver). Returns per joint: centre, axis (zeros if none), residual rms,
+    singular values, amount of relative motion."""
     n_cases = rot.shape[0]
+    n_real = jnp.sum(mask)
     eye = jnp.broadcast_to(jnp.eye(3, dtype=rot.dtype), (n_cases, 3, 3))
     zero = jnp.zeros((n_cases, 3), rot.dtype)
 
@@ -339,6 +346,8 @@ def _locate(specs, rot, trans, index, slides, priors, starts):
     for k in order:
         name, kind, (p1, p2), coordinate, link = specs[k]
         r, t = relative_operators(*pose(index[p1]), *pose(index[p2]))
+        r = jnp.where(mask[:, None, None] > 0, r, jnp.eye(3, dtype=r.dtype))
+        t = jnp.where(mask[:, None] > 0, t, 0.0)
         motion = jnp.max(jnp.abs(r - jnp.eye(3)), axis=(0, 1, 2)) + \
             jnp.max(jnp.abs(t)) / 1000.0
         axis = jnp.zeros(3, rot.dtype)
@@ -357,7 +366,7 @@ def _locate(specs, rot, trans, index, slides, priors, starts):
             axis = u
             sv = jnp.linalg.svd(m, compute_uv=False)
         elif kind == "ball_unknown_slide":
-            data = (r, t)
+            data = (r, t, mask)
 
             def fn(x, d):
                 return _line_residual(x, *d)[0]
@@ -368,11 +377,11 @@ def _locate(specs, rot, trans, index, slides, priors, starts):
             xs, fs = jax.vmap(lambda x0, f=frozen: _lm(f, x0))(starts[k] + offsets)
             best = xs[jnp.argmin(jnp.where(jnp.isfinite(fs), fs, jnp.inf))]
             c = _implicit(fn, best, data)
-            resid, axis = _line_residual(c, r, t)
+            _, axis = _line_residual(c, r, t, mask)
             axis = axis * jnp.where(axis[jnp.argmax(jnp.abs(axis))] < 0, -1.0, 1.0)
-            pts = _trajectory(c, r, t)
-            d = pts - jnp.mean(pts, axis=0)
-            res = (d - (d @ axis)[:, None] * axis).ravel()
+            pts, w = _trajectory(c, r, t, mask)
+            d = pts - (w @ pts) / jnp.sum(w)
+            res = ((d - (d @ axis)[:, None] * axis) * jnp.sqrt(w)[:, None]).ravel()
             sv = _gn_singular_values(frozen, jax.lax.stop_gradient(c))
         else:  # compliant_bushing
             ball = centres[link]
@@ -388,14 +397,16 @@ def _locate(specs, rot, trans, index, slides, priors, starts):
             res = fn(c, data)
             sv = _gn_singular_values(frozen, jax.lax.stop_gradient(c))
         centres[k] = c
-        out[k] = dict(centre=c, axis=axis, rms=jnp.sqrt(jnp.mean(res**2)), sv=sv,
+        rows = res.shape[0] // (n_cases + (kind == "ball_unknown_slide"))
+        count = rows * (n_real + (kind == "ball_unknown_slide"))
+        out[k] = dict(centre=c, axis=axis, rms=jnp.sqrt(jnp.sum(res**2) / count), sv=sv,
                       motion=motion)
     return [out[k] for k in range(len(specs))]
 
 
-def _estimates(specs, reference, landmarks, weights, index, slides, priors, starts):
+def _estimates(specs, reference, landmarks, weights, mask, index, slides, priors, starts):
     reg = register_landmarks(reference, landmarks, weights, method="svd")
-    return _locate(specs, reg.rotation, reg.translation, index, slides, priors, starts)
+    return _locate(specs, reg.rotation, reg.translation, mask, index, slides, priors, starts)
 
 
 def _flat(outputs):
@@ -403,21 +414,33 @@ def _flat(outputs):
 
 
 @functools.partial(jax.jit, static_argnames=("specs", "index", "with_sigma"))
-def _run_landmarks(specs, reference, landmarks, weights, index, slides, priors, starts,
+def _run_landmarks(specs, reference, landmarks, weights, mask, index, slides, priors, starts,
                    with_sigma):
-    outputs = _estimates(specs, reference, landmarks, weights, index, slides, priors, starts)
+    outputs = _estimates(specs, reference, landmarks, weights, mask, index, slides, priors,
+                         starts)
     if not with_sigma:
         return outputs, None
-    jac = jax.jacrev(lambda lm: _flat(_estimates(specs, reference, lm, weights, index, slides,
-                                                 priors, starts)))(landmarks)
-    jac = jac * (weights > 0)[None, ..., None]
+    jac = jax.jacrev(lambda lm: _flat(_estimates(specs, reference, lm, weights, mask, index,
+                                                 slides, priors, starts)))(landmarks)
+    jac = jac * ((weights > 0) & (mask[:, None, None] > 0))[None, ..., None]
     jac = jac.reshape(jac.shape[0], -1)
     return outputs, jac @ jac.T
 
 
 @functools.partial(jax.jit, static_argnames=("specs", "index"))
-def _run_poses(specs, rot, trans, index, slides, priors, starts):
-    return _locate(specs, rot, trans, index, slides, priors, starts)
+def _run_poses(specs, rot, trans, mask, index, slides, priors, starts):
+    return _locate(specs, rot, trans, mask, index, slides, priors, starts)
+
+
+CASE_BUCKET = 16
+"""Case counts are padded up to a multiple of this (padding cases are masked out), so tables
+of 17 and 25 cases share one compiled program."""
+
+
+def _pad(a, n):
+    a = jnp.asarray(a)
+    extra = n - a.shape[0]
+    return a if extra == 0 else jnp.concatenate([a, jnp.repeat(a[:1], extra, axis=0)])
 
 
 def _specs(joints: Sequence[GeometricJoint], parts: tuple[str, ...]):
@@ -489,15 +512,18 @@ def locate_joints(
                    for j in joints)
     starts = priors
     lookup = tuple((name, i) for name, i in index)
+    n_cases = int(measurements.n_cases)
+    n_pad = -(-n_cases // CASE_BUCKET) * CASE_BUCKET
+    mask = jnp.concatenate([jnp.ones(n_cases), jnp.zeros(n_pad - n_cases)])
     if measurements.landmarks is not None and measurements.layout is not None:
         outputs, cov = _run_landmarks(
             specs, jnp.asarray(measurements.layout.position),
-            jnp.asarray(measurements.landmarks), jnp.asarray(measurements.weights),
+            _pad(measurements.landmarks, n_pad), _pad(measurements.weights, n_pad), mask,
             _IndexMap(lookup), slides, priors, starts, bool(with_sigma))
     else:
-        outputs = _run_poses(specs, jnp.asarray(measurements.rotation),
-                             jnp.asarray(measurements.translation), _IndexMap(lookup), slides,
-                             priors, starts)
+        outputs = _run_poses(specs, _pad(measurements.rotation, n_pad),
+                             _pad(measurements.translation, n_pad), mask, _IndexMap(lookup),
+                             slides, priors, starts)
         cov = None
     cov = None if cov is None else np.asarray(cov) * landmark_sigma**2
     results = []
@@ -551,3 +577,213 @@ class _IndexMap(tuple):
             return dict(tuple.__iter__(self))[key]
         return tuple.__getitem__(self, key)
 
+
+
+# ------------------------------------------------------------------- chapter 2: correction
+
+
+@dataclasses.dataclass(frozen=True)
+class CorrectionReport:
+    """Result of `correct_geometry`.
+
+    **Fields:** `pose_errors`: per equilibrium solved, the largest distance (mm) between a
+    marker or landmark of a measured part at the model's equilibrium and at the measured pose
+    (the first is the uncorrected model's, the last the final one's); `converged` (the last is
+    below `tol`); `moves`: marker name → total displacement of its design position (mm);
+    `elements`: the joints and bushings whose I (or J) marker was moved; `notes`.
+    """
+
+    pose_errors: tuple[float, ...]
+    converged: bool
+    moves: dict
+    elements: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def iterations(self) -> int:
+        return len(self.pose_errors) - 1
+
+    def __str__(self) -> str:
+        lines = [f"Geometric correction: {self.iterations} correction(s), pose error "
+                 + " → ".join(f"{e:.2e}" for e in self.pose_errors) + " mm"
+                 + ("" if self.converged else " (NOT converged)")]
+        for name, move in self.moves.items():
+            lines.append(f"  {name:<28} moved {move:8.4f} mm")
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _element_markers(mech, elements, side):
+    pairs = []
+    groups = [("joint", mech.joints), ("bushing", mech.bushings)]
+    known = {n: (kind, group) for kind, group in groups for n in group.names}
+    names = list(known) if elements is None else list(elements)
+    for name in names:
+        if name not in known:
+            raise InputError(f"element '{name}' is not a joint or bushing of model "
+                             f"'{mech.name}' (known: {', '.join(known)}).")
+        _, group = known[name]
+        k = group.names.index(name)
+        i, j = group.i_marker[k], group.j_marker[k]
+        which = side.get(name, "i") if isinstance(side, dict) else side
+        if which not in ("i", "j"):
+            raise InputError(f"side of '{name}' must be 'i' or 'j'; got {which!r}.")
+        pairs.append((name, (i, j) if which == "i" else (j, i)))
+    moved = [m for _, (m, _) in pairs]
+    dup = sorted({mech.markers.names[m] for m in moved if moved.count(m) > 1})
+    if dup:
+        raise InputError(f"marker(s) {', '.join(dup)} would be moved by several elements; "
+                         "correct one element per marker (pass elements=...).")
+    return tuple(pairs)
+
+
+def _followers(mech, measured_index):
+    """For each unmeasured part, the measured part whose displacement it follows at the
+    measured state (joined to it by an ideal joint), or None (joined to the ground by an ideal
+    joint, or to no measured part: it keeps its equilibrium pose)."""
+    part_of = mech.markers.part
+    links = [(part_of[i], part_of[j]) for i, j in zip(mech.joints.i_marker,
+                                                       mech.joints.j_marker, strict=True)]
+    out = {}
+    for p in range(len(mech.parts)):
+        if p in measured_index:
+            continue
+        others = [b if a == p else a for a, b in links if p in (a, b)]
+        out[p] = None if -1 in others else next((o for o in others if o in measured_index),
+                                                None)
+    return out
+
+
+def _part_pose_table(rot_eq, trans_eq, rot_m, trans_m, measured_index, followers):
+    """Poses (P, 3, 3)/(P, 3) of every part at the measured state: measured where the part is
+    measured; an unmeasured part jointed to a measured one moves with it from the equilibrium
+    (its joint keeps its equilibrium state), else keeps its equilibrium pose."""
+    rot, trans = np.array(rot_eq), np.array(trans_eq)
+    for p, m in measured_index.items():
+        rot[p], trans[p] = rot_m[m], trans_m[m]
+    for p, leader in followers.items():
+        if leader is not None:
+            m = measured_index[leader]
+            r_move = rot_m[m] @ rot_eq[leader].T
+            rot[p] = r_move @ rot_eq[p]
+            trans[p] = r_move @ (trans_eq[p] - trans_eq[leader]) + trans_m[m]
+    return rot, trans
+
+
+def _global(rot, trans, part, x, o):
+    if part < 0:
+        return x, o
+    return rot[part] @ x + trans[part], rot[part] @ o
+
+
+def correct_geometry(
+    mech,
+    measurements,
+    *,
+    case: int = 0,
+    loads=None,
+    elements: Sequence[str] | None = None,
+    side: str | dict = "i",
+    tol: float = 1e-4,
+    max_iterations: int = 20,
+    **solve_options,
+):
+    """Equilibrium-consistent geometric correction (spec geometry §3.7–3.8, chapter 2;
+    CORRECTIONS 13): move the joint and bushing frames on the bolted side so that the model's
+    static equilibrium under the measured case's loads reproduces the measured part poses.
+
+    One correction (2.33)–(2.35): solve the equilibrium; for each element (markers I on part
+    S1, J on S2), take the relative pose D_eq of I in J at that equilibrium (the bushing's
+    equilibrium deformation; for an ideal joint a pose its constraint allows) and place I where
+    it must be on S1 for I to sit at D_eq from J when S1 and S2 are at their measured poses:
+    [A*_I/S1] = [A_S1]⁻¹[A_S2][A_J/S2] D_eq. The bushing is drawn pre-deformed, not given an
+    offset (§3.9). The new geometry changes lever arms and wrench directions, so the new
+    equilibrium is not yet the measured one: re-solve and re-correct until the largest
+    marker/landmark distance between equilibrium and measurement is below `tol` (one pass cannot
+    be exact: CORRECTIONS 13). A part without a measured pose (e.g. the strut) is taken to move
+    with the measured part it is jointed to (from the equilibrium to the measured state), or to
+    stay at its equilibrium pose when it is jointed to the ground (e.g. the rack).
+
+    **Arguments:**
+
+    - `mech`: the model; `measurements`: `Measurements` (poses of some parts);
+      `case`: which measured case is the reference equilibrium (0-based).
+    - `loads`: that case's loads (one case, no case axis; default: the measurements' own).
+    - `elements`: joints and bushings to correct (default: all); `side`: which marker moves,
+      `'i'` (the Adams I marker: the inner sleeve, bolted, in the thesis's convention) or
+      `'j'`, or a dict name → side.
+    - `tol` (mm), `max_iterations`; `**solve_options` for `solve_statics`.
+
+    **Returns:** `(corrected mechanism, CorrectionReport)`.
+    """
+    import equinox as eqx
+
+    from ..statics import marker_poses, part_poses, solve_statics
+
+    n_cases = measurements.n_cases
+    if not 0 <= case < n_cases:
+        raise InputError(f"case {case} is out of range: the measurements have {n_cases} "
+                         f"case(s) (0-based).")
+    measured_index = {}
+    for m, part in enumerate(measurements.parts):
+        if part not in mech.parts:
+            raise InputError(f"measured part '{part}' is not a part of model '{mech.name}' "
+                             f"(its parts: {', '.join(mech.parts)}).")
+        measured_index[mech.parts.index(part)] = m
+    if not measured_index:
+        raise InputError("the measurements have no pose of any part of the model.")
+    if loads is None:
+        loads = jax.tree.map(lambda a: a[case], measurements.loads)
+    pairs = _element_markers(mech, elements, side)
+    rot_m = np.asarray(measurements.rotation[case])
+    trans_m = np.asarray(measurements.translation[case])
+    # points that show the pose error: every marker of a measured part, and its landmarks
+    part_of = np.asarray(mech.markers.part)
+    check = [(p, np.asarray(mech.markers.position)[part_of == p]) for p in measured_index]
+    if measurements.layout is not None:
+        lay = np.asarray(measurements.layout.position)
+        check += [(mech.parts.index(part), lay[k][measurements.layout.present[k]])
+                  for k, part in enumerate(measurements.layout.parts) if part in mech.parts]
+    original = np.asarray(mech.markers.position)
+    followers = _followers(mech, measured_index)
+    errors, q0, current = [], None, mech
+    for _ in range(max_iterations + 1):
+        sol = solve_statics(current, loads, q0=q0, **solve_options)
+        q = np.asarray(sol.q)
+        rot_eq, trans_eq = (np.asarray(a) for a in part_poses(current, q))
+        rot, trans = _part_pose_table(rot_eq, trans_eq, rot_m, trans_m, measured_index,
+                                      followers)
+        err = 0.0
+        for p, pts in check:
+            m = measured_index[p]
+            diff = pts @ (rot_eq[p] - rot_m[m]).T + trans_eq[p] - trans_m[m]
+            err = max(err, float(np.max(np.linalg.norm(diff, axis=-1))) if len(pts) else 0.0)
+        errors.append(err)
+        if err < tol or len(errors) > max_iterations:
+            break
+        pos_eq, ori_eq = (np.asarray(a) for a in marker_poses(current, q))
+        x0 = np.array(current.markers.position)
+        o0 = np.array(current.markers.orientation)
+        for _, (mi, mj) in pairs:
+            r_d = ori_eq[mj].T @ ori_eq[mi]
+            t_d = ori_eq[mj].T @ (pos_eq[mi] - pos_eq[mj])
+            pj, oj = _global(rot, trans, part_of[mj], x0[mj], o0[mj])
+            pi_star, oi_star = pj + oj @ t_d, oj @ r_d
+            pi = part_of[mi]
+            if pi < 0:
+                x0[mi], o0[mi] = pi_star, oi_star
+            else:
+                x0[mi] = rot[pi].T @ (pi_star - trans[pi])
+                o0[mi] = rot[pi].T @ oi_star
+        current = eqx.tree_at(lambda m: (m.markers.position, m.markers.orientation), current,
+                              (jnp.asarray(x0), jnp.asarray(o0)))
+        q0 = jnp.asarray(q)
+    final = np.asarray(current.markers.position)
+    moves = {current.markers.names[mi]: float(np.linalg.norm(final[mi] - original[mi]))
+             for _, (mi, _) in pairs}
+    notes = ()
+    if errors[-1] >= tol:
+        notes = (f"not converged: pose error {errors[-1]:.3g} mm after {len(errors) - 1} "
+                 f"corrections (tol {tol:g} mm)",)
+    return current, CorrectionReport(tuple(errors), errors[-1] < tol, moves,
+                                     tuple(n for n, _ in pairs), notes)
