@@ -66,6 +66,7 @@ __all__ = [
     "GeometricReport",
     "JointEstimate",
     "locate_joints",
+    "offset_equivalent",
     "relative_operators",
 ]
 
@@ -787,3 +788,55 @@ def correct_geometry(
                  f"corrections (tol {tol:g} mm)",)
     return current, CorrectionReport(tuple(errors), errors[-1] < tol, moves,
                                      tuple(n for n, _ in pairs), notes)
+
+
+def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):
+    """The offset model of a pre-deformed bushing (spec geometry §3.9, eqs. 2.36–2.43): at the
+    configuration `q` (the reference equilibrium) each bushing's I marker is moved onto its J
+    marker and the deformation it had there becomes the offset: δ0 = −δ_eq, angles0 =
+    −angles_eq (2.36: T₀ = −T_eq; in the Adams law F = −K(δ − δ0) as the thesis's
+    F = f(T − T₀)), so both models exert the same force and torque on I at the reference.
+
+    They are **not** equivalent elsewhere: with R^c the relative rotation of I in J at another
+    configuration, the offset model's translational deformation is T^c − R^c R_eqᵀ T_eq (2.41)
+    and its force −K(T^c − R^c R_eqᵀ T_eq + T_eq) differs from the pre-deformed −K T^c unless
+    R^c R_eqᵀ T_eq = T_eq (2.42–2.43). (Even at the reference the J part's moment differs by
+    the second-order δ_eq × F, since I and J then coincide.) The thesis draws bushings
+    pre-deformed (`correct_geometry` does): this converter exists to compare the two.
+
+    **Arguments:** `mech`; `q` (n,) the public coordinates of the reference equilibrium;
+    `bushings`: names (default all).
+
+    **Returns:** the offset-model `Mechanism`.
+    """
+    import equinox as eqx
+
+    from ..statics import bushing_states, marker_poses, part_poses
+
+    b = mech.bushings
+    names = list(b.names) if bushings is None else list(bushings)
+    for n in names:
+        if n not in b.names:
+            raise InputError(f"'{n}' is not a bushing of model '{mech.name}' (bushings: "
+                             f"{', '.join(b.names) or 'none'}).")
+    q = jnp.asarray(q)
+    delta_t, delta_r, _, _ = (np.asarray(a) for a in bushing_states(mech, q))
+    pos, ori = (np.asarray(a) for a in marker_poses(mech, q))
+    rot, trans = (np.asarray(a) for a in part_poses(mech, q))
+    x0 = np.array(mech.markers.position)
+    o0 = np.array(mech.markers.orientation)
+    off_t, off_r = np.array(b.offset_trans), np.array(b.offset_rot)
+    for n in names:
+        k = b.names.index(n)
+        i, j = b.i_marker[k], b.j_marker[k]
+        part = mech.markers.part[i]
+        if part < 0:
+            x0[i], o0[i] = pos[j], ori[j]
+        else:
+            x0[i] = rot[part].T @ (pos[j] - trans[part])
+            o0[i] = rot[part].T @ ori[j]
+        off_t[k], off_r[k] = -delta_t[k], -delta_r[k]
+    return eqx.tree_at(
+        lambda m: (m.markers.position, m.markers.orientation, m.bushings.offset_trans,
+                   m.bushings.offset_rot),
+        mech, (jnp.asarray(x0), jnp.asarray(o0), jnp.asarray(off_t), jnp.asarray(off_r)))
