@@ -224,6 +224,11 @@ def _default(name: str, values: dict) -> float:
     return 0.0
 
 
+def _cos_atan(x):
+    """cos(atan x) = 1/√(1 + x²) (exact identity, no transcendental call)."""
+    return 1.0 / jnp.sqrt(1.0 + x * x)
+
+
 def _sgn(x):
     """sign(x) with sign(0) = 1 (MF-Tyre's guard of divisions)."""
     return jnp.where(x < 0, -1.0, 1.0)
@@ -330,9 +335,10 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         a_s, g_s = jnp.tan(alpha), jnp.sin(gamma)
     else:
         a_s, g_s = alpha, gamma
-    # cos α' (4.E6): V_cy = tan α·|V_cx|, with ε_V
-    vc = jnp.sqrt(vx**2 + (jnp.tan(alpha) * vx) ** 2)
-    cos_ap = vx / (vc + 1e3 * EPS * _sgn(vc))  # ε_V = 1e-6 m/s, in mm/s
+    # cos α' (4.E6): V_c = √(V_cx² + tan²α·V_cx²) = |V_cx|/|cos α|, so V_cx/(V_c + ε_V) =
+    # V_cx·|cos α|/(|V_cx| + ε_V·|cos α|) (one cos instead of tan and sqrt; ε_V = 1e-6 m/s)
+    cos_a = jnp.cos(alpha)
+    cos_ap = vx * jnp.abs(cos_a) / (jnp.abs(vx) + 1e3 * EPS * jnp.abs(cos_a))
 
     nan = jnp.full(jnp.broadcast_shapes(jnp.shape(fz), jnp.shape(kappa), jnp.shape(alpha),
                                         jnp.shape(gamma)), jnp.nan)
@@ -380,7 +386,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
                             + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
                                + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
-              * c["LMUY"] * jnp.cos(a_s))
+              * c["LMUY"] * (jnp.cos(a_s) if alpha_star else cos_a))
         Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
         Cr = 1.0
 
@@ -397,20 +403,20 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             if limits:
                 Exa = jnp.minimum(Exa, 1.0)
             Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
-                * jnp.cos(jnp.arctan(c["RBX2"] * kappa)) * c["LXAL"]
+                * _cos_atan(c["RBX2"] * kappa) * c["LXAL"]
             Gxa = _cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"]) / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"])
             Fx = Gxa * Fx0
         if need_fy:
             # combined lateral (4.E58–4.E67)
             DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
-                    * jnp.cos(jnp.arctan(c["RVY4"] * a_s)))
+                    * _cos_atan(c["RVY4"] * a_s))
             SVyk = DVyk * jnp.sin(c["RVY5"] * jnp.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
             SHyk = c["RHY1"] + c["RHY2"] * dfz
             Eyk = c["REY1"] + c["REY2"] * dfz
             if limits:
                 Eyk = jnp.minimum(Eyk, 1.0)
             Byk = (c["RBY1"] + (0.0 if v52 else c["RBY4"] * g_s**2)) \
-                * jnp.cos(jnp.arctan(c["RBY2"] * (a_s - c["RBY3"]))) * c["LYKA"]
+                * _cos_atan(c["RBY2"] * (a_s - c["RBY3"])) * c["LYKA"]
             Gyk = _cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk) / _cosmf(Byk, c["RCY1"], Eyk, SHyk)
             Fy = Gyk * Fy0 + SVyk
         if want_mz:
@@ -420,7 +426,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             at_eq = jnp.arctan(jnp.sqrt(jnp.tan(at) ** 2 + k2)) * _sgn_strict(at)
             s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
                 * c["LS"]
-            Mzr = Dr * jnp.cos(Cr * jnp.arctan(Br * ar_eq))
+            Mzr = Dr * _cos_atan(Br * ar_eq)  # C_r = 1
             t = Dt * _cosmf(Bt, Ct, Et, at_eq) * cos_ap * c["LFZO"]
             if v52:
                 Mz = -t * (Fy - SVyk) + Mzr + s * Fx

@@ -1,0 +1,138 @@
+"""Benchmark of the Magic Formula (diffsusp.tyre), issue 15.
+
+Run by hand: `python benchmarks/tyre.py [--quick]`. Prints a table and writes
+benchmarks/results/tyre.json. Timings are never asserted anywhere.
+
+- evaluation: MF 6.1 combined-slip F_x, F_y, M_z (`evaluate(..., outputs=("fx", "fy", "mz"))`)
+  of 10⁶ random points (load, slip ratio, slip angle, camber, pressure) of the shipped
+  MagicFormula61 file, jitted, float64, after compilation; evaluations per second; and the ratio
+  to the vectorised NumPy transcription of the tests (tests/test_tyre_oracle.py, which computes
+  M_x and M_y as well: about 15 % more work) on the same points in the same run;
+- fit: the 20-coefficient pure-lateral fit of the tests from 10 000 noisy synthetic points
+  (perturbed start ×0.7–1.3), Huber loss, after compilation (a second noise draw), with its
+  Levenberg–Marquardt steps and the report (lsq) time;
+- (OPENBLAS_NUM_THREADS defaults to 1: the machine has 2 shared cores).
+"""
+
+import argparse
+import os
+import pathlib
+import sys
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# two CPU devices, so the batch can be sharded over the two cores (DESIGN: many devices are
+# jax.sharding over the same batch axes); the single-device time is measured too
+os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                           + " --xla_force_host_platform_device_count=2").strip()
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+from _common import save_results, timed  # noqa: E402
+
+from diffsusp.io.tir import read_tir  # noqa: E402
+from diffsusp.tyre import MagicFormula6, evaluate  # noqa: E402
+from diffsusp.tyre import fit as F  # noqa: E402
+
+ROOT = pathlib.Path(__file__).parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+import test_tyre_oracle as oracle  # noqa: E402
+
+DATA = ROOT.parent / "shared" / "data" / "tyre"
+if not DATA.exists():
+    DATA = ROOT / "tests" / "data" / "tyre"
+NAMES = ("PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PKY1 PKY2 PKY3 PKY4 PKY6 PKY7 PHY1 PHY2 PVY1 "
+         "PVY2 PVY3 PVY4 PPY1").split()
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="10⁵ points, 1 repeat")
+    args = ap.parse_args()
+    n = 100_000 if args.quick else 1_000_000
+    repeats = 1 if args.quick else 5
+    tir = read_tir(DATA / "MagicFormula61_Paramerters.tir")
+    model = MagicFormula6.from_tir(tir)
+    rng = np.random.default_rng(0)
+    fz = rng.uniform(1000.0, 12000.0, n)
+    sl = rng.uniform(-0.3, 0.3, n)
+    sa = rng.uniform(-0.3, 0.3, n)
+    ia = rng.uniform(-0.08, 0.08, n)
+    p = rng.uniform(2.2e5, 3.0e5, n)
+    vx = np.full(n, 16.6)
+    args_j = [jnp.asarray(v) for v in (fz, sl, sa, ia, vx * 1000.0, p)]
+
+    @jax.jit
+    def run(m, fz, sl, sa, ia, vx, p):
+        f = evaluate(m, fz, sl, sa, ia, vx, p, outputs=("fx", "fy", "mz"))
+        return f.fx, f.fy, f.mz
+
+    t0 = time.perf_counter()
+    jax.block_until_ready(run(model, *args_j))
+    compile_eval = time.perf_counter() - t0
+    t_eval, out = timed(lambda: run(model, *args_j), repeats)
+    mesh = jax.sharding.Mesh(np.array(jax.devices()), ("batch",))
+    sharded = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    args_s = [jax.device_put(a, sharded) for a in args_j]
+    jax.block_until_ready(run(model, *args_s))
+    t_shard, _ = timed(lambda: run(model, *args_s), repeats)
+    t0 = time.perf_counter()
+    ref = oracle.mf_numpy(tir, fz, sl, sa, ia, vx, p)
+    t_numpy = time.perf_counter() - t0
+    agree = max(float(np.max(np.abs(np.asarray(out[0]) - ref[0]))),
+                float(np.max(np.abs(np.asarray(out[1]) - ref[1]))),
+                float(np.max(np.abs(np.asarray(out[2]) / 1000.0 - ref[4]))))
+
+    # ---- fit: 10 000 points, 20 coefficients
+    loads = np.linspace(2000.0, 12000.0, 8)
+    cambers = np.linspace(-0.08, 0.07, 5)
+    na = 250
+    f_fz = np.repeat(loads, len(cambers) * na)
+    f_ia = np.tile(np.repeat(cambers, na), len(loads))
+    f_sa = np.tile(np.linspace(-0.4, 0.4, na), len(loads) * len(cambers))
+    z = np.zeros(f_fz.size)
+    inputs = F.BenchData(*(jnp.asarray(v) for v in (f_fz, z, f_sa, f_ia, z + 16.6e3, z + 2.6e5)),
+                         jnp.zeros((1, z.size)), jnp.ones((1, z.size), bool), ("FY",))
+    clean = F.simulate(model, inputs, combined=False)
+    sigma = 0.01 * float(np.ptp(np.asarray(clean.measured)))
+    rs = np.random.default_rng(6)
+    start = model.replace(**{k: float(model[k]) * rs.uniform(0.7, 1.3) for k in NAMES})
+    data1 = F.simulate(model, inputs, noise={"FY": sigma}, seed=1, combined=False)
+    data2 = F.simulate(model, inputs, noise={"FY": sigma}, seed=2, combined=False)
+    t0 = time.perf_counter()
+    F.fit(start, data1, NAMES, noise={"FY": sigma}, combined=False)
+    compile_fit = time.perf_counter() - t0
+    problem = F._prepare(start, data2, NAMES, {"FY": sigma}, "huber", 1.345, False)
+    t0 = time.perf_counter()
+    x, r, J, steps, ok = F._solve(problem, jnp.zeros(len(NAMES)), 200, 1e-9, 1e-9)
+    jax.block_until_ready(x)
+    t_solve = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _, report = F._report(problem, x, r, J, steps, ok, 1e-8)
+    t_report = time.perf_counter() - t0
+
+    results = {
+        "points": n, "compile_eval_s": compile_eval, "eval_s": t_eval,
+        "evaluations_per_s": n / t_eval, "devices": len(jax.devices()),
+        "eval_sharded_s": t_shard, "evaluations_per_s_sharded": n / t_shard, "numpy_s": t_numpy, "speedup_vs_numpy": t_numpy / t_eval,
+        "max_abs_difference_vs_numpy_N": agree,
+        "fit_points": int(z.size), "fit_coefficients": len(NAMES), "compile_fit_s": compile_fit,
+        "fit_solve_s": t_solve, "fit_report_s": t_report, "fit_steps": int(steps),
+        "fit_converged": bool(ok), "fit_unidentifiable": list(report.unidentifiable),
+    }
+    print(f"MF 6.1 combined F_x, F_y, M_z, {n} points (float64): {t_eval * 1e3:.1f} ms "
+          f"= {n / t_eval:.3g} evaluations/s (compile {compile_eval:.1f} s); NumPy "
+          f"{t_numpy * 1e3:.0f} ms, ratio {t_numpy / t_eval:.1f}x; max |diff| {agree:.2e} N")
+    print(f"  sharded over {len(jax.devices())} CPU devices: {t_shard * 1e3:.1f} ms = "
+          f"{n / t_shard:.3g} evaluations/s")
+    print(f"pure-lateral fit, {len(NAMES)} coefficients, {z.size} points: LM {t_solve:.3f} s in "
+          f"{int(steps)} steps (converged {bool(ok)}), report {t_report:.3f} s, compile "
+          f"{compile_fit:.1f} s; not identifiable: {', '.join(report.unidentifiable)}")
+    print("results:", save_results("tyre", results, quick=args.quick))
+
+
+if __name__ == "__main__":
+    main()
