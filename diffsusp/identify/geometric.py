@@ -60,6 +60,8 @@ from ..geometry.registration import register_landmarks
 
 __all__ = [
     "JOINT_KINDS",
+    "apply_locations",
+    "joints_from_model",
     "CorrectionReport",
     "correct_geometry",
     "GeometricJoint",
@@ -99,6 +101,8 @@ class GeometricJoint:
       `'ball_unknown_slide'`: the initial estimate (required).
     - `link_ball`: `'compliant_bushing'`: name of the ball joint at the link's other end (a
       `'ball'` joint of the same list, between the link and another part).
+    - `elements`: names of the model's joints or bushings this located joint stands for (their
+      markers are moved by `apply_locations`).
     """
 
     name: str
@@ -108,6 +112,7 @@ class GeometricJoint:
     prior: tuple[float, float, float] | None = None
     prior_coordinate: str | None = None
     link_ball: str | None = None
+    elements: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in JOINT_KINDS:
@@ -840,3 +845,146 @@ def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):
         lambda m: (m.markers.position, m.markers.orientation, m.bushings.offset_trans,
                    m.bushings.offset_rot),
         mech, (jnp.asarray(x0), jnp.asarray(o0), jnp.asarray(off_t), jnp.asarray(off_r)))
+
+
+def _element_table(mech):
+    """name → (group, kind, I part, J part, I marker, J marker) of every joint and bushing."""
+    part_of = mech.markers.part
+    out = {}
+    for name, kind, i, j in zip(mech.joints.names, mech.joints.kind, mech.joints.i_marker,
+                                mech.joints.j_marker, strict=True):
+        out[name] = ("joint", kind, part_of[i], part_of[j], i, j)
+    for name, i, j in zip(mech.bushings.names, mech.bushings.i_marker, mech.bushings.j_marker,
+                          strict=True):
+        out[name] = ("bushing", "bushing", part_of[i], part_of[j], i, j)
+    return out
+
+
+def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = ()
+                      ) -> tuple[tuple[GeometricJoint, ...], tuple[str, ...]]:
+    """The joint list a model implies for the measured `parts` (spec geometry §4.6): which
+    solver locates which element, with the model's hardpoints as priors.
+
+    - spherical and universal joints, and bushings, between two measured parts (or one and the
+      ground): `'ball'` (a bushing named in `compliant`, on a link whose other end is a ball
+      joint: `'compliant_bushing'`);
+    - revolute and cylindrical joints: `'revolute'` (the prior keeps the model's point along
+      the axis);
+    - a ball joint (spherical/universal) between a measured part and an unmeasured part that
+      slides on the ground (translational joint: a steering rack): `'ball_known_slide'` along
+      the slide axis;
+    - a bushing or ball joint between the ground and an unmeasured part that slides on a
+      measured part (translational or cylindrical joint: the McPherson strut):
+      `'ball_unknown_slide'` from the model's position.
+
+    **Returns:** `(joints, notes)`: the list, and one sentence per element left out.
+    """
+    table = _element_table(mech)
+    measured = {mech.part_index(p) for p in parts if p != GROUND}
+    name_of = {i: p for i, p in enumerate(mech.parts)}
+    name_of[-1] = GROUND
+    pos = np.asarray(mech.markers.position)
+    ori = np.asarray(mech.markers.orientation)
+
+    def known(p):
+        return p < 0 or p in measured
+
+    def slides_of(p):
+        return [(n, e) for n, e in table.items() if e[1] in ("translational", "cylindrical")
+                and p in (e[2], e[3])]
+
+    joints, notes, balls = [], [], {}
+    for name, (_, kind, pi, pj, mi, _) in table.items():
+        at = tuple(float(v) for v in pos[mi])
+        if kind in ("spherical", "universal", "bushing") and known(pi) and known(pj):
+            if pi < 0 and pj < 0:
+                continue
+            if name in compliant:
+                joints.append(("compliant", name, pi, pj, at))
+            else:
+                joints.append(GeometricJoint(name, "ball", (name_of[pi], name_of[pj]),
+                                             elements=(name,)))
+                if kind != "bushing":
+                    balls[name] = (pi, pj)
+        elif kind in ("revolute", "cylindrical") and known(pi) and known(pj):
+            joints.append(GeometricJoint(name, "revolute", (name_of[pi], name_of[pj]),
+                                         prior=at, elements=(name,)))
+        elif kind in ("spherical", "universal", "bushing") and (known(pi) != known(pj)):
+            inner, outer = (pj, pi) if known(pi) else (pi, pj)  # inner: the unmeasured one
+            moved = False
+            for _, (_, _, si, sj, smi, smj) in slides_of(inner):
+                other = sj if si == inner else si
+                if other < 0 and kind != "bushing":
+                    axis = ori[smj if sj == other else smi][:, 2]
+                    joints.append(GeometricJoint(
+                        name, "ball_known_slide", (GROUND, name_of[outer]),
+                        slide=tuple(float(v) for v in axis), elements=(name,)))
+                    moved = True
+                elif other >= 0 and known(other) and outer < 0:
+                    joints.append(GeometricJoint(
+                        name, "ball_unknown_slide", (name_of[other], GROUND), prior=at,
+                        elements=(name,)))
+                    moved = True
+                if moved:
+                    break
+            if not moved:
+                notes.append(f"'{name}' joins unmeasured part '{name_of[inner]}': not located")
+        elif kind not in ("translational", "cylindrical") or (known(pi) and known(pj)):
+            if not (known(pi) and known(pj)):
+                notes.append(f"'{name}' ({kind}) joins an unmeasured part: not located")
+            elif kind != "bushing":
+                notes.append(f"'{name}' ({kind}): no localisation method for this kind")
+    out = []
+    for j in joints:
+        if isinstance(j, tuple):
+            _, name, pi, pj, at = j
+            link = pj if pi < 0 else pi
+            ball = next((b for b, (a, c) in balls.items() if link in (a, c)), None)
+            if ball is None:
+                raise InputError(f"bushing '{name}' is marked compliant but its link "
+                                 f"'{name_of[link]}' has no ball joint to another measured "
+                                 "part.")
+            out.append(GeometricJoint(name, "compliant_bushing",
+                                      (name_of[pj if pi == link else pi], name_of[link]),
+                                      link_ball=ball, elements=(name,)))
+        else:
+            out.append(j)
+    unknown = [c for c in compliant if c not in table]
+    if unknown:
+        raise InputError(f"compliant: {', '.join(unknown)} not bushings of '{mech.name}'.")
+    return tuple(out), tuple(notes)
+
+
+def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoint]):
+    """The model with the located joints: the I and J markers of every element a located,
+    observable joint stands for are moved to its centre (design coordinates); a revolute
+    joint's markers are also turned so that their z is the located axis.
+
+    **Returns:** `(mechanism, moved)`: the new model and element name → displacement (mm).
+    """
+    import equinox as eqx
+
+    table = _element_table(mech)
+    x0 = np.array(mech.markers.position)
+    o0 = np.array(mech.markers.orientation)
+    moved = {}
+    for joint in joints:
+        est = report[joint.name]
+        if not est.observable:
+            continue
+        for element in joint.elements:
+            if element not in table:
+                raise InputError(f"joint '{joint.name}' stands for '{element}', which is not "
+                                 f"a joint or bushing of model '{mech.name}'.")
+            _, kind, _, _, mi, mj = table[element]
+            moved[element] = float(np.linalg.norm(est.centre - x0[mi]))
+            for m in (mi, mj):
+                x0[m] = est.centre
+                if joint.kind == "revolute" and est.axis is not None:
+                    z = est.axis if est.axis @ o0[m][:, 2] >= 0 else -est.axis
+                    x = o0[m][:, 0] - (o0[m][:, 0] @ z) * z
+                    x /= np.linalg.norm(x)
+                    o0[m] = np.column_stack([x, np.cross(z, x), z])
+    new = eqx.tree_at(lambda m: (m.markers.position, m.markers.orientation), mech,
+                      (jnp.asarray(x0), jnp.asarray(o0)))
+    return new, moved
