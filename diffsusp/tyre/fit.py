@@ -44,7 +44,8 @@ from .. import lsq
 from ..errors import InputError, ModelWarning
 from . import mf6, mf89
 
-__all__ = ["BenchData", "TyreFitReport", "bench_data", "read_bench", "simulate", "fit", "fit_many", "GROUPS",
+__all__ = ["BenchData", "TyreFitReport", "bench_data", "read_bench", "read_bench_table",
+           "input_columns", "simulate", "fit", "fit_many", "GROUPS",
            "POSITIVE", "CHANNELS", "COLUMN_ALIASES", "check_constraints"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
@@ -205,9 +206,8 @@ def bench_data(table, *, channels=None, mapping: dict | None = None, defaults: d
                      jnp.asarray(meas), jnp.asarray(valid), channels)
 
 
-def read_bench(path, *, channels=None, mapping: dict | None = None,
-               defaults: dict | None = None) -> BenchData:
-    """Bench data from a CSV or Parquet file (see `bench_data` for columns and units).
+def read_bench_table(path):
+    """A `diffsusp.io.Table` of a bench CSV or Parquet file, units as written.
 
     CSV is read here rather than by `diffsusp.io.read_table` because the pressure and speed
     units (kPa, bar, psi, km/h, m/s) are not table units of the library: one header row
@@ -222,8 +222,7 @@ def read_bench(path, *, channels=None, mapping: dict | None = None,
 
     path = os.fspath(path)
     if not path.lower().endswith(".csv"):
-        return bench_data(read_table(path), channels=channels, mapping=mapping,
-                          defaults=defaults)
+        return read_table(path)
     try:
         with open(path, encoding="utf-8-sig") as f:
             lines = f.read().splitlines()
@@ -241,7 +240,7 @@ def read_bench(path, *, channels=None, mapping: dict | None = None,
             raise ModelFileError(f"{len(cells)} cells, the header has {len(header[1])}",
                                  path=path, line=i)
         vals = []
-        for cell, (name, _) in zip(cells, header[1]):
+        for cell, (name, _) in zip(cells, header[1], strict=True):
             try:
                 vals.append(float(cell))
             except ValueError:
@@ -255,9 +254,44 @@ def read_bench(path, *, channels=None, mapping: dict | None = None,
     names = [n for n, _ in header[1]]
     if len(set(names)) != len(names):
         raise ModelFileError("duplicate column names", path=path, line=header[0])
-    table = Table({n: arr[:, k] for k, n in enumerate(names)}, dict(header[1]), path,
-                  tuple(rows), header[0])
-    return bench_data(table, channels=channels, mapping=mapping, defaults=defaults)
+    return Table({n: arr[:, k] for k, n in enumerate(names)}, dict(header[1]), path,
+                 tuple(rows), header[0])
+
+
+def read_bench(path, *, channels=None, mapping: dict | None = None,
+               defaults: dict | None = None) -> BenchData:
+    """Bench data from a CSV or Parquet file (`read_bench_table`, then `bench_data`)."""
+    return bench_data(read_bench_table(path), channels=channels, mapping=mapping,
+                      defaults=defaults)
+
+
+def input_columns(table) -> dict[str, np.ndarray]:
+    """The input columns of a table in library units (FZ N, SL -, SA and IA rad, P Pa, VX mm/s;
+    missing SL/SA/IA = 0, missing P and VX = NaN: the model's INFLPRES and LONGVL). A NaN input
+    is an error naming the file and line (evaluation, unlike fitting, excludes nothing)."""
+    path = getattr(table, "path", None)
+    cols = {}
+    for name in table.names:
+        c = COLUMN_ALIASES.get(name.upper())
+        if c in ("FZ", "SL", "SA", "IA", "P", "VX"):
+            cols[c] = np.asarray(table[name], float) * _unit_scale(c, table.units.get(name),
+                                                                   path)
+    if "FZ" not in cols:
+        raise InputError(f"{path or '<table>'}: no FZ column; columns are "
+                         f"{', '.join(table.names)}")
+    n = len(cols["FZ"])
+    for c in ("SL", "SA", "IA"):
+        cols.setdefault(c, np.zeros(n))
+    for c in ("P", "VX"):
+        cols.setdefault(c, np.full(n, np.nan))
+    bad = np.zeros(n, bool)
+    for c in ("FZ", "SL", "SA", "IA"):
+        bad |= ~np.isfinite(cols[c])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"{path or '<table>'}: {table.where(i)[0]}: NaN input "
+                         f"({int(bad.sum())} row(s))")
+    return cols
 
 
 def _predict(model, data: BenchData, combined: bool) -> jax.Array:

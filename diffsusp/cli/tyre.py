@@ -1,0 +1,300 @@
+"""`diffsusp tyre info|eval|spec|fit`: Magic Formula tyre property files (spec: tyre §7 C; issue
+15 item 4).
+
+- `info FILE.tir`: version, dimensions, nominal load, ranges, coefficient counts.
+- `eval FILE.tir --inputs TABLE --out RESULTS` (or `--grid`): steady-state forces and moments.
+  Input columns `FZ` [N], `SL` [-], `SA` [rad], `IA` [rad], `P` [Pa], `VX` [m/s] (units in
+  brackets, e.g. `SA [deg]`, `P [kPa]`, `VX [km/h]`; missing SL/SA/IA are 0, P is INFLPRES, VX
+  LONGVL). Output: the inputs plus `FX`, `FY` [N], `MX`, `MY`, `MZ` [N·m]. Default behaviour
+  that of TNO MF-Tyre as MFeval reproduces it: no α* (`--alpha-star` to use it), limit checks
+  on (inputs beyond the file's ranges are warned about and saturated; `--no-limits`).
+- `spec FILE.tir [--loads 2000,4000,6000]`: the specification quantities over loads (cornering
+  and slip stiffness, trail, peaks, camber stiffness, values at zero slip).
+- `fit DATA --model mf61|mf62|mf52|mf1989 [--start FILE.tir] --out FITTED.tir`: coefficients from
+  bench data (columns as `eval`'s plus the measured FX, FY, MZ [N, N·m]); `--mode` chooses the
+  coefficient groups (`diffsusp.tyre.fit.GROUPS`), fitted one after the other; report to the
+  terminal (and `--report` .json), measured-vs-fitted figures per load and camber to
+  `--figures`.
+
+Exit codes as the other verbs: 2 bad input, 4 a model that cannot be evaluated.
+"""
+
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich import box
+from rich.table import Table as RichTable
+
+from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+
+tyre_app = typer.Typer(add_completion=False, no_args_is_help=True,
+                       help="Magic Formula tyre models (.tir files): evaluate, specify, fit.")
+app.add_typer(tyre_app, name="tyre")
+
+_MODES = {"pure_lateral", "pure_longitudinal", "pure_aligning", "combined_longitudinal",
+          "combined_lateral", "pressure", "overturning", "mf1989_lateral", "mf1989_aligning",
+          "mf1989_longitudinal"}
+
+
+def _load(path: Path):
+    from diffsusp.io.tir import read_tir
+    from diffsusp.tyre import MagicFormula6
+
+    tir = read_tir(path)
+    return tir, MagicFormula6.from_tir(tir)
+
+
+@tyre_app.command("info")
+def info(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
+         json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False):
+    """Summary of a .tir file: Magic Formula version, dimensions, ranges."""
+    with cli_errors():
+        enable_x64()
+        tir, model = _load(file)
+        lim = model.limit
+        out = {"file": str(file), "fittyp": tir.fittyp, "version": model.version,
+               "unloaded_radius_m": float(model["UNLOADED_RADIUS"]) / 1000.0,
+               "fnomin_N": float(model["FNOMIN"]), "nompres_Pa": float(model["NOMPRES"]),
+               "longvl_m_s": float(model["LONGVL"]) / 1000.0,
+               "limits": {k: (v if math.isfinite(v) else None) for k, v in lim.items()},
+               "coefficients_in_file": len(tir.entries),
+               "sections": list(tir.sections)}
+    if json_out:
+        print_json(out)
+        return
+    c = console()
+    c.print(f"[bold]{file}[/]: FITTYP {out['fittyp']} (MF {out['version']}), R0 "
+            f"{out['unloaded_radius_m']:.4g} m, FNOMIN {out['fnomin_N']:.6g} N, NOMPRES "
+            f"{out['nompres_Pa']:.6g} Pa, LONGVL {out['longvl_m_s']:.4g} m/s")
+    t = RichTable(box=box.SIMPLE)
+    for h in ("range", "min", "max"):
+        t.add_column(h)
+    for name, lo, hi in (("FZ [N]", "FZMIN", "FZMAX"), ("kappa [-]", "KPUMIN", "KPUMAX"),
+                         ("alpha [rad]", "ALPMIN", "ALPMAX"), ("gamma [rad]", "CAMMIN", "CAMMAX"),
+                         ("pressure [Pa]", "PRESMIN", "PRESMAX")):
+        t.add_row(name, f"{lim[lo]:g}", f"{lim[hi]:g}")
+    c.print(t)
+    c.print(f"{out['coefficients_in_file']} entries in {len(out['sections'])} sections")
+
+
+@tyre_app.command("eval")
+def eval_command(
+    file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
+    inputs: Annotated[Path | None, typer.Option(
+        help="Input table: FZ [N], SL [-], SA [rad], IA [rad], P [Pa], VX [m/s] (.csv/.parquet).")]
+    = None,
+    out: Annotated[Path | None, typer.Option(help="Results table (.csv or .parquet).")] = None,
+    grid: Annotated[bool, typer.Option(
+        help="A quick sweep: FNOMIN × {0.5, 1, 1.5}, slip angle −15…15°, κ = 0.")] = False,
+    alpha_star: Annotated[bool, typer.Option(help="Use α* = tan α, γ* = sin γ.")] = False,
+    limits: Annotated[bool, typer.Option(help="Limit checks (saturate at the file's ranges).")]
+    = True,
+    pure: Annotated[bool, typer.Option(help="Pure-slip functions instead of combined.")] = False,
+):
+    """Steady-state forces and moments of a .tir tyre at the given inputs."""
+    import jax.numpy as jnp
+
+    from diffsusp.io.tables import write_table
+    from diffsusp.tyre import check_limits, evaluate
+    from diffsusp.tyre import fit as F
+
+    if (inputs is None) == (not grid):
+        raise fail("give exactly one of --inputs TABLE and --grid", EXIT_BAD_INPUT)
+    with cli_errors():
+        enable_x64()
+        tir, model = _load(file)
+        if grid:
+            fz = np.repeat(np.array([0.5, 1.0, 1.5]) * float(model["FNOMIN"]), 31)
+            sa = np.tile(np.radians(np.linspace(-15.0, 15.0, 31)), 3)
+            z = np.zeros(fz.size)
+            cols = {"FZ": fz, "SL": z, "SA": sa, "IA": z, "P": z + float(model["INFLPRES"]),
+                    "VX": z + float(model["LONGVL"])}
+        else:
+            cols = F.input_columns(F.read_bench_table(inputs))
+        p = np.where(np.isnan(cols["P"]), float(model["INFLPRES"]), cols["P"])
+        vx = np.where(np.isnan(cols["VX"]), float(model["LONGVL"]), cols["VX"])
+        if limits:
+            with warnings.catch_warnings(record=True) as rec:
+                warnings.simplefilter("always")
+                check_limits(model, fz=cols["FZ"], kappa=cols["SL"], alpha=cols["SA"],
+                             gamma=cols["IA"], pressure=p, where=f"{inputs or 'grid'}: ")
+            for w in rec:
+                console(stderr=True).print(f"[yellow]warning:[/] {w.message}", highlight=False)
+        f = evaluate(model, jnp.asarray(cols["FZ"]), jnp.asarray(cols["SL"]),
+                     jnp.asarray(cols["SA"]), jnp.asarray(cols["IA"]), jnp.asarray(vx),
+                     jnp.asarray(p), combined=not pure, limits=limits, alpha_star=alpha_star)
+        res = {"FZ": cols["FZ"], "SL": cols["SL"], "SA": cols["SA"], "IA": cols["IA"], "P": p,
+               "VX": vx / 1000.0, "FX": np.asarray(f.fx), "FY": np.asarray(f.fy),
+               "MX": np.asarray(f.mx) / 1000.0, "MY": np.asarray(f.my) / 1000.0,
+               "MZ": np.asarray(f.mz) / 1000.0}
+        units = {"FZ": "N", "SL": "-", "SA": "rad", "IA": "rad", "P": None, "VX": None,
+                 "FX": "N", "FY": "N", "MX": "N·m", "MY": "N·m", "MZ": "N·m"}
+        if out is not None:
+            # P [Pa] and VX [m/s] are written without brackets: not table units of the library
+            write_table(out, {("P_Pa" if k == "P" else "VX_m_s" if k == "VX" else k): v
+                              for k, v in res.items()},
+                        {("P_Pa" if k == "P" else "VX_m_s" if k == "VX" else k): u
+                         for k, u in units.items()})
+    c = console()
+    if out is not None:
+        c.print(f"{len(res['FZ'])} points written to {out}")
+    else:
+        t = RichTable(box=box.SIMPLE)
+        for k in ("FZ", "SL", "SA", "IA", "FX", "FY", "MZ"):
+            t.add_column(f"{k} [{units[k]}]", justify="right")
+        for i in range(min(len(res["FZ"]), 40)):
+            t.add_row(*(f"{res[k][i]:.5g}" for k in ("FZ", "SL", "SA", "IA", "FX", "FY", "MZ")))
+        c.print(t)
+
+
+def _parse_loads(text: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise fail(f"--loads must be numbers separated by commas, got '{text}'",
+                   EXIT_BAD_INPUT) from None
+
+
+@tyre_app.command("spec")
+def spec_command(
+    file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
+    loads: Annotated[str | None, typer.Option(
+        help="Loads [N], comma separated (default FNOMIN × 0.5, 0.75, 1, 1.25, 1.5).")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
+):
+    """Specification quantities over loads (exact derivatives; pure slip, camber 0)."""
+    from diffsusp.tyre import specification
+    from diffsusp.tyre.spec import to_rows
+
+    with cli_errors():
+        enable_x64()
+        tir, model = _load(file)
+        fz = (_parse_loads(loads) if loads else
+              [f * float(model["FNOMIN"]) for f in (0.5, 0.75, 1.0, 1.25, 1.5)])
+        rows = to_rows(specification(model, np.array(fz)))
+    if json_out:
+        print_json(rows)
+        return
+    show = [("fz", "FZ [N]", 1), ("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
+            ("pneumatic_trail", "trail [mm]", 1), ("slip_stiffness", "C_kappa [N/-]", 1),
+            ("camber_stiffness", "C_gamma [N/deg]", math.pi / 180),
+            ("fy_peak", "FY peak [N]", 1), ("alpha_at_fy_peak", "at [deg]", 180 / math.pi),
+            ("mz_peak", "MZ peak [N·m]", 1e-3), ("alpha_at_mz_peak", "at [deg]", 180 / math.pi),
+            ("fy_at_zero", "FY(0) [N]", 1), ("mz_at_zero", "MZ(0) [N·m]", 1e-3)]
+    t = RichTable(box=box.SIMPLE)
+    for _, h, _ in show:
+        t.add_column(h, justify="right")
+    for r in rows:
+        t.add_row(*(f"{r[k] * s:.5g}" for k, _, s in show))
+    console().print(t)
+
+
+@tyre_app.command("fit")
+def fit_command(
+    data: Annotated[Path, typer.Argument(help="Bench data (.csv/.parquet): inputs and FX, FY, MZ.")],
+    model: Annotated[str, typer.Option(help="mf61 | mf62 | mf52 | mf1989.")] = "mf61",
+    start: Annotated[Path | None, typer.Option(help="Start .tir (MF 5.2/6.x).")] = None,
+    out: Annotated[Path | None, typer.Option(help="Write the fitted .tir here.")] = None,
+    mode: Annotated[list[str] | None, typer.Option(
+        help="Coefficient group(s), fitted in order (default: pure_lateral, pure_longitudinal, "
+        "pure_aligning as the data allow; mf1989: mf1989_lateral).")] = None,
+    loss: Annotated[str, typer.Option(help="huber | cauchy | linear.")] = "huber",
+    report: Annotated[Path | None, typer.Option(help="Write the reports (.json).")] = None,
+    figures: Annotated[Path | None, typer.Option(help="Measured-vs-fitted figures folder.")]
+    = None,
+):
+    """Fit Magic Formula coefficients to bench data (robust LM, σ and identifiability)."""
+    from diffsusp.tyre import MagicFormula89
+    from diffsusp.tyre import fit as F
+
+    if model not in ("mf61", "mf62", "mf52", "mf1989"):
+        raise fail(f"--model must be mf61, mf62, mf52 or mf1989; got '{model}'", EXIT_BAD_INPUT)
+    if loss not in F.LOSSES:
+        raise fail(f"--loss must be one of {', '.join(F.LOSSES)}; got '{loss}'", EXIT_BAD_INPUT)
+    for m in mode or ():
+        if m not in _MODES:
+            raise fail(f"--mode {m}: one of {', '.join(sorted(_MODES))}", EXIT_BAD_INPUT)
+    if model != "mf1989" and start is None:
+        raise fail("--start FILE.tir is needed for mf61/mf62/mf52 (the start values and the "
+                   "file's other sections)", EXIT_BAD_INPUT)
+    if model == "mf1989" and out is not None and out.suffix.lower() == ".tir":
+        raise fail("mf1989 coefficients are not a .tir model: use --report .json",
+                   EXIT_BAD_INPUT)
+    c = console()
+    with cli_errors():
+        enable_x64()
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            bench = F.read_bench(data)
+        for w in rec:
+            console(stderr=True).print(f"[yellow]warning:[/] {w.message}", highlight=False)
+        if model == "mf1989":
+            m0 = MagicFormula89.from_values({"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0,
+                                             "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
+                                             "c3": -1.0, "c4": -10.0, "c9": 0.5})
+            groups = mode or ["mf1989_lateral"]
+            tir = None
+        else:
+            tir, m0 = _load(start)
+            groups = mode or [g for g, ch in (("pure_lateral", "FY"),
+                                              ("pure_longitudinal", "FX"),
+                                              ("pure_aligning", "MZ"))
+                              if ch in bench.channels]
+        reports = {}
+        fitted = m0
+        for g in groups:
+            names = [n for n in F.GROUPS[g] if n in fitted.coefficients]
+            c.print(f"fitting {g} ({len(names)} coefficients, {bench.n} points) ...")
+            fitted, rep = F.fit(fitted, bench, names, loss=loss)
+            reports[g] = rep
+            c.print(rep.table(), highlight=False)
+        if out is not None and tir is not None:
+            from diffsusp.io.tir import write_tir
+
+            write_tir(fitted.to_tir(tir), out)
+            c.print(f"fitted model written to {out}")
+        if report is not None:
+            report.write_text(json.dumps({g: r.to_dict() for g, r in reports.items()},
+                                         indent=2) + "\n")
+        if figures is not None:
+            _figures(fitted, bench, figures)
+            c.print(f"figures written to {figures}")
+
+
+def _figures(model, bench, folder: Path):
+    """Measured vs fitted per channel, one curve per (load, camber) group."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from diffsusp.tyre import fit as F
+
+    folder.mkdir(parents=True, exist_ok=True)
+    pred = np.asarray(F._predict(model, bench, True))
+    fz = np.round(np.asarray(bench.fz), -1)
+    ia = np.round(np.degrees(np.asarray(bench.gamma)), 1)
+    x = np.degrees(np.asarray(bench.alpha))
+    for k, ch in enumerate(bench.channels):
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        valid = np.asarray(bench.valid[k])
+        for load in np.unique(fz):
+            for cam in np.unique(ia):
+                sel = (fz == load) & (ia == cam) & valid
+                if not sel.any():
+                    continue
+                order = np.argsort(x[sel])
+                ax.plot(x[sel][order], np.asarray(bench.measured[k])[sel][order], ".", ms=3)
+                ax.plot(x[sel][order], pred[k][sel][order], "-", lw=1,
+                        label=f"{load:.0f} N, {cam:g}°")
+        ax.set_xlabel("slip angle [deg]")
+        ax.set_ylabel(f"{ch} [{'N' if ch.startswith('F') else 'N·mm'}]")
+        ax.legend(fontsize=6, ncol=2)
+        fig.tight_layout()
+        fig.savefig(folder / f"{ch.lower()}_measured_vs_fitted.png", dpi=120)
+        plt.close(fig)
