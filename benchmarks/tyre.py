@@ -117,7 +117,8 @@ def main():
     results = {
         "points": n, "compile_eval_s": compile_eval, "eval_s": t_eval,
         "evaluations_per_s": n / t_eval, "devices": len(jax.devices()),
-        "eval_sharded_s": t_shard, "evaluations_per_s_sharded": n / t_shard, "numpy_s": t_numpy, "speedup_vs_numpy": t_numpy / t_eval,
+        "eval_sharded_s": t_shard, "evaluations_per_s_sharded": n / t_shard,
+        "numpy_s": t_numpy, "speedup_vs_numpy": t_numpy / t_eval,
         "max_abs_difference_vs_numpy_N": agree,
         "fit_points": int(z.size), "fit_coefficients": len(NAMES), "compile_fit_s": compile_fit,
         "fit_solve_s": t_solve, "fit_report_s": t_report, "fit_steps": int(steps),

@@ -58,7 +58,8 @@ def test_recovers_identifiable_within_3_sigma(setup):
     x_true = np.array([float(truth[k]) for k in NAMES])
     ok = report.identifiable
     z = (report.values - x_true) / report.sigma
-    assert np.all(np.abs(z[ok]) < 3.0), dict(zip(np.array(NAMES)[ok], np.round(z[ok], 2)))
+    bad = dict(zip(np.array(NAMES)[ok], np.round(z[ok], 2), strict=True))
+    assert np.all(np.abs(z[ok]) < 3.0), bad
     # the noise σ was right: whitened residual σ̂ ≈ 1, rms ≈ σ
     assert 0.9 < report.residual_sigma < 1.1
     assert report.rms["FY"] == pytest.approx(sigma, rel=0.1)

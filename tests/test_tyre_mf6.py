@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 import test_tyre_oracle as oracle
+
 from diffsusp.errors import ModelFileError, ModelWarning
 from diffsusp.io.tir import read_tir, tir_from_text, to_text, write_tir
 from diffsusp.tyre import MagicFormula6, check_limits, evaluate
@@ -180,7 +180,7 @@ def test_gradients_match_finite_differences(files):
         h = 1e-6 * max(1.0, abs(float(x[i])))
         fd = (f(x.at[i].add(h), *inputs[:4]) - f(x.at[i].add(-h), *inputs[:4])) / (2 * h)
         np.testing.assert_allclose(J[0][:, i], fd, rtol=2e-6, atol=1e-5)
-    for k, h in zip(range(4), (1e-2, 1e-7, 1e-7, 1e-7)):
+    for k, h in enumerate((1e-2, 1e-7, 1e-7, 1e-7)):
         args = list(inputs[:4])
         up, dn = list(args), list(args)
         up[k] += h

@@ -65,7 +65,8 @@ def mf_numpy(tir, FZ, SL, SA, IA, VX, P, *, combined=True):
             SVyg = FZ * (g("PVY3") + g("PVY4") * dfz) * gam * lam("LKYC") * lam("LMUY")
         else:
             Kya = (g("PKY1") * Fz0p * (1 + g("PPY1") * dpi) * (1 - g("PKY3") * np.abs(gam))
-                   * np.sin(g("PKY4", 2.0) * np.arctan(FZ / Fz0p / ((g("PKY2") + g("PKY5") * gam ** 2)
+                   * np.sin(g("PKY4", 2.0) * np.arctan(FZ / Fz0p / ((g("PKY2")
+                                                            + g("PKY5") * gam ** 2)
                                                             * (1 + g("PPY2") * dpi))))
                    * lam("LKY"))
             Kyg0 = FZ * (g("PKY6") + g("PKY7") * dfz) * (1 + g("PPY5") * dpi) * lam("LKYC")

@@ -196,7 +196,8 @@ def spec_command(
 
 @tyre_app.command("fit")
 def fit_command(
-    data: Annotated[Path, typer.Argument(help="Bench data (.csv/.parquet): inputs and FX, FY, MZ.")],
+    data: Annotated[Path, typer.Argument(
+        help="Bench data (.csv/.parquet): inputs and FX, FY, MZ.")],
     model: Annotated[str, typer.Option(help="mf61 | mf62 | mf52 | mf1989.")] = "mf61",
     start: Annotated[Path | None, typer.Option(help="Start .tir (MF 5.2/6.x).")] = None,
     out: Annotated[Path | None, typer.Option(help="Write the fitted .tir here.")] = None,

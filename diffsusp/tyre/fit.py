@@ -438,7 +438,8 @@ class TyreFitReport:
 
     @property
     def unidentifiable(self) -> tuple[str, ...]:
-        return tuple(n for n, ok in zip(self.names, self.identifiable) if not ok)
+        return tuple(n for n, ok in zip(self.names, self.identifiable, strict=True)
+                     if not ok)
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])

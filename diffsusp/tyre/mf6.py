@@ -404,7 +404,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
                 Exa = jnp.minimum(Exa, 1.0)
             Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
                 * _cos_atan(c["RBX2"] * kappa) * c["LXAL"]
-            Gxa = _cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"]) / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"])
+            Gxa = (_cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"])
+                   / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"]))
             Fx = Gxa * Fx0
         if need_fy:
             # combined lateral (4.E58–4.E67)
@@ -454,11 +455,13 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         fz_my = jnp.where(ufz < lim["FZMIN"], ufz * (ufz / lim["FZMIN"]), ufz) if (
             limits and lim["FZMIN"] > 0) else ufz
         V0 = c["LONGVL"]
-        roll = c["QSY1"] + c["QSY2"] * Fx / Fz0 + c["QSY3"] * jnp.abs(vx / V0) + c["QSY4"] * (vx / V0) ** 4
+        roll = (c["QSY1"] + c["QSY2"] * Fx / Fz0 + c["QSY3"] * jnp.abs(vx / V0)
+                + c["QSY4"] * (vx / V0) ** 4)
         if v52:
             My = -R0 * fz_my * c["LMY"] * roll
         else:
-            My = -R0 * Fz0 * c["LMY"] * (roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
+            My = -R0 * Fz0 * c["LMY"] * (
+                roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
                 (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
     return TyreForces(Fx, Fy, Mx, My, Mz)
 

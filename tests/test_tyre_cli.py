@@ -1,0 +1,111 @@
+"""`diffsusp tyre info|eval|spec|fit` (issue 15 item 4): the CLI equals the library, units at
+the edge, exit codes for bad input."""
+
+import json
+import math
+import pathlib
+
+import jax.numpy as jnp
+import numpy as np
+from typer.testing import CliRunner
+
+from diffsusp.cli import app
+from diffsusp.io.tir import read_tir
+from diffsusp.tyre import MagicFormula6, MagicFormula89, evaluate
+from diffsusp.tyre import fit as F
+
+DATA = pathlib.Path(__file__).parent.parent.parent / "shared" / "data" / "tyre"
+if not DATA.exists():
+    DATA = pathlib.Path(__file__).parent / "data" / "tyre"
+TIR = DATA / "MagicFormula61_Paramerters.tir"
+
+
+def _run(*args):
+    return CliRunner().invoke(app, ["tyre", *map(str, args)])
+
+
+def _text(result):
+    """The output with Rich's line wrapping undone."""
+    return " ".join(result.output.split())
+
+
+def test_info_and_spec():
+    r = _run("info", TIR, "--json")
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.output)
+    assert (out["fittyp"], out["version"], out["fnomin_N"]) == (61, "6.1", 6752.0)
+    assert out["unloaded_radius_m"] == 0.393581 and out["limits"]["FZMAX"] == 18000.0
+    r = _run("spec", DATA / "PacejkaBook_Defaults.tir", "--loads", "4000", "--json")
+    assert r.exit_code == 0, r.output
+    row = json.loads(r.output)[0]
+    # book file: K_yα = p_Ky1·F_z0·sin(2·atan(F_z/(p_Ky2·F_z0))) at F_z = F_z0 = 4000 N
+    np.testing.assert_allclose(row["cornering_stiffness"],
+                               -15.0 * 4000 * math.sin(2 * math.atan(0.5)), rtol=1e-6)
+
+
+def test_eval_table_equals_library(tmp_path):
+    inp = tmp_path / "in.csv"
+    inp.write_text("FZ [kN],SA [deg],SL [-],IA [deg],P [kPa],VX [km/h]\n"
+                   "4.5,3,0.02,-1,240,60\n6,-5,-0.05,2,280,90\n")
+    out = tmp_path / "out.csv"
+    r = _run("eval", TIR, "--inputs", inp, "--out", out)
+    assert r.exit_code == 0, r.output
+    lines = out.read_text().splitlines()
+    assert lines[0] == ("FZ [N],SL [-],SA [rad],IA [rad],P_Pa,VX_m_s,FX [N],FY [N],MX [N·m],"
+                        "MY [N·m],MZ [N·m]")
+    got = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    m = MagicFormula6.from_tir(read_tir(TIR))
+    f = evaluate(m, jnp.array([4500.0, 6000.0]), jnp.array([0.02, -0.05]),
+                 jnp.radians(jnp.array([3.0, -5.0])), jnp.radians(jnp.array([-1.0, 2.0])),
+                 jnp.array([60e6 / 3600, 90e6 / 3600]), jnp.array([2.4e5, 2.8e5]))
+    np.testing.assert_allclose(got[:, 6], f.fx, rtol=1e-14)
+    np.testing.assert_allclose(got[:, 7], f.fy, rtol=1e-14)
+    np.testing.assert_allclose(got[:, 10], np.asarray(f.mz) / 1000.0, rtol=1e-14)
+    np.testing.assert_allclose(got[:, 5], [60 / 3.6, 90 / 3.6], rtol=1e-14)
+    # beyond the file's range: warned, saturated, exit 0
+    inp.write_text("FZ [N],SA [rad]\n20000,0.1\n")
+    r = _run("eval", TIR, "--inputs", inp)
+    assert r.exit_code == 0 and "FZMAX = 18000 [VERTICAL_FORCE_RANGE]" in _text(r)
+
+
+def test_bad_inputs_exit_2(tmp_path):
+    bad = tmp_path / "bad.tir"
+    bad.write_text(TIR.read_text().replace("FITTYP                    \t = 61", "FITTYP = 7"))
+    r = _run("info", bad)
+    assert r.exit_code == 2 and "bad.tir:14: FITTYP: FITTYP = 7 is not a Magic Formula" in _text(r)
+    nofz = tmp_path / "nofz.csv"
+    nofz.write_text("SA [rad]\n0.1\n")
+    r = _run("eval", TIR, "--inputs", nofz)
+    assert r.exit_code == 2 and "no FZ column" in _text(r)
+    nan = tmp_path / "nan.csv"
+    nan.write_text("FZ [N],SA [rad]\n4000,0.1\n4000,nan\n")
+    r = _run("eval", TIR, "--inputs", nan)
+    assert r.exit_code == 2 and "nan.csv: row 2 (line 3): NaN input" in _text(r)
+    assert _run("eval", TIR).exit_code == 2
+    assert _run("fit", nan, "--model", "mf7").exit_code == 2
+
+
+def test_fit_mf1989(tmp_path):
+    """`tyre fit --model mf1989` recovers the Dunlop R16 2-bar F_y set from noisy data."""
+    truth = MagicFormula89.from_thesis("dunlop_r16", 2.0)
+    fz = np.repeat([2000.0, 3500.0, 5000.0, 6500.0], 25)
+    sa = np.tile(np.radians(np.linspace(-12, 12, 25)), 4)
+    z = np.zeros(fz.size)
+    d = F.BenchData(*(jnp.asarray(v) for v in (fz, z, sa, z, z, z)), jnp.zeros((1, fz.size)),
+                    jnp.ones((1, fz.size), bool), ("FY",))
+    fy = np.asarray(F.simulate(truth, d, noise={"FY": 15.0}, seed=4).measured[0])
+    csv = tmp_path / "bench.csv"
+    csv.write_text("FZ [N],SA [rad],FY [N]\n" + "".join(
+        f"{float(a)!r},{float(b)!r},{float(c)!r}\n" for a, b, c in zip(fz, sa, fy, strict=True)))
+    rep = tmp_path / "report.json"
+    r = _run("fit", csv, "--model", "mf1989", "--report", rep, "--figures", tmp_path / "fig")
+    assert r.exit_code == 0, r.output
+    out = json.loads(rep.read_text())["mf1989_lateral"]
+    vals = dict(zip(out["names"], out["values"], strict=True))
+    sig = dict(zip(out["names"], out["sigma"], strict=True))
+    for k in ("a1", "a2", "a3", "a4", "a7"):
+        assert abs(vals[k] - float(truth[k])) < 3 * sig[k], k
+    # coefficients without effect on this data (camber, shifts) are reported as such
+    ident = dict(zip(out["names"], out["identifiable"], strict=True))
+    assert not ident["a5"] and not ident["a111"]
+    assert (tmp_path / "fig" / "fy_measured_vs_fitted.png").exists()
