@@ -34,16 +34,18 @@ import numpy as np  # noqa: E402
 from _common import save_results, timed  # noqa: E402
 
 from diffsusp.io.tir import read_tir  # noqa: E402
-from diffsusp.tyre import MagicFormula6, evaluate  # noqa: E402
+from diffsusp.tyre import (  # noqa: E402
+    MagicFormula6,
+    evaluate,
+    examples,  # noqa: E402
+)
 from diffsusp.tyre import fit as F  # noqa: E402
 
 ROOT = pathlib.Path(__file__).parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 import test_tyre_oracle as oracle  # noqa: E402
 
-DATA = ROOT.parent / "shared" / "data" / "tyre"
-if not DATA.exists():
-    DATA = ROOT / "tests" / "data" / "tyre"
+DATA = examples.DATA
 NAMES = ("PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PKY1 PKY2 PKY3 PKY4 PKY6 PKY7 PHY1 PHY2 PVY1 "
          "PVY2 PVY3 PVY4 PPY1").split()
 

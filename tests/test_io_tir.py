@@ -1,7 +1,6 @@
 """.tir reader/writer (diffsusp.io.tir): every shipped file reads and writes back exactly; random
 and mutated files raise the library's own error (property tests, like the other parsers)."""
 
-import pathlib
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -9,11 +8,9 @@ from hypothesis import strategies as st
 
 from diffsusp.errors import ModelFileError
 from diffsusp.io.tir import read_tir, tir_from_text, to_text
-from diffsusp.tyre import MagicFormula6
+from diffsusp.tyre import MagicFormula6, examples
 
-DATA = pathlib.Path(__file__).parent.parent.parent / "shared" / "data" / "tyre"
-if not DATA.exists():
-    DATA = pathlib.Path(__file__).parent / "data" / "tyre"
+DATA = examples.DATA  # the example .tir files shipped in diffsusp/tyre/data
 FILES = sorted(DATA.glob("*.tir"))
 BASE = (DATA / "MagicFormula61_Paramerters.tir").read_text().splitlines()
 

@@ -3,7 +3,6 @@ the edge, exit codes for bad input."""
 
 import json
 import math
-import pathlib
 
 import jax.numpy as jnp
 import numpy as np
@@ -11,12 +10,10 @@ from typer.testing import CliRunner
 
 from diffsusp.cli import app
 from diffsusp.io.tir import read_tir
-from diffsusp.tyre import MagicFormula6, MagicFormula89, evaluate
+from diffsusp.tyre import MagicFormula6, MagicFormula89, evaluate, examples
 from diffsusp.tyre import fit as F
 
-DATA = pathlib.Path(__file__).parent.parent.parent / "shared" / "data" / "tyre"
-if not DATA.exists():
-    DATA = pathlib.Path(__file__).parent / "data" / "tyre"
+DATA = examples.DATA  # the example .tir files shipped in diffsusp/tyre/data
 TIR = DATA / "MagicFormula61_Paramerters.tir"
 
 

@@ -2,7 +2,6 @@
 coefficients from noisy synthetic data within the reported 3σ, the unseen ones reported, robust vs
 plain loss with gross outliers, exact write → read of the fitted .tir, batched fits, tables."""
 
-import pathlib
 
 import jax.numpy as jnp
 import numpy as np
@@ -10,12 +9,10 @@ import pytest
 
 from diffsusp.errors import InputError, ModelWarning
 from diffsusp.io.tir import read_tir, write_tir
-from diffsusp.tyre import MagicFormula6, MagicFormula89
+from diffsusp.tyre import MagicFormula6, MagicFormula89, examples
 from diffsusp.tyre import fit as F
 
-DATA = pathlib.Path(__file__).parent.parent.parent / "shared" / "data" / "tyre"
-if not DATA.exists():
-    DATA = pathlib.Path(__file__).parent / "data" / "tyre"
+DATA = examples.DATA  # the example .tir files shipped in diffsusp/tyre/data
 
 # 20 pure-lateral coefficients: PPY1 (pressure) cannot be seen at one pressure. The camber
 # terms of E_y (PEY4, PEY5) and of K_yα (PKY5) stay at the file's values: with them free the

@@ -5,7 +5,6 @@ path) to 1e-10 relative; closed forms of the slope and asymptote; exact symmetri
 symmetric book file; combined-slip factors equal to 1; central finite differences.
 """
 
-import pathlib
 import warnings
 
 import equinox as eqx
@@ -17,11 +16,9 @@ import test_tyre_oracle as oracle
 
 from diffsusp.errors import ModelFileError, ModelWarning
 from diffsusp.io.tir import read_tir, tir_from_text, to_text, write_tir
-from diffsusp.tyre import MagicFormula6, check_limits, evaluate
+from diffsusp.tyre import MagicFormula6, check_limits, evaluate, examples
 
-DATA = pathlib.Path(__file__).parent.parent.parent / "shared" / "data" / "tyre"
-if not DATA.exists():  # the shared data beside the repository, or a copy in tests/data
-    DATA = pathlib.Path(__file__).parent / "data" / "tyre"
+DATA = examples.DATA  # the example .tir files shipped in diffsusp/tyre/data
 FILES = ["MagicFormula61_Paramerters.tir", "MagicFormula62_Paramerters.tir",
          "MagicFormula52_Paramerters.tir", "PacejkaBook_Defaults.tir",
          "335_65R22_5_G275MSA_60psi.tir", "335_65R22_5_G275MSA_70psi.tir"]

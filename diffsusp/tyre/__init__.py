@@ -3,6 +3,7 @@
 - `mf89`: the thesis's Bakker–Pacejka 1989/1991 Magic Formula (Annex B) and its twelve
   identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);
 - `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
+- `examples`: the shipped example `.tir` files (`example_path("mf61")`);
 - `spec`: specification quantities (exact derivatives), macro-coefficients, similarity;
 - `fit`: coefficients from bench data (robust Levenberg–Marquardt, exact Jacobians, σ and
   identifiability through `diffsusp.lsq`), one tyre or many in one batched call;
@@ -17,10 +18,12 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 ```
 """
 
-from . import fit, mf6, mf89, spec, thesis_sets
+from . import examples, fit, mf6, mf89, spec, thesis_sets
+from .examples import example_path
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
 from .spec import specification
 
 __all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
-           "check_limits", "evaluate", "fit", "mf6", "mf89", "spec", "specification", "thesis_sets"]
+           "check_limits", "evaluate", "example_path", "examples", "fit", "mf6", "mf89", "spec",
+           "specification", "thesis_sets"]
