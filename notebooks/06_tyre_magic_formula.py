@@ -30,9 +30,16 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from diffsusp.io.tir import read_tir
-from diffsusp.tyre import MagicFormula6, MagicFormula89, evaluate, example_path, mf89
+from diffsusp.tyre import (
+    MagicFormula6,
+    MagicFormula89,
+    evaluate,
+    example_path,
+    mf89,
+    specification,
+    thesis_sets,
+)
 from diffsusp.tyre import fit as F
-from diffsusp.tyre import specification, thesis_sets
 from diffsusp.tyre.spec import similarity, similarity_primitive
 
 # %% [markdown]
@@ -93,9 +100,11 @@ ax.set(xlabel="slip angle [deg]", ylabel="F_y [N]", title="MF 6.1, F_z = FNOMIN"
 ax.legend()
 spec = specification(tyre, jnp.array([3000.0, 6752.0, 10000.0]))
 for i, fz in enumerate(np.asarray(spec["fz"])):
-    print(f"F_z {fz:6.0f} N: cornering stiffness {float(spec['cornering_stiffness'][i]) * np.pi / 180:8.1f} N/deg, "  # noqa: E501
+    k = float(spec["cornering_stiffness"][i]) * np.pi / 180
+    print(f"F_z {fz:6.0f} N: cornering stiffness {k:8.1f} N/deg, "
           f"trail {float(spec['pneumatic_trail'][i]):5.1f} mm, peak F_y "
-          f"{float(spec['fy_peak'][i]):7.0f} N at {np.degrees(float(spec['alpha_at_fy_peak'][i])):4.1f} deg")
+          f"{float(spec['fy_peak'][i]):7.0f} N at "
+          f"{np.degrees(float(spec['alpha_at_fy_peak'][i])):4.1f} deg")
 
 # %% [markdown]
 # ## Fit from noisy synthetic bench data
