@@ -230,7 +230,8 @@ def test_correction_reproduces_measured_poses_and_improves_toe(solved, data):
     over 1500–7500 N moves toward the truth (measured: RMS 0.26° → 0.004°)."""
     truth, loads, rot, _ = solved
     layout, landmarks = data
-    meas = from_landmarks(layout, landmarks[:25], jax.tree.map(lambda a: a[:25], loads))
+    # all 42 measured cases (the batched solve of each pass is the fixture's program)
+    meas = from_landmarks(layout, landmarks, loads)
     rng = np.random.default_rng(1)
     pos = np.array(truth.markers.position)
     for group in (truth.joints, truth.bushings):
@@ -243,8 +244,12 @@ def test_correction_reproduces_measured_poses_and_improves_toe(solved, data):
     assert report.pose_errors[0] > 1.0 and report.pose_errors[1] > 1e-3  # one pass: not exact
     assert report.iterations <= 8
     assert "bushing_A.i" in report.moves and 0.4 < report.moves["bushing_A.i"] < 1.2
-    # an independent check of the corrected model: its equilibrium at 4500 N
-    q = solve_statics(corrected, jax.tree.map(lambda a: a[REFERENCE], loads)).q
+    # away from the reference case the corrected model is not exact, but far better than the
+    # perturbed one (whose error at the reference was 1.4 mm)
+    assert report.case_errors[REFERENCE] < 1e-3
+    assert 1e-3 < max(report.case_errors) < 0.5
+    # an independent check of the corrected model: its equilibria
+    q = solve_statics(corrected, loads).q[REFERENCE]
     r_c, t_c = part_poses(corrected, q)
     for k, part in enumerate(MEASURED):
         p = corrected.parts.index(part)

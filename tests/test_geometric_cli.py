@@ -90,6 +90,7 @@ def test_identify_correct(files, tmp_path):
     report = json.loads(result.output)
     assert report["converged"] and report["pose_errors"][-1] < 1e-4
     assert report["pose_errors"][0] > 0.1
+    assert list(report["case_errors"]) == ["1"] and report["case_errors"]["1"] < 1e-4
     # the written model is the library's correction (same compiled solve: same model)
     perturbed = load_model(files["perturbed"])
     meas = measure.read_measurements(files["equilibrium"], perturbed)

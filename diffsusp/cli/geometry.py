@@ -238,9 +238,13 @@ def correct(
     if json_output:
         print_json(dict(pose_errors=list(report.pose_errors), converged=report.converged,
                         iterations=report.iterations, moves=report.moves,
+                        case_errors=dict(zip(meas.cases, report.case_errors, strict=True)),
                         notes=list(report.notes)))
         return
     con = console()
     con.print(str(report), highlight=False)
+    worst = max(range(len(meas.cases)), key=lambda c: report.case_errors[c])
+    con.print(f"pose error of the corrected model at the other cases: largest "
+              f"{report.case_errors[worst]:.3g} mm (case {meas.cases[worst]})", highlight=False)
     if write_model is not None:
         con.print(f"corrected model written to {write_model}", highlight=False)

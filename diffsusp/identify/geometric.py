@@ -596,13 +596,16 @@ class CorrectionReport:
     marker or landmark of a measured part at the model's equilibrium and at the measured pose
     (the first is the uncorrected model's, the last the final one's); `converged` (the last is
     below `tol`); `moves`: marker name → total displacement of its design position (mm);
-    `elements`: the joints and bushings whose I (or J) marker was moved; `notes`.
+    `elements`: the joints and bushings whose I (or J) marker was moved; `case_errors`: the
+    final model's pose error at every measured case (mm: how it does away from the reference
+    case); `notes`.
     """
 
     pose_errors: tuple[float, ...]
     converged: bool
     moves: dict
     elements: tuple[str, ...]
+    case_errors: tuple[float, ...] = ()
     notes: tuple[str, ...] = ()
 
     @property
@@ -713,8 +716,9 @@ def correct_geometry(
     **Arguments:**
 
     - `mech`: the model; `measurements`: `Measurements` (poses of some parts);
-      `case`: which measured case is the reference equilibrium (0-based).
-    - `loads`: that case's loads (one case, no case axis; default: the measurements' own).
+      `case`: which measured case is the reference equilibrium (0-based). Every measured case
+      is solved at each pass (one batched solve); the others are reported, not corrected for.
+    - `loads`: the loads of every measured case (default: the measurements' own).
     - `elements`: joints and bushings to correct (default: all); `side`: which marker moves,
       `'i'` (the Adams I marker: the inner sleeve, bolted, in the thesis's convention) or
       `'j'`, or a dict name → side.
@@ -738,11 +742,14 @@ def correct_geometry(
         measured_index[mech.parts.index(part)] = m
     if not measured_index:
         raise InputError("the measurements have no pose of any part of the model.")
-    if loads is None:
-        loads = jax.tree.map(lambda a: a[case], measurements.loads)
+    table_loads = measurements.loads if loads is None else loads
+    if table_loads.n_cases != n_cases:
+        raise InputError(f"loads must have one case per measured case ({n_cases}); got "
+                         f"{table_loads.n_cases}.")
     pairs = _element_markers(mech, elements, side)
-    rot_m = np.asarray(measurements.rotation[case])
-    trans_m = np.asarray(measurements.translation[case])
+    rot_all = np.asarray(measurements.rotation)
+    trans_all = np.asarray(measurements.translation)
+    rot_m, trans_m = rot_all[case], trans_all[case]
     # points that show the pose error: every marker of a measured part, and its landmarks
     part_of = np.asarray(mech.markers.part)
     check = [(p, np.asarray(mech.markers.position)[part_of == p]) for p in measured_index]
@@ -750,23 +757,34 @@ def correct_geometry(
         lay = np.asarray(measurements.layout.position)
         check += [(mech.parts.index(part), lay[k][measurements.layout.present[k]])
                   for k, part in enumerate(measurements.layout.parts) if part in mech.parts]
+
+    def pose_errors(rot_eq, trans_eq):
+        """Largest point distance (mm) per case between equilibrium and measurement."""
+        err = np.zeros(n_cases)
+        for p, pts in check:
+            if len(pts):
+                m = measured_index[p]
+                diff = (np.einsum("kj,cij->cki", pts, rot_eq[:, p] - rot_all[:, m])
+                        + (trans_eq[:, p] - trans_all[:, m])[:, None])
+                err = np.maximum(err, np.max(np.linalg.norm(diff, axis=-1), axis=-1))
+        return err
+
     original = np.asarray(mech.markers.position)
     followers = _followers(mech, measured_index)
     errors, q0, current = [], None, mech
     for _ in range(max_iterations + 1):
-        sol = solve_statics(current, loads, q0=q0, **solve_options)
-        q = np.asarray(sol.q)
-        rot_eq, trans_eq = (np.asarray(a) for a in part_poses(current, q))
-        rot, trans = _part_pose_table(rot_eq, trans_eq, rot_m, trans_m, measured_index,
-                                      followers)
-        err = 0.0
-        for p, pts in check:
-            m = measured_index[p]
-            diff = pts @ (rot_eq[p] - rot_m[m]).T + trans_eq[p] - trans_m[m]
-            err = max(err, float(np.max(np.linalg.norm(diff, axis=-1))) if len(pts) else 0.0)
-        errors.append(err)
-        if err < tol or len(errors) > max_iterations:
+        # every measured case at once (one batched solve); the reference case drives the
+        # correction, the others show how the corrected model does elsewhere
+        sol = solve_statics(current, table_loads, q0=q0, **solve_options)
+        q_all = np.asarray(sol.q)
+        rot_eq_all, trans_eq_all = (np.asarray(a) for a in part_poses(current, q_all))
+        case_errors = pose_errors(rot_eq_all, trans_eq_all)
+        errors.append(float(case_errors[case]))
+        if errors[-1] < tol or len(errors) > max_iterations:
             break
+        q = q_all[case]
+        rot, trans = _part_pose_table(rot_eq_all[case], trans_eq_all[case], rot_m, trans_m,
+                                      measured_index, followers)
         pos_eq, ori_eq = (np.asarray(a) for a in marker_poses(current, q))
         x0 = np.array(current.markers.position)
         o0 = np.array(current.markers.orientation)
@@ -783,7 +801,7 @@ def correct_geometry(
                 o0[mi] = rot[pi].T @ oi_star
         current = eqx.tree_at(lambda m: (m.markers.position, m.markers.orientation), current,
                               (jnp.asarray(x0), jnp.asarray(o0)))
-        q0 = jnp.asarray(q)
+        q0 = jnp.asarray(q_all)
     final = np.asarray(current.markers.position)
     moves = {current.markers.names[mi]: float(np.linalg.norm(final[mi] - original[mi]))
              for _, (mi, _) in pairs}
@@ -792,7 +810,7 @@ def correct_geometry(
         notes = (f"not converged: pose error {errors[-1]:.3g} mm after {len(errors) - 1} "
                  f"corrections (tol {tol:g} mm)",)
     return current, CorrectionReport(tuple(errors), errors[-1] < tol, moves,
-                                     tuple(n for n, _ in pairs), notes)
+                                     tuple(n for n, _ in pairs), tuple(case_errors), notes)
 
 
 def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):
