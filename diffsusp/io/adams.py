@@ -220,12 +220,13 @@ def _read_source(source, what: str) -> tuple[str, Path | None]:
     if isinstance(source, bytes | bytearray):
         return _decode(bytes(source)), None
     if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source):
+        from .files import read_input
+
         path = Path(source)
         try:
-            data = path.read_bytes()
-        except (OSError, ValueError) as e:
-            raise ModelFileError(f"cannot read the {what} file: "
-                                 f"{getattr(e, 'strerror', None) or e}.", path=path,
+            data = read_input(path, f"{what} file")
+        except FileNotFoundError:
+            raise ModelFileError(f"cannot read the {what} file: no such file.", path=path,
                                  line=None) from None
         return _decode(data), path
     if isinstance(source, str):

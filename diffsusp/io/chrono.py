@@ -148,11 +148,12 @@ class _Document:
             self.data, self.text, self.path = source, "", None
         else:
             self.path = Path(source)
+            from .files import read_input
+
             try:
-                raw = self.path.read_bytes()
-            except (OSError, ValueError) as e:
-                raise ModelFileError(f"cannot read the Chrono JSON file: "
-                                     f"{getattr(e, 'strerror', None) or e}.",
+                raw = read_input(self.path, "Chrono JSON file")
+            except FileNotFoundError:
+                raise ModelFileError("cannot read the Chrono JSON file: no such file.",
                                      path=self.path) from None
             try:
                 text = raw.decode("utf-8")

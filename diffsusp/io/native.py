@@ -87,6 +87,7 @@ import dataclasses
 import math
 import os
 import re
+import tomllib
 
 import numpy as np
 
@@ -328,8 +329,9 @@ def read_model_toml(path, *, check: bool = True) -> ModelFile:
     `ModelError` for a model that is well written but cannot be solved (free modes, joints not
     assembled at design); `FileNotFoundError` if there is no file.
     """
-    with open(path, "rb") as f:
-        data = f.read()
+    from .files import read_input
+
+    data = read_input(path, "model file")
     return model_from_toml(data, path=str(path), check=check)
 
 
@@ -348,9 +350,40 @@ def model_from_toml(data: str | bytes, *, path=None, check: bool = True) -> Mode
             ) from None
     else:
         text = data
+    if "\x00" in text:
+        # tomlkit reads NUL as its end-of-text mark (a truncated or zero-filled file).
+        nul = text.index("\x00")
+        raise ModelFileError(
+            "the file holds a NUL byte (a truncated or damaged file?); a model file is text.",
+            path=path, line=text.count("\n", 0, nul) + 1)
+    try:
+        # The standard library's parser is linear and ~10x faster than tomlkit; tomlkit (kept for
+        # writing with comments) is asked only for the message of a small malformed file.
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        doc = None
+        fast_error = e
+    except RecursionError:
+        raise ModelFileError("not valid TOML: values nested too deeply.", path=path,
+                             line=1) from None
+    if doc is not None:
+        src = _Source(text, path)
+        return _build(doc, src, path, check)
+    if len(text) > _TOMLKIT_MESSAGE_SIZE:
+        message = re.sub(r"\s*\(at line \d+, column \d+\)$", "", str(fast_error))
+        match = re.search(r"line (\d+)", str(fast_error))
+        raise ModelFileError(f"not valid TOML: {message}.", path=path,
+                             line=int(match.group(1)) if match else 1) from None
     try:
         doc = tomlkit.parse(text).unwrap()
     except ParseError as e:
+        if "\\x00" in str(e) or "\x00" in str(e):
+            # tomlkit's end-of-text mark: the file ends inside a value or a header.
+            message = re.sub(r"\s*\(at end of document\)$", "", str(fast_error))
+            raise ModelFileError(f"not valid TOML: the file ends early ({message}); is it "
+                                 "truncated?", path=path,
+                                 line=max(text.count("\n") + (not text.endswith("\n")), 1)
+                                 ) from None
         raise ModelFileError(f"not valid TOML: {e}.", path=path,
                              line=max(int(e.line), 1)) from None
     except RecursionError:
@@ -359,8 +392,15 @@ def model_from_toml(data: str | bytes, *, path=None, check: bool = True) -> Mode
     except Exception as e:  # tomlkit raises a few other types on malformed input
         raise ModelFileError(f"not valid TOML ({type(e).__name__}: {e}).", path=path,
                              line=_guess_line(text, e)) from None
-    src = _Source(text, path)
-    return _build(doc, src, path, check)
+    # tomlkit accepted what tomllib refused (they differ on a few corner cases): refuse it.
+    match = re.search(r"line (\d+)", str(fast_error))
+    raise ModelFileError(f"not valid TOML: {fast_error}.", path=path,
+                         line=int(match.group(1)) if match else 1)
+
+
+_TOMLKIT_MESSAGE_SIZE = 1 << 18
+"""Largest malformed file (characters) whose error message is taken from tomlkit (slow, but
+its messages are the ones users know from editors); larger files get tomllib's."""
 
 
 def _guess_line(text: str, error: Exception) -> int:

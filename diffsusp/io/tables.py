@@ -226,11 +226,12 @@ def read_table(path) -> Table:
     cannot read: text in a number column, a ragged row, a duplicate or empty column name, an
     unknown unit, a file that is not CSV/Parquet. `FileNotFoundError` if there is no file.
     """
+    from .files import check_input, read_input
+
     kind = _suffix(path)
     if kind == "csv":
-        with open(path, "rb") as f:
-            data = f.read()
-        return _read_csv(data, path)
+        return _read_csv(read_input(path, "table", "table"), path)
+    check_input(path, "table", "table")
     return _read_parquet(path)
 
 

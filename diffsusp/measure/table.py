@@ -89,9 +89,10 @@ def _read_raw(path) -> _Raw:
 
     path = os.fspath(path)
     suffix = os.path.splitext(path)[1].lower()
+    from ..io.files import check_input, read_input
+
     if suffix in (".csv", ".txt"):
-        with open(path, "rb") as f:
-            data = f.read()
+        data = read_input(path, "measurement table", "table")
         try:
             text = data.decode("utf-8-sig")
         except UnicodeDecodeError:
@@ -132,8 +133,7 @@ def _read_raw(path) -> _Raw:
     if suffix in (".parquet", ".pq"):
         import pyarrow.parquet as pq
 
-        if not os.path.exists(path):
-            raise FileNotFoundError(2, "No such file or directory", path)
+        check_input(path, "measurement table", "table")
         try:
             arrow = pq.read_table(path)
             names, units, columns = [], {}, []
