@@ -128,12 +128,4 @@ print(report.table())
 print("true values:", {k: round(float(tyre[k]), 6) for k in names})
 
 # %%
-pred = np.asarray(F._predict(fitted, data, False))[0]
-fig, ax = plt.subplots(figsize=(6, 4))
-sel = ia == 0.0
-for load in np.unique(fz):
-    s = sel & (fz == load)
-    ax.plot(np.degrees(sa[s]), np.asarray(data.measured)[0][s], ".", ms=3)
-    ax.plot(np.degrees(sa[s]), pred[s], "-", lw=1, label=f"{load:.0f} N")
-ax.set(xlabel="slip angle [deg]", ylabel="F_y [N]", title="measured (dots) vs fitted, γ = 0")
-ax.legend()
+figures = F.plot_fit(fitted, data, combined=False)

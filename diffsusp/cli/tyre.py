@@ -263,39 +263,5 @@ def fit_command(
             report.write_text(json.dumps({g: r.to_dict() for g, r in reports.items()},
                                          indent=2) + "\n")
         if figures is not None:
-            _figures(fitted, bench, figures)
+            F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")
-
-
-def _figures(model, bench, folder: Path):
-    """Measured vs fitted per channel, one curve per (load, camber) group."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from diffsusp.tyre import fit as F
-
-    folder.mkdir(parents=True, exist_ok=True)
-    pred = np.asarray(F._predict(model, bench, True))
-    fz = np.round(np.asarray(bench.fz), -1)
-    ia = np.round(np.degrees(np.asarray(bench.gamma)), 1)
-    x = np.degrees(np.asarray(bench.alpha))
-    for k, ch in enumerate(bench.channels):
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        valid = np.asarray(bench.valid[k])
-        for load in np.unique(fz):
-            for cam in np.unique(ia):
-                sel = (fz == load) & (ia == cam) & valid
-                if not sel.any():
-                    continue
-                order = np.argsort(x[sel])
-                ax.plot(x[sel][order], np.asarray(bench.measured[k])[sel][order], ".", ms=3)
-                ax.plot(x[sel][order], pred[k][sel][order], "-", lw=1,
-                        label=f"{load:.0f} N, {cam:g}°")
-        ax.set_xlabel("slip angle [deg]")
-        ax.set_ylabel(f"{ch} [{'N' if ch.startswith('F') else 'N·mm'}]")
-        ax.legend(fontsize=6, ncol=2)
-        fig.tight_layout()
-        fig.savefig(folder / f"{ch.lower()}_measured_vs_fitted.png", dpi=120)
-        plt.close(fig)

@@ -46,7 +46,7 @@ from . import mf6, mf89
 
 __all__ = ["BenchData", "TyreFitReport", "bench_data", "read_bench", "read_bench_table",
            "input_columns", "simulate", "fit", "fit_many", "GROUPS",
-           "POSITIVE", "CHANNELS", "COLUMN_ALIASES", "check_constraints"]
+           "POSITIVE", "CHANNELS", "COLUMN_ALIASES", "check_constraints", "plot_fit"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
 """Measured channels: forces [N], moments [N·mm] (library units)."""
@@ -610,3 +610,43 @@ def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "hu
     X, R, J, S, OK = _solve_many(stacked, u0, max_steps, rtol, atol)
     out = [_report(p, X[i], R[i], J[i], S[i], OK[i], threshold) for i, p in enumerate(problems)]
     return [o[0] for o in out], [o[1] for o in out]
+
+
+def plot_fit(model, data: BenchData, *, combined: bool = True, folder=None) -> dict:
+    """Measured (dots) vs fitted (lines) against slip angle, one curve per (load, camber) group,
+    one figure per channel; returns {channel: matplotlib Figure} and, with `folder`, writes
+    `<channel>_measured_vs_fitted.png` there (figures closed after writing)."""
+    import pathlib
+
+    import matplotlib.pyplot as plt
+
+    pred = np.asarray(_predict(model, data, combined))
+    fz = np.round(np.asarray(data.fz), -1)
+    ia = np.round(np.degrees(np.asarray(data.gamma)), 1)
+    x = np.degrees(np.asarray(data.alpha))
+    figures = {}
+    for k, ch in enumerate(data.channels):
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        valid = np.asarray(data.valid[k])
+        meas = np.asarray(data.measured[k])
+        for load in np.unique(fz):
+            for cam in np.unique(ia):
+                sel = (fz == load) & (ia == cam) & valid
+                if not sel.any():
+                    continue
+                order = np.argsort(x[sel])
+                line, = ax.plot(x[sel][order], pred[k][sel][order], "-", lw=1,
+                                label=f"{load:.0f} N, {cam:g}°")
+                ax.plot(x[sel][order], meas[sel][order], ".", ms=3, color=line.get_color())
+        ax.set_xlabel("slip angle [deg]")
+        ax.set_ylabel(f"{ch} [{'N' if ch.startswith('F') else 'N·mm'}]")
+        ax.set_title(f"{ch}: measured (dots) vs fitted")
+        ax.legend(fontsize=6, ncol=2)
+        fig.tight_layout()
+        figures[ch] = fig
+        if folder is not None:
+            folder = pathlib.Path(folder)
+            folder.mkdir(parents=True, exist_ok=True)
+            fig.savefig(folder / f"{ch.lower()}_measured_vs_fitted.png", dpi=120)
+            plt.close(fig)
+    return figures
