@@ -247,3 +247,26 @@ def test_specification_quantities():
     # C_y = 1: no F_y peak (CORRECTIONS 2); M_z has one (its minimum in PSA signs), = −D_z
     assert np.all(np.isnan(np.asarray(s["fy_peak"])))
     np.testing.assert_allclose(s["mz_peak"][1], -1000.0 * mf89.macro(m, 4.5)["Dz"], rtol=1e-9)
+
+
+def test_from_specification_recovers_thesis_sets():
+    """Step 1 of the polynomial → MF conversion (spec §3.8): the specification quantities of a
+    thesis set at 2–7 kN give its coefficients back (TLS of (3-100) exact on exact data)."""
+    for tyre, p in (("dunlop_r16", 2.0), ("michelin_r17", 3.0)):
+        m = MagicFormula89.from_thesis(tyre, p)
+        fz = np.linspace(2.0, 7.0, 6)
+        mac = {k: np.asarray(v) for k, v in mf89.macro(m, jnp.asarray(fz)).items()}
+        back = MagicFormula89.from_specification(
+            fz, cornering_stiffness=mac["BCDy"], fy_peak=mac["Dy"], fy_shift=mac["Shy"],
+            aligning_stiffness=mac["BCDz"], mz_peak=mac["Dz"], mz_shift=mac["Shz"],
+            a0=float(m["a0"]), c0=float(m["c0"]), a7=float(m["a7"]), c9=float(m["c9"]))
+        for k in ("a1", "a2", "a3", "a4", "a9", "a10", "c1", "c2", "c3", "c4", "c12", "c13"):
+            assert float(back[k]) == pytest.approx(float(m[k]), rel=1e-8, abs=1e-9), (tyre, k)
+    # a stiffness still rising at the highest load (linear range): a4 must be given
+    fz = np.array([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="not concave in load"):
+        MagicFormula89.from_specification(fz, cornering_stiffness=400.0 * fz + 1e-3 * fz**2,
+                                          fy_peak=1300.0 * fz)
+    lin = MagicFormula89.from_specification(fz, cornering_stiffness=400.0 * fz
+                                            + 1e-3 * fz**2, fy_peak=1300.0 * fz, a4=8.0)
+    assert float(lin["a3"]) == pytest.approx(400.0 * 8.0 / 2.0, rel=1e-4)

@@ -69,6 +69,62 @@ class MagicFormula89(eqx.Module):
                                    dtype=float) for n in NAMES})
 
     @classmethod
+    def from_specification(cls, fz, *, cornering_stiffness, fy_peak, fy_shift=None,
+                           aligning_stiffness=None, mz_peak=None, mz_shift=None,
+                           a0: float = 1.0, c0: float = 2.5, a7: float = 0.0, c9: float = 0.0,
+                           a4: float | None = None) -> "MagicFormula89":
+        """Step 1 of the thesis's polynomial → Magic Formula conversion (spec §3.8 (a)–(c),
+        (3-96…3-108)) from specification quantities at several loads, thesis units:
+
+        - (a3, a4) from the cornering stiffness K [N/°] by **total least squares** on
+          K·F_z² = 2F_z·(a3·a4) − K·a4² (3-100) (`diffsusp.lsq.tls`), requiring X2 = a4² > 0
+          (a stiffness concave in load); otherwise the linear range K = (2a3/a4)·F_z (3-101)
+          with the a-priori `a4` (an error without it);
+        - (a1, a2) from the F_y extremum/asymptote D [N] = a1·F_z² + a2·F_z (3-108);
+        - (a9, a10) from the shift S_h [°] = a9·F_z + a10 (3-104), when given;
+        - (c3, c4), (c1, c2), (c12, c13) likewise for M_z [N·m/°, N·m, °] when given.
+
+        C (a0, c0) and E (a7, c9) are a-priori values (the thesis fixes C and fits E in step 2).
+        `fz` [kN], at least two loads (three for the TLS)."""
+        import numpy as np
+
+        from .. import lsq
+
+        fz = np.asarray(fz, float)
+        K = np.asarray(cornering_stiffness, float)
+        values = {"a0": a0, "c0": c0, "a7": a7, "c9": c9}
+        tls = lsq.tls(np.stack([2.0 * fz, -K], axis=1), K * fz**2, names=["X1", "X2"])
+        X1, X2 = (float(v) for v in tls.x)
+        if X2 > 0:
+            values["a4"] = math.sqrt(X2)
+            values["a3"] = X1 / values["a4"]
+        else:
+            if a4 is None:
+                raise ValueError("the cornering stiffness is not concave in load (X2 = a4² = "
+                                 f"{X2:.4g} ≤ 0): only the linear range 2·a3/a4 is determined; "
+                                 "give an a-priori a4 [kN]")
+            X3 = float(np.linalg.lstsq(fz[:, None], K, rcond=None)[0][0])
+            values["a4"] = a4
+            values["a3"] = X3 * a4 / 2.0
+        quad = np.stack([fz**2, fz], axis=1)
+        lin = np.stack([fz, np.ones_like(fz)], axis=1)
+        values["a1"], values["a2"] = np.linalg.lstsq(quad, np.asarray(fy_peak, float),
+                                                     rcond=None)[0]
+        if fy_shift is not None:
+            values["a9"], values["a10"] = np.linalg.lstsq(lin, np.asarray(fy_shift, float),
+                                                          rcond=None)[0]
+        if aligning_stiffness is not None:
+            values["c3"], values["c4"] = np.linalg.lstsq(
+                quad, np.asarray(aligning_stiffness, float), rcond=None)[0]
+        if mz_peak is not None:
+            values["c1"], values["c2"] = np.linalg.lstsq(quad, np.asarray(mz_peak, float),
+                                                         rcond=None)[0]
+        if mz_shift is not None:
+            values["c12"], values["c13"] = np.linalg.lstsq(lin, np.asarray(mz_shift, float),
+                                                           rcond=None)[0]
+        return cls.from_values({k: float(v) for k, v in values.items()})
+
+    @classmethod
     def from_thesis(cls, tyre: str, pressure: float, *, fy: str = "slip_fy",
                     mz: str = "slip_mz") -> "MagicFormula89":
         """One of the thesis's identified sets (Tables 14–29, spec §4.6), e.g.
