@@ -8,6 +8,9 @@ every assumption or reconstructed value. Units: mm, N, N·mm, rad.
 - `two_bushing_coupler`: two links on bushings joined by a coupler (parallel Krx/Kry).
 - `pseudo_mcpherson`: the thesis's K&C test half axle (Tables 2.1, 2.2).
 - `double_wishbone`: Chrono::Vehicle's generic double wishbone (JSON hardpoints).
+- `pseudo_mcpherson_steering`: the same half axle with the tie rod as a part and a steering
+  rack (geometric identification, spec geometry §4.7).
+- `front_axle_table_3_3`: the chapter 3 full-vehicle front axle, ideal joints (kinematic).
 
 `ZOO` maps a name to a zero-argument builder, for parametrised tests.
 """
@@ -17,9 +20,11 @@ from collections.abc import Callable
 from ..model import Mechanism
 from .crank_slider import crank_slider
 from .double_wishbone import DOUBLE_WISHBONE_DESIGN_LOAD, double_wishbone
+from .front_axle_table_3_3 import front_axle_table_3_3
 from .isolated_bushing import isolated_bushing
 from .loadcases import TABLE_4_4, TABLE_5_1, thesis_load_cases
 from .pseudo_mcpherson import pseudo_mcpherson
+from .pseudo_mcpherson_steering import pseudo_mcpherson_steering
 from .two_bushing_coupler import two_bushing_coupler
 
 ZOO: dict[str, Callable[[], Mechanism]] = {
@@ -36,6 +41,6 @@ ZOO: dict[str, Callable[[], Mechanism]] = {
 
 __all__ = [
     "DOUBLE_WISHBONE_DESIGN_LOAD", "TABLE_4_4", "TABLE_5_1", "ZOO", "crank_slider",
-    "double_wishbone", "isolated_bushing", "pseudo_mcpherson", "thesis_load_cases",
-    "two_bushing_coupler",
+    "double_wishbone", "front_axle_table_3_3", "isolated_bushing", "pseudo_mcpherson",
+    "pseudo_mcpherson_steering", "thesis_load_cases", "two_bushing_coupler",
 ]
