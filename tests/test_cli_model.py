@@ -157,7 +157,7 @@ def test_bad_paths_exit_2(tmp_path, loads_csv):
         (("simulate", "isolated_bushing", "--loads", tmp_path / "nope.csv", "--out",
           tmp_path / "r.csv"), "not a load table of the model"),
         (("simulate", "isolated_bushing", "--loads", loads_csv, "--out", tmp_path / "r.xlsx"),
-         "unknown table format '.xlsx'"),
+         "unknown format '.xlsx' for the results table"),
         (("info", "no_such_model"), "not a model file or a built-in model"),
     ):
         result = invoke(*args)

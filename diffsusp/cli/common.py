@@ -1,33 +1,56 @@
 """Shared pieces of the `diffsusp` command: the Typer app, consoles, exit codes, and turning the
-library's errors into one-line messages with a distinct exit code."""
+library's errors into one-line messages with a distinct exit code.
+
+Exit codes (every verb): 0 success, 1 an internal error (a bug: please report it), 2 bad input
+(paths, files, tables, arguments, an output that cannot be written), 3 a load case or a fit did
+not converge, 4 a model that cannot be solved as given, 130 interrupted (SIGINT or SIGTERM;
+the cases finished so far are on disk).
+
+Everything a library message or a path holds is printed verbatim: Rich markup is used only for
+the `error:` and `warning:` labels, never for text that comes from a file, a name or an argument.
+"""
 
 import contextlib
 import json
+import os
+import signal
 import sys
+import warnings
 
 import typer
 from rich.console import Console
+from rich.markup import escape
+from rich.text import Text
 
 EXIT_OK = 0
+EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_MODEL_ERROR = 4
+EXIT_INTERRUPTED = 130
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Differentiable K&C suspension solver (units: mm, N, deg at the edge).")
 
 
 @app.callback()
-def _main():
+def _main(
+    max_file_mb: float | None = typer.Option(
+        None, "--max-file-mb", help="Largest input file read, in MiB (default: 16 for model "
+        "files, 512 for tables; also $DIFFSUSP_MAX_FILE_MB).", show_default=False),
+):
     """diffsusp: static equilibrium, K&C analysis and identification of suspension models."""
+    if max_file_mb is not None:
+        if not (max_file_mb > 0 and max_file_mb != float("inf")):
+            raise fail(f"--max-file-mb must be a positive number of MiB; got {max_file_mb}.",
+                       EXIT_BAD_INPUT)
+        os.environ["DIFFSUSP_MAX_FILE_MB"] = repr(float(max_file_mb))
 
 
 def enable_x64():
     """float64, and a persistent compilation cache so that the second run of a command does
     not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
     string to disable)."""
-    import os
-
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -37,35 +60,156 @@ def enable_x64():
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
-def console(stderr: bool = False) -> Console:
-    """A Rich console; 120 columns when not a terminal (logs, test runners)."""
-    c = Console(stderr=stderr)
+def console(stderr: bool = False, *, markup: bool = True) -> Console:
+    """A Rich console; 120 columns when not a terminal (logs, test runners). With
+    `markup=False` every string (printed, a table cell or title, a status line) is shown
+    verbatim: use it wherever text comes from a file, a name or an argument."""
+    c = Console(stderr=stderr, markup=markup)
     if not c.is_terminal:
-        c = Console(stderr=stderr, width=120)
+        c = Console(stderr=stderr, width=120, markup=markup)
     return c
 
 
+def plain(text) -> str:
+    """`text` escaped for a Rich markup string: printed exactly as it is (`[v2]` stays)."""
+    return escape(str(text))
+
+
+def _labelled(label: str, style: str, message: str) -> Text:
+    out = Text(f"{label}: ", style=style)
+    out.append(str(message))
+    return out
+
+
 def fail(message: str, code: int) -> typer.Exit:
-    """Print `message` on stderr and return the Exit to raise."""
-    console(stderr=True).print(f"[bold red]error:[/] {message}", highlight=False)
+    """Print `message` verbatim on stderr and return the Exit to raise."""
+    console(stderr=True).print(_labelled("error", "bold red", message), highlight=False)
     return typer.Exit(code=code)
 
 
+def warn(message) -> None:
+    """Print a warning verbatim on stderr (no Python source path or code line)."""
+    console(stderr=True).print(_labelled("warning", "yellow", str(message)), highlight=False)
+
+
+def show_warnings(caught, *, skip=()) -> list[str]:
+    """Print each distinct recorded warning once (in order); return their texts."""
+    seen = []
+    for w in caught:
+        text = str(w.message)
+        if text in seen or any(s in text for s in skip):
+            continue
+        seen.append(text)
+        warn(text)
+    return seen
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, delivered as an interruption so that long runs save what they finished."""
+
+
 @contextlib.contextmanager
-def cli_errors():
-    """Map the library's exceptions to messages and exit codes (bad input 2, non-convergence 3,
-    unsolvable model 4)."""
-    from diffsusp.errors import ConvergenceError, ModelError
+def interruptible():
+    """SIGTERM raises `KeyboardInterrupt` (like SIGINT) inside the block, so that long runs
+    can write the cases finished so far before they exit."""
+    def handler(signum, frame):
+        raise _Terminated()
 
     try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread: leave SIGTERM alone
         yield
-    except ConvergenceError as e:
-        raise fail(str(e), EXIT_NOT_CONVERGED) from None
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as e:
-        raise fail(f"cannot read {e.filename}: {e.strerror}", EXIT_BAD_INPUT) from None
-    except ModelError as e:
-        code = EXIT_BAD_INPUT if getattr(e, "bad_input", False) else EXIT_MODEL_ERROR
-        raise fail(str(e), code) from None
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def cli_errors(*, record_warnings: bool = True):
+    """Map the library's exceptions to messages and exit codes (bad input 2, non-convergence 3,
+    unsolvable model 4, interrupted 130, anything else 1 without a traceback unless
+    `$DIFFSUSP_DEBUG` is set), and print the warnings raised inside through the CLI's own
+    format, after the block."""
+    from diffsusp.errors import ConvergenceError, ModelError
+
+    with contextlib.ExitStack() as stack:
+        caught = []
+        if record_warnings:
+            caught = stack.enter_context(warnings.catch_warnings(record=True))
+            warnings.simplefilter("always")
+
+        def failed(message, code):
+            show_warnings(caught)  # what led to the error first
+            caught.clear()
+            return fail(message, code)
+
+        try:
+            with interruptible():
+                yield
+        except (typer.Exit, typer.Abort):
+            raise
+        except ConvergenceError as e:
+            raise failed(str(e), EXIT_NOT_CONVERGED) from None
+        except (FileNotFoundError, IsADirectoryError, PermissionError) as e:
+            raise failed(f"cannot read {e.filename}: {e.strerror}", EXIT_BAD_INPUT) from None
+        except ModelError as e:
+            code = EXIT_BAD_INPUT if getattr(e, "bad_input", False) else EXIT_MODEL_ERROR
+            raise failed(str(e), code) from None
+        except KeyboardInterrupt as e:
+            what = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+            raise failed(f"{what}.", EXIT_INTERRUPTED) from None
+        except MemoryError:
+            raise failed("out of memory; use a smaller model or table.",
+                         EXIT_BAD_INPUT) from None
+        except Exception as e:
+            if os.environ.get("DIFFSUSP_DEBUG"):
+                raise
+            raise failed(f"internal error ({type(e).__name__}: {e}). This is a bug in "
+                         "diffsusp; please report it with the command (set DIFFSUSP_DEBUG=1 "
+                         "for the traceback).", EXIT_INTERNAL) from None
+        finally:
+            show_warnings(caught)
+
+
+def check_output(path, *, suffixes=None, what: str = "output", directory: bool = False):
+    """Fail (exit 2) before any work if `path` cannot be written: a file whose folder does not
+    exist or is not writable, an existing directory where a file is expected (or the reverse),
+    or a suffix outside `suffixes`. A missing `directory` is fine if it can be created."""
+    if path is None:
+        return
+    text = os.fspath(path)
+    suffix = os.path.splitext(text)[1].lower()
+    if suffixes is not None and suffix not in suffixes:
+        raise fail(f"{text}: unknown format '{suffix or '(no suffix)'}' for the {what}; use a "
+                   f"{' or '.join(suffixes)} file.", EXIT_BAD_INPUT)
+    if directory:
+        target = text
+        while target and not os.path.exists(target):
+            parent = os.path.dirname(os.path.abspath(target))
+            if parent == os.path.abspath(target):
+                break
+            target = parent
+        if os.path.exists(text) and not os.path.isdir(text):
+            raise fail(f"cannot write the {what} to {text}: it is a file, not a folder.",
+                       EXIT_BAD_INPUT)
+        if not os.path.isdir(target) or not os.access(target, os.W_OK | os.X_OK):
+            raise fail(f"cannot write the {what} to {text}: {target} is not a writable folder.",
+                       EXIT_BAD_INPUT)
+        return
+    if os.path.isdir(text):
+        raise fail(f"cannot write the {what} to {text}: it is a directory.", EXIT_BAD_INPUT)
+    folder = os.path.dirname(os.path.abspath(text))
+    if not os.path.isdir(folder):
+        raise fail(f"cannot write the {what} to {text}: the folder {folder} does not exist.",
+                   EXIT_BAD_INPUT)
+    if os.path.exists(text) and not os.access(text, os.W_OK):
+        raise fail(f"cannot write the {what} to {text}: the file is not writable.",
+                   EXIT_BAD_INPUT)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise fail(f"cannot write the {what} to {text}: the folder {folder} is not writable.",
+                   EXIT_BAD_INPUT)
 
 
 def print_json(obj) -> None:

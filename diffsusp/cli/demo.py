@@ -12,8 +12,9 @@ from typing import Annotated
 import typer
 from rich import box
 from rich.table import Table
+from rich.text import Text
 
-from .common import EXIT_NOT_CONVERGED, app, cli_errors, console, enable_x64
+from .common import EXIT_NOT_CONVERGED, app, check_output, cli_errors, console, enable_x64
 
 
 def _timed(fn):
@@ -32,6 +33,7 @@ def demo(
         "diffsusp-demo"),
 ):
     """Thesis half axle: Table 5-1 load cases and ±80 mm travel; K&C table and figures."""
+    check_output(out, what="figures folder", directory=True)
     enable_x64()
     import jax.numpy as jnp
     import numpy as np
@@ -39,7 +41,7 @@ def demo(
     from diffsusp import kc, plot
     from diffsusp.models import TABLE_5_1, pseudo_mcpherson
 
-    term = console()
+    term = console(markup=False)
     with cli_errors():
         with term.status("building the model and compiling the solver (first run: ~1 min)..."):
             mech = pseudo_mcpherson()
@@ -106,5 +108,5 @@ def demo(
     )
     failed = int(np.sum(~cases.converged)) + int(np.sum(~travel.converged))
     if failed:
-        term.print(f"[red]{failed} case(s) did not converge.[/]")
+        term.print(Text(f"{failed} case(s) did not converge.", style="red"))
         raise typer.Exit(code=EXIT_NOT_CONVERGED)

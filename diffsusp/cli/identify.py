@@ -24,7 +24,17 @@ import typer
 from rich import box
 from rich.table import Table as RichTable
 
-from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_NOT_CONVERGED,
+    app,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+)
 
 identify_app = typer.Typer(add_completion=False, no_args_is_help=True,
                            help="Identify stiffnesses from measurements (spec stiffness ch. 4).")
@@ -149,7 +159,7 @@ def _write_model(mech, path: Path, model_file):
 
 
 def _print(report, mech, measurements, out, write_model):
-    con = console()
+    con = console(markup=False)
     table = RichTable(
         title=f"{mech.name}: direct identification from {measurements.name} "
         f"({len(report.cases)} cases, {report.n_equations} equations, rank {report.rank})",
@@ -191,10 +201,11 @@ _DEG = 3.141592653589793 / 180.0
 _ROTATIONAL = ("Krx", "Kry", "Krz")
 
 
-def _check_paths(out, write_model):
-    for path, kinds in ((out, (".csv", ".json")), (write_model, (".toml", ".adm"))):
-        if path is not None and path.suffix.lower() not in kinds:
-            raise fail(f"{path}: use a {' or '.join(kinds)} file.", EXIT_BAD_INPUT)
+def _check_paths(out, write_model, figures=None):
+    """Every output checked before any work (suffix, folder exists and is writable)."""
+    check_output(out, suffixes=(".csv", ".json"), what="report")
+    check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
+    check_output(figures, what="figures folder", directory=True)
 
 
 def _measured_bushings(mech, meas, names):
@@ -292,7 +303,7 @@ def _progress():
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                    console=console(stderr=True), transient=True)
+                    console=console(stderr=True, markup=False), transient=True)
 
 
 # ----------------------------------------------------------------------------- iterative
@@ -328,7 +339,7 @@ def iterative_command(
     """
     import numpy as np
 
-    _check_paths(out, write_model)
+    _check_paths(out, write_model, figures)
     res = None
     if resolution.strip().lower() != "none":
         try:
@@ -371,16 +382,20 @@ def iterative_command(
             paths = _iterative_figures(report, mech0, fitted, meas, figures)
     if json_output:
         print_json(report.to_dict())
-        return
-    con = console()
-    con.print(f"{mech.name}: iterative identification from {measurements.name} "
-              f"({meas.n_cases} cases)", highlight=False)
-    con.print(report.table(), highlight=False)
-    for label, path in (("report", out), ("identified model", write_model)):
-        if path is not None:
-            con.print(f"{label} written to {path}", highlight=False)
-    if paths:
-        con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+    else:
+        con = console(markup=False)
+        con.print(f"{mech.name}: iterative identification from {measurements.name} "
+                  f"({meas.n_cases} cases)", highlight=False)
+        con.print(report.table(), highlight=False)
+        for label, path in (("report", out), ("identified model", write_model)):
+            if path is not None:
+                con.print(f"{label} written to {path}", highlight=False)
+        if paths:
+            con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+    if not report.converged:
+        raise fail(f"the iterative identification did not converge in {report.iterations} "
+                   "iterations; the stiffnesses written are the last iteration's. Try more "
+                   "--max-iterations or a larger --eps.", EXIT_NOT_CONVERGED)
 
 
 def _iterative_rows(report):
@@ -438,27 +453,55 @@ def _iterative_figures(report, mech0, fitted, meas, folder: Path):
 # ----------------------------------------------------------------------------- fit
 
 
-def _fit_params(mech, bushings, axes, centres, springs, start):
+def _fit_params(mech, bushings, axes, centres, springs, start, notes):
+    """The selection of `identify fit`. Without --start, a stiffness that is 0 in the model
+    (a free direction of a bushing: no log-scaled start exists) is left out, with a note."""
+    import numpy as np
+
     from ..errors import InputError
     from ..identify.params import AXES, Params
 
     axes = tuple(a.strip() for a in axes.split(",")) if axes else AXES
     names = tuple(bushings or mech.bushings.names)
     params = None
-    if names and axes:
+    if names and axes and start is None:
+        for name in names:
+            if name not in mech.bushings.names:
+                break  # Params names the unknown bushing
+        else:
+            k = np.concatenate([np.asarray(mech.bushings.k_trans),
+                                np.asarray(mech.bushings.k_rot)], axis=1)
+            zero = [f"{n}.{a}" for n in names for a in axes
+                    if a in AXES and not k[mech.bushings.index(n), AXES.index(a)] > 0]
+            if zero:
+                notes.append(
+                    f"left out {len(zero)} stiffness(es) that are 0 in the model (free "
+                    f"directions; a zero cannot be fitted on a log scale): {', '.join(zero)}. "
+                    "Give --start to fit every selected stiffness from one positive value.")
+            pairs = [(n, a) for n in names for a in axes if f"{n}.{a}" not in zero]
+            for n in dict.fromkeys(n for n, _ in pairs):
+                axes_n = tuple(a for m, a in pairs if m == n)
+                p = Params.bushing_stiffness(mech, (n,), axes=axes_n)
+                params = p if params is None else params + p
+    elif names and axes:
         params = Params.bushing_stiffness(mech, names, axes=axes)
     if centres:
         c = Params.bushing_centres(mech, names)
         params = c if params is None else params + c
     if springs and mech.springs.names:
-        s = Params.leaves(mech, lambda m: m.springs.k)
-        params = s if params is None else params + s
+        rate = np.asarray(mech.springs.k) > 0
+        if start is None and not rate.all():
+            notes.append("left out the spring rate(s) that are 0 in the model: " + ", ".join(
+                n for n, ok in zip(mech.springs.names, rate, strict=True) if not ok) + ".")
+        if rate.any() or start is not None:
+            s = Params.leaves(mech, lambda m: m.springs.k,
+                              None if start is not None else rate)
+            params = s if params is None else params + s
     if params is None:
-        raise InputError("nothing to identify: the model has no bushings (or --axes is empty) "
-                         "and neither --centres nor --springs was asked.")
+        raise InputError("nothing to identify: the model has no bushings (or --axes is empty, "
+                         "or every selected stiffness is 0: give --start) and neither "
+                         "--centres nor --springs was asked.")
     if start is not None:
-        import numpy as np
-
         values = np.array(params.start, dtype=float)
         for k, name in enumerate(params.names):
             axis = name.rsplit(".", 1)[-1]
@@ -527,7 +570,7 @@ def fit_command(
     """
     from ..identify.least_squares import LOSSES
 
-    _check_paths(out, write_model)
+    _check_paths(out, write_model, figures)
     if loss not in LOSSES:
         raise fail(f"--loss must be one of {', '.join(LOSSES)}; got '{loss}'.", EXIT_BAD_INPUT)
     if not (sigma > 0 and sigma_rotation > 0):
@@ -543,7 +586,8 @@ def fit_command(
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
         data = from_measurements(meas, sigma, sigma_rotation * _DEG)
-        params = _fit_params(mech, bushing, axes, centres, springs, start)
+        notes: list[str] = []
+        params = _fit_params(mech, bushing, axes, centres, springs, start, notes)
         with _progress() as progress:
             task = progress.add_task("step", total=max_steps)
 
@@ -567,9 +611,13 @@ def fit_command(
             paths = _fit_figures(report, params.apply(mech, params.start), fitted, meas,
                                  figures)
     if json_output:
-        print_json(report.to_dict())
-        return
-    _print_fit(report, mech, measurements, meas, out, write_model, paths)
+        print_json(dict(report.to_dict(), notes=notes))
+    else:
+        _print_fit(report, mech, measurements, meas, out, write_model, paths, notes)
+    if not report.converged:
+        raise fail(f"the fit did not converge ({report.message}) after {report.steps} steps; "
+                   "the estimates written are the last accepted ones. Try more --max-steps, "
+                   "other --start values, or fewer parameters.", EXIT_NOT_CONVERGED)
 
 
 def _fit_figures(report, mech0, fitted, meas, folder: Path):
@@ -584,8 +632,8 @@ def _fit_figures(report, mech0, fitted, meas, folder: Path):
     return paths + plot.save(fig, folder / "fit_cases")
 
 
-def _print_fit(report, mech, measurements, meas, out, write_model, paths):
-    con = console()
+def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=()):
+    con = console(markup=False)
     table = RichTable(
         title=f"{mech.name}: least-squares fit to {measurements.name} ({meas.n_cases} cases, "
         f"{report.n_residuals} residuals, loss {report.loss_name})", box=box.SIMPLE_HEAD)
@@ -605,6 +653,8 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths):
     state = "converged" if report.converged else "NOT converged"
     con.print(f"{state} in {report.steps} steps ({report.accepted_steps} accepted); chi2/dof "
               f"{report.chi2 / max(report.dof, 1):.3g}.", highlight=False)
+    for note in notes:
+        con.print(f"note: {note}", highlight=False)
     outliers = report.outliers(threshold=5.0)
     if outliers:
         con.print(f"{len(outliers)} residual(s) beyond 5σ, largest "

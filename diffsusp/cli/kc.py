@@ -21,8 +21,19 @@ from typing import Annotated
 import typer
 from rich import box
 from rich.table import Table
+from rich.text import Text
 
-from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    app,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+    show_warnings,
+)
 
 EVENTS = {
     "parallel-travel": "wheel travel (mm), --travel",
@@ -233,7 +244,7 @@ def _table(ev, mech_name: str) -> Table:
     x_ref = float(np.asarray(ev.x)[ref]) * x_scale
     title = (f"{mech_name}: {ev.name.replace('_', ' ')}, {len(ev.x)} cases; reference "
              f"{ev.x_name.replace('_', ' ')} = {x_ref:g} {x_unit}")
-    table = Table(title=title, box=box.SIMPLE_HEAD)
+    table = Table(title=Text(title), box=box.SIMPLE_HEAD)
     for col, justify in (("metric", "left"), ("unit", "left"), ("reference", "right"),
                          ("min", "right"), ("max", "right")):
         table.add_column(col, justify=justify, no_wrap=True)
@@ -275,7 +286,8 @@ def kc_command(
     if event not in EVENTS:
         raise fail(f"unknown event '{event}'; known events: {', '.join(EVENTS)}.",
                    EXIT_BAD_INPUT)
-    err = console(stderr=True)
+    check_output(out, what="figures folder", directory=True)
+    err = console(stderr=True, markup=False)
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mech = _model(model)
@@ -292,18 +304,17 @@ def kc_command(
             paths = plot.save(fig, out / f"kc_{ev.name}")
             fig = plot.kc_curves(ev, _derivative_names(ev), title=f"{mech.name}: derivatives")
             paths += plot.save(fig, out / f"kc_{ev.name}_derivatives")
-    for w in caught:
-        err.print(f"[yellow]warning:[/] {w.message}", highlight=False)
+    show_warnings(caught)
     if as_json:
         print_json(_json(ev, mech.name))
         return
-    con = console()
+    con = console(markup=False)
     con.print(_table(ev, mech.name))
-    con.print(f"Held fixed by the derivative metrics: {ev.held}. Signs: toe-in, camber top "
+    con.print(Text(f"Held fixed by the derivative metrics: {ev.held}. Signs: toe-in, camber top "
               "outboard, lateral force inboard, longitudinal force rearward (braking) positive "
-              f"(Adams/Car, per side). {elapsed:.2f} s.", highlight=False)
+              f"(Adams/Car, per side). {elapsed:.2f} s."), highlight=False)
     if out is not None:
-        con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+        con.print(Text("figures: " + ", ".join(str(p) for p in paths)), highlight=False)
 
 
 def _derivative_names(ev) -> tuple[str, ...]:

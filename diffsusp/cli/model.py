@@ -11,16 +11,20 @@ import warnings
 import typer
 from rich import box
 from rich.table import Table as RichTable
+from rich.text import Text
 
 from .common import (
     EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
     EXIT_NOT_CONVERGED,
     app,
+    check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
     print_json,
+    warn,
 )
 
 PARAMETER_UNITS = {
@@ -114,24 +118,24 @@ def info(
     if json_output:
         print_json(summary)
         return
-    out = console()
-    out.print(f"[bold]{mech.name}[/] ({model})", highlight=False)
-    out.print(f"parts ({len(mech.parts)}): {', '.join(mech.parts)}", highlight=False)
+    out = console(markup=False)
+    out.print(Text(mech.name, style="bold") + Text(f" ({model})"), highlight=False)
+    out.print(Text(f"parts ({len(mech.parts)}): {', '.join(mech.parts)}"), highlight=False)
     out.print(f"markers: {len(names)}")
     for label, items in (("bushings", summary["bushings"]), ("springs", summary["springs"]),
                          ("stops", summary["stops"]), ("drivers", summary["drivers"]),
                          ("load points", summary["load_points"])):
-        out.print(f"{label} ({len(items)}): {', '.join(items) or '-'}", highlight=False)
+        out.print(Text(f"{label} ({len(items)}): {', '.join(items) or '-'}"), highlight=False)
     joints = ", ".join(f"{j['name']} ({j['kind']})" for j in summary["joints"])
-    out.print(f"joints ({len(summary['joints'])}): {joints or '-'}", highlight=False)
+    out.print(Text(f"joints ({len(summary['joints'])}): {joints or '-'}"), highlight=False)
     if mf.load_tables:
         tables = ", ".join(f"{k} ({v['rows']} rows)" for k, v in summary["load_tables"].items())
-        out.print(f"load tables: {tables}", highlight=False)
-    out.print(
+        out.print(Text(f"load tables: {tables}"), highlight=False)
+    out.print(Text(
         f"coordinates: {report.n_coordinates}, constraint rows: {report.n_rows}, rank: "
-        f"{report.rank}, DOF: {report.dof}", highlight=False)
-    out.print(f"redundant rows: {', '.join(report.redundant) or 'none'}", highlight=False)
-    out.print(f"free modes: {'; '.join(report.free_modes) or 'none'}", highlight=False)
+        f"{report.rank}, DOF: {report.dof}"), highlight=False)
+    out.print(Text(f"redundant rows: {', '.join(report.redundant) or 'none'}"), highlight=False)
+    out.print(Text(f"free modes: {'; '.join(report.free_modes) or 'none'}"), highlight=False)
     table = RichTable(title="parameters (float leaves)", box=box.SIMPLE_HEAD)
     for col in ("leaf", "shape", "unit"):
         table.add_column(col, no_wrap=True)
@@ -156,36 +160,97 @@ def _load_table(mf, loads: str):
     return read_table(loads)
 
 
-def _solve(mech, loads, max_steps: int, quiet: bool):
-    """Solve every case; a spinner for one chunk, a progress bar over chunks otherwise."""
+class _Run:
+    """What `_solve_and_write` did: per-case status and residuals (NaN / -1 for cases not
+    solved), the number of result columns, and whether it was interrupted."""
+
+    def __init__(self, n):
+        import numpy as np
+
+        self.status = np.full(n, -1, dtype=int)
+        self.residual = np.full(n, np.nan)
+        self.constraint_error = np.full(n, np.nan)
+        self.columns = 0
+        self.done = 0
+        self.interrupted = None
+
+
+def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _Run:
+    """Solve every case in chunks and append each chunk's rows to `out` as it completes; on
+    SIGINT / SIGTERM, write the cases not solved with status -1 and stop (a spinner for one
+    chunk, a progress bar over chunks otherwise)."""
     import jax
-    import jax.numpy as jnp
     import numpy as np
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
+    from ..io import results_table
+    from ..io.tables import Table, TableWriter
     from ..statics import solve_statics
+    from .common import _Terminated, interruptible
 
-    err = console(stderr=True)
+    err = console(stderr=True, markup=False)
     n = loads.n_cases
-    if n <= _CHUNK:
-        if quiet:
-            return solve_statics(mech, loads, max_steps=max_steps, throw=False)
-        with err.status(f"solving {n} load case{'s' * (n != 1)} (compiling first)..."):
-            sol = solve_statics(mech, loads, max_steps=max_steps, throw=False)
-            jax.block_until_ready(sol.q)
-        return sol
-    parts = []
-    with Progress("solving", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=err, transient=True, disable=quiet) as bar:
-        task = bar.add_task("cases", total=n)
-        for start in range(0, n, _CHUNK):
-            stop = min(start + _CHUNK, n)
-            index = np.minimum(np.arange(start, start + _CHUNK), n - 1)
-            chunk = jax.tree.map(lambda a, i=index: a[i], loads)
-            sol = solve_statics(mech, chunk, max_steps=max_steps, throw=False)
-            parts.append(jax.tree.map(lambda a, k=stop - start: a[:k], sol))
-            bar.update(task, completed=stop)
-    return jax.tree.map(lambda *a: jnp.concatenate(a), *parts)
+    chunk = max(min(n, _CHUNK), 1)
+    run = _Run(n)
+    writer = None
+
+    def rows(res, k):
+        return {name: res[name][:k] for name in res.names}
+
+    try:
+        with interruptible(), Progress(
+                "solving" + (" (compiling first)" if n <= _CHUNK else ""), BarColumn(),
+                MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True,
+                disable=quiet) as bar:
+            task = bar.add_task("cases", total=n)
+            for start in range(0, n, chunk):
+                stop = min(start + chunk, n)
+                # The last chunk is padded with copies of the last case: one compiled shape.
+                index = np.minimum(np.arange(start, start + chunk), n - 1)
+                case_loads = jax.tree.map(lambda a, i=index: a[i], loads)
+                sol = solve_statics(mech, case_loads, max_steps=max_steps, throw=False)
+                part = Table(columns={k: v[index] for k, v in table.columns.items()},
+                             units=dict(table.units))
+                res = results_table(mech, sol, part, first_case=start)
+                if writer is None:
+                    writer = TableWriter(out, res.names, res.units)
+                    run.columns = len(res.names)
+                writer.append(rows(res, stop - start))
+                run.status[start:stop] = np.asarray(sol.status)[: stop - start]
+                run.residual[start:stop] = np.asarray(sol.residual)[: stop - start]
+                run.constraint_error[start:stop] = np.asarray(
+                    sol.constraint_error)[: stop - start]
+                run.done = stop
+                bar.update(task, completed=stop)
+    except KeyboardInterrupt as e:
+        run.interrupted = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+    finally:
+        if run.done < n:
+            # The rest: their loads and status -1, every output NaN.
+            rest = np.arange(run.done, n)
+            part = Table(columns={k: v[rest] for k, v in table.columns.items()},
+                         units=dict(table.units))
+            dummy = _unsolved(mech, rest.size)
+            res = results_table(mech, dummy, part, first_case=run.done)
+            if writer is None:
+                writer = TableWriter(out, res.names, res.units)
+                run.columns = len(res.names)
+            writer.append(rows(res, rest.size))
+        if writer is not None:
+            writer.close()
+    return run
+
+
+def _unsolved(mech, n):
+    """A stand-in solution for cases not solved: NaN outputs, status -1."""
+    import types
+
+    import numpy as np
+
+    nan = np.full(n, np.nan)
+    return types.SimpleNamespace(
+        q=np.full((n, 6 * len(mech.parts)), np.nan), status=np.full(n, -1),
+        iterations=np.zeros(n), residual=nan, constraint_error=nan)
 
 
 @app.command()
@@ -198,59 +263,65 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ):
     """Solve the static equilibrium of MODEL under every row of a load table and write one row
-    of results per case (poses, bushing deformations and forces, springs, status)."""
-    enable_x64()
+    of results per case (poses, bushing deformations and forces, springs, status).
+
+    Rows are written as their cases are solved (256 at a time): a run interrupted by Ctrl-C or
+    SIGTERM leaves the finished cases on disk and the others with status -1 (exit 130)."""
     import numpy as np
 
-    from ..io import loads_from_table, results_table, write_table
-    from ..io.tables import RESULT_STATUS, _suffix
+    from ..io import loads_from_table
+    from ..io.tables import RESULT_STATUS
 
+    # A bad output path fails before the model is read, let alone solved.
+    check_output(out, suffixes=(".csv", ".txt", ".parquet", ".pq"), what="results table")
+    if max_steps < 1:
+        raise fail(f"--max-steps must be at least 1; got {max_steps}.", EXIT_BAD_INPUT)
+    enable_x64()
     t0 = time.perf_counter()
     with cli_errors():
-        _suffix(out)  # a bad output name fails before the solve
         mf = _load(model)
         mech = mf.mechanism
         table = _load_table(mf, loads)
         case_loads = loads_from_table(mech, table)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            sol = _solve(mech, case_loads, max_steps, json_output)
-            results = results_table(mech, sol, table)
-        try:
-            write_table(out, results.columns, results.units)
-        except OSError as e:
-            raise fail(f"cannot write {out}: {e.strerror or e}", EXIT_BAD_INPUT) from None
+            run = _solve_and_write(mech, case_loads, table, out, max_steps, json_output)
     elapsed = time.perf_counter() - t0
-    status = np.asarray(sol.status)
-    failed = np.flatnonzero(status != 0)
+    status = run.status
+    failed = np.flatnonzero((status != 0) & (status != -1))
     notes = sorted({str(w.message) for w in caught
                     if "cases did not converge" not in str(w.message)})
+    finite = run.residual[np.isfinite(run.residual)]
     summary = dict(
         model=mech.name,
         source=model,
         loads=loads,
         cases=int(status.size),
-        converged=int(status.size - failed.size),
+        converged=int(np.sum(status == 0)),
+        not_solved=int(np.sum(status == -1)),
         failed=[dict(case=int(c), status=RESULT_STATUS.get(int(status[c]), str(status[c])),
-                     residual=float(np.asarray(sol.residual)[c])) for c in failed],
-        max_residual=float(np.max(np.asarray(sol.residual), initial=0.0)),
-        max_constraint_error=float(np.max(np.asarray(sol.constraint_error), initial=0.0)),
+                     residual=float(run.residual[c])) for c in failed],
+        max_residual=float(np.max(finite, initial=0.0)),
+        max_constraint_error=float(np.nanmax(run.constraint_error, initial=0.0)),
         out=str(out),
-        columns=len(results.names),
+        columns=run.columns,
         seconds=elapsed,
         warnings=notes,
+        interrupted=bool(run.interrupted),
     )
     if json_output:
         print_json(summary)
     else:
-        con = console()
-        con.print(
+        con = console(markup=False)
+        con.print(Text(
             f"{mech.name}: {summary['converged']} of {summary['cases']} load cases converged "
-            f"in {elapsed:.2f} s; {summary['columns']} columns written to {out}",
-            highlight=False)
-        err = console(stderr=True)
-        for note in notes:
-            err.print(f"[yellow]warning:[/] {note}", highlight=False)
+            f"in {elapsed:.2f} s; {summary['columns']} columns written to {out}"))
+    for note in notes:
+        warn(note)
+    if run.interrupted:
+        raise fail(
+            f"{run.interrupted} after {run.done} of {status.size} load cases; the rows of the "
+            f"{status.size - run.done} not solved have status -1 in {out}.", EXIT_INTERRUPTED)
     if failed.size:
         shown = ", ".join(f"{d['case']} ({d['status']})" for d in summary["failed"][:10])
         more = f" and {failed.size - 10} more" if failed.size > 10 else ""

@@ -16,7 +16,16 @@ import typer
 from rich import box
 from rich.table import Table
 
-from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    app,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+)
 from .kc import EVENTS, _corner, _model, _nan_to_none, _run_event
 
 PARAMETER_SETS = {
@@ -88,10 +97,11 @@ def sensitivity_command(
                    EXIT_BAD_INPUT)
     if top < 1:
         raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
+    check_output(out, what="figures folder", directory=True)
     enable_x64()
     from diffsusp.identify.sensitivity import sensitivity
 
-    err = console(stderr=True)
+    err = console(stderr=True, markup=False)
     with cli_errors():
         mech = _model(model)
         corner = _corner(mech, None, None, None, None)
@@ -113,7 +123,7 @@ def sensitivity_command(
     if as_json:
         print_json(_nan_to_none(_json(report, mech.name, ev)))
         return
-    con = console()
+    con = console(markup=False)
     con.print(_table(report, mech.name, ev, params, top))
     con.print(f"elasticity: ∂metric/∂θ · θ / max|metric| over the event (θ → 1 mm for "
               f"positions); sign + means the metric grows with the parameter. {len(ev.x)} "

@@ -568,10 +568,12 @@ def _report(params: Params, problem: _Problem, u, last, history, converged, step
         shape = meas.weight.shape
         size = int(np.prod(shape))
         weight = np.asarray(meas.weight)
-        raw = raw_all[offset:offset + size].reshape(shape) * (weight > 0)
-        white = raw * weight
+        # A fit that diverged can have absurd residuals: chi2 = inf is reported, not warned.
+        with np.errstate(over="ignore", invalid="ignore"):
+            raw = raw_all[offset:offset + size].reshape(shape) * (weight > 0)
+            white = raw * weight
+            chi2 += float(np.sum(white ** 2))
         residuals[meas.name] = MeasurementResiduals(raw=raw, whitened=white)
-        chi2 += float(np.sum(white ** 2))
         n_res += int(np.count_nonzero(weight))
         offset += size
     rank = int(np.sum(s > floor))

@@ -61,7 +61,7 @@ def check_input(path, what: str, kind: str = "model") -> int:
         kind_text = ("a character device" if stat.S_ISCHR(mode) else "a block device"
                      if stat.S_ISBLK(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
                      else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
-        raise ModelFileError(f"is {kind_text}, not a regular file; give the path of a {what} "
+        raise ModelFileError(f"is {kind_text}, not a regular file; give the path of the {what} "
                              "on disk.", path=path)
     bound = limit(kind)
     if info.st_size > bound:

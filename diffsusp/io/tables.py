@@ -382,6 +382,69 @@ def _format(value) -> str:
     return repr(v)
 
 
+class TableWriter:
+    """A table written as its rows come (CSV or Parquet, format from the suffix), so that a
+    long run interrupted half-way leaves the rows finished so far in a readable file.
+
+    CSV rows are flushed after every `append`; Parquet gets one row group per `append` and its
+    footer at `close` (a `with` block closes it even on an exception or an interruption).
+    Columns are float64, written as `write_table` writes them.
+    """
+
+    def __init__(self, path, names, units: Mapping | None = None):
+        self.path, self.kind = path, _suffix(path)
+        self.names = tuple(str(n) for n in names)
+        self.units = dict(units or {})
+        self.rows = 0
+        for name in self.names:
+            if _HEADER_RE.match(name) or "\n" in name or "\r" in name:
+                raise ValueError(f"TableWriter: column name {name!r} cannot hold a unit or a "
+                                 "newline.")
+        if self.kind == "csv":
+            self._file = open(path, "w", newline="", encoding="utf-8")  # noqa: SIM115
+            self._csv = csv.writer(self._file, lineterminator="\n")
+            self._csv.writerow([_header(n, self.units.get(n)) for n in self.names])
+            self._file.flush()
+        else:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            self._schema = pa.schema([
+                pa.field(n, pa.float64(),
+                         metadata={"unit": self.units[n]} if self.units.get(n) else None)
+                for n in self.names])
+            self._parquet = pq.ParquetWriter(path, self._schema)
+
+    def append(self, columns: Mapping) -> None:
+        """Write rows: `columns` maps every name to a 1-D array (one common length)."""
+        arrays = [np.asarray(columns[n], dtype=np.float64).reshape(-1) for n in self.names]
+        if len({a.shape for a in arrays}) > 1:
+            raise ValueError("TableWriter.append: columns of different lengths.")
+        if self.kind == "csv":
+            for row in zip(*arrays, strict=True):
+                self._csv.writerow([_format(v) for v in row])
+            self._file.flush()
+        else:
+            import pyarrow as pa
+
+            self._parquet.write_table(pa.Table.from_arrays(
+                [pa.array(a) for a in arrays], schema=self._schema))
+        self.rows += len(arrays[0]) if arrays else 0
+
+    def close(self) -> None:
+        if self.kind == "csv":
+            self._file.close()
+        else:
+            self._parquet.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
 def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     """Write columns to CSV or Parquet (format from the suffix).
 
@@ -518,11 +581,12 @@ def loads_from_table(mech, table: Table):
 
 # ------------------------------------------------------------------------------------- results
 
-RESULT_STATUS = {0: "converged", 1: "max_steps reached", 2: "non-finite", 3: "stalled"}
+RESULT_STATUS = {0: "converged", 1: "max_steps reached", 2: "non-finite", 3: "stalled",
+                 -1: "not solved (the run was interrupted)"}
 """Meaning of the `status` column of a results table (`diffsusp.statics` status codes)."""
 
 
-def results_table(mech, sol, loads: Table | None = None) -> Table:
+def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0) -> Table:
     """One row per load case and a column per output of a batched `StaticSolution`.
 
     Columns (library units): `case` (0-based), the load columns of `loads` (converted to N,
@@ -532,7 +596,7 @@ def results_table(mech, sol, loads: Table | None = None) -> Table:
     `.gz` (Gibbs vector of its rotation from design); per bushing `<bushing>.dx` … `.dz`
     (deformation, mm, in J), `.ax` … `.az` (projected angles, rad), `.fx` … `.fz` (N) and
     `.tx` … `.tz` (N·mm) on the I part in J axes; per spring `<spring>.length` (mm) and
-    `.tension` (N).
+    `.tension` (N). `first_case`: the number of the first row (a chunk of a longer table).
     """
     from ..errors import ModelError
 
@@ -551,7 +615,7 @@ def results_table(mech, sol, loads: Table | None = None) -> Table:
         columns[name] = np.asarray(values, dtype=np.float64).reshape(n)
         units[name] = unit
 
-    add("case", np.arange(n), None)
+    add("case", first_case + np.arange(n), None)
     if loads is not None:
         library = {"force": "N", "moment": "N·mm", "length": "mm"}
         valid = load_columns(mech)

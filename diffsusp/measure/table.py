@@ -50,6 +50,12 @@ POSE_COLUMNS = ("case", "part", "x", "y", "z", "psi", "theta", "phi")
 _TEXT = ("case", "part", "landmark")
 _LENGTH = ("x", "y", "z", "x0", "y0", "z0")
 _ANGLE = ("psi", "theta", "phi")
+LENGTH_LIMIT = 1e6
+"""Largest |coordinate| read (mm: 1 km); larger is a typo or a damaged file."""
+ANGLE_LIMIT = 1e4
+"""Largest |angle| read (rad, ~1600 turns)."""
+LOAD_LIMIT = 1e12
+"""Largest |load| read (N, N·mm, mm for drivers)."""
 
 
 class _Raw:
@@ -65,7 +71,9 @@ class _Raw:
         c = self.names.index(name)
         return [row[c] for row in self.rows]
 
-    def numbers(self, name, factor=1.0, allow_empty=False):
+    def numbers(self, name, factor=1.0, allow_empty=False, limit=None, unit=""):
+        """The column as floats times `factor`; beyond ±`limit` (library units: a typo or a
+        corrupted file, e.g. 1e300) is an error naming the line and the column."""
         out = np.empty(len(self.rows))
         for r, cell in enumerate(self.column(name)):
             text = "" if cell is None else str(cell).strip()
@@ -81,6 +89,11 @@ class _Raw:
                 shown = text if len(text) <= 40 else text[:37] + "..."
                 raise ModelFileError(f"'{shown}' in column '{name}' is not a number.",
                                      path=self.path, line=self.where(r), field=name) from None
+            if limit is not None and abs(out[r]) > limit:
+                raise ModelFileError(
+                    f"{text} in column '{name}' (column {self.names.index(name) + 1}) is "
+                    f"beyond ±{limit:g} {unit}; check the value and its unit.".replace(
+                        "  ", " "), path=self.path, line=self.where(r), field=name)
         return out
 
 
@@ -182,13 +195,16 @@ def _loads(raw: _Raw, mech: Mechanism, labels, order, known):
     from ..io.tables import Table, loads_from_table
 
     columns, units = {}, {}
+    rows_of = {case: [] for case in order}  # one pass: linear in the rows
+    for r, c in enumerate(labels):
+        rows_of[c].append(r)
     for name in raw.names:
         if name in known:
             continue
-        values = raw.numbers(name, allow_empty=True)
+        values = raw.numbers(name, allow_empty=True, limit=LOAD_LIMIT)
         per_case = np.zeros(len(order))
         for k, case in enumerate(order):
-            rows = [r for r, c in enumerate(labels) if c == case]
+            rows = rows_of[case]
             given = [(r, values[r]) for r in rows if np.isfinite(values[r])]
             if not given:
                 raise ModelFileError(f"column '{name}' has no value for case '{case}'.",
@@ -258,10 +274,10 @@ def _landmark_table(raw: _Raw, mech, reorder, tolerance) -> Measurements:
     labels, order = _cases(raw)
     parts = _text(raw, "part")
     names = _text(raw, "landmark")
-    xyz = np.stack([raw.numbers(c, _factor(raw, c, "length"), allow_empty=True)
-                    for c in ("x", "y", "z")], axis=1)
-    ref = np.stack([raw.numbers(c, _factor(raw, c, "length")) for c in ("x0", "y0", "z0")],
-                   axis=1)
+    xyz = np.stack([raw.numbers(c, _factor(raw, c, "length"), allow_empty=True,
+                                limit=LENGTH_LIMIT, unit="mm") for c in ("x", "y", "z")], axis=1)
+    ref = np.stack([raw.numbers(c, _factor(raw, c, "length"), limit=LENGTH_LIMIT, unit="mm")
+                    for c in ("x0", "y0", "z0")], axis=1)
     weight = raw.numbers("weight", allow_empty=True) if "weight" in raw.names else None
     part_names = list(dict.fromkeys(parts))
     per_part = {p: list(dict.fromkeys(n for q, n in zip(parts, names, strict=True) if q == p))
@@ -272,14 +288,18 @@ def _landmark_table(raw: _Raw, mech, reorder, tolerance) -> Measurements:
     weights = np.zeros((len(order), len(part_names), k))
     for p, part in enumerate(part_names):  # a landmark without a row in a case: not measured
         weights[:, p, : len(per_part[part])] = 1.0
+    _known_parts(raw, mech, parts)
     seen = {}
+    part_index = {p: k for k, p in enumerate(part_names)}
+    case_index = {c: k for k, c in enumerate(order)}
+    landmark_index = {p: {n: k for k, n in enumerate(v)} for p, v in per_part.items()}
     for r in range(len(raw.rows)):
         if not np.all(np.isfinite(ref[r])):
             raise ModelFileError("the design position (x0, y0, z0) of a landmark must be "
                                  "finite.", path=raw.path, line=raw.where(r), field="x0")
-        p = part_names.index(parts[r])
-        a = per_part[parts[r]].index(names[r])
-        c = order.index(labels[r])
+        p = part_index[parts[r]]
+        a = landmark_index[parts[r]][names[r]]
+        c = case_index[labels[r]]
         key = (c, p, a)
         if key in seen:
             raise ModelFileError(
@@ -306,14 +326,30 @@ def _landmark_table(raw: _Raw, mech, reorder, tolerance) -> Measurements:
                           tolerance=tolerance, cases=order)
 
 
+def _known_parts(raw: _Raw, mech, parts):
+    """Every part of the table is a moving part of the model (named, with its line)."""
+    known = set(mech.parts)
+    for r, part in enumerate(parts):
+        if part not in known:
+            raise ModelFileError(
+                f"part '{part}' is not a moving part of model '{mech.name}'; its parts: "
+                f"{', '.join(mech.parts) or 'none'}.", path=raw.path, line=raw.where(r),
+                field="part")
+
+
 def _pose_table(raw: _Raw, mech) -> Measurements:
     from ..geometry import reuler_to_matrix
 
     labels, order = _cases(raw)
     parts = _text(raw, "part")
-    xyz = np.stack([raw.numbers(c, _factor(raw, c, "length")) for c in ("x", "y", "z")], axis=1)
-    angles = np.stack([raw.numbers(c, _factor(raw, c, "angle")) for c in _ANGLE], axis=1)
+    xyz = np.stack([raw.numbers(c, _factor(raw, c, "length"), limit=LENGTH_LIMIT, unit="mm")
+                    for c in ("x", "y", "z")], axis=1)
+    angles = np.stack([raw.numbers(c, _factor(raw, c, "angle"), limit=ANGLE_LIMIT, unit="rad")
+                       for c in _ANGLE], axis=1)
     part_names = list(dict.fromkeys(parts))
+    _known_parts(raw, mech, parts)
+    part_index = {p: k for k, p in enumerate(part_names)}
+    case_index = {c: k for k, c in enumerate(order)}
     rotation = np.full((len(order), len(part_names), 3, 3), np.nan)
     translation = np.full((len(order), len(part_names), 3), np.nan)
     for r in range(len(raw.rows)):
@@ -321,7 +357,7 @@ def _pose_table(raw: _Raw, mech) -> Measurements:
             if not np.all(np.isfinite(v)):
                 raise ModelFileError("a pose must be finite.", path=raw.path,
                                      line=raw.where(r), field=name)
-        c, p = order.index(labels[r]), part_names.index(parts[r])
+        c, p = case_index[labels[r]], part_index[parts[r]]
         if np.isfinite(translation[c, p, 0]):
             raise ModelFileError(f"part '{parts[r]}' appears twice in case '{labels[r]}'.",
                                  path=raw.path, line=raw.where(r), field="part")
