@@ -65,10 +65,10 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
     if suffix == ".toml":
         return read_model_toml(text, check=check)
     if suffix == ".adm":
-        from .adams import read_adm
+        from .adams import parse_adm
 
-        return ModelFile(mechanism=read_adm(text), load_tables={}, units=dict(_LIBRARY),
-                         path=text)
+        return ModelFile(mechanism=parse_adm(text).build(check=check), load_tables={},
+                         units=dict(_LIBRARY), path=text)
     if suffix == ".json":
         from .chrono import read_chrono
 

@@ -285,6 +285,12 @@ class _Body:
 
 
 def _error(message, path, line, field=None):
+    """A located error; the field is named in the prefix only if the message does not already
+    name it (`file:43: BUSHING/1: K needs 3 values`, not `file:43: K: BUSHING/1: K needs ...`)."""
+    if field and re.search(rf"(?<![\w.]){re.escape(str(field))}(?![\w])", message):
+        error = ModelFileError(message, path=path, line=line)
+        error.field = field
+        return error
     return ModelFileError(message, path=path, line=line, field=field)
 
 
@@ -849,7 +855,25 @@ class _Plan:
             try:
                 handler(s)
             except _Unsupported as e:
-                self.skip(s, str(e))
+                if s.keyword in ("GFORCE", "VFORCE", "VTORQUE"):
+                    self._load_point_only(s, e)
+                else:
+                    self.skip(s, str(e))
+
+    def _load_point_only(self, s, reason):
+        """A load whose values cannot be read keeps its load point (the K&C tables and the
+        CLI's load tables need it) with no load from the file; one that cannot be placed is an
+        error, not a silently missing load point."""
+        name = self.element_name(s)
+        try:
+            self._gforce(s, values=False)
+        except _Unsupported as e:
+            raise _error(f"{s.label} (load point '{name}') cannot be read: {e}. Without it the "
+                         f"model would have no load point '{name}'; rewrite the statement in "
+                         "the supported subset (see diffsusp.io.adams).", self.path,
+                         s.line) from None
+        self.skip(s, f"{reason}; its load point '{name}' is kept with no load from the file "
+                     "(give its loads in a load table)")
 
     def use(self, marker: _Marker, kind: str):
         table = self.geometry_use if kind == "geometry" else self.frame_use
@@ -974,13 +998,13 @@ class _Plan:
                              "J positions (it acts along their line).", self.path, s.line)
             self.calls.append((s, "spring", (name, i.id, j.id), dict(force_function=node)))
 
-    def _gforce(self, s):
+    def _gforce(self, s, values=True):
         keys = {"GFORCE": ("FX", "FY", "FZ", "TX", "TY", "TZ"), "VFORCE": ("FX", "FY", "FZ"),
                 "VTORQUE": ("TX", "TY", "TZ")}[s.keyword]
-        if "FUNCTION" in s.arguments:
+        if "FUNCTION" in s.arguments and values:
             raise _Unsupported("FUNCTION = USER(...) subroutines are not supported")
         comps = {}
-        for key in keys:
+        for key in keys if values else ():
             node = self.expression(s, key)
             if node is not None:
                 _check_evaluable(node)
@@ -1069,6 +1093,12 @@ class _Plan:
 
     def build(self, time, check) -> Mechanism:
         time = float(time)
+        if not any(ident != self.ground for ident in self.parts):
+            what = ("the dataset holds no statement (an empty file?)" if not self.statements
+                    else "the dataset defines no moving PART")
+            raise _error(f"{what}; an Adams dataset (.adm) needs PART/ statements (one with "
+                         "GROUND), MARKER/s on them and the joints and forces between them.",
+                         self.path, 1)
         title = re.sub(r"^ADAMS/View model name:\s*", "", self.model.title, flags=re.I)
         builder = MechanismBuilder(title or (self.path.stem if self.path else "adm"))
         lines: dict[str, int] = {}
@@ -1115,7 +1145,11 @@ class _Plan:
         try:
             return builder.build(check=check)
         except ModelError as e:
-            raise _error(str(e), self.path, _line_of(str(e), lines, self.statements)) from None
+            error = _error(str(e), self.path, _line_of(str(e), lines, self.statements))
+            # A model well written but not solvable as given (free modes, joints not assembled)
+            # is exit 4 whatever its format, like a native file's.
+            error.bad_input = getattr(e, "bad_input", False)
+            raise error from None
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as e:
             raise _error(f"the model cannot be assembled: {e}", self.path,
                          self.statements[-1].line if self.statements else 1) from None

@@ -136,8 +136,32 @@ def _strip_comments(text: str) -> str:
     return "".join(out)
 
 
+class _BadNumber(ValueError):
+    def __init__(self, token, message):
+        super().__init__(message)
+        self.token = token
+
+
 def _reject_constant(name):
-    raise ValueError(f"{name} is not a number JSON allows")
+    raise _BadNumber(name, f"{name} is not a number JSON allows; give a finite number")
+
+
+def _finite_float(text):
+    value = float(text)
+    if not math.isfinite(value):
+        raise _BadNumber(text, f"{text} is out of the range of a double; give a finite number")
+    return value
+
+
+_TOKENS = re.compile(r'"(?:\\.|[^"\\])*"|[-+]?[A-Za-z0-9_.+-]+')
+
+
+def _token_line(text: str, token: str) -> int:
+    """1-based line of the first `token` outside strings (1 if not found)."""
+    for m in _TOKENS.finditer(text):
+        if m.group().lstrip("+-") == token.lstrip("+-") or m.group() == token:
+            return text.count("\n", 0, m.start()) + 1
+    return 1
 
 
 class _Document:
@@ -162,10 +186,13 @@ class _Document:
             self.text = _strip_comments(text)
             try:
                 self.data = json.loads(self.text, parse_constant=_reject_constant,
-                                       parse_int=float)
+                                       parse_int=_finite_float, parse_float=_finite_float)
             except json.JSONDecodeError as e:
                 raise ModelFileError(f"not valid JSON: {e.msg}.", path=self.path,
                                      line=e.lineno) from None
+            except _BadNumber as e:
+                raise ModelFileError(f"not valid JSON: {e}.", path=self.path,
+                                     line=_token_line(self.text, e.token)) from None
             except (ValueError, RecursionError) as e:
                 raise ModelFileError(f"not valid JSON: {e}.", path=self.path,
                                      line=1) from None
@@ -568,6 +595,8 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
     try:
         return b.build()
     except ModelError as e:
-        raise doc.error(f"the model cannot be assembled: {e}", ("Template",)) from None
+        error = doc.error(f"the model cannot be assembled: {e}", ("Template",))
+        error.bad_input = getattr(e, "bad_input", False)  # unsolvable: exit 4, as .toml/.adm
+        raise error from None
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as e:
         raise doc.error(f"the model cannot be assembled: {e}", ("Template",)) from None
