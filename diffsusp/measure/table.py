@@ -347,7 +347,6 @@ def _pose_table(raw: _Raw, mech) -> Measurements:
     angles = np.stack([raw.numbers(c, _factor(raw, c, "angle"), limit=ANGLE_LIMIT, unit="rad")
                        for c in _ANGLE], axis=1)
     part_names = list(dict.fromkeys(parts))
-    _known_parts(raw, mech, parts)
     part_index = {p: k for k, p in enumerate(part_names)}
     case_index = {c: k for k, c in enumerate(order)}
     rotation = np.full((len(order), len(part_names), 3, 3), np.nan)
@@ -368,6 +367,7 @@ def _pose_table(raw: _Raw, mech) -> Measurements:
         c, p = missing[0]
         raise InputError(f"{raw.path}: no pose of part '{part_names[p]}' in case "
                          f"'{order[c]}'; every case needs the pose of every part.")
+    _known_parts(raw, mech, parts)
     loads = _loads(raw, mech, labels, order, set(POSE_COLUMNS))
     return from_poses(tuple(part_names), rotation, translation, loads, cases=order)
 
