@@ -109,11 +109,11 @@ def main():
     compile_fit = time.perf_counter() - t0
     problem = F._prepare(start, data2, NAMES, {"FY": sigma}, "huber", 1.345, False)
     t0 = time.perf_counter()
-    x, r, J, steps, ok = F._solve(problem, jnp.zeros(len(NAMES)), 200, 1e-9, 1e-9)
+    x, steps, ok = F._solve(problem, jnp.zeros(len(NAMES)), 200, 1e-9, 1e-9)
     jax.block_until_ready(x)
     t_solve = time.perf_counter() - t0
     t0 = time.perf_counter()
-    _, report = F._report(problem, x, r, J, steps, ok, 1e-8)
+    _, report = F._report(problem, x, steps, ok, 1e-8)
     t_report = time.perf_counter() - t0
 
     results = {

@@ -394,16 +394,18 @@ def _static(model):
 def _solve_impl(problem: _Problem, u0, max_steps: int, rtol: float, atol: float):
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     sol = optx.least_squares(problem.residual_u, solver, u0, max_steps=max_steps, throw=False)
-    u = sol.value
-    x = problem.x_of(u)
-    r = problem.residual_x(x)
-    J = jax.jacfwd(problem.residual_x)(x)
-    return x, r, J, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+    return problem.x_of(sol.value), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+
+
+def _linearise_impl(problem: _Problem, x):
+    """Robust residuals and their Jacobian in coefficient space at x (for the report)."""
+    return problem.residual_x(x), jax.jacfwd(problem.residual_x)(x)
 
 
 _solve = eqx.filter_jit(_solve_impl)
 _solve_many = eqx.filter_jit(eqx.filter_vmap(_solve_impl, in_axes=(eqx.if_array(0), 0, None,
                                                                       None, None)))
+_linearise = eqx.filter_jit(_linearise_impl)
 
 
 @dataclasses.dataclass
@@ -549,11 +551,10 @@ def _prepare(model, data, names, noise, loss, loss_scale, combined):
                     jnp.asarray(float(loss_scale)), names, combined)
 
 
-def _report(problem, x, r, J, steps, ok, threshold):
+def _report(problem, x, steps, ok, threshold):
     names = problem.names
+    r, J = (np.asarray(a) for a in _linearise(problem, jnp.asarray(x)))
     x = np.asarray(x)
-    r = np.asarray(r)
-    J = np.asarray(J)
     rows = np.asarray(problem.data.valid).ravel()
     lin = lsq.solve(J[rows], J[rows] @ x - r[rows], names=names, prior=x, threshold=threshold)
     cov = np.asarray(lin.covariance)
@@ -593,8 +594,8 @@ def fit(model, data: BenchData, names, *, noise: dict | None = None, loss: str =
     """
     problem = _prepare(model, data, names, noise, loss, loss_scale, combined)
     u0 = jnp.zeros(len(problem.names))
-    x, r, J, steps, ok = _solve(problem, u0, max_steps, rtol, atol)
-    return _report(problem, x, r, J, steps, ok, threshold)
+    x, steps, ok = _solve(problem, u0, max_steps, rtol, atol)
+    return _report(problem, x, steps, ok, threshold)
 
 
 def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "huber",
@@ -607,8 +608,8 @@ def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "hu
                 for m, d in zip(models, datas, strict=True)]
     stacked = jax.tree.map(lambda *a: jnp.stack(a), *problems)
     u0 = jnp.zeros((len(problems), len(problems[0].names)))
-    X, R, J, S, OK = _solve_many(stacked, u0, max_steps, rtol, atol)
-    out = [_report(p, X[i], R[i], J[i], S[i], OK[i], threshold) for i, p in enumerate(problems)]
+    X, S, OK = _solve_many(stacked, u0, max_steps, rtol, atol)
+    out = [_report(p, X[i], S[i], OK[i], threshold) for i, p in enumerate(problems)]
     return [o[0] for o in out], [o[1] for o in out]
 
 
