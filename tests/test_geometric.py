@@ -274,3 +274,24 @@ def test_correction_bad_input(solved, data):
         correct_geometry(truth, meas, case=5)
     with pytest.raises(InputError, match="element 'nope' is not a joint or bushing"):
         correct_geometry(truth, meas, elements=["nope"])
+
+
+def test_design_of_cases(data):
+    """Greedy choice among the 42 candidates (25 steering + 17 force cases): a few cases
+    including a steering one make every joint observable; the 17 force cases alone cannot make
+    the strut top observable (its σ stays above the 5 mm limit). Measured here: cases
+    (40, 24, 38, 39) with predicted strut-top σ 3.15 mm, against 2.94 mm from `locate_joints`
+    on those four cases (the design's sandwich covariance is the same first-order quantity)."""
+    from diffsusp.identify.geometric import design_geometry_cases
+
+    layout, landmarks = data
+    meas = from_landmarks(layout, landmarks, _loads(42))
+    design = design_geometry_cases(meas, JOINTS)
+    assert design.complete and len(design.cases) <= 6
+    assert any(c < 25 and c % 5 != 2 for c in design.cases)  # a case with the rack moved
+    assert all(s <= 5.0 for s in design.sigma.values())
+    assert list(design.history) == sorted(design.history, reverse=True)
+    forces_only = design_geometry_cases(meas, JOINTS, candidates=range(25, 42))
+    assert not forces_only.complete and not forces_only.observable["bushing_F"]
+    assert forces_only.sigma["bushing_F"] > 5.0
+    assert all(v for k, v in forces_only.observable.items() if k != "bushing_F")

@@ -60,6 +60,8 @@ from ..geometry.registration import register_landmarks
 
 __all__ = [
     "JOINT_KINDS",
+    "GeometryDesign",
+    "design_geometry_cases",
     "apply_locations",
     "joints_from_model",
     "CorrectionReport",
@@ -1006,3 +1008,209 @@ def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoi
     new = eqx.tree_at(lambda m: (m.markers.position, m.markers.orientation), mech,
                       (jnp.asarray(x0), jnp.asarray(o0)))
     return new, moved
+
+
+# ------------------------------------------------------------- experiment design (geometry)
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometryDesign:
+    """Result of `design_geometry_cases`.
+
+    **Fields:** `cases`: chosen case indices, in the order they were added; `sigma`: joint name
+    → largest centre σ (mm) with the chosen cases (at the landmark noise σ_L); `observable`:
+    joint name → σ ≤ `max_sigma`; `history`: the worst joint σ after each added case;
+    `complete`: every joint observable.
+    """
+
+    cases: tuple[int, ...]
+    sigma: dict
+    observable: dict
+    history: tuple[float, ...]
+    complete: bool
+
+
+def _case_residual(kind, x, r, t, extra):
+    if kind == "ball_unknown_slide":
+        # x = (C, G, u): distance of the image of C to the line through G along u, both
+        # unknowns too (the line is fitted with the centre)
+        u = x[6:] / jnp.linalg.norm(x[6:])
+        d = r @ x[:3] + t - x[3:6]
+        return d - (d @ u) * u
+    delta = t + r @ x - x
+    if kind in ("ball", "revolute"):
+        return delta
+    if kind == "ball_known_slide":
+        u = extra[0] / jnp.linalg.norm(extra[0])
+        return delta - (delta @ u) * u
+    # compliant_bushing
+    u = (x - extra[0]) / jnp.linalg.norm(x - extra[0])
+    return jnp.cross(delta, r @ u)
+
+
+@functools.partial(jax.jit, static_argnames=("specs", "index"))
+def _case_blocks(specs, reference, landmarks, weights, mask, index, extras, centres):
+    """Per joint and case: H_c = A_cᵀA_c and G_c = A_cᵀ D_c D_cᵀ A_c, with A_c = ∂r_c/∂x and
+    D_c = ∂r_c/∂(landmarks of case c) (the residual's noise per unit landmark σ)."""
+    n_cases = landmarks.shape[0]
+    eye = jnp.eye(3, dtype=landmarks.dtype)
+
+    def one_case(lm, w, m):
+        out = []
+        for k, (_, kind, (p1, p2), _, _) in enumerate(specs):
+            def residual(x, lm_c, k=k, kind=kind, p1=p1, p2=p2):
+                reg_c = register_landmarks(reference, lm_c, w, method="svd")
+
+                def pose(p):
+                    i = index[p]
+                    return (eye, jnp.zeros(3, eye.dtype)) if i < 0 else \
+                        (reg_c.rotation[i], reg_c.translation[i])
+
+                (r1, t1), (r2, t2) = pose(p1), pose(p2)
+                return _case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extras[k])
+
+            a = jax.jacfwd(residual)(centres[k], lm)
+            d = jax.jacfwd(residual, argnums=1)(centres[k], lm)
+            d = (d * (w > 0)[None, ..., None]).reshape(d.shape[0], -1)
+            out.append((m * a.T @ a, m * a.T @ d @ d.T @ a))
+        return out
+
+    return jax.vmap(one_case)(landmarks, weights, mask), n_cases
+
+
+def _sigma_of(kind, h, g, axis):
+    """Largest σ (per unit landmark σ) of the centre from summed blocks."""
+    if kind == "ball_unknown_slide":
+        # (C, G, u) with two gauge directions (G along u, the scale of u): pseudo-inverse
+        h, g = np.asarray(h), np.asarray(g)
+        w = np.linalg.eigvalsh(h)
+        if w[2] <= 1e-10 * max(w[-1], 1e-300):  # more than the two gauge directions free
+            return math.inf
+        hinv = np.linalg.pinv(h, rcond=1e-10, hermitian=True)
+        cov = (hinv @ g @ hinv)[:3, :3]
+        return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
+    if kind == "revolute":
+        # the point along the axis is fixed by the prior: invert in the plane ⟂ axis
+        basis = jnp.linalg.svd(jnp.eye(3) - jnp.outer(axis, axis))[0][:, :2]
+        h, g = basis.T @ h @ basis, basis.T @ g @ basis
+    w = np.linalg.eigvalsh(np.asarray(h))
+    if w[0] <= 1e-12 * max(w[-1], 1e-300):
+        return math.inf
+    hinv = np.linalg.inv(np.asarray(h))
+    cov = hinv @ np.asarray(g) @ hinv
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
+
+
+def _relative_all(measurements, pair):
+    """Relative operators (R^c, T^c) of a pair over all cases, NumPy."""
+    n = measurements.n_cases
+
+    def pose(p):
+        if p == GROUND:
+            return np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3))
+        i = measurements.parts.index(p)
+        return np.asarray(measurements.rotation[:, i]), np.asarray(measurements.translation[:, i])
+
+    (r1, t1), (r2, t2) = pose(pair[0]), pose(pair[1])
+    return np.einsum("cji,cjk->cik", r1, r2), np.einsum("cji,cj->ci", r1, t2 - t1)
+
+
+def design_geometry_cases(
+    measurements,
+    joints: Sequence[GeometricJoint],
+    *,
+    candidates: Sequence[int] | None = None,
+    landmark_sigma: float = 0.05,
+    max_sigma: float = 5.0,
+    budget: int | None = None,
+) -> GeometryDesign:
+    """Which load cases make every joint observable (spec geometry §4.10: steering inputs,
+    varied rotations): greedy forward selection among candidate cases.
+
+    The candidates are measured or simulated cases (e.g. `diffsusp.measure.synthesize` over a
+    grid of wheel heights × rack positions × forces). The joints are first located from all
+    candidates; then each case's contribution to every joint's information is computed once —
+    H_c = A_cᵀA_c and G_c = A_cᵀ D_c D_cᵀ A_c with A_c the Jacobian of that case's equations
+    with respect to the centre and D_c with respect to that case's landmarks — and a subset S
+    has the centre covariance σ_L² H_S⁻¹ G_S H_S⁻¹ (sums over S; the sandwich form of the
+    estimators' first-order covariance, the same quantity `locate_joints` reports; for the
+    strut top the line's point and direction are unknowns with the centre). Cases are
+    added one at a time, each time the one that most lowers the worst joint σ, until every
+    joint's σ ≤ `max_sigma` or `budget` cases. As the stiffness design (`design_experiment`)
+    does with the direct method's rows, this ranks cases by the information they add.
+    (Approximation: a compliant link's ball centre is held at its all-candidates value.)
+
+    **Returns:** a `GeometryDesign`.
+    """
+    parts = tuple(measurements.parts)
+    specs, index = _specs(joints, parts)
+    if measurements.landmarks is None or measurements.layout is None:
+        raise InputError("design_geometry_cases needs landmark measurements (for the noise).")
+    n = int(measurements.n_cases)
+    pool = list(range(n)) if candidates is None else [int(c) for c in candidates]
+    if not pool or any(not 0 <= c < n for c in pool):
+        raise InputError(f"candidates must be case indices in [0, {n}).")
+    full = locate_joints(measurements, joints, with_sigma=False)
+    extras, centres = [], []
+    for j, est in zip(joints, full.joints, strict=True):
+        centres.append(jnp.asarray(est.estimate))
+        if j.kind == "ball_known_slide":
+            extras.append((jnp.asarray(j.slide, float),))
+        elif j.kind == "compliant_bushing":
+            extras.append((jnp.asarray(full[j.link_ball].estimate),))
+        elif j.kind == "ball_unknown_slide":
+            rel = _relative_all(measurements, j.parts)
+            pts = np.concatenate([est.estimate[None], np.einsum("cij,j->ci", rel[0],
+                                                                est.estimate) + rel[1]])
+            axis = est.axis if est.axis is not None else np.linalg.svd(
+                pts - pts.mean(0))[2][0]
+            centres[-1] = jnp.concatenate([centres[-1], jnp.asarray(pts.mean(0)),
+                                           jnp.asarray(axis)])
+            extras.append(())
+        else:
+            extras.append(())
+    n_pad = -(-n // CASE_BUCKET) * CASE_BUCKET
+    mask = jnp.concatenate([jnp.ones(n), jnp.zeros(n_pad - n)])
+    blocks, _ = _case_blocks(specs, jnp.asarray(measurements.layout.position),
+                             _pad(measurements.landmarks, n_pad),
+                             _pad(measurements.weights, n_pad), mask,
+                             _IndexMap(tuple(index)), tuple(extras), tuple(centres))
+    h = [np.asarray(b[0]) for b in blocks]
+    g = [np.asarray(b[1]) for b in blocks]
+    # the strut top's design position is on the line too (C itself, no measurement noise)
+    fixed = []
+    for k, j in enumerate(joints):
+        if j.kind == "ball_unknown_slide":
+            a = np.asarray(jax.jacfwd(lambda x: _case_residual(
+                "ball_unknown_slide", x, jnp.eye(3), jnp.zeros(3), ()))(centres[k]))
+            fixed.append(a.T @ a)
+        else:
+            fixed.append(0.0)
+    axes = [np.asarray(e.axis) if e.axis is not None else np.zeros(3) for e in full.joints]
+
+    def worst(subset):
+        out = {}
+        for k, j in enumerate(joints):
+            hs, gs = h[k][subset].sum(0) + fixed[k], g[k][subset].sum(0)
+            out[j.name] = landmark_sigma * _sigma_of(j.kind, hs, gs, axes[k])
+        return out
+
+    chosen, history = [], []
+    limit = len(pool) if budget is None else min(budget, len(pool))
+    sig = {j.name: math.inf for j in joints}
+    while len(chosen) < limit and max(sig.values()) > max_sigma:
+        best, best_key = None, None
+        for c in pool:
+            if c in chosen:
+                continue
+            s = worst(chosen + [c])
+            values = sorted((min(v, 1e12) for v in s.values()), reverse=True)
+            key = (sum(v > max_sigma for v in s.values()), values)
+            if best_key is None or key < best_key:
+                best, best_key, best_sig = c, key, s
+        chosen.append(best)
+        sig = best_sig
+        history.append(max(sig.values()))
+    observable = {k: v <= max_sigma for k, v in sig.items()}
+    return GeometryDesign(tuple(chosen), sig, observable, tuple(history),
+                          all(observable.values()))
