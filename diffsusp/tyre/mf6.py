@@ -158,6 +158,7 @@ class MagicFormula6(eqx.Module):
     def from_values(cls, values: dict, version: str = "6.1", limits: dict | None = None
                     ) -> "MagicFormula6":
         """From a dict of coefficients in library units (missing: neutral values)."""
+        _check_x64()
         c = {n: jnp.asarray(float(values.get(n, _default(n, values))), dtype=float)
              for n in COEFFICIENTS}
         lim = dict(_LIMITS)
@@ -208,6 +209,15 @@ class MagicFormula6(eqx.Module):
             elif v != _default(n, {}):
                 tir.set(n, v, section=SECTION_OF[n])
         return tir
+
+
+def _check_x64():
+    import jax
+
+    if not jax.config.jax_enable_x64:
+        warnings.warn("jax_enable_x64 is off: the Magic Formula is evaluated in float32 (about "
+                      "7 digits; the tests' 1e-10 agreement needs float64). Call "
+                      "jax.config.update('jax_enable_x64', True) first.", stacklevel=3)
 
 
 def _default(name: str, values: dict) -> float:

@@ -62,6 +62,9 @@ class MagicFormula89(eqx.Module):
 
     @classmethod
     def from_values(cls, values: dict) -> "MagicFormula89":
+        from .mf6 import _check_x64
+
+        _check_x64()
         unknown = set(values) - set(NAMES)
         if unknown:
             raise ValueError(f"unknown coefficient(s) {sorted(unknown)}; known: {NAMES}")
