@@ -80,6 +80,8 @@ def test_bad_inputs_exit_2(tmp_path):
     assert r.exit_code == 2 and "nan.csv: row 2 (line 3): NaN input" in _text(r)
     assert _run("eval", TIR).exit_code == 2
     assert _run("fit", nan, "--model", "mf7").exit_code == 2
+    r = _run("fit", nan, "--model", "mf52", "--start", TIR)
+    assert r.exit_code == 2 and "--model mf52 but" in _text(r) and "use --model mf61" in _text(r)
 
 
 def test_fit_mf1989(tmp_path):

@@ -229,6 +229,13 @@ def fit_command(
     c = console()
     with cli_errors():
         enable_x64()
+        if model != "mf1989":
+            tir, m0 = _load(start)
+            want = {"mf61": "6.1", "mf62": "6.2", "mf52": "5.2"}[model]
+            if m0.version != want:
+                raise fail(f"--model {model} but {start} is MF {m0.version} (FITTYP "
+                           f"{tir.fittyp}); use --model mf{m0.version.replace('.', '')}",
+                           EXIT_BAD_INPUT)
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
             bench = F.read_bench(data)
@@ -241,7 +248,6 @@ def fit_command(
             groups = mode or ["mf1989_lateral"]
             tir = None
         else:
-            tir, m0 = _load(start)
             groups = mode or [g for g, ch in (("pure_lateral", "FY"),
                                               ("pure_longitudinal", "FX"),
                                               ("pure_aligning", "MZ"))
