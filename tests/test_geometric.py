@@ -208,6 +208,11 @@ def test_bad_input(data):
     bad[1, 0, 1:] = np.nan
     with pytest.raises(InputError, match="case 2, part 'front_arm': 1 usable landmark"):
         from_landmarks(layout, bad, _loads(3))
+    line = np.array(layout.position)
+    line[0] = line[0, 0] + np.arange(4)[:, None] * np.array([10.0, 2.0, -3.0])
+    collinear = eqx.tree_at(lambda lay: lay.position, layout, jnp.asarray(line))
+    with pytest.raises(InputError, match="part 'front_arm' has 4 landmark.s. on one line"):
+        from_landmarks(collinear, landmarks[:3], _loads(3))
 
 
 # ---------------------------------------------------------------- chapter 2: correction
