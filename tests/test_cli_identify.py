@@ -167,6 +167,13 @@ def test_identify_fit_from_landmarks(tables, tmp_path):
                                 "Ktx,Krz", "--loss", "huber", "--json").output)
     assert report["names"] == ["bush.Ktx", "bush.Krz"] and report["loss"] == "huber"
     assert report["converged"]
+    # A fit stopped before it converged is exit 3 (issue 13), with its report still printed.
+    result = _invoke("fit", "isolated_bushing", "-m", tables["marks"], "--start", "1e4",
+                     "--max-steps", "1", "--json")
+    assert result.exit_code == 3, result.output
+    assert json.loads(result.stdout)["converged"] is False
+    assert "the fit did not converge (max_steps=1 reached)" in _text(result)
+    assert "Traceback" not in result.output
 
 
 def test_identify_iterative_and_fit_bad_input(tables, tmp_path):

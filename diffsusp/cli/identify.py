@@ -484,7 +484,8 @@ def _fit_params(mech, bushings, axes, centres, springs, start, notes):
                 p = Params.bushing_stiffness(mech, (n,), axes=axes_n)
                 params = p if params is None else params + p
     elif names and axes:
-        params = Params.bushing_stiffness(mech, names, axes=axes)
+        # Every value is replaced by --start: select from a copy without zero stiffnesses.
+        params = Params.bushing_stiffness(_without_zeros(mech), names, axes=axes)
     if centres:
         c = Params.bushing_centres(mech, names)
         params = c if params is None else params + c
@@ -494,7 +495,7 @@ def _fit_params(mech, bushings, axes, centres, springs, start, notes):
             notes.append("left out the spring rate(s) that are 0 in the model: " + ", ".join(
                 n for n, ok in zip(mech.springs.names, rate, strict=True) if not ok) + ".")
         if rate.any() or start is not None:
-            s = Params.leaves(mech, lambda m: m.springs.k,
+            s = Params.leaves(_without_zeros(mech), lambda m: m.springs.k,
                               None if start is not None else rate)
             params = s if params is None else params + s
     if params is None:
@@ -509,6 +510,21 @@ def _fit_params(mech, bushings, axes, centres, springs, start, notes):
                 values[k] = start / _DEG if axis in _ROTATIONAL else start
         params = params.with_start(values)
     return params
+
+
+def _without_zeros(mech):
+    """`mech` with every non-positive stiffness and spring rate set to 1 (a placeholder for a
+    selection whose start values are all given)."""
+    import equinox as eqx
+    import numpy as np
+
+    def positive(a):
+        a = np.asarray(a, dtype=float)
+        return np.where(a > 0, a, 1.0)
+
+    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.springs.k), mech,
+                       tuple(positive(a) for a in (mech.bushings.k_trans, mech.bushings.k_rot,
+                                                  mech.springs.k)))
 
 
 def _display(name, value):

@@ -1099,6 +1099,10 @@ class _Plan:
             raise _error(f"{what}; an Adams dataset (.adm) needs PART/ statements (one with "
                          "GROUND), MARKER/s on them and the joints and forces between them.",
                          self.path, 1)
+        if not any(kind in ("joint", "bushing", "spring") for _, kind, _, _ in self.calls):
+            raise _error("the dataset defines no joint, bushing or spring between its parts "
+                         "(a truncated file?); nothing holds the parts.", self.path,
+                         max(s.line for s in self.statements))
         title = re.sub(r"^ADAMS/View model name:\s*", "", self.model.title, flags=re.I)
         builder = MechanismBuilder(title or (self.path.stem if self.path else "adm"))
         lines: dict[str, int] = {}

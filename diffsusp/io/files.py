@@ -41,6 +41,10 @@ def limit(kind: str = "model") -> int:
     return TABLE_LIMIT if kind == "table" else MODEL_LIMIT
 
 
+def _size(n: int) -> str:
+    return f"{n / MiB:.1f} MiB" if n >= MiB else f"{n} bytes"
+
+
 def check_input(path, what: str, kind: str = "model") -> int:
     """Check that `path` is a regular file no larger than the limit; return its size.
 
@@ -66,8 +70,7 @@ def check_input(path, what: str, kind: str = "model") -> int:
     bound = limit(kind)
     if info.st_size > bound:
         raise ModelFileError(
-            f"the {what} is {info.st_size / MiB:.1f} MiB, more than the limit of "
-            f"{bound / MiB:g} MiB; raise it with --max-file-mb or ${ENVIRONMENT} if the file "
+            f"the {what} is {_size(info.st_size)}, more than the limit of {_size(bound)}; raise it with --max-file-mb or ${ENVIRONMENT} if the file "
             "is meant to be this large.", path=path)
     return info.st_size
 
@@ -86,6 +89,6 @@ def read_input(path, what: str, kind: str = "model") -> bytes:
         raise ModelFileError(f"cannot read the {what}: {getattr(e, 'strerror', None) or e}.",
                              path=path) from None
     if len(data) > bound:
-        raise ModelFileError(f"the {what} is larger than the limit of {bound / MiB:g} MiB; "
+        raise ModelFileError(f"the {what} is larger than the limit of {_size(bound)}; "
                              f"raise it with --max-file-mb or ${ENVIRONMENT}.", path=path)
     return data
