@@ -508,6 +508,9 @@ def locate_joints(
       largest (after the one the kind leaves free: the revolute axis) is not observable.
     - `with_sigma`: compute σ (the Jacobian through registration and solvers).
 
+    The number of cases is padded up to a multiple of `CASE_BUCKET` with masked cases, so that
+    tables of similar size share one compiled program.
+
     **Returns:** a `GeometricReport`.
 
     **Raises:** `InputError` for a joint list naming an unknown part or a wrong link.
