@@ -463,3 +463,38 @@ def test_mutated_adams_files_raise_the_library_error(cut, junk):
             parse_adm(ADM[:cut] + junk + "\n").build(check=False)
     except ModelError as e:
         assert "concatenate" not in str(e)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_an_interrupted_fit_leaves_its_last_estimate_on_disk(tmp_path, monkeypatch, suffix):
+    import importlib
+
+    # The package re-exports the function under the module's name: fetch the module itself.
+    lsq_module = importlib.import_module("diffsusp.identify.least_squares")
+
+    def fit_then_interrupt(mech, data, params, *, callback, **kwargs):
+        estimate = np.asarray(params.start) * 2.0
+        callback(0, lsq_module.StepRecord(step=0, trial=estimate, trial_loss=1.0,
+                                          failed_cases=0, accepted=True, estimate=estimate,
+                                          step_size=1.0))
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(lsq_module, "least_squares", fit_then_interrupt)
+    table = tmp_path / "marks.csv"
+    table.write_text(LANDMARKS)
+    out = tmp_path / f"fit{suffix}"
+    result = invoke("identify", "fit", "isolated_bushing", "-m", table, "--start", "1e4",
+                    "--out", out)
+    assert result.exit_code == 130, result.output
+    assert "terminated (SIGTERM); the estimate of the last LM step is in" in text(result)
+    if suffix == ".json":
+        rows = json.loads(out.read_text())["rows"]
+    else:
+        lines = out.read_text().splitlines()
+        header = lines[0].split(",")
+        rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
+    assert [r["parameter"] for r in rows] == [f"bush.{a}" for a in
+                                              ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")]
+    assert all(float(r["value"]) == pytest.approx(2e4) for r in rows)
+    assert {r["status"] for r in rows} == {"interrupted"}
+    assert_clean(result)

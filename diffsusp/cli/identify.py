@@ -15,6 +15,7 @@ name). TABLE is a landmark or pose table with the loads, CSV or Parquet (format 
 or a complete dataset), and for `iterative` and `fit` the figures to `--figures`.
 """
 
+import contextlib
 import csv
 import os
 from pathlib import Path
@@ -298,6 +299,63 @@ def _comparison_figure(mech_start, mech_fitted, meas, title):
     return plot.case_comparison(series, channels, title=title)
 
 
+@contextlib.contextmanager
+def _save_on_interrupt(out, rows, what):
+    """On SIGINT / SIGTERM, write the last estimate (`rows()`: the report rows of the last
+    accepted step, each with status 'interrupted') to `out` before exiting with 130."""
+    from .common import EXIT_INTERRUPTED, _Terminated, interruptible
+
+    try:
+        with interruptible():
+            yield
+    except KeyboardInterrupt as e:
+        how = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+        data = rows()
+        where = ""
+        if out is not None and data:
+            if out.suffix.lower() == ".json":
+                import json
+
+                out.write_text(json.dumps({"interrupted": True, "rows": data}, indent=2) + "\n",
+                               encoding="utf-8")
+            else:
+                _write_rows(data, out)
+            where = f"; the estimate of the last {what} is in {out} (status 'interrupted')"
+        elif not data:
+            where = f"; no {what} had finished"
+        raise fail(f"{how}{where}.", EXIT_INTERRUPTED) from None
+
+
+def _partial_fit_rows(params, last):
+    if not last:
+        return []
+    rows = []
+    for k, name in enumerate(params.names):
+        value, unit = _display(name, float(last[0].estimate[k]))
+        rows.append(dict(parameter=name, value=value, unit=unit,
+                         start=float(_display(name, float(params.start[k]))[0]),
+                         step=last[0].step, status="interrupted"))
+    return rows
+
+
+def _partial_iterative_rows(mech0, names, last):
+    from ..identify.iterative import AXES
+
+    if not last:
+        return []
+    rows = []
+    for b, name in enumerate(names):
+        index = mech0.bushings.index(name)
+        for a, axis in enumerate(AXES):
+            scale = _DEG if axis in _ROTATIONAL else 1.0
+            start = (mech0.bushings.k_trans if a < 3 else mech0.bushings.k_rot)[index][a % 3]
+            rows.append(dict(parameter=f"{name}.{axis}",
+                             value=float(last[0].stiffness[b, a] * scale),
+                             unit="N*mm/deg" if axis in _ROTATIONAL else "N/mm",
+                             start=float(start) * scale, status="interrupted"))
+    return rows
+
+
 def _progress():
     """A transient progress bar on stderr (bounded loops: iterations, LM steps)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -361,10 +419,13 @@ def iterative_command(
         d_t, d_r = measure.bushing_deformations(mech, meas, names)
         measured = np.concatenate([np.asarray(d_t), np.asarray(d_r)], axis=-1)
         mech0 = _with_start(mech, names, start)
-        with _progress() as progress:
+        last = []
+        with _progress() as progress, _save_on_interrupt(out, lambda: _partial_iterative_rows(
+                mech0, names, last), "iteration"):
             task = progress.add_task("iteration", total=max_iterations)
 
             def step(i, record):
+                last[:] = [record]
                 progress.update(task, completed=i,
                                 description=f"iteration {i}: largest change "
                                 f"{100 * record.max_change:.3g}%")
@@ -604,10 +665,14 @@ def fit_command(
         data = from_measurements(meas, sigma, sigma_rotation * _DEG)
         notes: list[str] = []
         params = _fit_params(mech, bushing, axes, centres, springs, start, notes)
-        with _progress() as progress:
+        last = []
+        with _progress() as progress, _save_on_interrupt(out, lambda: _partial_fit_rows(
+                params, last), "LM step"):
             task = progress.add_task("step", total=max_steps)
 
             def step(i, record):
+                if record.accepted or not last:
+                    last[:] = [record]
                 progress.update(task, completed=i, description=f"step {i}: loss "
                                 f"{record.trial_loss:.4g}")
 
