@@ -498,3 +498,27 @@ def test_an_interrupted_fit_leaves_its_last_estimate_on_disk(tmp_path, monkeypat
     assert all(float(r["value"]) == pytest.approx(2e4) for r in rows)
     assert {r["status"] for r in rows} == {"interrupted"}
     assert_clean(result)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(row=st.integers(min_value=1, max_value=3), column=st.integers(min_value=0, max_value=9),
+       cell=st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                      st.text(max_size=6)))
+def test_mutated_measurement_cells_raise_the_library_error(tmp_path_factory, row, column, cell):
+    """Any one cell of a landmark table replaced by any number or text: read, or refused with
+    the library's own error (`InputError`, of which `ModelFileError` is one)."""
+    from diffsusp import measure
+    from diffsusp.errors import InputError
+    from diffsusp.models import isolated_bushing
+
+    lines = LANDMARKS.splitlines()
+    cells = lines[row].split(",")
+    cells[column] = cell.replace(",", ";").replace("\n", " ").replace("\r", " ").replace('"', "'")
+    lines[row] = ",".join(cells)
+    path = tmp_path_factory.mktemp("cell") / "m.csv"
+    path.write_text("\n".join(lines) + "\n")
+    try:
+        meas = measure.read_measurements(path, isolated_bushing())
+    except InputError:
+        return
+    assert np.all(np.isfinite(np.asarray(meas.loads.force)))
