@@ -522,3 +522,11 @@ def test_mutated_measurement_cells_raise_the_library_error(tmp_path_factory, row
     except InputError:
         return
     assert np.all(np.isfinite(np.asarray(meas.loads.force)))
+
+
+def test_an_empty_load_table_is_bad_input(tmp_path, no_solve):
+    loads = tmp_path / "empty.csv"
+    loads.write_text("centre.fx [N]\n")
+    result = invoke("simulate", "isolated_bushing", "-l", loads, "-o", tmp_path / "r.csv")
+    assert result.exit_code == 2, result.output
+    assert "the load table has no rows" in text(result)

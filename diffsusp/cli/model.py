@@ -282,6 +282,11 @@ def simulate(
         mf = _load(model)
         mech = mf.mechanism
         table = _load_table(mf, loads)
+        if table.n_rows == 0:
+            from ..errors import InputError
+
+            raise InputError(f"{loads}: the load table has no rows; give one row per load "
+                             "case.")
         case_loads = loads_from_table(mech, table)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
