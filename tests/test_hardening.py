@@ -181,12 +181,14 @@ def test_warnings_use_the_cli_format_and_a_skipped_load_keeps_its_load_point(tmp
     assert_clean(result)
 
 
-def test_a_load_that_cannot_be_placed_is_an_error_naming_its_load_point(tmp_path):
-    # The reaction on a moving part (marker 11 is on PART_2), and values outside the subset.
+def test_a_load_that_cannot_be_placed_is_named_as_missing(tmp_path):
+    # The reaction marker on a moving part: the load statement is skipped, and `info` says
+    # which load point the model does not have.
     path = _adm(tmp_path, "MARKER/14, PART = 1, FLOATING", "MARKER/14, PART = 2, FLOATING")
-    result = invoke("info", path)
-    assert result.exit_code == 2, result.output
-    assert "(load point 'GFORCE_1') cannot be read" in text(result)
+    result = invoke("info", path, "--json")
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["load_points"] == []
+    assert "THE MODEL HAS NO LOAD POINT 'GFORCE_1'" in text(result)
     assert_clean(result)
 
 

@@ -862,16 +862,16 @@ class _Plan:
 
     def _load_point_only(self, s, reason):
         """A load whose values cannot be read keeps its load point (the K&C tables and the
-        CLI's load tables need it) with no load from the file; one that cannot be placed is an
-        error, not a silently missing load point."""
+        CLI's load tables need it) with no load from the file; one that cannot be placed is
+        skipped with a reason that names the load point the model will not have (never a
+        silently missing load point)."""
         name = self.element_name(s)
         try:
             self._gforce(s, values=False)
         except _Unsupported as e:
-            raise _error(f"{s.label} (load point '{name}') cannot be read: {e}. Without it the "
-                         f"model would have no load point '{name}'; rewrite the statement in "
-                         "the supported subset (see diffsusp.io.adams).", self.path,
-                         s.line) from None
+            self.skip(s, f"{e}; THE MODEL HAS NO LOAD POINT '{name}' (rewrite the statement in "
+                         "the supported subset to keep it)")
+            return
         self.skip(s, f"{reason}; its load point '{name}' is kept with no load from the file "
                      "(give its loads in a load table)")
 
