@@ -70,8 +70,9 @@ def check_input(path, what: str, kind: str = "model") -> int:
     bound = limit(kind)
     if info.st_size > bound:
         raise ModelFileError(
-            f"the {what} is {_size(info.st_size)}, more than the limit of {_size(bound)}; raise it with --max-file-mb or ${ENVIRONMENT} if the file "
-            "is meant to be this large.", path=path)
+            f"the {what} is {_size(info.st_size)}, more than the limit of {_size(bound)}; "
+            f"raise it with --max-file-mb or ${ENVIRONMENT} if the file is meant to be this "
+            "large.", path=path)
     return info.st_size
 
 
