@@ -68,6 +68,29 @@ def bench_model(name, mech, rng, sizes, baseline_cases):
     return rows, dict(model=name, latency_one=latency, baseline_per_solve=base)
 
 
+def program_cost(name, mech, n_cases, rng):
+    """Size of the batched solve_statics program (jaxpr equations, recursively) and the time of
+    each stage, separately: trace, lower to StableHLO, XLA compile, run (after compile)."""
+    from test_program_size import equations
+
+    loads = mech.loads(forces={"contact_patch": envelope(n_cases, rng)})
+
+    def solve(l):
+        return ds.solve_statics(mech, l, throw=False)
+
+    t0 = time.perf_counter()
+    traced = jax.jit(solve).trace(loads)
+    t1 = time.perf_counter()
+    lowered = traced.lower()
+    t2 = time.perf_counter()
+    compiled = lowered.compile()
+    t3 = time.perf_counter()
+    run, _ = timed(lambda: compiled(loads), repeats=3)
+    return dict(model=name, cases=n_cases, equations=equations(traced.jaxpr.jaxpr),
+                stablehlo_mb=len(lowered.as_text()) / 1e6, trace=t1 - t0, lower=t2 - t1,
+                compile=t3 - t2, run=run)
+
+
 def jacobian_cost(mech):
     loads = thesis_load_cases(mech)
 
@@ -91,7 +114,10 @@ def main():
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     sizes = (1, 13, 100) if args.quick else (1, 13, 100, 1000, 10000)
-    results = dict(rows=[], models=[])
+    results = dict(rows=[], models=[], programs=[])
+    for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
+                       ("double_wishbone", double_wishbone())):
+        results["programs"].append(program_cost(name, mech, 13, rng))
     for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
                        ("double_wishbone", double_wishbone())):
         rows, info = bench_model(name, mech, rng, sizes, baseline_cases=3 if args.quick else 13)
@@ -108,6 +134,11 @@ def main():
                                      failed=int(np.sum(np.asarray(sol.status) != 0)))
     results["max_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
+    for p in results["programs"]:
+        print(f"{p['model']}: solve_statics program ({p['cases']} cases) {p['equations']} "
+              f"equations, {p['stablehlo_mb']:.2f} MB StableHLO; trace {p['trace']:.2f} s, "
+              f"lower {p['lower']:.2f} s, compile {p['compile']:.2f} s, run "
+              f"{p['run'] * 1e3:.2f} ms")
     print(f"{'model':18s} {'cases':>7s} {'solves/s':>10s} {'iters':>6s} {'failed':>6s} "
           f"{'compile+1st s':>13s}")
     for r in results["rows"]:

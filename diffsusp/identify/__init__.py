@@ -7,6 +7,9 @@ ch. 2–3, guaranteed least squares):
   equilibrium, from any measurements (`Landmarks`, `Poses`, `Deformations`, `Channel`) of any
   parameters (`Params`: stiffnesses, hardpoints), with σ, identifiability and the directions the
   data cannot see; batched over many data sets.
+- `geometric` (`locate_joints`, `correct_geometry`): joint centres and axes from the measured
+  relative motion of parts, with σ and an observability verdict per joint, and the
+  equilibrium-consistent correction of the bolted-side joint frames (geometry ch. 2–3).
 - `sensitivity` and `design_experiment`: exact ∂(K&C metric)/∂(parameter), and the choice of
   load cases that best determine chosen parameters.
 
@@ -16,6 +19,19 @@ a report.
 
 from .data import Channel, Deformations, Landmarks, Measurement, Poses, from_measurements
 from .direct import DirectReport, DirectSystem, direct, direct_system
+from .geometric import (
+    CorrectionReport,
+    GeometricJoint,
+    GeometricReport,
+    GeometryDesign,
+    JointEstimate,
+    apply_locations,
+    correct_geometry,
+    design_geometry_cases,
+    joints_from_model,
+    locate_joints,
+    offset_equivalent,
+)
 from .iterative import IterativeReport, iterative
 from .least_squares import (
     BatchFitReport,
@@ -29,6 +45,9 @@ from .params import Params
 from .sensitivity import DesignReport, SensitivityReport, design_experiment, sensitivity
 
 __all__ = [
+    "CorrectionReport", "GeometricJoint", "GeometricReport", "GeometryDesign", "JointEstimate",
+    "apply_locations", "correct_geometry", "design_geometry_cases", "joints_from_model",
+    "locate_joints", "offset_equivalent",
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
     "SensitivityReport", "design_experiment", "direct", "direct_system", "iterative",

@@ -301,21 +301,17 @@ def _rows_and_reaction(fn):
     return wrapped
 
 
-def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
-    """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case.
-
-    Every element group is evaluated once (vmapped over its elements): force elements with their
-    12×12 forward-mode Jacobian, constraints with their rows, Φ_zᵀλ and (one forward-over-
-    reverse pass) their Jacobian A and λ-weighted Hessian Σλ∂²Φ. All contributions land in the
-    live unknowns through one scatter-add for the vector and one for the matrix (static
-    destinations; ground and redundant-row entries go to a trash slot).
-    """
+def _terms(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool):
+    """Every element contribution, one load case: (vector values, their destinations, matrix
+    values, their destinations). Values are traced arrays; destinations are static positions
+    in the live residual (n + m + 1, the last one a trash slot) and in the flattened Jacobian
+    ((n + m)² + 1)."""
     topo = mech.topology
     size = topo.n + topo.m
     yfull = _full(mech, q)
     lam_slots = jnp.concatenate([lam, jnp.zeros(1, lam.dtype)])
     live = topo.live
-    vec_idx, vec_val, mat_r, mat_c, mat_val = [], [], [], [], []
+    vec_idx, vec_val, mat_idx, mat_val = [], [], [], []
 
     def add_vec(idx, val):
         vec_idx.append(live[np.asarray(idx)].reshape(-1))
@@ -323,8 +319,8 @@ def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
 
     def add_mat(ri, ci, val):
         ri, ci = np.broadcast_arrays(live[np.asarray(ri)], live[np.asarray(ci)])
-        mat_r.append(ri.reshape(-1))
-        mat_c.append(ci.reshape(-1))
+        mat_idx.append(np.where((ri == size) | (ci == size), size * size, ri * size + ci)
+                       .reshape(-1))
         mat_val.append(val.reshape(-1))
 
     for g, fn, args in force_groups(mech, loads):
@@ -358,14 +354,48 @@ def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
         add_vec(g.coords, react)
         add_vec(g.row_slots, val)
 
-    r = jnp.zeros(size + 1, q.dtype).at[np.concatenate(vec_idx)].add(
-        jnp.concatenate(vec_val))[:size]
+    vec = (jnp.concatenate(vec_val), np.concatenate(vec_idx))
+    if not with_jacobian:
+        return (*vec, None, None)
+    return (*vec, jnp.concatenate(mat_val), np.concatenate(mat_idx))
+
+
+def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
+    """Residual r (n + m,) and, if asked, its Jacobian (n + m, n + m) at (q, λ), one load case.
+
+    Every element group is evaluated once (vmapped over its elements): force elements with their
+    12×12 forward-mode Jacobian, constraints with their rows, Φ_zᵀλ and (one forward-over-
+    reverse pass) their Jacobian A and λ-weighted Hessian Σλ∂²Φ. All contributions land in the
+    live unknowns through one scatter-add for the vector and one for the matrix (static
+    destinations; ground and redundant-row entries go to a trash slot).
+    """
+    size = mech.topology.n + mech.topology.m
+    vec, vec_idx, mat, mat_idx = _terms(mech, loads, q, lam, with_jacobian)
+    r = jnp.zeros(size + 1, q.dtype).at[vec_idx].add(vec)[:size]
     if not with_jacobian:
         return r, None
-    ri, ci = np.concatenate(mat_r), np.concatenate(mat_c)
-    dest = np.where((ri == size) | (ci == size), size * size, ri * size + ci)
-    flat = jnp.zeros(size * size + 1, q.dtype).at[dest].add(jnp.concatenate(mat_val))
+    flat = jnp.zeros(size * size + 1, q.dtype).at[mat_idx].add(mat)
     return r, flat[:-1].reshape(size, size)
+
+
+def assemble_batch(mech: Mechanism, loads: Loads, q, lam):
+    """`assemble` (with the Jacobian) over a leading case axis of `loads`, q and λ.
+
+    The element terms are vmapped over cases; the scatter into the KKT system is done once for
+    the whole batch with the case axis minor (each static destination receives a contiguous
+    row of cases), which runs an order of magnitude faster on CPU than a vmapped scatter."""
+    size = mech.topology.n + mech.topology.m
+    dest = {}
+
+    def terms(loads_, q_, lam_):
+        vec, dest["vec"], mat, dest["mat"] = _terms(mech, loads_, q_, lam_, True)
+        return vec, mat
+
+    vec, mat = jax.vmap(terms)(loads, q, lam)
+    cases = q.shape[0]
+    r = jnp.zeros((size + 1, cases), q.dtype).at[dest["vec"]].add(vec.T)[:size].T
+    flat = jnp.zeros((size * size + 1, cases), q.dtype).at[dest["mat"]].add(mat.T)[:-1]
+    return r, flat.T.reshape(cases, size, size)
 
 
 def constraint_values(mech: Mechanism, loads: Loads, q):

@@ -25,7 +25,7 @@ from jaxtyping import Array, Float, Int
 
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .kernel import assemble, retract, to_internal, to_public
+from .kernel import assemble_batch, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
@@ -83,22 +83,26 @@ def _measures(mech: Mechanism, r, f_scale):
             merit)
 
 
-_LINE_SEARCH = 13  # trial steps α = 1, ½, ¼, … before the last one is taken anyway
+_LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
+# one is taken anyway
 
 
 def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
-    """Damped Newton on the KKT system from (q0, λ = 0), one load case.
+    """Damped Newton on the KKT system from (q0, λ = 0), for a batch of load cases (leading
+    axis of `loads` and q0).
 
     One evaluation of the residual and its Jacobian per loop pass: a pass evaluates the trial
     point; if the scaled merit decreased enough (Armijo) the point is accepted and the next
     Newton step is solved from the Jacobian just computed, otherwise the step is halved. So a
     full Newton step costs one assembly and one linear solve, and the program traces the
-    assembly once."""
+    assembly once. Every case runs its own iteration (per-case state, frozen once the case has
+    stopped); only the assembly's scatter is done batch-wide (`kernel.assemble_batch`)."""
     topo = mech.topology
     n = topo.n
     length = mech.length_scale
     rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6), np.zeros(topo.m)])
-    y0 = jnp.concatenate([q0, jnp.zeros(topo.m, q0.dtype)])
+    cases = q0.shape[0]
+    y0 = jnp.concatenate([q0, jnp.zeros((cases, topo.m), q0.dtype)], axis=1)
 
     def done(r, f_scale, step):
         # Converged, or at the round-off floor: within 1000× the tolerances and no longer moving.
@@ -107,26 +111,25 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         floor = (force <= 1e3 * rtol) & (constraint <= 1e3 * atol) & (step <= 1e-13)
         return tight | floor
 
-    def cond(s):
+    def running(s):
         return (s["it"] <= max_steps) & (s["status"] == MAX_STEPS) & ~s["done"]
 
-    def body(s):
-        y_try = retract(s["y"], s["alpha"] * s["dy"], n)
-        r, jac = assemble(mech, loads, y_try[:n], y_try[n:])
+    def update(s, loads_, y_try, r, jac):
+        """The next state of one case, given the residual and Jacobian at its trial point."""
         merit = _measures(mech, r, s["f_scale"])[2]
         merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
         first = s["it"] == 0
         accept = first | (merit <= (1.0 - 1e-4 * s["alpha"]) * s["merit"]) | (
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
-        f_scale = _force_scale(mech, loads, jac[:n, n:] @ y_try[n:])
+        f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
         dy = scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, 0.5 / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
         # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
         # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
-        # vmapped batch to max_steps.
+        # batch to max_steps.
         stall = jnp.where(first, 0, jnp.where(s["alpha"] < 0.01, s["stall"] + 1, 0))
         status = jnp.where(jnp.all(jnp.isfinite(r)), MAX_STEPS, NONFINITE)
         status = jnp.where(stall >= _STALL_STEPS, STALLED, status)
@@ -136,64 +139,155 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             trial=jnp.zeros_like(s["trial"]), status=status, stall=stall,
             done=done(r, f_scale, jnp.where(first, jnp.inf, step)),
         )
-        rejected = dict(s, alpha=0.5 * s["alpha"], trial=s["trial"] + 1)
-        return jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
+        # Backtrack to the minimum of the quadratic through φ(0), φ'(0) = −2φ(0) (a Newton
+        # step on ½‖r‖²) and φ(α), kept within [0.1α, 0.5α]; 0.1α if φ(α) is not finite.
+        alpha, phi0 = s["alpha"], s["merit"]
+        curvature = (merit - phi0 + 2.0 * alpha * phi0) / alpha**2
+        shrink = jnp.where(jnp.isfinite(merit) & (curvature > 0),
+                           phi0 / jnp.maximum(curvature * alpha, 1e-300), 0.1)
+        rejected = dict(s, alpha=alpha * jnp.clip(shrink, 0.1, 0.5), trial=s["trial"] + 1)
+        new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
+        return jax.tree.map(lambda a, b: jnp.where(running(s), a, b), new, s)
+
+    def body(s):
+        y_try = jax.vmap(lambda y, d: retract(y, d, n))(s["y"], s["alpha"][:, None] * s["dy"])
+        r, jac = assemble_batch(mech, loads, y_try[:, :n], y_try[:, n:])
+        return jax.vmap(update)(s, loads, y_try, r, jac)
 
     size = n + topo.m
-    zero = jnp.zeros((), y0.dtype)
+    zero = jnp.zeros(cases, y0.dtype)
+    count = jnp.zeros(cases, int)
     state = dict(
-        y=y0, r=jnp.zeros(size, y0.dtype), dy=jnp.zeros(size, y0.dtype), alpha=zero + 1.0,
-        merit=zero + jnp.inf, f_scale=zero + 1.0, it=jnp.asarray(0), trial=jnp.asarray(0),
-        status=jnp.asarray(MAX_STEPS), stall=jnp.asarray(0), done=jnp.asarray(False),
+        y=y0, r=jnp.zeros((cases, size), y0.dtype), dy=jnp.zeros((cases, size), y0.dtype),
+        alpha=zero + 1.0, merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
+        status=count + MAX_STEPS, stall=count, done=jnp.zeros(cases, bool),
     )
-    s = jax.lax.while_loop(cond, body, state)
-    force, constraint, _ = _measures(mech, s["r"], s["f_scale"])
+    s = jax.lax.while_loop(lambda s: jnp.any(jax.vmap(running)(s)), body, state)
+    force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
     status = jnp.where(s["done"], SUCCESS, s["status"])
-    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint])
+    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint], 1)
     return s["y"], info
 
 
 @eqx.filter_custom_jvp
 def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
+    """Solver coordinates and multipliers (cases, n + m) and (status, iterations, residual,
+    constraint error) (cases, 4) of a batch of load cases."""
     return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
 
 
 @_equilibrium.def_jvp
 def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
-    # Implicit function theorem: J·dy = −∂r/∂(mech, loads)·t (`linearize`). Everything here
-    # stays differentiable (y through this same rule, J and ∂r through autodiff), so derivatives
-    # of derivatives — e.g. the sensitivity of bump steer to a stiffness — are exact too.
+    # Implicit function theorem, case by case: J·dy = −∂r/∂(mech, loads)·t (`linearize`).
+    # Everything here stays differentiable (y through this same rule, J and ∂r through
+    # autodiff), so derivatives of derivatives — e.g. the sensitivity of bump steer to a
+    # stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
     y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
-    lin = linearize_internal(mech, loads, y)
-    return (y, info), (lin.tangent(t_mech, t_loads), jnp.zeros_like(info))
+
+    def tangent(loads_, y_, t_loads_):
+        return linearize_internal(mech, loads_, y_).tangent(t_mech, t_loads_)
+
+    if t_loads is None:
+        dy = jax.vmap(lambda l, y_: tangent(l, y_, None))(loads, y)
+    else:
+        dy = jax.vmap(tangent)(loads, y, t_loads)
+    return (y, info), (dy, jnp.zeros_like(info))
 
 
-def _solve_one(mech, loads, q0, rtol, atol, max_steps):
-    y0 = to_internal(mech, q0)
+def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps):
+    """Public-coordinate solutions of a batch of cases (leading axis)."""
+    y0 = jax.vmap(lambda q: to_internal(mech, q))(q0)
     y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
     n = mech.topology.n
     return StaticSolution(
-        q=to_public(mech, y[:n]),
-        multipliers=y[n:],
-        status=info[0].astype(int),
-        iterations=info[1].astype(int),
-        residual=info[2],
-        constraint_error=info[3],
+        q=jax.vmap(lambda y_: to_public(mech, y_))(y[:, :n]),
+        multipliers=y[:, n:],
+        status=info[:, 0].astype(int),
+        iterations=info[:, 1].astype(int),
+        residual=info[:, 2],
+        constraint_error=info[:, 3],
     )
+
+
+def _solve_one(mech, loads, q0, rtol, atol, max_steps):
+    sol = _solve_batch_cases(mech, jax.tree.map(lambda a: a[None], loads), q0[None], rtol, atol,
+                             max_steps)
+    return jax.tree.map(lambda a: a[0], sol)
+
+
+def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
+    n_cases = loads.force.shape[0]
+    if chunk is None or n_cases <= chunk:
+        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps)
+    # Chunks of `chunk` cases one after the other (the last one padded by repeating a case).
+    n_chunks = -(-n_cases // chunk)
+    pad = n_chunks * chunk - n_cases
+
+    def split(a):
+        a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+        return a.reshape(n_chunks, chunk, *a.shape[1:])
+
+    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps),
+                      jax.tree.map(split, (loads, q0)))
+    return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], sol)
 
 
 @eqx.filter_jit
 def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk):
-    def one(args):
-        loads_, q0_ = args
-        return _solve_one(mech, loads_, q0_, rtol, atol, max_steps)
+    return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
 
+
+def _solve_sharded(mech, loads, q0, rtol, atol, max_steps, chunk, devices):
+    """The batch split over `devices` along the case axis: the inputs are placed sharded and
+    the one batched program is partitioned by XLA (GSPMD), each device computing its share."""
+    mesh = jax.sharding.Mesh(np.asarray(devices), ("cases",))
+    cases = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("cases"))
+    whole = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    dynamic, static = eqx.partition(mech, eqx.is_array)
+    mech = eqx.combine(jax.device_put(dynamic, whole), static)
+    loads, q0 = jax.device_put((loads, q0), cases)
+    return _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+
+
+_DEFAULT_DEVICES = [1]
+
+
+def use_devices(devices) -> None:
+    """Set how many local devices `solve_statics` splits a batch over when its `devices`
+    argument is not given: an int, "all" (every local device), or a list of devices. The CLI
+    uses "all"; the library default is 1. On CPU, JAX exposes several host devices only when
+    asked before it starts (`jax.config.update("jax_num_cpu_devices", N)`)."""
+    _DEFAULT_DEVICES[0] = devices
+
+
+def _devices(devices):
+    devices = _DEFAULT_DEVICES[0] if devices is None else devices
+    local = jax.local_devices()
+    if devices == "all":
+        return tuple(local)
+    if isinstance(devices, int):
+        if devices < 1:
+            raise ValueError(f"devices must be ≥ 1; got {devices}.")
+        return tuple(local[: min(devices, len(local))])
+    return tuple(devices)
+
+
+def _solve_split(mech, loads, q0, rtol, atol, max_steps, chunk, devices):
+    devices = _devices(devices)
     n_cases = loads.force.shape[0]
-    if chunk is None or n_cases <= chunk:
-        return jax.vmap(lambda l, q: one((l, q)))(loads, q0)
-    return jax.lax.map(one, (loads, q0), batch_size=chunk)
+    k = len(devices)
+    if k <= 1 or n_cases < 2 * k:
+        return _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+    pad = -n_cases % k  # repeat the last case so that every device gets as many
+
+    def padded(a):
+        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+
+    loads, q0 = jax.tree.map(padded, (loads, q0))
+    sol = _solve_sharded(mech, loads, q0, rtol, atol, max_steps, chunk, devices)
+    return jax.tree.map(lambda a: a[:n_cases], sol)
 
 
 @eqx.filter_jit
@@ -322,6 +416,7 @@ def solve_statics(
     atol: float = 1e-10,
     max_steps: int = 50,
     chunk: int | None = 4096,
+    devices=None,
     throw: bool = True,
 ) -> StaticSolution:
     """Static equilibria of `mech` under each load case of `loads`.
@@ -333,6 +428,8 @@ def solve_statics(
     - `rtol`: force rows below rtol·(load scale); `atol`: constraint rows below atol (mm).
     - `max_steps`: Newton iterations per case.
     - `chunk`: cases solved at once (larger tables are mapped in chunks to bound memory).
+    - `devices`: split the cases over this many local devices (an int, "all", or a list of
+      devices; default: `use_devices`, 1 unless set), each solving its share independently.
     - `throw`: raise `ConvergenceError` naming the first failed case; otherwise return the
       per-case `status`.
 
@@ -348,7 +445,7 @@ def solve_statics(
                            max_steps, chunk)
         sol = jax.tree.map(lambda a: a[0], sol)
     else:
-        sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+        sol = _solve_split(mech, loads, q0, rtol, atol, max_steps, chunk, devices)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
 
