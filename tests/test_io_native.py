@@ -125,7 +125,7 @@ def test_builtin_name_loads_the_builtin_model(zoo):
 def test_dispatch_on_suffix(tmp_path, monkeypatch):
     calls = []
     fake_adams = types.ModuleType("diffsusp.io.adams")
-    fake_adams.read_adm = lambda path: calls.append(("adm", path)) or "adm-model"
+    fake_adams.read_adm = lambda path, **kw: calls.append(("adm", path)) or "adm-model"
     fake_chrono = types.ModuleType("diffsusp.io.chrono")
     fake_chrono.read_chrono = lambda path: calls.append(("json", path)) or "chrono-model"
     monkeypatch.setitem(sys.modules, "diffsusp.io.adams", fake_adams)

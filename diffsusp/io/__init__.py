@@ -65,9 +65,9 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
     if suffix == ".toml":
         return read_model_toml(text, check=check)
     if suffix == ".adm":
-        from .adams import parse_adm
+        from .adams import read_adm
 
-        return ModelFile(mechanism=parse_adm(text).build(check=check), load_tables={},
+        return ModelFile(mechanism=read_adm(text, check=check), load_tables={},
                          units=dict(_LIBRARY), path=text)
     if suffix == ".json":
         from .chrono import read_chrono

@@ -612,14 +612,15 @@ def parse_adm(source) -> AdmModel:
     return model
 
 
-def read_adm(path, *, time: float = 0.0) -> Mechanism:
+def read_adm(path, *, time: float = 0.0, check: bool = True) -> Mechanism:
     """Read an Adams dataset (.adm) into a `Mechanism` (see the module docstring for the
     subset). Two-body SFORCE functions are evaluated at `time` (s); the external loads and
-    motions of the file are given by `parse_adm(path).loads(mech, times)`.
+    motions of the file are given by `parse_adm(path).loads(mech, times)`. `check`: validate
+    the model (free modes, joints assembled), as `MechanismBuilder.build`.
 
     spec: stiffness §4.1 (Annex F), §6 item 10.
     """
-    return parse_adm(path).build(time)
+    return parse_adm(path).build(time, check=check)
 
 
 # ----------------------------------------------------------------------------- interpretation
