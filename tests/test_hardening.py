@@ -532,3 +532,18 @@ def test_an_empty_load_table_is_bad_input(tmp_path, no_solve):
     result = invoke("simulate", "isolated_bushing", "-l", loads, "-o", tmp_path / "r.csv")
     assert result.exit_code == 2, result.output
     assert "the load table has no rows" in text(result)
+
+
+def test_an_interrupted_kc_run_exits_130_without_a_traceback(monkeypatch):
+    import diffsusp.cli.kc as cli_kc
+
+    def terminate(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(cli_kc, "_run_event", terminate)
+    before = signal.getsignal(signal.SIGTERM)
+    result = invoke("kc", "isolated_bushing")
+    assert result.exit_code == 130, result.output
+    assert "terminated (SIGTERM)" in text(result)
+    assert signal.getsignal(signal.SIGTERM) == before  # the previous handler is back
+    assert_clean(result)
