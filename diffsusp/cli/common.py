@@ -21,6 +21,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.text import Text
+from typer.exceptions import TyperException
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
@@ -148,7 +149,7 @@ def cli_errors(*, record_warnings: bool = True):
         try:
             with interruptible():
                 yield
-        except (typer.Exit, typer.Abort):
+        except (typer.Exit, typer.Abort, TyperException):  # usage errors: Typer words them
             raise
         except ConvergenceError as e:
             raise failed(str(e), EXIT_NOT_CONVERGED) from None
