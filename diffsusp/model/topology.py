@@ -92,7 +92,8 @@ class Topology:
         marker_part = np.array(mech.markers.part, dtype=int)
         self.marker_part = np.where(marker_part == GROUND, n_parts, marker_part)
         centre = np.zeros((n_parts + 1, 3))
-        centre[:n_parts] = np.asarray(mech.reference_points, dtype=float).reshape(-1, 3)
+        given = np.asarray(mech.reference_points, dtype=float).reshape(-1, 3)[:n_parts]
+        centre[: len(given)] = given  # a mechanism still being assembled may have none yet
         self.centre = centre
         self.angular = np.zeros(n_rows, dtype=bool)
         for kind, _, offsets in row_blocks(mech.joints):

@@ -36,6 +36,7 @@ STATUS_TEXT = {
     STALLED: "stalled: no descent in the last steps",
 }
 _STALL_STEPS = 4  # consecutive steps shorter than 1/100 of Newton's before giving up
+_MAX_BACKTRACKS = 24  # rejected trial points in all before giving up (each costs an assembly)
 
 
 class StaticSolution(eqx.Module):
@@ -137,6 +138,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             y=y_try, r=r, dy=dy, alpha=jnp.ones_like(s["alpha"]),
             merit=_measures(mech, r, f_scale)[2], f_scale=f_scale, it=s["it"] + 1,
             trial=jnp.zeros_like(s["trial"]), status=status, stall=stall,
+            backtracks=s["backtracks"],
             done=done(r, f_scale, jnp.where(first, jnp.inf, step)),
         )
         # Backtrack to the minimum of the quadratic through φ(0), φ'(0) = −2φ(0) (a Newton
@@ -145,7 +147,10 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         curvature = (merit - phi0 + 2.0 * alpha * phi0) / alpha**2
         shrink = jnp.where(jnp.isfinite(merit) & (curvature > 0),
                            phi0 / jnp.maximum(curvature * alpha, 1e-300), 0.1)
-        rejected = dict(s, alpha=alpha * jnp.clip(shrink, 0.1, 0.5), trial=s["trial"] + 1)
+        backtracks = s["backtracks"] + 1
+        rejected = dict(s, alpha=alpha * jnp.clip(shrink, 0.1, 0.5), trial=s["trial"] + 1,
+                        backtracks=backtracks,
+                        status=jnp.where(backtracks >= _MAX_BACKTRACKS, STALLED, s["status"]))
         new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
         return jax.tree.map(lambda a, b: jnp.where(running(s), a, b), new, s)
 
@@ -160,12 +165,13 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     state = dict(
         y=y0, r=jnp.zeros((cases, size), y0.dtype), dy=jnp.zeros((cases, size), y0.dtype),
         alpha=zero + 1.0, merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
-        status=count + MAX_STEPS, stall=count, done=jnp.zeros(cases, bool),
+        status=count + MAX_STEPS, stall=count, backtracks=count, done=jnp.zeros(cases, bool),
     )
     s = jax.lax.while_loop(lambda s: jnp.any(jax.vmap(running)(s)), body, state)
     force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
     status = jnp.where(s["done"], SUCCESS, s["status"])
-    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint], 1)
+    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint,
+                      s["backtracks"].astype(float)], 1)
     return s["y"], info
 
 
@@ -237,57 +243,6 @@ def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
 @eqx.filter_jit
 def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk):
     return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
-
-
-def _solve_sharded(mech, loads, q0, rtol, atol, max_steps, chunk, devices):
-    """The batch split over `devices` along the case axis: the inputs are placed sharded and
-    the one batched program is partitioned by XLA (GSPMD), each device computing its share."""
-    mesh = jax.sharding.Mesh(np.asarray(devices), ("cases",))
-    cases = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("cases"))
-    whole = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-    dynamic, static = eqx.partition(mech, eqx.is_array)
-    mech = eqx.combine(jax.device_put(dynamic, whole), static)
-    loads, q0 = jax.device_put((loads, q0), cases)
-    return _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
-
-
-_DEFAULT_DEVICES = [1]
-
-
-def use_devices(devices) -> None:
-    """Set how many local devices `solve_statics` splits a batch over when its `devices`
-    argument is not given: an int, "all" (every local device), or a list of devices. The CLI
-    uses "all"; the library default is 1. On CPU, JAX exposes several host devices only when
-    asked before it starts (`jax.config.update("jax_num_cpu_devices", N)`)."""
-    _DEFAULT_DEVICES[0] = devices
-
-
-def _devices(devices):
-    devices = _DEFAULT_DEVICES[0] if devices is None else devices
-    local = jax.local_devices()
-    if devices == "all":
-        return tuple(local)
-    if isinstance(devices, int):
-        if devices < 1:
-            raise ValueError(f"devices must be ≥ 1; got {devices}.")
-        return tuple(local[: min(devices, len(local))])
-    return tuple(devices)
-
-
-def _solve_split(mech, loads, q0, rtol, atol, max_steps, chunk, devices):
-    devices = _devices(devices)
-    n_cases = loads.force.shape[0]
-    k = len(devices)
-    if k <= 1 or n_cases < 2 * k:
-        return _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
-    pad = -n_cases % k  # repeat the last case so that every device gets as many
-
-    def padded(a):
-        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
-
-    loads, q0 = jax.tree.map(padded, (loads, q0))
-    sol = _solve_sharded(mech, loads, q0, rtol, atol, max_steps, chunk, devices)
-    return jax.tree.map(lambda a: a[:n_cases], sol)
 
 
 @eqx.filter_jit
@@ -416,7 +371,6 @@ def solve_statics(
     atol: float = 1e-10,
     max_steps: int = 50,
     chunk: int | None = 4096,
-    devices=None,
     throw: bool = True,
 ) -> StaticSolution:
     """Static equilibria of `mech` under each load case of `loads`.
@@ -428,8 +382,6 @@ def solve_statics(
     - `rtol`: force rows below rtol·(load scale); `atol`: constraint rows below atol (mm).
     - `max_steps`: Newton iterations per case.
     - `chunk`: cases solved at once (larger tables are mapped in chunks to bound memory).
-    - `devices`: split the cases over this many local devices (an int, "all", or a list of
-      devices; default: `use_devices`, 1 unless set), each solving its share independently.
     - `throw`: raise `ConvergenceError` naming the first failed case; otherwise return the
       per-case `status`.
 
@@ -445,7 +397,7 @@ def solve_statics(
                            max_steps, chunk)
         sol = jax.tree.map(lambda a: a[0], sol)
     else:
-        sol = _solve_split(mech, loads, q0, rtol, atol, max_steps, chunk, devices)
+        sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
 
