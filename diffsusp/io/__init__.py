@@ -1,5 +1,6 @@
 """Files in and out: the native TOML model file, load-case and result tables (CSV, Parquet), and
-importers of other tools' models (Adams .adm, Chrono JSON).
+importers of other tools' models (Adams .adm, Chrono JSON), probed geometry (IGES points,
+lines and planes) and tyre property files (.tir, MF 5.2/6.1/6.2).
 
 `load_model(source)` reads any model diffsusp knows: a `.toml` native file, an Adams `.adm`
 dataset, a Chrono `.json` template, or the name of a built-in model (`diffsusp.models.ZOO`).
@@ -7,6 +8,7 @@ dataset, a Chrono `.json` template, or the name of a built-in model (`diffsusp.m
 
 import os
 
+from .iges import IgesFile, read_iges
 from .native import (
     ModelFile,
     model_from_toml,
@@ -23,8 +25,10 @@ from .tables import (
     results_table,
     write_table,
 )
+from .tir import TirFile, read_tir, tir_from_text, write_tir
 
 __all__ = [
+    "IgesFile", "TirFile", "read_iges", "read_tir", "tir_from_text", "write_tir",
     "ModelFile", "Table", "load_columns", "load_model", "load_model_file", "loads_from_table",
     "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml", "read_table",
     "results_table", "save_model", "write_model_toml", "write_table",
