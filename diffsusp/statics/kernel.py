@@ -117,38 +117,6 @@ def load_force(z, x0m, r0f, force, moment, global_frame: bool):
 # ----------------------------------------------------------------------------- constraints
 
 
-def joint_rows(kind: str, z, x0i, r0i, x0j, r0j, length0):
-    """Constraint rows Φ of one joint of `kind` (Adams definitions, spec stiffness §1.6).
-
-    `x0i`, `x0j` are the markers' offsets from their parts' reference points; `length0` the
-    design distance of the two markers (for 'distance')."""
-    xi, ri = _pose(z[:6], x0i, r0i)
-    xj, rj = _pose(z[6:], x0j, r0j)
-    d = xi - xj
-    (xi_, _, zi_), (xj_, yj_, zj_) = ri.T, rj.T
-    if kind == "spherical":
-        return d
-    if kind == "revolute":
-        return jnp.concatenate([d, jnp.stack([zi_ @ xj_, zi_ @ yj_])])
-    if kind == "cylindrical":
-        return jnp.stack([d @ xj_, d @ yj_, zi_ @ xj_, zi_ @ yj_])
-    if kind == "translational":
-        return jnp.stack([d @ xj_, d @ yj_, zi_ @ xj_, zi_ @ yj_, xi_ @ yj_])
-    if kind == "universal":
-        return jnp.concatenate([d, jnp.stack([zi_ @ zj_])])
-    if kind == "fixed":
-        return jnp.concatenate([d, jnp.stack([zi_ @ xj_, zi_ @ yj_, xi_ @ yj_])])
-    if kind == "inline":
-        return jnp.stack([d @ xj_, d @ yj_])
-    if kind == "inplane":
-        return jnp.stack([d @ zj_])
-    if kind == "perpendicular":
-        return jnp.stack([zi_ @ zj_])
-    if kind == "distance":
-        return jnp.stack([jnp.sqrt(d @ d) - length0])
-    raise ValueError(f"unknown joint kind '{kind}'")
-
-
 def _safe_norm(d):
     """|d| along the last axis, with zero (not NaN) derivatives at d = 0 (a spherical joint's
     design distance)."""
@@ -158,9 +126,12 @@ def _safe_norm(d):
 
 
 def selected_joint_rows(z, x0i, r0i, x0j, r0j, length0, select):
-    """Rows of one joint of any kind: `select` (r, 12) picks them (one-hot) among the candidate
-    quantities of `diffsusp.model.topology.JOINT_CANDIDATES`, so that joints of every kind are
-    one vmapped group. Same rows as `joint_rows`."""
+    """Constraint rows Φ of one joint of any kind (Adams definitions, spec stiffness §1.6):
+    `select` (r, 12) picks them (one-hot) among the candidate quantities of
+    `diffsusp.model.topology.JOINT_CANDIDATES` (d = x_I − x_J, its components on the J axes,
+    dot products of the I and J axes, |d| minus its design value `length0`), so that joints of
+    every kind are one vmapped group. `x0i`, `x0j` are the markers' offsets from their parts'
+    reference points."""
     xi, ri = _pose(z[:6], x0i, r0i)
     xj, rj = _pose(z[6:], x0j, r0j)
     d = xi - xj
@@ -177,11 +148,6 @@ def driver_row(z6, offset, x0m, direction):
 
 
 # ----------------------------------------------------------------------------- assembly
-
-
-def topology(mech: Mechanism):
-    """The mechanism's static index data (`diffsusp.model.topology.Topology`)."""
-    return mech.topology
 
 
 def bushing_params(mech):

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..model.mechanism import Loads, Mechanism
-from .kernel import assemble, to_internal, to_public
+from .kernel import assemble, to_internal
 
 
 def _ruiz(jac):
@@ -83,12 +83,6 @@ class Linearization(eqx.Module):
             _, dr = eqx.filter_jvp(lambda m, l: residual(m, l, self.y), (self.mech, self.loads),
                                    (d_mech, d_loads))
         return -self.solve(dr)
-
-    def public(self, dy):
-        """A tangent dy of the solver coordinates as (dq, dλ) in public coordinates."""
-        n = self.mech.topology.n
-        dq = jax.jvp(lambda y_: to_public(self.mech, y_), (self.y[:n],), (dy[:n],))[1]
-        return dq, dy[n:]
 
 
 def linearize(mech: Mechanism, loads: Loads, q, multipliers) -> Linearization:
