@@ -2,14 +2,16 @@
 
 spec: stiffness §1.9 (Q_ext + Q_int + Φ_qᵀλ = 0, Φ = c); DESIGN.md "Static equilibrium".
 
-Per load case: multipliers initialised by weighted least squares at the start pose; each Newton
-step solves the KKT system after a Ruiz row/column equilibration (forces in N, moments in N·mm and
-constraint rows in mm or radians differ by orders of magnitude); the step is capped so no Gibbs
-vector moves by more than 0.5 at once, applied to each part as a rigid screw motion (see
-`kernel.retract`), and backtracked on a scaled merit function. A case has converged when every
-force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with F_s the load scale and L the
-model's length scale) and every constraint row below `atol` mm; a case whose line search makes no
-progress for several steps is stopped as stalled (no equilibrium nearby).
+Per load case, from the start pose with zero multipliers (the first Newton step estimates them):
+each Newton step solves the KKT system after a Ruiz row/column equilibration (forces in N,
+moments in N·mm and constraint rows in mm or radians differ by orders of magnitude); the step is
+capped so no Gibbs vector moves by more than 0.5 at once, applied to each part as a rigid screw
+motion (see `kernel.retract`), and backtracked on a scaled merit function (every trial point is
+assembled with its Jacobian, which becomes the next step's if the point is accepted).
+A case has converged when every force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with
+F_s the load scale and L the model's length scale) and every constraint row below `atol` mm; a
+case whose line search makes no progress for several steps, or that has rejected 24 trial points
+in all, is stopped as stalled (no equilibrium nearby).
 
 The solution is differentiated implicitly: for a parameter tangent dθ, dy = −J⁻¹ ∂r/∂θ·dθ at the
 solution (one more linear solve), in forward and reverse mode; the Newton loop is never unrolled.
@@ -44,8 +46,8 @@ class StaticSolution(eqx.Module):
 
     **Fields:** `q` (mm and Gibbs vectors, 6 per part), `multipliers` (one per independent
     constraint row: N for length rows, N·mm for angular rows), `status` (0 converged,
-    1 max_steps reached, 2 non-finite), `iterations`, `residual` (largest force row relative to
-    the load scale), `constraint_error` (mm).
+    1 max_steps reached, 2 non-finite, 3 stalled), `iterations`, `residual` (largest force row
+    relative to the load scale), `constraint_error` (mm).
     """
 
     q: Float[Array, "*cases n"]
