@@ -5,6 +5,8 @@
 - `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
 - `examples`: the shipped example `.tir` files (`example_path("mf61")`);
 - `spec`: specification quantities (exact derivatives), macro-coefficients, similarity;
+- `rig`: the tyre on the K&C rig (the coupled tyre–suspension static equilibrium at a
+  commanded slip angle, exact sensitivities to the suspension's parameters);
 - `fit`: coefficients from bench data (robust Levenberg–Marquardt, exact Jacobians, σ and
   identifiability through `diffsusp.lsq`), one tyre or many in one batched call;
 
@@ -18,12 +20,12 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 ```
 """
 
-from . import examples, fit, mf6, mf89, spec, thesis_sets
+from . import examples, fit, mf6, mf89, rig, spec, thesis_sets
 from .examples import example_path
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
 from .spec import specification
 
 __all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
-           "check_limits", "evaluate", "example_path", "examples", "fit", "mf6", "mf89", "spec",
-           "specification", "thesis_sets"]
+           "check_limits", "evaluate", "example_path", "examples", "fit", "mf6", "mf89", "rig",
+           "spec", "specification", "thesis_sets"]

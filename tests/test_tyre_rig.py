@@ -1,0 +1,283 @@
+"""The tyre on the K&C rig (`diffsusp.tyre.rig`, issue 15 item 6).
+
+References:
+- a wheel held at its contact point by one six-axis bushing (axes along the global ones): a
+  contact-patch force then only translates the wheel, and an aligning torque M_z turns it by
+  exactly M_z/K_rz about the vertical (the load acts at the bushing's I marker; no small-angle
+  approximation). With the tyre's M_x, M_y switched off (λ_Mx = λ_My = 0) the coupled
+  equilibrium is the scalar equation α = α_cmd − M_z(α)/K_rz, solved here by bracketing with
+  the independent NumPy transcription of the Magic Formula (tests/test_tyre_oracle.py);
+- its derivative with respect to K_rz from the implicit function theorem on that scalar
+  equation; finite differences of the whole coupled solve; zero sensitivity to the bushing's
+  other stiffnesses;
+- the small-slip linear regime with the wheel's aligning-torque compliance steer;
+- the pseudo-McPherson: the rigid-suspension limit (bushings ×10⁸: the tyre's own force at the
+  commanded slip and the design camber) and the sensitivities of F_y and M_z to every bushing
+  stiffness (one forward-mode program) against central differences of the same solve.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+from test_tyre_oracle import mf_numpy
+
+from diffsusp import InputError, kc
+from diffsusp.io.tir import read_tir
+from diffsusp.model import MechanismBuilder
+from diffsusp.models import pseudo_mcpherson
+from diffsusp.tyre import MagicFormula6, example_path
+from diffsusp.tyre import rig as R
+
+K_T = 500.0  # N/mm
+K_RZ = 4.0e7  # N·mm/rad: about 0.7 kN·m/deg
+R_L = 300.0
+WHEEL_Y = -800.0  # a left wheel in the Adams/Car frame (x rearward, y right, z up)
+
+
+def bushing_wheel(k_rz=K_RZ, stiffen=1.0):
+    b = MechanismBuilder("tyre test wheel on one bushing")
+    b.part("hub")
+    b.marker("wheel_centre", "hub", (0.0, WHEEL_Y, R_L), z=(0.0, -1.0, 0.0), x=(1.0, 0.0, 0.0))
+    b.bushing("bush", parts=("hub", "ground"), at=(0.0, WHEEL_Y, 0.0), reuler_deg=(0.0, 0.0, 0.0),
+              k_trans=K_T * stiffen, k_rot=(1.0e8 * stiffen, 1.0e8 * stiffen, k_rz * stiffen))
+    b.load_point("contact_patch", part="hub", at=(0.0, WHEEL_Y, 0.0))
+    b.load_point("wheel_centre", marker="wheel_centre")
+    return b.build()
+
+
+CORNER = kc.Corner(wheel_centre="wheel_centre", contact_point="contact_patch",
+                   wheel_centre_load="wheel_centre", frame="adams", loaded_radius=R_L,
+                   design_load=4000.0)
+
+
+@pytest.fixture(scope="module")
+def tir():
+    return read_tir(example_path("mf61"))
+
+
+@pytest.fixture(scope="module")
+def tyre(tir):
+    # M_x and M_y off: the closed form needs a pure aligning torque at the bushing point.
+    return MagicFormula6.from_tir(tir).replace(LMX=0.0, LMY=0.0)
+
+
+def oracle(tir, fz, kappa, alpha, gamma):
+    """(F_x, F_y [N], M_z [N·mm]) of the NumPy transcription at LONGVL, INFLPRES."""
+    fx, fy, _, _, mz = mf_numpy(tir, fz, kappa, alpha, gamma, float(tir["LONGVL"]),
+                                float(tir["INFLPRES"]))
+    return float(fx), float(fy), 1000.0 * float(mz)
+
+
+def scalar_root(tir, fz, kappa, alpha_cmd, gamma, k_rz):
+    """α solving α = α_cmd − M_z(α)/K_rz."""
+    def h(a):
+        return a - alpha_cmd + oracle(tir, fz, kappa, a, gamma)[2] / k_rz
+
+    return brentq(h, alpha_cmd - 0.3, alpha_cmd + 0.3, xtol=1e-15, rtol=1e-15)
+
+
+CASES = dict(  # F_z, α_cmd, κ, camber offset (K&C sense)
+    fz=np.array([4000.0, 4000.0, 6000.0, 3000.0, 4000.0, 4000.0]),
+    slip_angle=np.array([0.0, 0.03, -0.06, 0.12, 0.02, 2e-4]),
+    slip_ratio=np.array([0.0, 0.0, 0.05, -0.03, 0.0, 0.0]),
+    camber_offset=np.array([0.0, 0.0, 0.0, 0.0, 0.02, 0.0]),
+)
+
+
+@pytest.fixture(scope="module")
+def wheel_rig(tyre):
+    return R.tyre_rig(bushing_wheel(), tyre, corner=CORNER)
+
+
+@pytest.fixture(scope="module")
+def wheel_jvp(wheel_rig):
+    """Solution and its forward derivative along K_rz, one program (values reused for FD)."""
+    tangent = jax.tree.map(jnp.zeros_like, eqx.filter(wheel_rig.mech, eqx.is_inexact_array))
+    tangent = eqx.tree_at(lambda m: m.bushings.k_rot, tangent,
+                          jnp.zeros_like(wheel_rig.mech.bushings.k_rot).at[0, 2].set(1.0))
+
+    @eqx.filter_jit
+    def run(mech, d_mech):
+        def f(m):
+            sol = R.solve(eqx.tree_at(lambda r: r.mech, wheel_rig, m), **CASES, throw=False)
+            return (sol.forces.fx, sol.forces.fy, sol.forces.mz, sol.slip_angle,
+                    sol.inclination, sol.steer, sol.status.astype(float))
+
+        return jax.jvp(f, (mech,), (d_mech,))
+
+    return run, tangent
+
+
+def test_bushing_wheel_matches_the_scalar_closed_form(wheel_rig, wheel_jvp, tir):
+    run, tangent = wheel_jvp
+    (fx, fy, mz, alpha, gamma, steer, status), _ = run(wheel_rig.mech, tangent)
+    assert np.all(np.asarray(status) == 0)
+    for c in range(CASES["fz"].size):
+        g = -CASES["camber_offset"][c]  # left wheel: ISO inclination = −camber
+        a = scalar_root(tir, CASES["fz"][c], CASES["slip_ratio"][c], CASES["slip_angle"][c], g,
+                        K_RZ)
+        want = oracle(tir, CASES["fz"][c], CASES["slip_ratio"][c], a, g)
+        np.testing.assert_allclose(float(alpha[c]), a, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(float(gamma[c]), g, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(float(steer[c]), want[2] / K_RZ, rtol=1e-9, atol=1e-14)
+        np.testing.assert_allclose([float(fx[c]), float(fy[c]), float(mz[c])], want,
+                                   rtol=1e-9, atol=1e-7)
+    # the aligning torque turns the wheel toward smaller |α| (compliance understeer)
+    assert abs(float(alpha[3])) < CASES["slip_angle"][3]
+
+
+def test_bushing_wheel_sensitivity_to_k_rz(wheel_rig, wheel_jvp, tir):
+    run, tangent = wheel_jvp
+    _, (dfx, dfy, dmz, dalpha, *_) = run(wheel_rig.mech, tangent)
+    h = 1e-4 * K_RZ
+    plus = run(bushing_wheel(K_RZ + h), tangent)[0]
+    minus = run(bushing_wheel(K_RZ - h), tangent)[0]
+    for c in range(CASES["fz"].size):
+        fz, kappa, a_cmd = (CASES[k][c] for k in ("fz", "slip_ratio", "slip_angle"))
+        g = -CASES["camber_offset"][c]
+        a = scalar_root(tir, fz, kappa, a_cmd, g, K_RZ)
+        e = 1e-6
+        d_fy, d_mz = ((oracle(tir, fz, kappa, a + e, g)[i] - oracle(tir, fz, kappa, a - e, g)[i])
+                      / (2 * e) for i in (1, 2))
+        mz = oracle(tir, fz, kappa, a, g)[2]
+        da = (mz / K_RZ**2) / (1.0 + d_mz / K_RZ)  # implicit function theorem
+        np.testing.assert_allclose(float(dalpha[c]), da, rtol=1e-6, atol=1e-22)
+        np.testing.assert_allclose(float(dfy[c]), d_fy * da, rtol=1e-6, atol=1e-18)
+        for k, d in ((0, dfx), (1, dfy), (2, dmz), (3, dalpha)):
+            fd = (float(plus[k][c]) - float(minus[k][c])) / (2 * h)
+            assert abs(float(d[c]) - fd) <= 1e-6 * max(abs(fd), 1e-14) + 1e-15, (c, k)
+
+
+def test_bushing_wheel_only_k_rz_matters_and_rigid_limit(wheel_rig, wheel_jvp, tir):
+    run, tangent = wheel_jvp
+    # translations and the other rotations carry no torque here: zero derivatives
+    zero = jnp.zeros((1, 3))
+    for field, axis in (("k_trans", 0), ("k_trans", 1), ("k_trans", 2), ("k_rot", 0),
+                        ("k_rot", 1)):
+        unit = zero.at[0, axis].set(1.0)
+        t = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), tangent,
+                        (unit, zero) if field == "k_trans" else (zero, unit))
+        _, d = run(wheel_rig.mech, t)
+        assert np.all(np.abs(np.asarray(d[1])) < 1e-12), (field, axis)
+        assert np.all(np.abs(np.asarray(d[3])) < 1e-18), (field, axis)
+    # rigid limit: the tyre's own force at the commanded slip
+    (fx, fy, mz, alpha, *_), _ = run(bushing_wheel(stiffen=1e8), tangent)
+    for c in range(CASES["fz"].size):
+        want = oracle(tir, CASES["fz"][c], CASES["slip_ratio"][c], CASES["slip_angle"][c],
+                      -CASES["camber_offset"][c])
+        np.testing.assert_allclose([float(fx[c]), float(fy[c]), float(mz[c])], want, rtol=1e-8,
+                                   atol=1e-6)
+
+
+def test_linear_regime_with_the_compliance_steer(wheel_rig, wheel_jvp, tir):
+    """F_y = F_y0 + C_α·α, M_z = M_z0 + C_M·α, α = α_cmd − Δψ with Δψ = σ·c·M_z and c the
+    aligning-torque compliance steer in the K&C sense (toe per toe-out torque; the left wheel's
+    toe-out axis is up and σ = −1), c = −1/K_rz here (what `kc.aligning_torque` reports for
+    this wheel): α = (α_cmd − σ·c·M_z0)/(1 + σ·c·C_M)."""
+    c = -1.0 / K_RZ
+    sigma = -1.0
+    e = 1e-6
+    f0 = oracle(tir, 4000.0, 0.0, 0.0, 0.0)
+    c_a = (oracle(tir, 4000.0, 0.0, e, 0.0)[1] - oracle(tir, 4000.0, 0.0, -e, 0.0)[1]) / (2 * e)
+    c_m = (oracle(tir, 4000.0, 0.0, e, 0.0)[2] - oracle(tir, 4000.0, 0.0, -e, 0.0)[2]) / (2 * e)
+    a_cmd = CASES["slip_angle"][5]
+    run, tangent = wheel_jvp
+    (_, fy, _, got, *_), _ = run(wheel_rig.mech, tangent)
+    alpha = (a_cmd - sigma * c * f0[2]) / (1.0 + sigma * c * c_m)
+    np.testing.assert_allclose(float(got[5]), alpha, rtol=2e-3)
+    np.testing.assert_allclose(float(fy[5]), f0[1] + c_a * alpha, rtol=2e-3)
+    # the compliance matters at this scale: the rigid answer is off by more than the tolerance
+    assert abs(alpha - a_cmd) > 1e-2 * abs(a_cmd)
+
+
+# ---------------------------------------------------------------------- pseudo-McPherson
+
+
+@pytest.fixture(scope="module")
+def pm_jvp(tir):
+    """F_y, M_z on the pseudo-McPherson at three commanded slip angles and their derivatives
+    with respect to all 18 bushing stiffnesses (forward mode), one compiled program."""
+    rig = R.tyre_rig(pseudo_mcpherson(), MagicFormula6.from_tir(tir))
+    alphas = jnp.radians(jnp.array([-3.0, 1.0, 2.0]))
+
+    @eqx.filter_jit
+    def run(k_trans, k_rot, spring):
+        def f(kt, kr):
+            m = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.springs.k,
+                                       m.springs.free_length), rig.mech, (kt, kr, *spring))
+            sol = R.solve(eqx.tree_at(lambda r: r.mech, rig, m), alphas, fz=4500.0,
+                          throw=False)
+            return jnp.stack([sol.forces.fy, sol.forces.mz, sol.slip_angle,
+                              sol.inclination, sol.status.astype(float)])
+
+        return f(k_trans, k_rot), jax.jacfwd(f, argnums=(0, 1))(k_trans, k_rot)
+
+    return rig, alphas, run
+
+
+def test_pm_rigid_limit_is_the_tyre_at_the_command(pm_jvp, tir):
+    rig, alphas, run = pm_jvp
+    b = rig.mech.bushings
+    sp = rig.mech.springs
+    pos = rig.mech.markers.position
+    length = jnp.linalg.norm(pos[sp.i_marker[0]] - pos[sp.j_marker[0]])
+    # a spring 10⁵ times stiffer with the same force at design (free length moved)
+    stiff = (sp.k * 1e5, length - (length - sp.free_length) / 1e5)
+    (value, _) = run(b.k_trans * 1e5, b.k_rot * 1e5, stiff)
+    value = np.asarray(value)
+    assert np.all(value[4] == 0)
+    camber0 = float(kc.corner_geometry(rig.mech, rig.corner,
+                                       jnp.zeros(rig.mech.n_coordinates))["camber"])
+    # left wheel: γ = −camber; what is left of the compliance (×10⁻⁵) is ~1e-7 rad
+    np.testing.assert_allclose(value[3], -camber0, atol=1e-6)
+    for c, a in enumerate(np.asarray(alphas)):
+        np.testing.assert_allclose(value[2, c], a, atol=1e-7)
+        want = oracle(tir, 4500.0, 0.0, a, -camber0)
+        np.testing.assert_allclose(value[:2, c], want[1:], rtol=1e-4)
+
+
+def test_pm_sensitivities_to_bushing_stiffnesses_match_differences(pm_jvp):
+    rig, alphas, run = pm_jvp
+    b = rig.mech.bushings
+    spring = (rig.mech.springs.k, rig.mech.springs.free_length)
+    value, (d_kt, d_kr) = run(b.k_trans, b.k_rot, spring)
+    value = np.asarray(value)
+    assert np.all(value[4] == 0)
+    # compliance steer and camber change the force: F_y differs from the rigid one
+    assert np.all(np.abs(value[2] - np.asarray(alphas)) > 1e-5)
+    checked = 0
+    for field, d in (("k_trans", d_kt), ("k_rot", d_kr)):
+        k0 = np.asarray(getattr(b, field))
+        d = np.asarray(d)  # (5, cases, bushings, 3)
+        for e in range(k0.shape[0]):
+            for a in range(3):
+                if k0[e, a] == 0.0:
+                    continue
+                h = 1e-4 * k0[e, a]
+                kp, km = (jnp.asarray(k0).at[e, a].add(s) for s in (h, -h))
+                if field == "k_trans":
+                    vp, vm = run(kp, b.k_rot, spring)[0], run(km, b.k_rot, spring)[0]
+                else:
+                    vp, vm = run(b.k_trans, kp, spring)[0], run(b.k_trans, km, spring)[0]
+                fd = (np.asarray(vp) - np.asarray(vm))[:2] / (2 * h)
+                got = d[:2, :, e, a]
+                scale = np.abs(value[:2]).max(axis=1, keepdims=True) / k0[e, a]
+                np.testing.assert_allclose(got, fd, rtol=1e-4, atol=1e-7 * scale.max())
+                checked += 1
+    assert checked >= 15
+
+
+def test_bad_inputs_are_named(wheel_rig, tyre):
+    with pytest.raises(InputError, match="fz must be a positive"):
+        R.solve(wheel_rig, 0.01, fz=-10.0)
+    with pytest.raises(InputError, match="finite"):
+        R.solve(wheel_rig, math.nan)
+    with pytest.raises(InputError, match="MagicFormula6"):
+        R.tyre_rig(bushing_wheel(), object(), corner=CORNER)
+    with pytest.raises(InputError, match="longitudinal_at"):
+        R.tyre_rig(bushing_wheel(), tyre, corner=CORNER, longitudinal_at="hub")
