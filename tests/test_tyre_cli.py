@@ -108,3 +108,15 @@ def test_fit_mf1989(tmp_path):
     ident = dict(zip(out["names"], out["identifiable"], strict=True))
     assert not ident["a5"] and not ident["a111"]
     assert (tmp_path / "fig" / "fy_measured_vs_fitted.png").exists()
+
+
+def test_rig_bad_inputs_exit_2():
+    """`tyre rig` (the tyre on the K&C rig): bad input is named before anything compiles."""
+    r = _run("rig", TIR, "--model", "no_such_model")
+    assert r.exit_code == 2 and "neither a built-in model" in _text(r), r.output
+    r = _run("rig", TIR, "--slip-angle", "a:b")
+    assert r.exit_code == 2 and "not a range" in _text(r), r.output
+    r = _run("rig", TIR, "--longitudinal-at", "hub")
+    assert r.exit_code == 2 and "longitudinal_at must be" in _text(r), r.output
+    r = _run("rig", TIR, "--fz", "-5")
+    assert r.exit_code == 2 and "fz must be a positive" in _text(r), r.output

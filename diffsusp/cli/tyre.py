@@ -10,6 +10,11 @@
   on (inputs beyond the file's ranges are warned about and saturated; `--no-limits`).
 - `spec FILE.tir [--loads 2000,4000,6000]`: the specification quantities over loads (cornering
   and slip stiffness, trail, peaks, camber stiffness, values at zero slip).
+- `rig FILE.tir --model pseudo_mcpherson --slip-angle -4:4:9 [--fz 4500]`: the tyre on the
+  K&C rig (`diffsusp.tyre.rig`): the coupled tyre–suspension equilibrium at commanded slip
+  angles [deg, ISO-W], slip ratio and camber offset [deg, K&C sense]; output per case: the
+  tyre's effective slip angle and inclination, the corner's toe and camber, FX, FY [N], MX,
+  MY, MZ [N·m] (ISO-W); `--out` a table, `--json`.
 - `fit DATA --model mf61|mf62|mf52|mf1989 [--start FILE.tir] --out FITTED.tir`: coefficients from
   bench data (columns as `eval`'s plus the measured FX, FY, MZ [N, N·m]); `--mode` chooses the
   coefficient groups (`diffsusp.tyre.fit.GROUPS`), fitted one after the other; report to the
@@ -192,6 +197,85 @@ def spec_command(
     for r in rows:
         t.add_row(*(f"{r[k] * s:.5g}" for k, _, s in show))
     console().print(t)
+
+
+@tyre_app.command("rig")
+def rig_command(
+    file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
+    model: Annotated[str, typer.Option(
+        help="Suspension: a built-in model name or a model file.")] = "pseudo_mcpherson",
+    slip_angle: Annotated[str, typer.Option(
+        help="Commanded slip angles [deg, ISO-W]: start:stop:count or one number.")]
+    = "-4:4:9",
+    fz: Annotated[float | None, typer.Option(
+        help="Vertical load [N] (default: the corner's design load).")] = None,
+    slip_ratio: Annotated[float, typer.Option(help="Slip ratio κ [-].")] = 0.0,
+    camber_offset: Annotated[float, typer.Option(
+        help="Added to the corner's camber [deg, top outboard +].")] = 0.0,
+    longitudinal_at: Annotated[str, typer.Option(
+        help="contact_patch (brake torque on the carrier) | wheel_centre (drive shaft).")]
+    = "contact_patch",
+    out: Annotated[Path | None, typer.Option(help="Results table (.csv or .parquet).")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
+):
+    """The tyre on the K&C rig: forces at commanded slip with the suspension's compliance."""
+    import jax.numpy as jnp
+
+    from diffsusp.io.tables import write_table
+    from diffsusp.tyre import rig as tyre_rig
+
+    from .kc import parse_range
+
+    with cli_errors():
+        enable_x64()
+        _, tyre = _load(file)
+        mech = _suspension(model)
+        alpha = np.radians(parse_range(slip_angle, "slip-angle"))
+        rig = tyre_rig.tyre_rig(mech, tyre, longitudinal_at=longitudinal_at)
+        sol = tyre_rig.solve(rig, jnp.asarray(alpha), fz=fz, slip_ratio=slip_ratio,
+                             camber_offset=math.radians(camber_offset))
+        deg = 180.0 / math.pi
+        res = {"SA_CMD": alpha * deg, "SA": np.asarray(sol.slip_angle) * deg,
+               "IA": np.asarray(sol.inclination) * deg, "TOE": np.asarray(sol.toe) * deg,
+               "CAMBER": np.asarray(sol.camber) * deg,
+               "FZ": np.full(alpha.size, float(rig.corner.design_load if fz is None else fz)),
+               "FX": np.asarray(sol.forces.fx), "FY": np.asarray(sol.forces.fy),
+               "MX": np.asarray(sol.forces.mx) / 1000.0,
+               "MY": np.asarray(sol.forces.my) / 1000.0,
+               "MZ": np.asarray(sol.forces.mz) / 1000.0}
+        units = {"SA_CMD": "deg", "SA": "deg", "IA": "deg", "TOE": "deg", "CAMBER": "deg",
+                 "FZ": "N", "FX": "N", "FY": "N", "MX": "N·m", "MY": "N·m", "MZ": "N·m"}
+        if out is not None:
+            write_table(out, res, units)
+    if json_out:
+        print_json([{k: float(v[i]) for k, v in res.items()} for i in range(alpha.size)])
+        return
+    c = console()
+    if out is not None:
+        c.print(f"{alpha.size} cases written to {out}")
+        return
+    t = RichTable(box=box.SIMPLE, title=f"{mech.name} with {file.name} (ISO-W tyre axes)")
+    for k in res:
+        t.add_column(f"{k} [{units[k]}]", justify="right")
+    for i in range(alpha.size):
+        t.add_row(*(f"{res[k][i]:.5g}" for k in res))
+    c.print(t)
+
+
+def _suspension(name: str):
+    """A built-in model (`diffsusp.models.ZOO`) or a model file (`diffsusp.io.load_model`)."""
+    from diffsusp.errors import InputError
+    from diffsusp.models import ZOO
+
+    if name in ZOO:
+        return ZOO[name]()
+    path = Path(name)
+    if not path.exists():
+        raise InputError(f"model '{name}' is neither a built-in model ({', '.join(ZOO)}) nor "
+                         "an existing file (.toml, .adm, .json).")
+    from diffsusp.io import load_model
+
+    return load_model(path)
 
 
 @tyre_app.command("fit")
