@@ -16,7 +16,10 @@
 #   curves of one tyre at all loads onto one primitive;
 # - a `.tir` property file (MF 6.1) evaluated in combined slip, with its specification
 #   quantities (exact derivatives);
-# - a fit from noisy synthetic bench data with its report: σ, σ %, what the data cannot see.
+# - a fit from noisy synthetic bench data with its report: σ, σ %, what the data cannot see;
+# - the tyre on the K&C rig: the pseudo-McPherson's wheel at commanded slip angles, where the
+#   cornering force and aligning torque turn and tilt the wheel (compliance steer and camber),
+#   with the exact sensitivities of F_y to every bushing stiffness.
 #
 # Units: the 1989 sets are in the thesis's units (F_z kN, slip in degrees, M_z N·m); the MF 6.x
 # interface is the library's (N, rad, N·mm).
@@ -129,3 +132,62 @@ print("true values:", {k: round(float(tyre[k]), 6) for k in names})
 
 # %%
 figures = F.plot_fit(fitted, data, combined=False)
+
+# %% [markdown]
+# ## The tyre on the K&C rig
+# The MF 6.1 tyre at the pseudo-McPherson's contact patch (`diffsusp.tyre.rig`), F_z = 4.5 kN, at
+# commanded slip angles (ISO-W: the slip angle the tyre would have on a rigid suspension; a
+# positive α pushes the tyre to its right, here inboard on the left wheel). The tyre's force
+# and aligning torque deflect the bushings: the wheel steers (the effective α differs from the
+# command) and cambers (the inclination changes), and the tyre answers with another force —
+# one coupled equilibrium, solved by Newton with exact Jacobians. `jax.jacfwd` through it gives
+# the exact sensitivity of F_y to each bushing stiffness (implicit differentiation of the
+# coupled root, no finite differences), in the same compiled program.
+
+# %%
+import equinox as eqx
+
+from diffsusp.models import pseudo_mcpherson
+from diffsusp.tyre import rig as tyre_rig
+
+rig = tyre_rig.tyre_rig(pseudo_mcpherson(), tyre)
+commands = jnp.radians(jnp.array([-4.0, -2.0, 1.0, 3.0]))
+
+
+@eqx.filter_jit
+def cornering(k_trans, k_rot):
+    def f(kt, kr):
+        mech = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), rig.mech, (kt, kr))
+        sol = tyre_rig.solve(eqx.tree_at(lambda r: r.mech, rig, mech), commands, fz=4500.0,
+                             throw=False)
+        return jnp.stack([sol.forces.fy, sol.forces.mz, sol.slip_angle, sol.inclination,
+                          sol.status.astype(float)])
+
+    return f(k_trans, k_rot), jax.jacfwd(lambda kt, kr: f(kt, kr)[0], argnums=(0, 1))(
+        k_trans, k_rot)
+
+
+b = rig.mech.bushings
+value, (d_kt, d_kr) = cornering(b.k_trans, b.k_rot)
+rigid = evaluate(tyre, 4500.0, 0.0, commands, value[3])  # the same inclination, no steer
+for i, a in enumerate(np.degrees(np.asarray(commands))):
+    print(f"α_cmd {a:5.1f}°: α {np.degrees(float(value[2, i])):6.3f}°, γ "
+          f"{np.degrees(float(value[3, i])):6.3f}°, F_y {float(value[0, i]):7.0f} N "
+          f"(rigid steer {float(rigid.fy[i]):7.0f} N), M_z {float(value[1, i]) / 1e3:6.1f} N·m"
+          f", converged {int(value[4, i]) == 0}")
+
+# %% [markdown]
+# Normalised sensitivities (K/F_y)·∂F_y/∂K at α_cmd = 3°: which bushing stiffnesses set the
+# cornering force the wheel delivers (bushing F has no torsional stiffness, K_rz = 0).
+
+# %%
+case = 3
+names = [f"{n}.{a}" for n in b.names for a in ("Kx", "Ky", "Kz", "Krx", "Kry", "Krz")]
+k_all = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1).ravel()
+d_all = np.concatenate([np.asarray(d_kt)[case], np.asarray(d_kr)[case]], axis=1).ravel()
+normalised = k_all * d_all / float(value[0, case])
+order = np.argsort(-np.abs(normalised))[:10]
+fig, ax = plt.subplots(figsize=(6, 3.5))
+ax.barh([names[i] for i in order][::-1], normalised[order][::-1])
+ax.set(xlabel="(K / F_y) · ∂F_y/∂K", title="F_y at α_cmd = 3°, pseudo-McPherson")
+fig.tight_layout()
