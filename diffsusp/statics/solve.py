@@ -23,11 +23,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from .kernel import assemble_batch, retract, to_internal, to_public
+from .checks import with_flags
 from .linearize import linearize_internal, scaled_solve
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
@@ -47,7 +48,12 @@ class StaticSolution(eqx.Module):
     **Fields:** `q` (mm and Gibbs vectors, 6 per part), `multipliers` (one per independent
     constraint row: N for length rows, N·mm for angular rows), `status` (0 converged,
     1 max_steps reached, 2 non-finite, 3 stalled), `iterations`, `residual` (largest force row
-    relative to the load scale), `constraint_error` (mm).
+    relative to the load scale), `constraint_error` (mm), `stable` (the reduced tangent
+    stiffness is positive definite) and `law_valid` (every bushing's projected angles within
+    their validity), both False for a case that did not converge (`diffsusp.statics.checks`).
+    The two flags are computed when `solve_statics` / `solve_sweep` are called with concrete
+    arrays; under a transformation (jit, vmap, grad) they are None: call
+    `checks.equilibrium_flags` there if they are needed.
     """
 
     q: Float[Array, "*cases n"]
@@ -56,6 +62,8 @@ class StaticSolution(eqx.Module):
     iterations: Int[Array, "*cases"]
     residual: Float[Array, "*cases"]
     constraint_error: Float[Array, "*cases"]
+    stable: Bool[Array, "*cases"] | None = None
+    law_valid: Bool[Array, "*cases"] | None = None
 
     @property
     def converged(self):
@@ -400,6 +408,7 @@ def solve_statics(
         sol = jax.tree.map(lambda a: a[0], sol)
     else:
         sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+    sol = with_flags(mech, loads, sol)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
 
@@ -423,5 +432,6 @@ def solve_sweep(
         raise ValueError("solve_sweep needs loads with a leading case axis (the path).")
     q0 = _start(mech, loads, q0, None)
     sol = _solve_path(mech, loads, q0, rtol, atol, max_steps)
+    sol = with_flags(mech, loads, sol)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_sweep")
