@@ -12,7 +12,10 @@ every assumption or reconstructed value. Units: mm, N, N·mm, rad.
   rack (geometric identification, spec geometry §4.7).
 - `front_axle_table_3_3`: the chapter 3 full-vehicle front axle, ideal joints (kinematic).
 
-`ZOO` maps a name to a zero-argument builder, for parametrised tests.
+`ZOO` maps a name to a zero-argument builder, for parametrised tests. `STOP_VARIANTS` maps
+the names of the axles built with bump and rebound stops (`stops=True`, Adams/Car-style, see
+each builder) to their builders: use them for loads over the whole K&C envelope; the stop-free
+models are the thesis's reference models.
 """
 
 from collections.abc import Callable
@@ -39,8 +42,16 @@ ZOO: dict[str, Callable[[], Mechanism]] = {
 }
 """Name → zero-argument builder of every built-in model variant."""
 
+STOP_VARIANTS: dict[str, Callable[[], Mechanism]] = {
+    "pseudo_mcpherson_stops": lambda: pseudo_mcpherson(stops=True),
+    "double_wishbone_stops": lambda: double_wishbone(stops=True),
+    "double_wishbone_bushings_stops": lambda: double_wishbone(bushings=True, stops=True),
+}
+"""Name → zero-argument builder of the axles with bump and rebound stops."""
+
 __all__ = [
-    "DOUBLE_WISHBONE_DESIGN_LOAD", "TABLE_4_4", "TABLE_5_1", "ZOO", "crank_slider",
+    "DOUBLE_WISHBONE_DESIGN_LOAD", "STOP_VARIANTS", "TABLE_4_4", "TABLE_5_1", "ZOO",
+    "crank_slider",
     "double_wishbone", "front_axle_table_3_3", "isolated_bushing", "pseudo_mcpherson",
     "pseudo_mcpherson_steering", "thesis_load_cases", "two_bushing_coupler",
 ]

@@ -54,6 +54,18 @@ whose tilting stiffness is k_radial·d²/2 ≈ 5000·185²/2 = 8.6e7 and 5.8e8 N
 that order. (A much softer 1e6 lets the arms tilt 30–50° under the design load, far beyond the
 projected angles' 15° validity, and the equilibria do not converge.)"""
 
+BUMP_STOP = dict(length=575.0, k=200.0, cubic=4.0)
+"""Bump stop of `double_wishbone(stops=True)` on the shock length |shock_chassis − shock_arm|
+(mm, N/mm, N/mm³): engaged below 575 mm, 37.6 mm of shock compression from the design length
+612.6 mm (about +75 mm of wheel travel; the shock moves ≈ 0.5 mm per mm of wheel travel),
+force 200·p + 4·p³ N (6 kN at 10 mm, 36 kN at 20 mm of penetration). Chosen: the JSON has
+no stop data."""
+
+REBOUND_STOP = dict(length=662.0, k=400.0, cubic=8.0)
+"""Rebound stop of `double_wishbone(stops=True)` on the shock length (mm, N/mm, N/mm³): engaged
+above 662 mm, 49.4 mm of shock extension (about −100 mm of wheel travel), force
+400·p + 8·p³ N. Chosen: the JSON has no stop data."""
+
 DOUBLE_WISHBONE_DESIGN_LOAD = 9018.1007
 """Vertical contact-patch load (N) for which the design position is the equilibrium of the
 revolute model (see `double_wishbone`)."""
@@ -72,7 +84,7 @@ def _pivot_frame(front, back, outer) -> np.ndarray:
 
 def double_wishbone(bushings: bool = False, wheel_travel: bool = False, *,
                     bushing_k_trans: float = BUSHING_K_TRANS,
-                    bushing_k_rot: float = BUSHING_K_ROT) -> Mechanism:
+                    bushing_k_rot: float = BUSHING_K_ROT, stops: bool = False) -> Mechanism:
     """The Chrono::Vehicle generic double wishbone, left side, as a K&C half axle.
 
     **Source:** Project Chrono, `data/vehicle/generic/suspension/DoubleWishbone.json`
@@ -134,19 +146,28 @@ def double_wishbone(bushings: bool = False, wheel_travel: bool = False, *,
     the joint reactions (the lower bushing carries most of the 18 kN spring force) now deflect
     the bushings. Wheel rate about the design position ≈ 88 N/mm (revolute model).
 
+    **Stops** (`stops=True`): a bump stop `'bump_stop'` and a rebound stop `'rebound_stop'` on
+    the shock (damper) line, `shock_chassis` (ground) to `shock_arm` (lower arm), where an
+    Adams/Car template puts them: bump stop engaged below 575 mm (37.6 mm of shock compression
+    from the 612.6 mm design length, about +75 mm of wheel travel), 200·p + 4·p³ N; rebound stop
+    engaged above 662 mm (49.4 mm of extension, about −100 mm of wheel travel), 400·p + 8·p³ N
+    (`BUMP_STOP`, `REBOUND_STOP`; the shock moves about 0.5 mm per mm of wheel travel, so the
+    laws are four times softer at the wheel). Neither is engaged at the design load.
+
     **Arguments:**
 
     - `bushings`: replace the two control-arm revolutes by six-axis bushings.
     - `wheel_travel`: add the wheel-travel driver.
     - `bushing_k_trans`: bushing translational stiffness (N/mm), with `bushings=True`.
     - `bushing_k_rot`: bushing rotational stiffness about the two locked axes (N·mm/rad).
+    - `stops`: add the bump and rebound stops on the shock line.
 
     **Returns:** the `Mechanism`.
     """
     p = HARDPOINTS
     b = MechanismBuilder(
         "Chrono generic double wishbone" + (" (bushings)" if bushings else "")
-        + (" (wheel travel)" if wheel_travel else "")
+        + (" (wheel travel)" if wheel_travel else "") + (" (stops)" if stops else "")
     )
     for part in ("upper_control_arm", "lower_control_arm", "upright"):
         b.part(part)
@@ -176,6 +197,9 @@ def double_wishbone(bushings: bool = False, wheel_travel: bool = False, *,
              free_length=SPRING_FREE_LENGTH)
     b.marker("shock_chassis", "ground", p["shock_chassis"])
     b.marker("shock_arm", "lower_control_arm", p["shock_arm"])
+    if stops:
+        b.stop("bump_stop", "shock_chassis", "shock_arm", kind="bump", **BUMP_STOP)
+        b.stop("rebound_stop", "shock_chassis", "shock_arm", kind="rebound", **REBOUND_STOP)
 
     x, y, z = p["spindle"]
     b.marker("wheel_centre", "upright", (x, y, z), z=(0.0, 1.0, 0.0), x=(-1.0, 0.0, 0.0))

@@ -49,11 +49,27 @@ SPRING_FREE_LENGTH = 357.32158331
 """Spring free length (mm) that makes Table 2.2 the equilibrium under `DESIGN_LOAD` (see the
 builder's docstring for the derivation)."""
 
+BUMP_STOP = dict(length=70.0, k=50.0, cubic=1.0)
+"""Bump stop of `pseudo_mcpherson(stops=True)` on the strut length |L4 − L5| (mm, N/mm, N/mm³):
+engaged below 70 mm, i.e. 60.0 mm of strut compression from the design length 130.0 mm (about
++73 mm of wheel travel above the 4500 N ride height), force 50·p + 1.0·p³ N at p mm of
+penetration (1.5 kN at 10 mm, 9 kN at 20 mm, 28.5 kN at 30 mm: a progressive elastomer bump stop
+like the force–deflection curve of an Adams/Car `.bum` property file). Chosen: the thesis
+tabulates no stop."""
+
+REBOUND_STOP = dict(length=225.0, k=100.0, cubic=2.0)
+"""Rebound stop of `pseudo_mcpherson(stops=True)` on the strut length (mm, N/mm, N/mm³): engaged
+above 225 mm, i.e. 95.0 mm of strut extension from design (about −100 mm of wheel travel, reached
+near 2 050 N of vertical load), force 100·p + 2.0·p³ N (3 kN at 10 mm, 18 kN at 20 mm), stiffer
+than the bump stop like the hydraulic/elastomer rebound stop inside a damper (Adams/Car `.reb`).
+Chosen: the thesis tabulates no stop."""
+
 _NMM_PER_DEG_TO_RAD = 180.0 / math.pi
 
 
 def pseudo_mcpherson(wheel_travel: bool = False, *,
-                     spring_free_length: float = SPRING_FREE_LENGTH) -> Mechanism:
+                     spring_free_length: float = SPRING_FREE_LENGTH,
+                     stops: bool = False) -> Mechanism:
     """The pseudo-McPherson front half axle of the thesis's K&C tests, nominal stiffnesses.
 
     **Source:** spec "suspension_stiffness_identification" §0 (Tables 2.1, 2.2 and the parts
@@ -148,23 +164,45 @@ def pseudo_mcpherson(wheel_travel: bool = False, *,
     their own axes, held only by the bushings' Krx, are as soft as the wheel travel but move no
     joint.)
 
+    **Stops** (`stops=True`; the thesis's model has none, so the identification tests and the
+    reference numbers use the stop-free model): a bump stop `'bump_stop'` and a rebound stop
+    `'rebound_stop'` on the strut length, between the spring seats L4 (strut) and L5 (hub
+    carrier), where an Adams/Car MacPherson template puts them (between the damper rod and the
+    damper tube, with a clearance from the design length and a force–penetration law). Bump
+    stop engaged below 70 mm (60 mm of strut compression from the 130.0 mm design length, about
+    +73 mm of wheel travel), 50·p + 1.0·p³ N; rebound stop engaged above 225 mm (95 mm of
+    extension, about −100 mm of wheel travel), 100·p + 2.0·p³ N (`BUMP_STOP`, `REBOUND_STOP`).
+    Why they are needed: inside the thesis envelope (vertical 1 500–7 500 N, lateral and
+    longitudinal ±4 000 N at the contact patch) the stop-free model has no equilibrium for
+    about 8–10 % of the load combinations. Large vertical load with a forward (traction)
+    longitudinal force pushes the wheel up until the spring is ~20 mm long and the tangent
+    stiffness vanishes (a limit point), and a large inboard lateral force at low vertical load
+    pulls the wheel down by 170–200 mm where the arms' and the spring's geometric softening
+    again end the equilibrium branch (the stability margin of `diffsusp.statics.checks` falls to
+    zero along a load ramp, so it is the model, not the solver). With the stops the strut stays
+    between 58 and 236 mm over the envelope, the wheel centre between −121 and +92 mm, and every
+    case has a stable equilibrium. Under pure vertical load the stops change nothing between
+    2 050 and 6 500 N.
+
     **Arguments:**
 
     - `wheel_travel`: add the wheel-travel driver.
     - `spring_free_length`: spring free length (mm); the default is the reconstructed value.
+    - `stops`: add the bump and rebound stops.
 
     **Returns:** the `Mechanism`.
     """
-    return _builder(wheel_travel, spring_free_length).build()
+    return _builder(wheel_travel, spring_free_length, stops=stops).build()
 
 
 def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: bool = False,
-             strut_joint: str = "translational") -> MechanismBuilder:
+             strut_joint: str = "translational", stops: bool = False) -> MechanismBuilder:
     """The builder of `pseudo_mcpherson`. `tie_rod_part=True` models the tie rod as a part
     between two ball joints and `strut_joint='cylindrical'` uses the physical strut joint: the
     two free modes the public model removes (kept for tests of `validate`)."""
     p, e = JOINT_POSITIONS, JOINT_REULER_DEG
-    b = MechanismBuilder("pseudo-McPherson half axle" + (" (wheel travel)" if wheel_travel else ""))
+    b = MechanismBuilder("pseudo-McPherson half axle" + (" (wheel travel)" if wheel_travel else "")
+                         + (" (stops)" if stops else ""))
     for part in ("front_arm", "rear_arm", "strut", "hub_carrier"):
         b.part(part)
 
@@ -203,6 +241,11 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
     b.joint("front_ball_joint", "spherical", parts=("front_arm", "hub_carrier"), at=p["L8"])
     b.spring("spring", parts=("strut", "hub_carrier"), at=(p["L4"], p["L5"]), k=SPRING_RATE,
              free_length=spring_free_length)
+    if stops:
+        b.stop("bump_stop", parts=("strut", "hub_carrier"), at=(p["L4"], p["L5"]), kind="bump",
+               **BUMP_STOP)
+        b.stop("rebound_stop", parts=("strut", "hub_carrier"), at=(p["L4"], p["L5"]),
+               kind="rebound", **REBOUND_STOP)
 
     x9, y9, z9 = p["L9"]
     b.load_point("contact_patch", part="hub_carrier", at=(x9, y9, z9 - LOADED_RADIUS))
