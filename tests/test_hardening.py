@@ -373,7 +373,8 @@ def _fake_solutions(stop_after, interrupt):
         n = loads.n_cases
         return types.SimpleNamespace(
             q=np.zeros((n, 6 * len(mech.parts))), status=np.zeros(n, int),
-            iterations=np.ones(n, int), residual=np.zeros(n), constraint_error=np.zeros(n))
+            iterations=np.ones(n, int), residual=np.zeros(n), constraint_error=np.zeros(n),
+            stable=np.ones(n, bool), law_valid=np.ones(n, bool))
 
     return solve
 
@@ -402,6 +403,7 @@ def test_an_interrupted_simulate_leaves_the_finished_cases_on_disk(
     table = read_table(out)
     np.testing.assert_array_equal(table["case"], np.arange(5))
     np.testing.assert_array_equal(table["status"], [0, 0, -1, -1, -1])
+    np.testing.assert_array_equal(table["stable"], [1, 1, 0, 0, 0])  # not solved: not flagged
     np.testing.assert_array_equal(table["centre.fx"], [10, 20, 30, 40, 50])
     assert np.all(table["arm.x"][:2] == 0) and np.all(np.isnan(table["arm.x"][2:]))
     assert_clean(result)

@@ -52,6 +52,9 @@ def enable_x64():
     """float64, and a persistent compilation cache so that the second run of a command does
     not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
     string to disable)."""
+    from .._compile import set_xla_flags
+
+    set_xla_flags(os.environ)  # before JAX starts its backend
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -211,6 +214,22 @@ def check_output(path, *, suffixes=None, what: str = "output", directory: bool =
     if not os.access(folder, os.W_OK | os.X_OK):
         raise fail(f"cannot write the {what} to {text}: the folder {folder} is not writable.",
                    EXIT_BAD_INPUT)
+
+
+def load_model_file(model, *, check: bool = True):
+    """`diffsusp.io.load_model_file`, and the built-in axles with bump and rebound stops
+    (`diffsusp.models.STOP_VARIANTS`, e.g. 'pseudo_mcpherson_stops'), which come with the load
+    tables of the model they add the stops to."""
+    import dataclasses
+
+    from ..io import load_model_file as load
+    from ..models import STOP_VARIANTS
+
+    text = os.fspath(model)
+    if text in STOP_VARIANTS and not os.path.exists(text):
+        base = load(text.removesuffix("_stops"), check=False)
+        return dataclasses.replace(base, mechanism=STOP_VARIANTS[text]())
+    return load(model, check=check)
 
 
 def print_json(obj) -> None:

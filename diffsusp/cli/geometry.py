@@ -38,7 +38,7 @@ from .identify import (
 
 def _load(model, measurements, reorder):
     from .. import measure
-    from ..io import load_model_file
+    from .common import load_model_file
 
     model_file = load_model_file(model)
     mech = model_file.mechanism

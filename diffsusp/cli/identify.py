@@ -106,7 +106,7 @@ def direct(
     _check_paths(out, write_model)
     enable_x64()
     from .. import identify, measure
-    from ..io import load_model_file
+    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model)
@@ -409,7 +409,7 @@ def iterative_command(
     enable_x64()
     from .. import measure
     from ..identify.iterative import iterative
-    from ..io import load_model_file
+    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model)
@@ -656,7 +656,7 @@ def fit_command(
     from .. import measure
     from ..identify.data import from_measurements
     from ..identify.least_squares import least_squares
-    from ..io import load_model_file
+    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model)

@@ -8,7 +8,9 @@ command line: mm, N, N·m; angles printed in degrees.
 
 Output: a table with each metric's value at the reference case (zero travel / force, or the
 design load) and its range over the event; `--json` prints every value of every case instead
-(display units, stated per metric); `--out DIR` writes the K&C curves as PNG and SVG.
+(display units, stated per metric), with each case's `status`, `stable` and `law_valid`;
+`--out DIR` writes the K&C curves as PNG and SVG. Converged cases that are unstable or turn a
+bushing beyond its law's validity are named in a warning (exit 0).
 Exit codes (`cli.common`): 2 bad input (unknown model, file or event, bad range), 3 a case did
 not converge, 4 a model that cannot be solved.
 """
@@ -33,6 +35,7 @@ from .common import (
     fail,
     print_json,
     show_warnings,
+    warn,
 )
 
 EVENTS = {
@@ -78,17 +81,21 @@ def parse_range(text: str, what: str):
 
 
 def _model(name: str):
-    """A built-in model (`diffsusp.models.ZOO`) or a model file (`diffsusp.io.load_model`)."""
+    """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file
+    (`diffsusp.io.load_model`)."""
     from diffsusp.errors import InputError
-    from diffsusp.models import ZOO
+    from diffsusp.models import STOP_VARIANTS, ZOO
 
     if name in ZOO:
         return ZOO[name]()
+    if name in STOP_VARIANTS and not pathlib.Path(name).exists():
+        return STOP_VARIANTS[name]()
     path = pathlib.Path(name)
     if not path.exists():
         raise InputError(
-            f"model '{name}' is neither a built-in model ({', '.join(ZOO)}) nor an existing "
-            "file. Give a built-in name or the path of a model file (.toml, .adm, .json)."
+            f"model '{name}' is neither a built-in model ({', '.join([*ZOO, *STOP_VARIANTS])}) "
+            "nor an existing file. Give a built-in name or the path of a model file (.toml, "
+            ".adm, .json)."
         )
     from diffsusp.io import load_model
 
@@ -208,6 +215,8 @@ def _json(ev, mech_name: str) -> dict:
         "held": ev.held,
         "status": np.asarray(ev.solution.status).tolist(),
         "iterations": np.asarray(ev.solution.iterations).tolist(),
+        "stable": _flag_list(ev.solution.stable),
+        "law_valid": _flag_list(ev.solution.law_valid),
         "metrics": {name: {"unit": kc.display_unit(name), "values": clean(kc.display(name, v))}
                     for name, v in sorted(ev.metrics.items())},
     }
@@ -219,6 +228,35 @@ def _json(ev, mech_name: str) -> dict:
         }
     # NaN is not JSON: non-converged cases are null.
     return _nan_to_none(out)
+
+
+def _flag_list(flag):
+    """Per-case flag as a list of booleans (None when the solution carries no flags)."""
+    import numpy as np
+
+    return None if flag is None else np.asarray(flag, dtype=bool).tolist()
+
+
+def _flag_notes(ev) -> list[str]:
+    """One warning per flag that some converged case fails (stable, law_valid)."""
+    import numpy as np
+
+    sol = ev.solution
+    notes = []
+    for flag, what in (("stable", "an unstable equilibrium (the reduced tangent stiffness is "
+                        "not positive definite)"),
+                       ("law_valid", "a bushing beyond its law's validity (|AX|, |AY| < 15°, "
+                        "|AZ| < 90°)")):
+        value = getattr(sol, flag)
+        if value is None:
+            continue
+        cases = np.flatnonzero((np.asarray(sol.status) == 0) & ~np.asarray(value, dtype=bool))
+        if cases.size:
+            shown = ", ".join(map(str, cases[:10])) + (
+                f" and {cases.size - 10} more" if cases.size > 10 else "")
+            notes.append(f"{cases.size} converged case{'s' * (cases.size != 1)} of the event "
+                         f"with {what}: {shown} ('{flag}' is false in --json).")
+    return notes
 
 
 def _nan_to_none(obj):
@@ -305,6 +343,8 @@ def kc_command(
             fig = plot.kc_curves(ev, _derivative_names(ev), title=f"{mech.name}: derivatives")
             paths += plot.save(fig, out / f"kc_{ev.name}_derivatives")
     show_warnings(caught)
+    for note in _flag_notes(ev):
+        warn(note)
     if as_json:
         print_json(_json(ev, mech.name))
         return

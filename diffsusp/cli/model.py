@@ -1,7 +1,8 @@
 """`diffsusp info MODEL` and `diffsusp simulate MODEL --loads TABLE --out RESULTS`.
 
 MODEL is anything `diffsusp.io.load_model` reads: a native `.toml` file, an Adams `.adm`, a
-Chrono `.json`, or a built-in model name (`diffsusp.models.ZOO`). TABLE is a CSV/Parquet load
+Chrono `.json`, or a built-in model name (`diffsusp.models.ZOO`, or `STOP_VARIANTS` such as
+`pseudo_mcpherson_stops`: the axles with bump and rebound stops). TABLE is a CSV/Parquet load
 table (columns in `diffsusp.io.tables`) or the name of a load table in the model file.
 """
 
@@ -71,7 +72,7 @@ def parameter_leaves(mech) -> list[dict]:
 
 
 def _load(model: str, *, check: bool = True):
-    from ..io import load_model_file
+    from .common import load_model_file
 
     return load_model_file(model, check=check)
 
@@ -160,14 +161,42 @@ def _load_table(mf, loads: str):
     return read_table(loads)
 
 
+FLAG_COLUMNS = ("stable", "law_valid")
+"""Result columns after `status`: 1 where the equilibrium is stable (reduced tangent stiffness
+positive definite) / every bushing's projected angles are within their law's validity, 0
+otherwise and for cases that did not converge or were not solved (`diffsusp.statics.checks`)."""
+
+
+def with_flag_columns(res, sol):
+    """The results table `res` with the `stable` and `law_valid` columns of `sol` inserted after
+    `status` (0 where the solution has no flags)."""
+    import numpy as np
+
+    from ..io.tables import Table
+
+    n = res.n_rows
+    columns, units = {}, {}
+    for name in res.names:
+        columns[name], units[name] = res[name], res.units.get(name)
+        if name == "status":
+            for flag in FLAG_COLUMNS:
+                value = getattr(sol, flag, None)
+                columns[flag] = (np.zeros(n) if value is None
+                                 else np.asarray(value, dtype=np.float64).reshape(n))
+                units[flag] = None
+    return Table(columns=columns, units=units)
+
+
 class _Run:
-    """What `_solve_and_write` did: per-case status and residuals (NaN / -1 for cases not
-    solved), the number of result columns, and whether it was interrupted."""
+    """What `_solve_and_write` did: per-case status, flags and residuals (NaN / -1 / False for
+    cases not solved), the number of result columns, and whether it was interrupted."""
 
     def __init__(self, n):
         import numpy as np
 
         self.status = np.full(n, -1, dtype=int)
+        self.stable = np.zeros(n, dtype=bool)
+        self.law_valid = np.zeros(n, dtype=bool)
         self.residual = np.full(n, np.nan)
         self.constraint_error = np.full(n, np.nan)
         self.columns = 0
@@ -211,12 +240,16 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
                 sol = solve_statics(mech, case_loads, max_steps=max_steps, throw=False)
                 part = Table(columns={k: v[index] for k, v in table.columns.items()},
                              units=dict(table.units))
-                res = results_table(mech, sol, part, first_case=start)
+                res = with_flag_columns(results_table(mech, sol, part, first_case=start), sol)
                 if writer is None:
                     writer = TableWriter(out, res.names, res.units)
                     run.columns = len(res.names)
                 writer.append(rows(res, stop - start))
                 run.status[start:stop] = np.asarray(sol.status)[: stop - start]
+                for flag in FLAG_COLUMNS:
+                    value = getattr(sol, flag, None)
+                    if value is not None:
+                        getattr(run, flag)[start:stop] = np.asarray(value)[: stop - start]
                 run.residual[start:stop] = np.asarray(sol.residual)[: stop - start]
                 run.constraint_error[start:stop] = np.asarray(
                     sol.constraint_error)[: stop - start]
@@ -231,7 +264,8 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
             part = Table(columns={k: v[rest] for k, v in table.columns.items()},
                          units=dict(table.units))
             dummy = _unsolved(mech, rest.size)
-            res = results_table(mech, dummy, part, first_case=run.done)
+            res = with_flag_columns(results_table(mech, dummy, part, first_case=run.done),
+                                    dummy)
             if writer is None:
                 writer = TableWriter(out, res.names, res.units)
                 run.columns = len(res.names)
@@ -241,8 +275,15 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
     return run
 
 
+def _flagged(status, flag) -> list[int]:
+    """Converged cases whose flag is False."""
+    import numpy as np
+
+    return [int(c) for c in np.flatnonzero((status == 0) & ~flag)]
+
+
 def _unsolved(mech, n):
-    """A stand-in solution for cases not solved: NaN outputs, status -1."""
+    """A stand-in solution for cases not solved: NaN outputs, status -1, flags 0."""
     import types
 
     import numpy as np
@@ -250,7 +291,8 @@ def _unsolved(mech, n):
     nan = np.full(n, np.nan)
     return types.SimpleNamespace(
         q=np.full((n, 6 * len(mech.parts)), np.nan), status=np.full(n, -1),
-        iterations=np.zeros(n), residual=nan, constraint_error=nan)
+        iterations=np.zeros(n), residual=nan, constraint_error=nan, stable=np.zeros(n, bool),
+        law_valid=np.zeros(n, bool))
 
 
 @app.command()
@@ -263,7 +305,11 @@ def simulate(
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ):
     """Solve the static equilibrium of MODEL under every row of a load table and write one row
-    of results per case (poses, bushing deformations and forces, springs, status).
+    of results per case (status, stable and law_valid flags, poses, bushing deformations and
+    forces, springs).
+
+    A converged case whose equilibrium is unstable or turns a bushing beyond its law's validity
+    is written with its flag at 0 and named in a warning (exit 0).
 
     Rows are written as their cases are solved (256 at a time): a run interrupted by Ctrl-C or
     SIGTERM leaves the finished cases on disk and the others with status -1 (exit 130)."""
@@ -306,6 +352,8 @@ def simulate(
         not_solved=int(np.sum(status == -1)),
         failed=[dict(case=int(c), status=RESULT_STATUS.get(int(status[c]), str(status[c])),
                      residual=float(run.residual[c])) for c in failed],
+        unstable=_flagged(status, run.stable),
+        law_invalid=_flagged(status, run.law_valid),
         max_residual=float(np.max(finite, initial=0.0)),
         max_constraint_error=float(np.nanmax(run.constraint_error, initial=0.0)),
         out=str(out),
@@ -323,6 +371,16 @@ def simulate(
             f"in {elapsed:.2f} s; {summary['columns']} columns written to {out}"))
     for note in notes:
         warn(note)
+    for key, what in (("unstable", "with an unstable equilibrium (the reduced tangent "
+                       "stiffness is not positive definite; column 'stable' = 0)"),
+                      ("law_invalid", "beyond a bushing law's validity (|AX|, |AY| < 15°, "
+                       "|AZ| < 90°; column 'law_valid' = 0)")):
+        cases = summary[key]
+        if cases:
+            shown = ", ".join(map(str, cases[:10])) + (
+                f" and {len(cases) - 10} more" if len(cases) > 10 else "")
+            warn(f"{len(cases)} converged load case{'s' * (len(cases) != 1)} {what}: "
+                 f"{shown}.")
     if run.interrupted:
         raise fail(
             f"{run.interrupted} after {run.done} of {status.size} load cases; the rows of the "
