@@ -149,6 +149,12 @@ def _is_traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
+_FLAG_CHUNK = 64
+"""Cases per call of the compiled flags program: every table size (one case, 13, 4096) reuses
+one program per model structure (the last chunk is padded), so a test suite or an
+identification that solves tables of many sizes compiles it once; a chunk costs ~10–30 ms."""
+
+
 def with_flags(mech: Mechanism, loads: Loads, sol):
     """`sol` (a `StaticSolution`, one case or a leading case axis) with `stable` and
     `law_valid` filled in; unchanged (None flags) when any input is traced, so that programs
@@ -156,9 +162,24 @@ def with_flags(mech: Mechanism, loads: Loads, sol):
     if _is_traced((mech, loads, sol)):
         return sol
     single = loads.n_cases is None
-    batch = jax.tree.map(lambda a: a[None], (loads, sol)) if single else (loads, sol)
-    stable, law_valid = _flags(mech, batch[0], batch[1].q, batch[1].multipliers,
-                               batch[1].status == 0)
+    if single:
+        loads, batch = jax.tree.map(lambda a: a[None], (loads, sol))
+    else:
+        batch = sol
+    n = batch.status.shape[0]
+    stable, law_valid = [jnp.zeros(0, bool)], [jnp.zeros(0, bool)]
+    for start in range(0, n, _FLAG_CHUNK):
+        index = np.minimum(np.arange(start, start + _FLAG_CHUNK), n - 1)
+        real = np.arange(start, start + _FLAG_CHUNK) < n
+
+        def take(a, index=index):
+            return jnp.asarray(a)[index]
+
+        out = _flags(mech, jax.tree.map(take, loads), take(batch.q), take(batch.multipliers),
+                     (take(batch.status) == 0) & jnp.asarray(real))
+        stable.append(out[0][real])
+        law_valid.append(out[1][real])
+    stable, law_valid = jnp.concatenate(stable), jnp.concatenate(law_valid)
     if single:
         stable, law_valid = stable[0], law_valid[0]
     return eqx.tree_at(lambda s: (s.stable, s.law_valid), sol, (stable, law_valid),
