@@ -1,21 +1,66 @@
 import gc
 import os
+import shutil
+import tempfile
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
-# No persistent compilation cache by default (on a fresh clone it only costs writes). Set
-# DIFFSUSP_TEST_CACHE=<dir> to reuse compiled programs across local runs (one directory per
-# pytest-xdist worker; notebook kernels inherit it through JAX_COMPILATION_CACHE_DIR). The CLI's
-# own cache (DIFFSUSP_CACHE) is off inside the tests either way.
+# The CLI's own cache (DIFFSUSP_CACHE) is off inside the tests.
 os.environ["DIFFSUSP_CACHE"] = ""
-_root = os.environ.get("DIFFSUSP_TEST_CACHE")
-if _root:
-    _dir = os.path.join(_root, os.environ.get("PYTEST_XDIST_WORKER", "main"))
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = _dir
-    jax.config.update("jax_compilation_cache_dir", _dir)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+# One persistent compilation cache per test run, shared by the pytest-xdist workers and the
+# notebook kernels (which inherit JAX_COMPILATION_CACHE_DIR): a program that several files or
+# notebooks compile (the pseudo-McPherson's 13-case solve, its K&C metrics...) is compiled once
+# per run instead of once per file; a hit still traces and lowers. The controller makes the
+# folder before it starts the workers (they find it in DIFFSUSP_TEST_RUN_CACHE) and removes it
+# at the end. DIFFSUSP_TEST_CACHE=<dir> uses (and keeps) that folder instead, across runs.
+_RUN_CACHE = "DIFFSUSP_TEST_RUN_CACHE"
+_owned_cache = None
+_cache_dir = os.environ.get("DIFFSUSP_TEST_CACHE") or os.environ.get(_RUN_CACHE)
+if not _cache_dir:
+    _cache_dir = _owned_cache = tempfile.mkdtemp(prefix="diffsusp-xla-cache-")
+    os.environ[_RUN_CACHE] = _cache_dir
+os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache_dir
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+jax.config.update("jax_compilation_cache_dir", _cache_dir)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
+def _write_cache_entries_atomically():
+    """JAX writes a cache entry in place (unless the cache evicts, which needs `filelock`): the
+    other worker could read half a file. Write to a temporary name and rename instead. A torn
+    read that still happens (a notebook kernel writes in place) is a warning and a recompile:
+    pyproject.toml ignores that warning."""
+    try:
+        from jax._src import lru_cache
+    except ImportError:
+        return
+    put = getattr(lru_cache.LRUCache, "put", None)
+    suffix = getattr(lru_cache, "_CACHE_SUFFIX", None)
+    if put is None or suffix is None:
+        return
+
+    def atomic_put(self, key, value):
+        if getattr(self, "eviction_enabled", True) or not key:
+            return put(self, key, value)
+        path = self.path / f"{key}{suffix}"
+        if path.exists():
+            return
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(value)
+        os.replace(tmp, path)
+
+    lru_cache.LRUCache.put = atomic_put
+
+
+_write_cache_entries_atomically()
+
+
+def pytest_unconfigure(config):
+    if _owned_cache and not hasattr(config, "workerinput"):
+        shutil.rmtree(_owned_cache, ignore_errors=True)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -23,15 +68,16 @@ def _release_compiled_programs():
     """Drop every compiled program after each test module. XLA maps each CPU executable's code
     into memory (~6 mappings each) and JAX's jit caches keep them alive: a worker that compiled
     one half of the suite passed Linux's vm.max_map_count (65 530) and died with a segmentation
-    fault inside an XLA compile (CI, twice). Modules share programs through their own
-    module-scoped fixtures, not across modules, so this costs no recompilation."""
+    fault inside an XLA compile (CI, twice). Modules share programs in memory through their own
+    module-scoped fixtures, and across modules through the run's compilation cache."""
     yield
     jax.clear_caches()
     gc.collect()
 
 
 def pytest_collection_modifyitems(items):
-    """The notebooks first: they are the longest file (one kernel after another), and
-    pytest-xdist hands files out in collection order, so starting them first lets the other
-    worker take the rest of the suite meanwhile instead of waiting at the end."""
-    items.sort(key=lambda item: item.path.name != "test_notebooks.py")
+    """The notebooks last, each its own work unit (test_notebooks.py): pytest-xdist hands work
+    units out in collection order, so they start when the other files have filled the run's
+    compilation cache with the programs they share, and the two workers split them at the end
+    instead of one worker running all six while the other takes the rest of the suite."""
+    items.sort(key=lambda item: item.path.name == "test_notebooks.py")
