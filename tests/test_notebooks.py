@@ -1,4 +1,9 @@
-"""Every notebook in notebooks/ (jupytext percent-format .py) runs top to bottom as a notebook."""
+"""Every notebook in notebooks/ (jupytext percent-format .py) runs top to bottom as a notebook.
+
+Each notebook is its own pytest-xdist work unit (an `xdist_group`, with `--dist loadgroup`), so
+the two workers share them; they run last (conftest), when the rest of the suite has put the
+programs they share with it (the pseudo-McPherson's solves, K&C metrics and sensitivities) in
+the run's compilation cache, which their kernels inherit."""
 
 import pathlib
 
@@ -8,7 +13,8 @@ NOTEBOOKS = sorted((pathlib.Path(__file__).parent.parent / "notebooks").glob("[0
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xdist_group(p.stem))
+                                  for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path, tmp_path):
     import jupytext
     import nbclient
