@@ -12,6 +12,14 @@ benchmarks/results/tyre.json. Timings are never asserted anywhere.
   (perturbed start ×0.7–1.3), Huber loss, after compilation (a second noise draw), with its
   Levenberg–Marquardt steps and the report (lsq) time;
 - (OPENBLAS_NUM_THREADS defaults to 1: the machine has 2 shared cores).
+
+Timing on a shared machine: every evaluation timing is repeated (`--repeats`, default 7) and
+reported as the best and the median wall time and the median CPU time of this process
+(`time.process_time`, all threads): with other jobs on the two cores the wall time measures
+the share the scheduler gave us, the CPU time what the computation costs. The load average
+(`os.getloadavg`) is recorded before and after. `--compare-libm` (default on) also times the
+same program with XLA's own float64 arctan/sin/cos/tan/sqrt (scalar calls, the evaluation before
+`diffsusp.tyre._math`) in the same process.
 """
 
 import argparse
@@ -31,7 +39,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import save_results, timed  # noqa: E402
+from _common import save_results  # noqa: E402
 
 from diffsusp.io.tir import read_tir  # noqa: E402
 from diffsusp.tyre import (  # noqa: E402
@@ -50,12 +58,28 @@ NAMES = ("PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PKY1 PKY2 PKY3 PKY4 PKY6 PKY7 PHY1 
          "PVY2 PVY3 PVY4 PPY1").split()
 
 
+def _timings(fn, repeats):
+    """(best wall, median wall, median CPU) seconds of `fn()` over `repeats` calls after a
+    first (compiling) call, and the last output."""
+    out = jax.block_until_ready(fn())
+    wall, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = jax.block_until_ready(fn())
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return (min(wall), float(np.median(wall)), float(np.median(cpu))), out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="10⁵ points, 1 repeat")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--no-compare-libm", dest="compare_libm", action="store_false")
     args = ap.parse_args()
     n = 100_000 if args.quick else 1_000_000
-    repeats = 1 if args.quick else 5
+    repeats = 1 if args.quick else args.repeats
+    load_before = os.getloadavg()
     tir = read_tir(DATA / "MagicFormula61_Paramerters.tir")
     model = MagicFormula6.from_tir(tir)
     rng = np.random.default_rng(0)
@@ -67,20 +91,39 @@ def main():
     vx = np.full(n, 16.6)
     args_j = [jnp.asarray(v) for v in (fz, sl, sa, ia, vx * 1000.0, p)]
 
-    @jax.jit
-    def run(m, fz, sl, sa, ia, vx, p):
+    def run_raw(m, fz, sl, sa, ia, vx, p):
         f = evaluate(m, fz, sl, sa, ia, vx, p, outputs=("fx", "fy", "mz"))
         return f.fx, f.fy, f.mz
+
+    run = jax.jit(run_raw)
 
     t0 = time.perf_counter()
     jax.block_until_ready(run(model, *args_j))
     compile_eval = time.perf_counter() - t0
-    t_eval, out = timed(lambda: run(model, *args_j), repeats)
+    (t_eval, t_eval_median, cpu_eval), out = _timings(lambda: run(model, *args_j), repeats)
     mesh = jax.sharding.Mesh(np.array(jax.devices()), ("batch",))
     sharded = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     args_s = [jax.device_put(a, sharded) for a in args_j]
-    jax.block_until_ready(run(model, *args_s))
-    t_shard, _ = timed(lambda: run(model, *args_s), repeats)
+    (t_shard, t_shard_median, cpu_shard), _ = _timings(lambda: run(model, *args_s), repeats)
+    libm = {}
+    if args.compare_libm:
+        import types
+
+        from diffsusp.tyre import mf6
+
+        fast = mf6._m
+        mf6._m = types.SimpleNamespace(arctan=jnp.arctan, sin=jnp.sin, cos=jnp.cos,
+                                       tan=jnp.tan, sqrt=jnp.sqrt)
+        try:
+            run_libm = jax.jit(lambda *a: run_raw(*a))  # a new trace with the patch
+            (w, wm, c), out_libm = _timings(lambda: run_libm(model, *args_j), repeats)
+            (ws, wsm, cs), _ = _timings(lambda: run_libm(model, *args_s), repeats)
+        finally:
+            mf6._m = fast
+        libm = {"eval_s": w, "eval_median_s": wm, "eval_cpu_s": c, "eval_sharded_s": ws,
+                "eval_sharded_median_s": wsm, "eval_sharded_cpu_s": cs,
+                "max_abs_difference_N": max(float(np.max(np.abs(np.asarray(a) - np.asarray(b))))
+                                            for a, b in zip(out, out_libm, strict=True))}
     t0 = time.perf_counter()
     ref = oracle.mf_numpy(tir, fz, sl, sa, ia, vx, p)
     t_numpy = time.perf_counter() - t0
@@ -117,20 +160,33 @@ def main():
     t_report = time.perf_counter() - t0
 
     results = {
-        "points": n, "compile_eval_s": compile_eval, "eval_s": t_eval,
-        "evaluations_per_s": n / t_eval, "devices": len(jax.devices()),
-        "eval_sharded_s": t_shard, "evaluations_per_s_sharded": n / t_shard,
+        "points": n, "repeats": repeats, "load_average_before": load_before,
+        "load_average_after": os.getloadavg(), "compile_eval_s": compile_eval,
+        "eval_s": t_eval, "eval_median_s": t_eval_median, "eval_cpu_s": cpu_eval,
+        "evaluations_per_s": n / t_eval, "evaluations_per_cpu_s": n / cpu_eval,
+        "devices": len(jax.devices()), "eval_sharded_s": t_shard,
+        "eval_sharded_median_s": t_shard_median, "eval_sharded_cpu_s": cpu_shard,
+        "evaluations_per_s_sharded": n / t_shard, "libm": libm,
         "numpy_s": t_numpy, "speedup_vs_numpy": t_numpy / t_eval,
         "max_abs_difference_vs_numpy_N": agree,
         "fit_points": int(z.size), "fit_coefficients": len(NAMES), "compile_fit_s": compile_fit,
         "fit_solve_s": t_solve, "fit_report_s": t_report, "fit_steps": int(steps),
         "fit_converged": bool(ok), "fit_unidentifiable": list(report.unidentifiable),
     }
-    print(f"MF 6.1 combined F_x, F_y, M_z, {n} points (float64): {t_eval * 1e3:.1f} ms "
-          f"= {n / t_eval:.3g} evaluations/s (compile {compile_eval:.1f} s); NumPy "
-          f"{t_numpy * 1e3:.0f} ms, ratio {t_numpy / t_eval:.1f}x; max |diff| {agree:.2e} N")
-    print(f"  sharded over {len(jax.devices())} CPU devices: {t_shard * 1e3:.1f} ms = "
+    print(f"load average {load_before[0]:.1f} before, {os.getloadavg()[0]:.1f} after")
+    print(f"MF 6.1 combined F_x, F_y, M_z, {n} points (float64): best {t_eval * 1e3:.1f} ms "
+          f"(median {t_eval_median * 1e3:.1f}, CPU {cpu_eval * 1e3:.1f}) = {n / t_eval:.3g} "
+          f"evaluations/s, {n / cpu_eval:.3g} per CPU-second (compile {compile_eval:.1f} s); "
+          f"NumPy {t_numpy * 1e3:.0f} ms, ratio {t_numpy / t_eval:.1f}x; max |diff| "
+          f"{agree:.2e} N")
+    print(f"  sharded over {len(jax.devices())} CPU devices: best {t_shard * 1e3:.1f} ms "
+          f"(median {t_shard_median * 1e3:.1f}, CPU {cpu_shard * 1e3:.1f}) = "
           f"{n / t_shard:.3g} evaluations/s")
+    if libm:
+        print(f"  XLA's own transcendentals (before): best {libm['eval_s'] * 1e3:.1f} ms "
+              f"(median {libm['eval_median_s'] * 1e3:.1f}, CPU {libm['eval_cpu_s'] * 1e3:.1f}),"
+              f" sharded best {libm['eval_sharded_s'] * 1e3:.1f} ms; max |diff| "
+              f"{libm['max_abs_difference_N']:.2e}")
     print(f"pure-lateral fit, {len(NAMES)} coefficients, {z.size} points: LM {t_solve:.3f} s in "
           f"{int(steps)} steps (converged {bool(ok)}), report {t_report:.3f} s, compile "
           f"{compile_fit:.1f} s; not identifiable: {', '.join(report.unidentifiable)}")

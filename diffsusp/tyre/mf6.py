@@ -32,6 +32,11 @@ dimensionless or already N, rad, Pa); `to_tir` converts back.
   λ_Fz0;
 - M_x: the Besselink draft (49) with q_sx12…q_sx14; M_y: paper (A48), negative in ISO-W.
 
+**Evaluation.** arctan, sin, cos, tan and the equivalent slips' sqrt are the vectorised
+float64 implementations of `diffsusp.tyre._math` (Cephes algorithms, relative error about
+1e-16, exact custom derivatives) instead of XLA's scalar calls: the combined F_x, F_y, M_z cost
+2.5× less CPU time per point (benchmarks/README.md, tyre section).
+
 MF 6.2 steady-state forces and moments at a given F_z are the 6.1 equations (6.2 changes the
 vertical model, the loaded and effective radius, not evaluated here). **MF 5.2** (FITTYP 5, 6):
 no pressure terms; K_yα = p_Ky1·F'_z0·sin(p_Ky4·atan(F_z/(p_Ky2·F'_z0)))(1 − p_Ky3|γ|)λ_Kyα
@@ -53,6 +58,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..errors import ModelFileError, ModelWarning
 from ..io.tir import TirFile
+from . import _math as _m
 
 __all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
            "FITTYP_VERSION"]
@@ -235,8 +241,9 @@ def _default(name: str, values: dict) -> float:
 
 
 def _cos_atan(x):
-    """cos(atan x) = 1/√(1 + x²) (exact identity, no transcendental call)."""
-    return 1.0 / jnp.sqrt(1.0 + x * x)
+    """cos(atan x) = 1/√(1 + x²), by the vectorised functions of `_math`: a float64 sqrt in a
+    loop fusion stops LLVM from vectorising it (see `diffsusp.tyre._math`)."""
+    return _m.cos(_m.arctan(x))
 
 
 def _sgn(x):
@@ -247,26 +254,26 @@ def _sgn(x):
 def _mf(B, C, E, x):
     """D-less Magic Formula sin(C·atan(Bx − E(Bx − atan Bx)))."""
     bx = B * x
-    return jnp.sin(C * jnp.arctan(bx - E * (bx - jnp.arctan(bx))))
+    return _m.sin(C * _m.arctan(bx - E * (bx - _m.arctan(bx))))
 
 
 def _cosmf(B, C, E, x):
     bx = B * x
-    return jnp.cos(C * jnp.arctan(bx - E * (bx - jnp.arctan(bx))))
+    return _m.cos(C * _m.arctan(bx - E * (bx - _m.arctan(bx))))
 
 
 def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits):
     """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0."""
     Fz0p = c["LFZO"] * c["FNOMIN"]
     if v52:
-        Kya = (c["PKY1"] * Fz0p * jnp.sin(c["PKY4"] * jnp.arctan(fz / (c["PKY2"] * Fz0p)))
+        Kya = (c["PKY1"] * Fz0p * _m.sin(c["PKY4"] * _m.arctan(fz / (c["PKY2"] * Fz0p)))
                * (1.0 - c["PKY3"] * jnp.abs(gamma_s)) * c["LKY"])
-        Kya0 = c["PKY1"] * Fz0p * jnp.sin(c["PKY4"] * jnp.arctan(fz / (c["PKY2"] * Fz0p))) \
+        Kya0 = c["PKY1"] * Fz0p * _m.sin(c["PKY4"] * _m.arctan(fz / (c["PKY2"] * Fz0p))) \
             * c["LKYC"]
         Kyg0 = (c["PHY3"] * Kya0 + fz * (c["PVY3"] + c["PVY4"] * dfz)) * c["LKYC"]
     else:
         Kya = (c["PKY1"] * Fz0p * (1.0 + c["PPY1"] * dpi) * (1.0 - c["PKY3"] * jnp.abs(gamma_s))
-               * jnp.sin(c["PKY4"] * jnp.arctan((fz / Fz0p) / ((c["PKY2"] + c["PKY5"] * gamma_s**2)
+               * _m.sin(c["PKY4"] * _m.arctan((fz / Fz0p) / ((c["PKY2"] + c["PKY5"] * gamma_s**2)
                                                               * (1.0 + c["PPY2"] * dpi))))
                * c["LKY"])
         Kyg0 = fz * (c["PKY6"] + c["PKY7"] * dfz) * (1.0 + c["PPY5"] * dpi) * c["LKYC"]
@@ -342,12 +349,12 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     dfz = (fz - Fz0p) / Fz0p
     dpi = 0.0 * fz if v52 else (p - c["NOMPRES"]) / c["NOMPRES"]
     if alpha_star:
-        a_s, g_s = jnp.tan(alpha), jnp.sin(gamma)
+        a_s, g_s = _m.tan(alpha), _m.sin(gamma)
     else:
         a_s, g_s = alpha, gamma
     # cos α' (4.E6): V_c = √(V_cx² + tan²α·V_cx²) = |V_cx|/|cos α|, so V_cx/(V_c + ε_V) =
     # V_cx·|cos α|/(|V_cx| + ε_V·|cos α|) (one cos instead of tan and sqrt; ε_V = 1e-6 m/s)
-    cos_a = jnp.cos(alpha)
+    cos_a = _m.cos(alpha)
     cos_ap = vx * jnp.abs(cos_a) / (jnp.abs(vx) + 1e3 * EPS * jnp.abs(cos_a))
 
     nan = jnp.full(jnp.broadcast_shapes(jnp.shape(fz), jnp.shape(kappa), jnp.shape(alpha),
@@ -390,13 +397,13 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
               * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
         Ct = c["QCZ1"]
         Et = (c["QEZ1"] + c["QEZ2"] * dfz + c["QEZ3"] * dfz**2) * (
-            1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * jnp.arctan(Bt * Ct * at))
+            1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * _m.arctan(Bt * Ct * at))
         if limits:
             Et = jnp.minimum(Et, 1.0)
         Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
                             + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
                                + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
-              * c["LMUY"] * (jnp.cos(a_s) if alpha_star else cos_a))
+              * c["LMUY"] * (_m.cos(a_s) if alpha_star else cos_a))
         Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
         Cr = 1.0
 
@@ -405,7 +412,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         Fy = Fy0 if need_fy else nan
         if want_mz:
             t0 = Dt * _cosmf(Bt, Ct, Et, at) * cos_ap
-            Mz = -t0 * Fy0_g0 + Dr * jnp.cos(Cr * jnp.arctan(Br * ar)) * cos_ap
+            Mz = -t0 * Fy0_g0 + Dr * _m.cos(Cr * _m.arctan(Br * ar)) * cos_ap
     else:
         if need_fx:
             # combined longitudinal (4.E50–4.E57)
@@ -421,7 +428,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             # combined lateral (4.E58–4.E67)
             DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
                     * _cos_atan(c["RVY4"] * a_s))
-            SVyk = DVyk * jnp.sin(c["RVY5"] * jnp.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
+            SVyk = DVyk * _m.sin(c["RVY5"] * _m.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
             SHyk = c["RHY1"] + c["RHY2"] * dfz
             Eyk = c["REY1"] + c["REY2"] * dfz
             if limits:
@@ -433,8 +440,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         if want_mz:
             # combined aligning torque (4.E71–4.E78, A54–A56)
             k2 = (Kxk / Kyap) ** 2 * kappa**2
-            ar_eq = jnp.arctan(jnp.sqrt(jnp.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
-            at_eq = jnp.arctan(jnp.sqrt(jnp.tan(at) ** 2 + k2)) * _sgn_strict(at)
+            ar_eq = _m.arctan(_m.sqrt(_m.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
+            at_eq = _m.arctan(_m.sqrt(_m.tan(at) ** 2 + k2)) * _sgn_strict(at)
             s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
                 * c["LS"]
             Mzr = Dr * _cos_atan(Br * ar_eq)  # C_r = 1
@@ -456,9 +463,9 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             Mx = (R0 * fz_mx * c["LMX"] * (
                 c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma * (1.0 + c["PPMX1"] * dpi)
                 - c["QSX12"] * gamma * jnp.abs(gamma) + c["QSX3"] * Fy / Fz0
-                + c["QSX4"] * jnp.cos(c["QSX5"] * jnp.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
-                * jnp.sin(c["QSX7"] * gamma + c["QSX8"] * jnp.arctan(c["QSX9"] * Fy / Fz0))
-                + c["QSX10"] * jnp.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
+                + c["QSX4"] * _m.cos(c["QSX5"] * _m.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
+                * _m.sin(c["QSX7"] * gamma + c["QSX8"] * _m.arctan(c["QSX9"] * Fy / Fz0))
+                + c["QSX10"] * _m.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
                 + R0 * Fy * c["LMX"] * (c["QSX13"] + c["QSX14"] * jnp.abs(gamma)))
     if want_my:
         # rolling resistance moment (A48; MF 5.2: manual), F_z not saturated at FZMAX
