@@ -302,7 +302,11 @@ def test_unassembled_joint_is_reported():
 
 
 def test_nonconvergence_names_the_case(mount):
-    loads = mount.loads(forces={"load": jnp.array([[0.0, 0.0, 100.0], [0.0, 0.0, 1e9]])})
+    # Case 1 has no equilibrium: the link turns about its ball joint, so the bushing and the
+    # spring can only resist a bounded moment (≈ 1e8 N·mm), far below 1e12 N·mm. (A huge force
+    # does have one: the link turns until the force passes through the ball.)
+    loads = mount.loads(forces={"load": jnp.array([[0.0, 0.0, 100.0], [0.0, 0.0, 0.0]])},
+                        moments={"load": jnp.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1e12]])})
     warnings.simplefilter("ignore", ds.ModelWarning)  # the failed case is far out of range
     with pytest.raises(ds.ConvergenceError, match="load case 1 did not converge"):
         ds.solve_statics(mount, loads, max_steps=8)
@@ -365,3 +369,22 @@ def test_pseudo_mcpherson_gradients_match_central_differences():
     e = jnp.zeros(13).at[6].set(1.0)
     fd = (centre(theta[:3] + (theta[3] + e,)) - centre(theta[:3] + (theta[3] - e,))) / 2.0
     np.testing.assert_allclose(jac[3][:, :, 6], fd, rtol=1e-6, atol=1e-9)
+
+
+def test_pool_gives_each_case_its_own_iterates(mount, monkeypatch):
+    """A batch larger than the solver's pool (cases iterated a few at a time, a stopped case's
+    slot taken by the next) returns bit for bit what the whole batch solved at once does, the
+    failed case included, in input order."""
+    rng = np.random.default_rng(3)
+    forces = rng.uniform(-300.0, 300.0, (10, 3))
+    moments = np.zeros((10, 3))
+    moments[6, 2] = 1e12  # no equilibrium (see test_nonconvergence_names_the_case)
+    loads = mount.loads(forces={"load": forces}, moments={"load": moments})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the failed case
+        whole = ds.solve_statics(mount, loads, throw=False)
+        monkeypatch.setattr(solve_module, "_POOL", 3)
+        pooled = ds.solve_statics(mount, loads, throw=False)
+    assert list(np.flatnonzero(np.asarray(whole.status))) == [6]
+    for a, b in zip(jax.tree.leaves(whole), jax.tree.leaves(pooled), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._compile import filter_jit
 from ..errors import ConvergenceError, InputError
 from ..model import GROUND, Loads, Mechanism
 from ..models.loadcases import TABLE_4_4, TABLE_5_1
@@ -282,7 +283,7 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
     return out, compliance
 
 
-@eqx.filter_jit
+@filter_jit
 def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear

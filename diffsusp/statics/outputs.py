@@ -8,18 +8,19 @@ spec: stiffness §0 (poses, projected angles), §1.8 (bushing law), §1.7 (sprin
 
 import functools
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix
+from .._compile import filter_jit
+from ..geometry import gibbs_to_matrix
 from ..model.mechanism import GROUND, Mechanism
 from .kernel import (
     bushing_params,
     bushing_state,
     constraint_groups,
     marker_offsets,
+    part_poses_internal,
     spring_tension,
     to_internal,
 )
@@ -30,7 +31,7 @@ def _batched(fn):
     """Apply a one-case function of (mech, q, ...) over a leading case axis of q if present,
     compiled (`eqx.filter_jit`: called op by op, bushing_states took ~100 ms for 13 cases)."""
 
-    @eqx.filter_jit
+    @filter_jit
     @functools.wraps(fn)
     def wrapper(mech, q, *args):
         q = jnp.asarray(q)
@@ -104,7 +105,7 @@ def spring_states(mech: Mechanism, q):
     return length, tension
 
 
-@eqx.filter_jit
+@filter_jit
 def joint_reactions(mech: Mechanism, sol: StaticSolution):
     """Reaction wrench of every joint on its I part, at the I marker, global components.
 
@@ -119,7 +120,7 @@ def joint_reactions(mech: Mechanism, sol: StaticSolution):
 def _joint_reactions(mech: Mechanism, q, lam):
     topo = mech.topology
     lam_slots = jnp.concatenate([lam, jnp.zeros(1)])
-    yfull = jnp.concatenate([to_internal(mech, q), jnp.zeros(6)])
+    p, r = part_poses_internal(to_internal(mech, q))
     pos, _ = marker_poses(mech, q)
     n_joints = len(mech.joints.names)
     force = jnp.zeros((n_joints, 3))
@@ -127,17 +128,14 @@ def _joint_reactions(mech: Mechanism, q, lam):
     for g, fn, args, _ in constraint_groups(mech, mech.loads()):
         if g.kind == "driver":
             continue
-        z = yfull[g.coords]
+        parts = np.asarray(g.coords)[:, ::6] // 6
         lam_e = lam_slots[jnp.asarray(g.row_slots - topo.base)]
-        react = jax.vmap(lambda z_, l_, *a, fn=fn: jax.vjp(lambda zz: fn(zz, *a), z_)[1](l_)[0])(
-            z, lam_e, *args)
+        react = jax.vmap(fn)(p[parts[:, 0]], r[parts[:, 0]], p[parts[:, 1]], r[parts[:, 1]],
+                             lam_e, *args)[1]
         f_i = react[:, :3]
-        # Q_b = G(b)ᵀ M about the part's reference point: recover M, move it to the marker.
-        m_ref = jax.vmap(lambda b, gb: jnp.linalg.solve(gibbs_angular_jacobian(b).T, gb))(
-            z[:, 3:6], react[:, 3:6]
-        )
+        # The moment about the I part's reference point, moved to the I marker.
         i = np.asarray(mech.joints.i_marker)[g.members]
-        arm = pos[i] - z[:, :3]
+        arm = pos[i] - p[parts[:, 0]]
         force = force.at[g.members].set(f_i)
-        moment = moment.at[g.members].set(m_ref - jnp.cross(arm, f_i))
+        moment = moment.at[g.members].set(react[:, 3:6] - jnp.cross(arm, f_i))
     return force, moment

@@ -3,11 +3,13 @@
 spec: stiffness §1.9 (Q_ext + Q_int + Φ_qᵀλ = 0, Φ = c); DESIGN.md "Static equilibrium".
 
 Per load case, from the start pose with zero multipliers (the first Newton step estimates them):
-each Newton step solves the KKT system after a Ruiz row/column equilibration (forces in N,
-moments in N·mm and constraint rows in mm or radians differ by orders of magnitude); the step is
-capped so no Gibbs vector moves by more than 0.5 at once, applied to each part as a rigid screw
-motion (see `kernel.retract`), and backtracked on a scaled merit function (every trial point is
-assembled with its Jacobian, which becomes the next step's if the point is accepted).
+each Newton step solves the KKT system of the wrench residual in twist coordinates
+(`kernel.assemble_batch`) after a Ruiz row/column equilibration (forces in N, moments in N·mm
+and constraint rows in mm or radians differ by orders of magnitude); the step is capped so no
+part turns by more than 1 rad at once, applied to each part as a rigid screw motion (see
+`kernel.retract`), and backtracked on a scaled merit function (every trial point is assembled
+with its Jacobian, which becomes the next step's if the point is accepted). A large batch runs
+as a pool of `_POOL` cases at a time: a case that stops hands its slot to the next one waiting.
 A case has converged when every force row is below `rtol`·F_s (moment rows `rtol`·F_s·L, with
 F_s the load scale and L the model's length scale) and every constraint row below `atol` mm; a
 case whose line search makes no progress for several steps, or that has rejected 24 trial points
@@ -25,10 +27,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._compile import filter_jit
 from ..errors import ConvergenceError, ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .kernel import assemble_batch, retract, to_internal, to_public
 from .checks import with_flags
+from .kernel import assemble_batch, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
@@ -94,6 +97,7 @@ def _measures(mech: Mechanism, r, f_scale):
             merit)
 
 
+_POOL = 48  # cases iterated at once; a batch larger than this runs as a pool (see `_newton`)
 _LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
 # one is taken anyway
 
@@ -106,8 +110,11 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     point; if the scaled merit decreased enough (Armijo) the point is accepted and the next
     Newton step is solved from the Jacobian just computed, otherwise the step is halved. So a
     full Newton step costs one assembly and one linear solve, and the program traces the
-    assembly once. Every case runs its own iteration (per-case state, frozen once the case has
-    stopped); only the assembly's scatter is done batch-wide (`kernel.assemble_batch`)."""
+    assembly once. Every case runs its own iteration (per-case state); only the assembly's
+    scatter is done slot-wide (`kernel.assemble_batch`). At most `_POOL` cases are iterated at
+    once and a stopped case's slot takes the next case, so a batch costs the sum of its cases'
+    passes (about 5 each), not the slowest case's (up to 40 near the envelope's edge) times every
+    case; each case's iterates do not depend on the others (vmap = loop)."""
     topo = mech.topology
     n = topo.n
     length = mech.length_scale
@@ -136,7 +143,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
         dy = scaled_solve(jac, -r)
         cap = jnp.max(jnp.abs(dy * rot))
-        dy = dy * jnp.minimum(1.0, 0.5 / jnp.maximum(cap, 1e-300))
+        dy = dy * jnp.minimum(1.0, 1.0 / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
         # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
         # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
@@ -164,25 +171,54 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
         return jax.tree.map(lambda a, b: jnp.where(running(s), a, b), new, s)
 
-    def body(s):
-        y_try = jax.vmap(lambda y, d: retract(y, d, n))(s["y"], s["alpha"][:, None] * s["dy"])
-        r, jac = assemble_batch(mech, loads, y_try[:, :n], y_try[:, n:])
-        return jax.vmap(update)(s, loads, y_try, r, jac)
-
     size = n + topo.m
-    zero = jnp.zeros(cases, y0.dtype)
-    count = jnp.zeros(cases, int)
-    state = dict(
-        y=y0, r=jnp.zeros((cases, size), y0.dtype), dy=jnp.zeros((cases, size), y0.dtype),
-        alpha=zero + 1.0, merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
-        status=count + MAX_STEPS, stall=count, backtracks=count, done=jnp.zeros(cases, bool),
-    )
-    s = jax.lax.while_loop(lambda s: jnp.any(jax.vmap(running)(s)), body, state)
-    force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
-    status = jnp.where(s["done"], SUCCESS, s["status"])
-    info = jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint,
-                      s["backtracks"].astype(float)], 1)
-    return s["y"], info
+    slots = min(cases, _POOL)
+
+    def fresh(case):
+        """The start state of the cases `case` (slots,)."""
+        zero = jnp.zeros(case.shape, y0.dtype)
+        count = jnp.zeros(case.shape, int)
+        return dict(
+            y=y0[jnp.minimum(case, cases - 1)], r=jnp.zeros(case.shape + (size,), y0.dtype),
+            dy=jnp.zeros(case.shape + (size,), y0.dtype), alpha=zero + 1.0,
+            merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
+            status=count + MAX_STEPS, stall=count, backtracks=count,
+            done=case >= cases,  # an empty slot
+        )
+
+    def result(s):
+        force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
+        status = jnp.where(s["done"], SUCCESS, s["status"])
+        return jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint,
+                          s["backtracks"].astype(float)], 1)
+
+    def body(pool):
+        # One Newton pass over the slots; a slot whose case has stopped hands its result over
+        # and takes the next case waiting (a pool: each case runs its own iteration, so the
+        # batch costs the sum of the cases' passes, not the slowest case's times all cases).
+        s, case, queue, y_out, info_out = pool
+        loads_s = jax.tree.map(lambda a: a[jnp.minimum(case, cases - 1)], loads)
+        y_try = jax.vmap(lambda y, d: retract(y, d, n))(s["y"], s["alpha"][:, None] * s["dy"])
+        r, jac = assemble_batch(mech, loads_s, y_try[:, :n], y_try[:, n:])
+        s = jax.vmap(update)(s, loads_s, y_try, r, jac)
+        stopped = ~jax.vmap(running)(s) & (case < cases)
+        dest = jnp.where(stopped, case, cases)  # out of range: dropped
+        y_out = y_out.at[dest].set(s["y"], mode="drop")
+        info_out = info_out.at[dest].set(result(s), mode="drop")
+        new_case = jnp.where(stopped, queue + jnp.cumsum(stopped) - 1, case)
+        new_case = jnp.where(stopped & (new_case >= cases), cases, new_case)
+        s = jax.tree.map(lambda a, b: jnp.where(stopped.reshape((-1,) + (1,) * (a.ndim - 1)),
+                                                a, b), fresh(new_case), s)
+        return s, new_case, queue + jnp.sum(stopped), y_out, info_out
+
+    def more(pool):
+        s, case = pool[0], pool[1]
+        return jnp.any(jax.vmap(running)(s) & (case < cases))
+
+    first = jnp.arange(slots)
+    pool = (fresh(first), first, jnp.asarray(slots), y0, jnp.zeros((cases, 5), y0.dtype))
+    _, _, _, y, info = jax.lax.while_loop(more, body, pool)
+    return y, info
 
 
 @eqx.filter_custom_jvp
@@ -250,12 +286,12 @@ def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
     return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], sol)
 
 
-@eqx.filter_jit
+@filter_jit
 def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk):
     return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
 
 
-@eqx.filter_jit
+@filter_jit
 def _solve_path(mech, loads, q0, rtol, atol, max_steps):
     def step(q, loads_):
         sol = _solve_one(mech, loads_, q, rtol, atol, max_steps)
@@ -319,7 +355,7 @@ def _report(sol: StaticSolution, throw: bool, what: str):
     return sol
 
 
-@eqx.filter_jit
+@filter_jit
 def _bushing_angles(mech, q):
     from .outputs import bushing_states
 
