@@ -10,11 +10,14 @@ then a rational (atan) or polynomial (sin, cos) approximation; relative error ab
 (tests/test_tyre_mf6.py), far below the 1e-10 the tyre tests ask for. Each is about 2 ns per
 element alone.
 
-Measured with `benchmarks/tyre.py`: MF 6.1 combined F_x, F_y, M_z costs 2.5× less CPU time per
-point with these than with XLA's calls, not the 10× the functions alone promise — a loop fusion
-that also holds a float64 `sqrt` is not vectorised (one Magic Formula cosine term with a sqrt in
-its B factor: 49 ns per element against 9 ns without), hence `sqrt` here and cos(atan x) for
-1/√(1 + x²) in `mf6`; what is left is the fusion structure XLA picks for the three outputs.
+Measured with `benchmarks/tyre.py`: MF 6.1 combined F_x, F_y, M_z costs 2.4× less CPU time per
+point with these than with XLA's calls (545 → 230 ns), not the 10× the functions alone
+promise — a loop fusion that also holds a float64 `sqrt` is not vectorised (one Magic Formula
+cosine term with a sqrt in its B factor: 49 ns per element against 9 ns without), hence `sqrt`
+here and cos(atan x) for 1/√(1 + x²) in `mf6`; what is left is the fusion structure XLA picks
+for the three outputs.
+The program they make compiles about 2.5× slower, so `mf6` uses them only for batches of
+`mf6.FAST_MATH_POINTS` points or more.
 
 Each has a custom JVP with the exact derivative (1/(1 + x²), cos, −sin, 1 + tan², 1/(2√x))
 written with these same functions, so derivatives of any order are those of the exact

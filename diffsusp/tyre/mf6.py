@@ -32,10 +32,12 @@ dimensionless or already N, rad, Pa); `to_tir` converts back.
   λ_Fz0;
 - M_x: the Besselink draft (49) with q_sx12…q_sx14; M_y: paper (A48), negative in ISO-W.
 
-**Evaluation.** arctan, sin, cos, tan and the equivalent slips' sqrt are the vectorised
-float64 implementations of `diffsusp.tyre._math` (Cephes algorithms, relative error about
-1e-16, exact custom derivatives) instead of XLA's scalar calls: the combined F_x, F_y, M_z cost
-2.5× less CPU time per point (benchmarks/README.md, tyre section).
+**Evaluation.** For batches of `FAST_MATH_POINTS` points or more, arctan, sin, cos, tan and
+the equivalent slips' sqrt are the vectorised float64 implementations of `diffsusp.tyre._math`
+(Cephes algorithms, relative error about 1e-16, exact custom derivatives) instead of XLA's
+scalar calls: the combined F_x, F_y, M_z cost 2.4× less CPU time per point
+(benchmarks/README.md, tyre section); smaller batches keep XLA's functions, whose program
+compiles faster.
 
 MF 6.2 steady-state forces and moments at a given F_z are the 6.1 equations (6.2 changes the
 vertical model, the loaded and effective radius, not evaluated here). **MF 5.2** (FITTYP 5, 6):
@@ -58,7 +60,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..errors import ModelFileError, ModelWarning
 from ..io.tir import TirFile
-from . import _math as _m
+from . import _math
 
 __all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
            "FITTYP_VERSION"]
@@ -240,10 +242,27 @@ def _default(name: str, values: dict) -> float:
     return 0.0
 
 
-def _cos_atan(x):
-    """cos(atan x) = 1/√(1 + x²), by the vectorised functions of `_math`: a float64 sqrt in a
-    loop fusion stops LLVM from vectorising it (see `diffsusp.tyre._math`)."""
-    return _m.cos(_m.arctan(x))
+class _XLA:
+    """XLA's own float64 functions (scalar calls per element; a smaller program)."""
+
+    arctan, sin, cos, tan, sqrt = (staticmethod(f) for f in (jnp.arctan, jnp.sin, jnp.cos,
+                                                             jnp.tan, jnp.sqrt))
+
+
+FAST_MATH_POINTS = 20_000
+"""Evaluations with at least this many points (the inputs' broadcast size, known when the
+program is traced) use the vectorised functions of `diffsusp.tyre._math`; smaller ones XLA's
+own. Both agree to about 1e-16 relative; the vectorised ones cost 2.4× less CPU per point but
+make a program that compiles about 2.5× slower, which small batches (fits, the tyre on the K&C
+rig, tests) do not win back."""
+
+
+def _cos_atan(x, fm):
+    """cos(atan x) = 1/√(1 + x²); with the vectorised functions as cos(atan x): a float64 sqrt
+    in a loop fusion stops LLVM from vectorising it (see `diffsusp.tyre._math`)."""
+    if fm is _math:
+        return fm.cos(fm.arctan(x))
+    return 1.0 / jnp.sqrt(1.0 + x * x)
 
 
 def _sgn(x):
@@ -251,29 +270,29 @@ def _sgn(x):
     return jnp.where(x < 0, -1.0, 1.0)
 
 
-def _mf(B, C, E, x):
+def _mf(B, C, E, x, fm):
     """D-less Magic Formula sin(C·atan(Bx − E(Bx − atan Bx)))."""
     bx = B * x
-    return _m.sin(C * _m.arctan(bx - E * (bx - _m.arctan(bx))))
+    return fm.sin(C * fm.arctan(bx - E * (bx - fm.arctan(bx))))
 
 
-def _cosmf(B, C, E, x):
+def _cosmf(B, C, E, x, fm):
     bx = B * x
-    return _m.cos(C * _m.arctan(bx - E * (bx - _m.arctan(bx))))
+    return fm.cos(C * fm.arctan(bx - E * (bx - fm.arctan(bx))))
 
 
-def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits):
+def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm):
     """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0."""
     Fz0p = c["LFZO"] * c["FNOMIN"]
     if v52:
-        Kya = (c["PKY1"] * Fz0p * _m.sin(c["PKY4"] * _m.arctan(fz / (c["PKY2"] * Fz0p)))
+        Kya = (c["PKY1"] * Fz0p * fm.sin(c["PKY4"] * fm.arctan(fz / (c["PKY2"] * Fz0p)))
                * (1.0 - c["PKY3"] * jnp.abs(gamma_s)) * c["LKY"])
-        Kya0 = c["PKY1"] * Fz0p * _m.sin(c["PKY4"] * _m.arctan(fz / (c["PKY2"] * Fz0p))) \
+        Kya0 = c["PKY1"] * Fz0p * fm.sin(c["PKY4"] * fm.arctan(fz / (c["PKY2"] * Fz0p))) \
             * c["LKYC"]
         Kyg0 = (c["PHY3"] * Kya0 + fz * (c["PVY3"] + c["PVY4"] * dfz)) * c["LKYC"]
     else:
         Kya = (c["PKY1"] * Fz0p * (1.0 + c["PPY1"] * dpi) * (1.0 - c["PKY3"] * jnp.abs(gamma_s))
-               * _m.sin(c["PKY4"] * _m.arctan((fz / Fz0p) / ((c["PKY2"] + c["PKY5"] * gamma_s**2)
+               * fm.sin(c["PKY4"] * fm.arctan((fz / Fz0p) / ((c["PKY2"] + c["PKY5"] * gamma_s**2)
                                                               * (1.0 + c["PPY2"] * dpi))))
                * c["LKY"])
         Kyg0 = fz * (c["PKY6"] + c["PKY7"] * dfz) * (1.0 + c["PPY5"] * dpi) * c["LKYC"]
@@ -295,7 +314,7 @@ def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits):
     if limits:
         Ey = jnp.minimum(Ey, 1.0)
     By = Kya / (Cy * Dy + EPS * _sgn(Dy))
-    Fy0 = Dy * _mf(By, Cy, Ey, ay) + SVy
+    Fy0 = Dy * _mf(By, Cy, Ey, ay, fm) + SVy
     return Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0
 
 
@@ -343,18 +362,20 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     lim = model.limit
     fz, ufz, kappa, alpha, gamma, vx, p = _inputs(model, fz, kappa, alpha, gamma, vx, pressure,
                                                   limits)
+    shapes = [jnp.shape(x) for x in (fz, kappa, alpha, gamma, vx, p)]
+    fm = _math if math.prod(jnp.broadcast_shapes(*shapes)) >= FAST_MATH_POINTS else _XLA
     Fz0 = c["FNOMIN"]
     Fz0p = c["LFZO"] * Fz0
     R0 = c["UNLOADED_RADIUS"]
     dfz = (fz - Fz0p) / Fz0p
     dpi = 0.0 * fz if v52 else (p - c["NOMPRES"]) / c["NOMPRES"]
     if alpha_star:
-        a_s, g_s = _m.tan(alpha), _m.sin(gamma)
+        a_s, g_s = fm.tan(alpha), fm.sin(gamma)
     else:
         a_s, g_s = alpha, gamma
     # cos α' (4.E6): V_c = √(V_cx² + tan²α·V_cx²) = |V_cx|/|cos α|, so V_cx/(V_c + ε_V) =
     # V_cx·|cos α|/(|V_cx| + ε_V·|cos α|) (one cos instead of tan and sqrt; ε_V = 1e-6 m/s)
-    cos_a = _m.cos(alpha)
+    cos_a = fm.cos(alpha)
     cos_ap = vx * jnp.abs(cos_a) / (jnp.abs(vx) + 1e3 * EPS * jnp.abs(cos_a))
 
     nan = jnp.full(jnp.broadcast_shapes(jnp.shape(fz), jnp.shape(kappa), jnp.shape(alpha),
@@ -376,15 +397,15 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             * c["LEX"]
         if limits:
             Ex = jnp.minimum(Ex, 1.0)
-        Fx0 = Dx * _mf(Bx, Cx, Ex, kx) + SVx
+        Fx0 = Dx * _mf(Bx, Cx, Ex, kx, fm) + SVx
 
     if need_fy:
         # pure lateral
-        Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits)
+        Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits, fm)
 
     if want_mz:
         # pure aligning torque (4.E31–4.E49, A58, A60)
-        Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits)[0]
+        Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits, fm)[0]
         fz_mz = jnp.where(fz <= 0.0, 0.0, jnp.maximum(fz, lim["FZMIN"])) if limits else fz
         SHt = c["QHZ1"] + c["QHZ2"] * dfz + (c["QHZ3"] + c["QHZ4"] * dfz) * g_s
         Kyap = Kya + EPS * _sgn(Kya)
@@ -397,13 +418,13 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
               * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
         Ct = c["QCZ1"]
         Et = (c["QEZ1"] + c["QEZ2"] * dfz + c["QEZ3"] * dfz**2) * (
-            1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * _m.arctan(Bt * Ct * at))
+            1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * fm.arctan(Bt * Ct * at))
         if limits:
             Et = jnp.minimum(Et, 1.0)
         Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
                             + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
                                + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
-              * c["LMUY"] * (_m.cos(a_s) if alpha_star else cos_a))
+              * c["LMUY"] * (fm.cos(a_s) if alpha_star else cos_a))
         Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
         Cr = 1.0
 
@@ -411,8 +432,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         Fx = Fx0 if need_fx else nan
         Fy = Fy0 if need_fy else nan
         if want_mz:
-            t0 = Dt * _cosmf(Bt, Ct, Et, at) * cos_ap
-            Mz = -t0 * Fy0_g0 + Dr * _m.cos(Cr * _m.arctan(Br * ar)) * cos_ap
+            t0 = Dt * _cosmf(Bt, Ct, Et, at, fm) * cos_ap
+            Mz = -t0 * Fy0_g0 + Dr * fm.cos(Cr * fm.arctan(Br * ar)) * cos_ap
     else:
         if need_fx:
             # combined longitudinal (4.E50–4.E57)
@@ -420,32 +441,33 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             if limits:
                 Exa = jnp.minimum(Exa, 1.0)
             Bxa = (c["RBX1"] + (0.0 if v52 else c["RBX3"] * g_s**2)) \
-                * _cos_atan(c["RBX2"] * kappa) * c["LXAL"]
-            Gxa = (_cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"])
-                   / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"]))
+                * _cos_atan(c["RBX2"] * kappa, fm) * c["LXAL"]
+            Gxa = (_cosmf(Bxa, c["RCX1"], Exa, a_s + c["RHX1"], fm)
+                   / _cosmf(Bxa, c["RCX1"], Exa, c["RHX1"], fm))
             Fx = Gxa * Fx0
         if need_fy:
             # combined lateral (4.E58–4.E67)
             DVyk = (muy * fz * (c["RVY1"] + c["RVY2"] * dfz + c["RVY3"] * g_s)
-                    * _cos_atan(c["RVY4"] * a_s))
-            SVyk = DVyk * _m.sin(c["RVY5"] * _m.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
+                    * _cos_atan(c["RVY4"] * a_s, fm))
+            SVyk = DVyk * fm.sin(c["RVY5"] * fm.arctan(c["RVY6"] * kappa)) * c["LVYKA"]
             SHyk = c["RHY1"] + c["RHY2"] * dfz
             Eyk = c["REY1"] + c["REY2"] * dfz
             if limits:
                 Eyk = jnp.minimum(Eyk, 1.0)
             Byk = (c["RBY1"] + (0.0 if v52 else c["RBY4"] * g_s**2)) \
-                * _cos_atan(c["RBY2"] * (a_s - c["RBY3"])) * c["LYKA"]
-            Gyk = _cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk) / _cosmf(Byk, c["RCY1"], Eyk, SHyk)
+                * _cos_atan(c["RBY2"] * (a_s - c["RBY3"]), fm) * c["LYKA"]
+            Gyk = (_cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk, fm)
+                   / _cosmf(Byk, c["RCY1"], Eyk, SHyk, fm))
             Fy = Gyk * Fy0 + SVyk
         if want_mz:
             # combined aligning torque (4.E71–4.E78, A54–A56)
             k2 = (Kxk / Kyap) ** 2 * kappa**2
-            ar_eq = _m.arctan(_m.sqrt(_m.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
-            at_eq = _m.arctan(_m.sqrt(_m.tan(at) ** 2 + k2)) * _sgn_strict(at)
+            ar_eq = fm.arctan(fm.sqrt(fm.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
+            at_eq = fm.arctan(fm.sqrt(fm.tan(at) ** 2 + k2)) * _sgn_strict(at)
             s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
                 * c["LS"]
-            Mzr = Dr * _cos_atan(Br * ar_eq)  # C_r = 1
-            t = Dt * _cosmf(Bt, Ct, Et, at_eq) * cos_ap * c["LFZO"]
+            Mzr = Dr * _cos_atan(Br * ar_eq, fm)  # C_r = 1
+            t = Dt * _cosmf(Bt, Ct, Et, at_eq, fm) * cos_ap * c["LFZO"]
             if v52:
                 Mz = -t * (Fy - SVyk) + Mzr + s * Fx
             else:
@@ -463,9 +485,9 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             Mx = (R0 * fz_mx * c["LMX"] * (
                 c["QSX1"] * c["LVMX"] - c["QSX2"] * gamma * (1.0 + c["PPMX1"] * dpi)
                 - c["QSX12"] * gamma * jnp.abs(gamma) + c["QSX3"] * Fy / Fz0
-                + c["QSX4"] * _m.cos(c["QSX5"] * _m.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
-                * _m.sin(c["QSX7"] * gamma + c["QSX8"] * _m.arctan(c["QSX9"] * Fy / Fz0))
-                + c["QSX10"] * _m.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
+                + c["QSX4"] * fm.cos(c["QSX5"] * fm.arctan((c["QSX6"] * fz_mx / Fz0) ** 2))
+                * fm.sin(c["QSX7"] * gamma + c["QSX8"] * fm.arctan(c["QSX9"] * Fy / Fz0))
+                + c["QSX10"] * fm.arctan(c["QSX11"] * fz_mx / Fz0) * gamma)
                 + R0 * Fy * c["LMX"] * (c["QSX13"] + c["QSX14"] * jnp.abs(gamma)))
     if want_my:
         # rolling resistance moment (A48; MF 5.2: manual), F_z not saturated at FZMAX

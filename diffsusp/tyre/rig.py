@@ -63,9 +63,12 @@ Units at this interface: F_z, forces N; moments N·mm; angles rad; lengths mm (t
 the tyre's own units are those of `diffsusp.tyre.mf6` (N, N·mm, rad, mm/s, Pa).
 
 ```python
+import jax.numpy as jnp
 from diffsusp import tyre
+from diffsusp.io.tir import read_tir
 from diffsusp.models import pseudo_mcpherson
-rig = tyre.rig.tyre_rig(pseudo_mcpherson(), tyre.MagicFormula6.from_tir(read_tir(path)))
+model = tyre.MagicFormula6.from_tir(read_tir(tyre.example_path("mf61")))
+rig = tyre.rig.tyre_rig(pseudo_mcpherson(), model)
 sol = tyre.rig.solve(rig, slip_angle=jnp.radians(jnp.array([-2.0, 1.0, 4.0])), fz=4500.0)
 sol.forces.fy, sol.forces.mz, sol.slip_angle, sol.toe
 ```
