@@ -1,10 +1,14 @@
 """What every benchmark script shares: timing after compilation and writing its results."""
 
 import json
+import os
 import pathlib
 import time
 
-import jax
+from diffsusp._compile import set_xla_flags
+
+set_xla_flags(os.environ)  # the CLI's compiler flags, before JAX starts its backend
+import jax  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).parent / "results"
 
@@ -19,6 +23,20 @@ def timed(fn, repeats):
         out = fn()
     jax.block_until_ready(out)
     return (time.perf_counter() - t0) / repeats, out
+
+
+def timed_cpu(fn, repeats):
+    """(best wall seconds, best CPU seconds of this process) per call of `fn()` over `repeats`
+    calls after a first (compiling) call, and the last output. CPU time is the steadier number
+    on a shared machine: other processes delay a call but do not add to its CPU time."""
+    out = jax.block_until_ready(fn())
+    wall, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = jax.block_until_ready(fn())
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return min(wall), min(cpu), out
 
 
 def save_results(name: str, results, quick: bool = False) -> pathlib.Path:

@@ -10,12 +10,14 @@ as a ratio. Timings are never asserted anywhere.
 """
 
 import argparse
+import os
 import pathlib
 import resource
 import sys
 import time
 
 import jax
+from _common import save_results, timed, timed_cpu  # noqa: I001 (sets XLA flags first)
 
 jax.config.update("jax_enable_x64", True)
 import equinox as eqx  # noqa: E402
@@ -27,7 +29,6 @@ from diffsusp.models import double_wishbone, pseudo_mcpherson, thesis_load_cases
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
-from _common import save_results, timed  # noqa: E402
 
 
 def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
@@ -49,9 +50,10 @@ def bench_model(name, mech, rng, sizes, baseline_cases):
         sol = ds.solve_statics(mech, loads, throw=False)
         jax.block_until_ready(sol.q)
         first = time.perf_counter() - t0
-        dt, sol = timed(lambda loads=loads: ds.solve_statics(mech, loads, throw=False),
-                        repeats=3 if n >= 1000 else 10)
-        rows.append(dict(model=name, cases=n, seconds=dt, per_second=n / dt,
+        dt, cpu, sol = timed_cpu(lambda loads=loads: ds.solve_statics(mech, loads, throw=False),
+                                 repeats=3 if n >= 1000 else 10)
+        rows.append(dict(model=name, cases=n, seconds=dt, per_second=n / dt, cpu_seconds=cpu,
+                         per_cpu_second=n / cpu,
                          compile_and_first=first, mean_iterations=float(np.mean(sol.iterations)),
                          failed=int(np.sum(np.asarray(sol.status) != 0))))
     one = mech.loads(forces={"contact_patch": jnp.array([0.0, 0.0, 4500.0])})
@@ -132,6 +134,7 @@ def main():
         jax.block_until_ready(sol.q)
         results["batch_100k"] = dict(seconds=time.perf_counter() - t0,
                                      failed=int(np.sum(np.asarray(sol.status) != 0)))
+    results["load_average"] = os.getloadavg()
     results["max_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
     for p in results["programs"]:
@@ -139,10 +142,11 @@ def main():
               f"equations, {p['stablehlo_mb']:.2f} MB StableHLO; trace {p['trace']:.2f} s, "
               f"lower {p['lower']:.2f} s, compile {p['compile']:.2f} s, run "
               f"{p['run'] * 1e3:.2f} ms")
-    print(f"{'model':18s} {'cases':>7s} {'solves/s':>10s} {'iters':>6s} {'failed':>6s} "
-          f"{'compile+1st s':>13s}")
+    print(f"{'model':18s} {'cases':>7s} {'solves/s':>10s} {'per CPU s':>10s} {'iters':>6s} "
+          f"{'failed':>6s} {'compile+1st s':>13s}")
     for r in results["rows"]:
         print(f"{r['model']:18s} {r['cases']:7d} {r['per_second']:10.0f} "
+              f"{r['per_cpu_second']:10.0f} "
               f"{r['mean_iterations']:6.2f} {r['failed']:6d} {r['compile_and_first']:13.2f}")
     for info in results["models"]:
         best = max(r["per_second"] for r in results["rows"] if r["model"] == info["model"])
@@ -155,6 +159,7 @@ def main():
           f"{jac['seconds'] * 1e3:.1f} ms (compile+first {jac['compile_and_first']:.1f} s)")
     if "batch_100k" in results:
         print(f"100 000 cases (chunks of 4096): {results['batch_100k']['seconds']:.1f} s")
+    print(f"load average during the run (1, 5, 15 min): {results['load_average']}")
     print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
     save_results("statics", results, args.quick)
 

@@ -46,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._compile import filter_jit
 from ..model.mechanism import Loads, Mechanism
 from .linearize import linearize
 
@@ -140,7 +141,7 @@ def equilibrium_flags(mech: Mechanism, loads: Loads, q: Float[Array, "cases n"],
             converged & (ratio <= 1.0))
 
 
-@eqx.filter_jit
+@filter_jit
 def _flags(mech, loads, q, multipliers, converged):
     return equilibrium_flags(mech, loads, q, multipliers, converged)
 
@@ -167,19 +168,18 @@ def with_flags(mech: Mechanism, loads: Loads, sol):
     else:
         batch = sol
     n = batch.status.shape[0]
-    stable, law_valid = [jnp.zeros(0, bool)], [jnp.zeros(0, bool)]
+    # Sliced on the host: a device gather per array and chunk costs more than the chunk's work.
+    loads_h, q, lam, status = jax.tree.map(np.asarray, (loads, batch.q, batch.multipliers,
+                                                        batch.status))
+    stable, law_valid = [np.zeros(0, bool)], [np.zeros(0, bool)]
     for start in range(0, n, _FLAG_CHUNK):
         index = np.minimum(np.arange(start, start + _FLAG_CHUNK), n - 1)
         real = np.arange(start, start + _FLAG_CHUNK) < n
-
-        def take(a, index=index):
-            return jnp.asarray(a)[index]
-
-        out = _flags(mech, jax.tree.map(take, loads), take(batch.q), take(batch.multipliers),
-                     (take(batch.status) == 0) & jnp.asarray(real))
-        stable.append(out[0][real])
-        law_valid.append(out[1][real])
-    stable, law_valid = jnp.concatenate(stable), jnp.concatenate(law_valid)
+        out = _flags(mech, jax.tree.map(lambda a, index=index: a[index], loads_h), q[index],
+                     lam[index], (status[index] == 0) & real)
+        stable.append(np.asarray(out[0])[real])
+        law_valid.append(np.asarray(out[1])[real])
+    stable, law_valid = jnp.asarray(np.concatenate(stable)), jnp.asarray(np.concatenate(law_valid))
     if single:
         stable, law_valid = stable[0], law_valid[0]
     return eqx.tree_at(lambda s: (s.stable, s.law_valid), sol, (stable, law_valid),
