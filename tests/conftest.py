@@ -6,6 +6,11 @@ import tempfile
 import jax
 import pytest
 
+from diffsusp._compile import set_xla_flags  # noqa: E402
+
+# The CLI's compiler flags for every program of the tests and the notebook kernels (they
+# inherit XLA_FLAGS), set before JAX starts its backend.
+set_xla_flags(os.environ)
 jax.config.update("jax_enable_x64", True)
 # The CLI's own cache (DIFFSUSP_CACHE) is off inside the tests.
 os.environ["DIFFSUSP_CACHE"] = ""
