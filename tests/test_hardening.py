@@ -30,6 +30,7 @@ DATA = ROOT / "data"
 MODELS = pathlib.Path(cli_model.__file__).parents[1] / "models" / "data"
 ADM = (DATA / "model_exemple11.adm").read_text()
 BUSHING_TOML = (MODELS / "isolated_bushing.toml").read_text()
+TIR = next((pathlib.Path(cli_model.__file__).parents[1] / "tyre" / "data").glob("*.tir"))
 
 
 def invoke(*args, env=None):
@@ -98,13 +99,14 @@ def test_size_limit_and_its_override(tmp_path):
 
 def test_every_reader_checks_type_and_size(tmp_path, monkeypatch):
     from diffsusp import measure
-    from diffsusp.io import read_adm, read_chrono, read_model_toml
+    from diffsusp.io import read_adm, read_chrono, read_iges, read_model_toml, read_tir
     from diffsusp.io.adams import read_bushing_property, read_lcf
     from diffsusp.models import isolated_bushing
 
     for reader, name in ((read_model_toml, "m.toml"), (read_adm, "m.adm"),
                          (read_chrono, "m.json"), (read_lcf, "m.lcf"),
-                         (read_bushing_property, "m.bus"), (read_table, "t.csv"),
+                         (read_bushing_property, "m.bus"), (read_tir, "t.tir"),
+                         (read_iges, "p.igs"), (read_table, "t.csv"),
                          (read_table, "t.parquet"),
                          (lambda p: measure.read_measurements(p, isolated_bushing()), "t.csv")):
         link = tmp_path / name
@@ -146,6 +148,11 @@ def test_bracketed_text_in_messages_and_paths_is_printed(tmp_path):
     assert result.exit_code == 2
     assert "missing [units]: declare the file's units" in text(result)
     assert_clean(result)
+    tir = tmp_path / "tyre[v2].tir"
+    tir.write_text(TIR.read_text(encoding="latin-1"), encoding="latin-1")
+    result = invoke("tyre", "info", tir)
+    assert result.exit_code == 0, result.output
+    assert "tyre[v2].tir" in " ".join(result.stdout.split())
 
 
 def test_a_model_name_with_markup_is_printed_verbatim(tmp_path):
@@ -354,6 +361,14 @@ def test_output_paths_are_checked_before_the_work(tmp_path, loads5, no_solve, mo
           tmp_path / "nope" / "m.toml"), "does not exist"),
         (("identify", "iterative", "isolated_bushing", "-m", loads5, "--figures", a_file),
          "it is a file, not a folder"),
+        (("tyre", "eval", TIR, "--grid", "--out", tmp_path / "nope" / "r.csv"),
+         "does not exist"),
+        (("tyre", "rig", TIR, "--model", "pseudo_mcpherson", "--out", tmp_path / "r.txt"),
+         "unknown format '.txt'"),
+        (("tyre", "fit", loads5, "--start", TIR, "--out", tmp_path / "nope" / "f.tir"),
+         "does not exist"),
+        (("identify", "geometry", "isolated_bushing", "-m", loads5, "--out",
+          tmp_path / "nope" / "j.csv"), "does not exist"),
     ):
         result = invoke(*args)
         assert result.exit_code == 2, (args, result.output)

@@ -125,7 +125,7 @@ def geometry(
     if json_output:
         print_json(json.loads(report.to_json()) | {"notes_model": list(notes)})
         return
-    con = console()
+    con = console(markup=False)
     table = RichTable(title=f"{mech.name}: joints located from {measurements.name} "
                       f"({report.n_cases} cases, σ at landmark noise {landmark_sigma:g} mm)",
                       box=box.SIMPLE_HEAD)
@@ -241,7 +241,7 @@ def correct(
                         case_errors=dict(zip(meas.cases, report.case_errors, strict=True)),
                         notes=list(report.notes)))
         return
-    con = console()
+    con = console(markup=False)
     con.print(str(report), highlight=False)
     worst = max(range(len(meas.cases)), key=lambda c: report.case_errors[c])
     con.print(f"pose error of the corrected model at the other cases: largest "

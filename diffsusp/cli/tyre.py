@@ -35,7 +35,17 @@ import typer
 from rich import box
 from rich.table import Table as RichTable
 
-from .common import EXIT_BAD_INPUT, app, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    app,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+    warn,
+)
 
 tyre_app = typer.Typer(add_completion=False, no_args_is_help=True,
                        help="Magic Formula tyre models (.tir files): evaluate, specify, fit.")
@@ -72,8 +82,8 @@ def info(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")
     if json_out:
         print_json(out)
         return
-    c = console()
-    c.print(f"[bold]{file}[/]: FITTYP {out['fittyp']} (MF {out['version']}), R0 "
+    c = console(markup=False)
+    c.print(f"{file}: FITTYP {out['fittyp']} (MF {out['version']}), R0 "
             f"{out['unloaded_radius_m']:.4g} m, FNOMIN {out['fnomin_N']:.6g} N, NOMPRES "
             f"{out['nompres_Pa']:.6g} Pa, LONGVL {out['longvl_m_s']:.4g} m/s")
     t = RichTable(box=box.SIMPLE)
@@ -110,6 +120,7 @@ def eval_command(
 
     if (inputs is None) == (not grid):
         raise fail("give exactly one of --inputs TABLE and --grid", EXIT_BAD_INPUT)
+    check_output(out, suffixes=(".csv", ".parquet"), what="results table")
     with cli_errors():
         enable_x64()
         tir, model = _load(file)
@@ -129,7 +140,7 @@ def eval_command(
                 check_limits(model, fz=cols["FZ"], kappa=cols["SL"], alpha=cols["SA"],
                              gamma=cols["IA"], pressure=p, where=f"{inputs or 'grid'}: ")
             for w in rec:
-                console(stderr=True).print(f"[yellow]warning:[/] {w.message}", highlight=False)
+                warn(w.message)
         f = evaluate(model, jnp.asarray(cols["FZ"]), jnp.asarray(cols["SL"]),
                      jnp.asarray(cols["SA"]), jnp.asarray(cols["IA"]), jnp.asarray(vx),
                      jnp.asarray(p), combined=not pure, limits=limits, alpha_star=alpha_star)
@@ -145,7 +156,7 @@ def eval_command(
                               for k, v in res.items()},
                         {("P_Pa" if k == "P" else "VX_m_s" if k == "VX" else k): u
                          for k, u in units.items()})
-    c = console()
+    c = console(markup=False)
     if out is not None:
         c.print(f"{len(res['FZ'])} points written to {out}")
     else:
@@ -196,7 +207,7 @@ def spec_command(
         t.add_column(h, justify="right")
     for r in rows:
         t.add_row(*(f"{r[k] * s:.5g}" for k, _, s in show))
-    console().print(t)
+    console(markup=False).print(t)
 
 
 @tyre_app.command("rig")
@@ -226,6 +237,7 @@ def rig_command(
 
     from .kc import parse_range
 
+    check_output(out, suffixes=(".csv", ".parquet"), what="results table")
     with cli_errors():
         enable_x64()
         _, tyre = _load(file)
@@ -250,7 +262,7 @@ def rig_command(
     if json_out:
         print_json([{k: float(v[i]) for k, v in res.items()} for i in range(alpha.size)])
         return
-    c = console()
+    c = console(markup=False)
     if out is not None:
         c.print(f"{alpha.size} cases written to {out}")
         return
@@ -310,7 +322,10 @@ def fit_command(
     if model == "mf1989" and out is not None and out.suffix.lower() == ".tir":
         raise fail("mf1989 coefficients are not a .tir model: use --report .json",
                    EXIT_BAD_INPUT)
-    c = console()
+    check_output(out, suffixes=None if model == "mf1989" else (".tir",), what="fitted model")
+    check_output(report, suffixes=(".json",), what="report")
+    check_output(figures, what="figures folder", directory=True)
+    c = console(markup=False)
     with cli_errors():
         enable_x64()
         if model != "mf1989":
@@ -324,7 +339,7 @@ def fit_command(
             warnings.simplefilter("always")
             bench = F.read_bench(data)
         for w in rec:
-            console(stderr=True).print(f"[yellow]warning:[/] {w.message}", highlight=False)
+            warn(w.message)
         if model == "mf1989":
             m0 = MagicFormula89.from_values({"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0,
                                              "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,

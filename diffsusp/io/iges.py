@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ModelFileError
+from .files import read_input
 
 __all__ = ["IgesFile", "IgesLine", "IgesPlane", "IgesPoint", "read_iges"]
 
@@ -104,9 +105,10 @@ def _source(source) -> tuple[str, str | None]:
     if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source):
         path = os.fspath(source)
         try:
-            with open(path, "rb") as f:
-                raw = f.read()
-        except OSError as exc:
+            # A regular file within the size limit (a device, a FIFO or an endless file is
+            # refused before it is read: `io.files`).
+            raw = read_input(path, "IGES file")
+        except FileNotFoundError as exc:
             raise ModelFileError(f"cannot read the IGES file ({exc.strerror or exc}).",
                                  path=path) from None
         return _source(raw)[0], path

@@ -27,6 +27,7 @@ import os
 import re
 
 from ..errors import ModelFileError
+from .files import read_input
 
 __all__ = ["TirEntry", "TirFile", "read_tir", "write_tir", "tir_from_text"]
 
@@ -241,9 +242,10 @@ def read_tir(path: str | os.PathLike) -> TirFile:
     """Read a `.tir` file (any line ends; Latin-1 tolerated). See the module docstring."""
     path = os.fspath(path)
     try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
+        # A regular file within the size limit (a device, a FIFO or an endless file is refused
+        # before it is read: `io.files`).
+        data = read_input(path, "tyre property file")
+    except FileNotFoundError as exc:
         raise ModelFileError(f"cannot read the file: {exc.strerror}", path=path) from None
     try:
         text = data.decode("utf-8")
