@@ -80,9 +80,26 @@ def _release_compiled_programs():
     gc.collect()
 
 
+# The files whose programs cost the most (measured: compile counts and seconds per file), handed
+# out first so that the short files fill the end of the run on both workers.
+_LONG_FILES = ("test_kc.py", "test_statics.py", "test_oracle.py", "test_sensitivity.py",
+               "test_fit.py", "test_direct.py", "test_geometric.py", "test_io_chrono.py")
+
+
 def pytest_collection_modifyitems(items):
-    """The notebooks last, each its own work unit (test_notebooks.py): pytest-xdist hands work
-    units out in collection order, so they start when the other files have filled the run's
-    compilation cache with the programs they share, and the two workers split them at the end
-    instead of one worker running all six while the other takes the rest of the suite."""
-    items.sort(key=lambda item: item.path.name == "test_notebooks.py")
+    """pytest-xdist work units (`--dist loadscope`: a module, or a test class: each notebook,
+    test_notebooks.py) are handed out in collection order: the longest files first, then the
+    others in name order, then the notebooks, which start when the other files have filled the
+    run's compilation cache with the programs they share, and which the two workers split at
+    the end. (`--dist loadgroup` would do it with xdist_group marks, but pytest-xdist 3.8
+    cannot rename pytest 9's node ids: every test became a unit of its own.)"""
+
+    def rank(item):
+        name = item.path.name
+        if name == "test_notebooks.py":
+            return 2, 0
+        if name in _LONG_FILES:
+            return 0, _LONG_FILES.index(name)
+        return 1, 0
+
+    items.sort(key=rank)
