@@ -49,12 +49,12 @@ def csv_run(loads_csv, tmp_path_factory):
 def test_simulate_builtin_csv_matches_the_closed_form(csv_run):
     result, out = csv_run
     assert result.exit_code == 3, result.output  # case 2 cannot converge
-    assert "1 load case did not converge: 2 (max_steps reached)" in result.stderr
+    assert "1 load case did not converge: 2 (stalled)" in result.stderr
     assert "beyond the projected angles' validity" in result.stderr  # the warning, printed
     assert "2 of 3 load cases converged" in result.stdout
     table = read_table(out)
     np.testing.assert_array_equal(table["case"], [0, 1, 2])
-    np.testing.assert_array_equal(table["status"], [0, 0, 1])
+    np.testing.assert_array_equal(table["status"], [0, 0, 3])  # 3: stalled
     assert table.units["arm.x"] == "mm" and table.units["bush.tx"] == "N·mm"
     rj = np.asarray(isolated_bushing().markers.orientation[1])  # J marker frame (columns)
     # Case 0: a force at the I marker translates the arm by F/K; deformation and force in J.
@@ -91,7 +91,7 @@ def test_simulate_toml_parquet_json_and_named_table(csv_run, loads_csv, tmp_path
     summary = json.loads(result.stdout)
     assert summary["cases"] == 3 and summary["converged"] == 2
     assert summary["failed"][0]["case"] == 2
-    assert summary["failed"][0]["status"] == "max_steps reached"
+    assert summary["failed"][0]["status"] == "stalled"
     assert summary["columns"] == len(reference.names)
     assert summary["max_residual"] > 1e-6
     got = read_table(out)
@@ -127,7 +127,7 @@ def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_pat
     out = tmp_path / "chunked.csv"
     result = invoke("simulate", "isolated_bushing", "--loads", five, "--out", out)
     assert result.exit_code == 3
-    assert "1 load case did not converge: 2 (max_steps reached)" in result.stderr
+    assert "1 load case did not converge: 2 (stalled)" in result.stderr
     got = read_table(out)
     np.testing.assert_array_equal(got["case"], np.arange(5))
     for name in reference.names:
