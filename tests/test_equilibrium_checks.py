@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 import diffsusp as ds
 from diffsusp.errors import ModelWarning
 from diffsusp.model import MechanismBuilder
-from diffsusp.models import STOP_VARIANTS, pseudo_mcpherson, thesis_load_cases
+from diffsusp.models import STOP_VARIANTS, double_wishbone, pseudo_mcpherson, thesis_load_cases
 from diffsusp.statics import checks
 
 CASES = 8  # cases per batch: every batch of an axle reuses one compiled program
@@ -167,7 +167,8 @@ def test_flags_of_one_case_a_sweep_and_non_converged_cases(column_solved):
 @pytest.fixture(scope="module")
 def axles():
     """The axle with stops and a function solving a batch of CASES (F_vert, F_lat, F_long)."""
-    models = {"pseudo_mcpherson": pseudo_mcpherson(stops=True)}
+    models = {"pseudo_mcpherson": pseudo_mcpherson(stops=True),
+              "double_wishbone": double_wishbone(stops=True)}
 
     def solve(name, table):
         mech = models[name]
@@ -214,13 +215,14 @@ case = st.tuples(st.floats(1500.0, 7500.0), st.floats(-4000.0, 4000.0),
 @given(table=st.lists(case, min_size=CASES, max_size=CASES))
 @example(table=CORNERS)
 def test_every_envelope_load_has_a_stable_equilibrium_with_stops(axles, table):
-    """Any 8 loads of the envelope on the pseudo-McPherson with stops: every case converges, to
-    a stable equilibrium with valid laws. (The stop-free model fails on ~8–10 % of such loads;
-    a batch of 8 meets at least one with probability ~0.5.)"""
-    _, _, sol = axles("pseudo_mcpherson", table)
-    status = np.asarray(sol.status)
-    assert np.all(status == 0), np.asarray(table)[status != 0]
-    assert np.all(sol.stable) and np.all(sol.law_valid)
+    """Any 8 loads of the envelope on the built-in axles with stops: every case converges, to
+    a stable equilibrium with valid laws. (The stop-free pseudo-McPherson fails on ~8–10 % of
+    such loads; a batch of 8 meets at least one with probability ~0.5.)"""
+    for name in ("pseudo_mcpherson", "double_wishbone"):
+        _, _, sol = axles(name, table)
+        status = np.asarray(sol.status)
+        assert np.all(status == 0), (name, np.asarray(table)[status != 0])
+        assert np.all(sol.stable) and np.all(sol.law_valid), name
 
 
 # ----------------------------------------------------------------------------- CLI
