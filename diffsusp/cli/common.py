@@ -217,18 +217,9 @@ def check_output(path, *, suffixes=None, what: str = "output", directory: bool =
 
 
 def load_model_file(model, *, check: bool = True):
-    """`diffsusp.io.load_model_file`, and the built-in axles with bump and rebound stops
-    (`diffsusp.models.STOP_VARIANTS`, e.g. 'pseudo_mcpherson_stops'), which come with the load
-    tables of the model they add the stops to."""
-    import dataclasses
-
+    """`diffsusp.io.load_model_file` (built-in names, the stop variants included)."""
     from ..io import load_model_file as load
-    from ..models import STOP_VARIANTS
 
-    text = os.fspath(model)
-    if text in STOP_VARIANTS and not os.path.exists(text):
-        base = load(text.removesuffix("_stops"), check=False)
-        return dataclasses.replace(base, mechanism=STOP_VARIANTS[text]())
     return load(model, check=check)
 
 

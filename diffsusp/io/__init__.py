@@ -6,6 +6,7 @@ lines and planes) and tyre property files (.tir, MF 5.2/6.1/6.2).
 dataset, a Chrono `.json` template, or the name of a built-in model (`diffsusp.models.ZOO`).
 """
 
+import dataclasses
 import os
 
 from .iges import IgesFile, read_iges
@@ -40,7 +41,9 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
 
     **Arguments:** `source`: a path (`.toml`, `.adm`, `.json`) or a built-in model name (a key
     of `diffsusp.models.ZOO`; its load tables are those of the shipped file
-    `diffsusp/models/data/<name>.toml`); `check`: validate the model at build (native files).
+    `diffsusp/models/data/<name>.toml`; or of `diffsusp.models.STOP_VARIANTS`, e.g.
+    'pseudo_mcpherson_stops', with the load tables of the model it adds stops to); `check`:
+    validate the model at build (native files).
 
     **Returns:** a `ModelFile`.
 
@@ -48,9 +51,13 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
     file nor a built-in model.
     """
     from ..errors import ModelFileError
-    from ..models import ZOO
+    from ..models import STOP_VARIANTS, ZOO
 
     text = os.fspath(source)
+    if text in STOP_VARIANTS and not os.path.exists(text):
+        # An axle with bump and rebound stops: the load tables of the model it adds them to.
+        base = load_model_file(text.removesuffix("_stops"), check=False)
+        return dataclasses.replace(base, mechanism=STOP_VARIANTS[text]())
     if text in ZOO and not os.path.exists(text):
         mech = ZOO[text]()
         data = os.path.join(os.path.dirname(__file__), "..", "models", "data", f"{text}.toml")
