@@ -29,6 +29,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._compile import filter_jit
 from ..errors import ConvergenceError, ModelWarning
+from ..geometry import gibbs_angular_jacobian
 from ..model.mechanism import Loads, Mechanism
 from .checks import with_flags
 from .kernel import assemble_batch, retract, to_internal, to_public
@@ -97,6 +98,16 @@ def _measures(mech: Mechanism, r, f_scale):
             merit)
 
 
+def _generalised(y, r, n):
+    """The wrench residual r (moments M about each part's reference point) as generalised
+    forces of the Gibbs coordinates: moment rows G(b)ᵀM."""
+    b = y[:n].reshape(-1, 6)[:, 3:]
+    w = r[:n].reshape(-1, 2, 3)
+    m = jnp.einsum("pji,pj->pi", jax.vmap(gibbs_angular_jacobian)(b), w[:, 1])
+    return jnp.concatenate([jnp.stack([w[:, 0], m], 1).reshape(-1), r[n:]])
+
+
+_MAX_TURN = 1.0  # rad: the largest rotation of a part in one Newton step
 _POOL = 48  # cases iterated at once; a batch larger than this runs as a pool (see `_newton`)
 _LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
 # one is taken anyway
@@ -132,8 +143,11 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     def running(s):
         return (s["it"] <= max_steps) & (s["status"] == MAX_STEPS) & ~s["done"]
 
-    def update(s, loads_, y_try, r, jac):
+    def update(s, loads_, y_try, r_twist, jac):
         """The next state of one case, given the residual and Jacobian at its trial point."""
+        # Convergence and the merit are measured on the generalised forces of the Gibbs
+        # coordinates (F, G(b)ᵀM), as `residual` reports them; the step uses the twist form.
+        r = _generalised(y_try, r_twist, n)
         merit = _measures(mech, r, s["f_scale"])[2]
         merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
         first = s["it"] == 0
@@ -141,9 +155,9 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
         f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
-        dy = scaled_solve(jac, -r)
+        dy = scaled_solve(jac, -r_twist)
         cap = jnp.max(jnp.abs(dy * rot))
-        dy = dy * jnp.minimum(1.0, 1.0 / jnp.maximum(cap, 1e-300))
+        dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
         # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
         # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
