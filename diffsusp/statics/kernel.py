@@ -444,8 +444,9 @@ def assemble_batch(mech: Mechanism, loads: Loads, q, lam):
         vec, dest["vec"], mat, dest["mat"] = _terms(mech, loads_, q_, lam_, True)
         return vec, mat
 
-    # Case axis last (minor) throughout: the element algebra on 3-vectors then runs as
-    # contiguous, vectorised loops over cases.
+    # The case axis is handed over last so that the terms come out case-minor, as the scatter
+    # wants them. (XLA still runs the element algebra case-major inside: a case-minor layout of
+    # the 3-vector algebra, which PERFORMANCE.md suggests, is not reached this way.)
     last = functools.partial(jnp.moveaxis, source=0, destination=-1)
     vec, mat = jax.vmap(terms, in_axes=-1, out_axes=-1)(jax.tree.map(last, loads), q.T, lam.T)
     cases = q.shape[0]
