@@ -25,10 +25,10 @@ def timed(fn, repeats):
     return (time.perf_counter() - t0) / repeats, out
 
 
-def timed_cpu(fn, repeats):
-    """(best wall seconds, best CPU seconds of this process) per call of `fn()` over `repeats`
-    calls after a first (compiling) call, and the last output. CPU time is the steadier number
-    on a shared machine: other processes delay a call but do not add to its CPU time."""
+def samples(fn, repeats):
+    """(wall seconds, CPU seconds of this process) of each of `repeats` calls of `fn()` after a
+    first (compiling) call, and the last output. CPU time is the steadier number on a shared
+    machine: other processes delay a call but do not add to its CPU time."""
     out = jax.block_until_ready(fn())
     wall, cpu = [], []
     for _ in range(repeats):
@@ -36,6 +36,13 @@ def timed_cpu(fn, repeats):
         out = jax.block_until_ready(fn())
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
+    return wall, cpu, out
+
+
+def timed_cpu(fn, repeats):
+    """(best wall seconds, best CPU seconds) per call of `fn()` (see `samples`), and the last
+    output."""
+    wall, cpu, out = samples(fn, repeats)
     return min(wall), min(cpu), out
 
 

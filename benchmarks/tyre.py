@@ -40,7 +40,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import save_results  # noqa: E402
+from _common import samples, save_results  # noqa: E402
 
 from diffsusp.io.tir import read_tir  # noqa: E402
 from diffsusp.tyre import (  # noqa: E402
@@ -62,13 +62,7 @@ NAMES = ("PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PKY1 PKY2 PKY3 PKY4 PKY6 PKY7 PHY1 
 def _timings(fn, repeats):
     """(best wall, median wall, median CPU) seconds of `fn()` over `repeats` calls after a
     first (compiling) call, and the last output."""
-    out = jax.block_until_ready(fn())
-    wall, cpu = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = jax.block_until_ready(fn())
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
+    wall, cpu, out = samples(fn, repeats)
     return (min(wall), float(np.median(wall)), float(np.median(cpu))), out
 
 

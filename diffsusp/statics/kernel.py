@@ -460,6 +460,15 @@ def _gibbs_blocks(q):
     return jax.vmap(gibbs_angular_jacobian)(q.reshape(-1, 6)[:, 3:])
 
 
+def generalised_residual(q, w):
+    """The wrench residual w (moments M about each part's reference point, then the constraint
+    rows) as the residual of the Gibbs coordinates q: moment rows G(b)ᵀM."""
+    n = q.shape[0]
+    parts = w[:n].reshape(-1, 2, 3)
+    moments = jnp.einsum("pji,pj->pi", _gibbs_blocks(q), parts[:, 1])
+    return jnp.concatenate([jnp.stack([parts[:, 0], moments], 1).reshape(-1), w[n:]])
+
+
 def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
     """KKT residual in Gibbs coordinates r = (Q_ext + Q_int + Φ_qᵀλ, Φ − c) (n + m,) at solver
     coordinates q and multipliers λ, one load case, and if asked its exact Jacobian ∂r/∂(q, λ).
@@ -471,9 +480,7 @@ def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
     w, jac_t = assemble_twist(mech, loads, q, lam, with_jacobian)
     gb = _gibbs_blocks(q)
     moments = w[:n].reshape(-1, 2, 3)[:, 1]
-    forces = w[:n].reshape(-1, 2, 3)[:, 0]
-    gen = jnp.stack([forces, jnp.einsum("pji,pj->pi", gb, moments)], 1).reshape(-1)
-    r = jnp.concatenate([gen, w[n:]])
+    r = generalised_residual(q, w)
     if not with_jacobian:
         return r, None
     eye = jnp.eye(3, dtype=q.dtype)

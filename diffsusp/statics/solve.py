@@ -29,10 +29,9 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._compile import filter_jit
 from ..errors import ConvergenceError, ModelWarning
-from ..geometry import gibbs_angular_jacobian
 from ..model.mechanism import Loads, Mechanism
 from .checks import with_flags
-from .kernel import assemble_batch, retract, to_internal, to_public
+from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
 
 SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
@@ -98,15 +97,6 @@ def _measures(mech: Mechanism, r, f_scale):
             merit)
 
 
-def _generalised(y, r, n):
-    """The wrench residual r (moments M about each part's reference point) as generalised
-    forces of the Gibbs coordinates: moment rows G(b)ᵀM."""
-    b = y[:n].reshape(-1, 6)[:, 3:]
-    w = r[:n].reshape(-1, 2, 3)
-    m = jnp.einsum("pji,pj->pi", jax.vmap(gibbs_angular_jacobian)(b), w[:, 1])
-    return jnp.concatenate([jnp.stack([w[:, 0], m], 1).reshape(-1), r[n:]])
-
-
 _MAX_TURN = 1.0  # rad: the largest rotation of a part in one Newton step
 _POOL = 48  # cases iterated at once; a batch larger than this runs as a pool (see `_newton`)
 _LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
@@ -147,7 +137,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         """The next state of one case, given the residual and Jacobian at its trial point."""
         # Convergence and the merit are measured on the generalised forces of the Gibbs
         # coordinates (F, G(b)ᵀM), as `residual` reports them; the step uses the twist form.
-        r = _generalised(y_try, r_twist, n)
+        r = generalised_residual(y_try[:n], r_twist)
         merit = _measures(mech, r, s["f_scale"])[2]
         merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
         first = s["it"] == 0
