@@ -313,6 +313,10 @@ def test_nonconvergence_names_the_case(mount):
     with pytest.warns(UserWarning, match="1 of 2 cases did not converge"):
         sol = ds.solve_statics(mount, loads, max_steps=8, throw=False)
     assert list(np.asarray(sol.status != 0)) == [False, True]
+    status = [ds.statics.Status(int(c)) for c in np.asarray(sol.status)]
+    assert status[0] is ds.statics.Status.CONVERGED and status[1] is not status[0]
+    with pytest.raises(ds.ConvergenceError, match=status[1].text):
+        ds.solve_statics(mount, loads, max_steps=8)
 
 
 def test_bushing_rotated_past_validity_warns(iso):

@@ -19,6 +19,7 @@ The solution is differentiated implicitly: for a parameter tangent dθ, dy = −
 solution (one more linear solve), in forward and reverse mode; the Newton loop is never unrolled.
 """
 
+import enum
 import warnings
 
 import equinox as eqx
@@ -34,13 +35,32 @@ from .checks import with_flags
 from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
 
-SUCCESS, MAX_STEPS, NONFINITE, STALLED = 0, 1, 2, 3
-STATUS_TEXT = {
-    SUCCESS: "converged",
-    MAX_STEPS: "max_steps reached",
-    NONFINITE: "non-finite",
-    STALLED: "stalled: no descent in the last steps",
+
+class Status(enum.IntEnum):
+    """Why the Newton of a load case stopped: the per-case `StaticSolution.status` codes.
+
+    The arrays hold the integer codes (they live inside compiled programs); compare them with
+    the members (`sol.status == Status.CONVERGED`) and read a code's meaning with
+    `Status(code).text`.
+    """
+
+    CONVERGED = 0
+    MAX_STEPS = 1
+    NONFINITE = 2
+    STALLED = 3
+
+    @property
+    def text(self) -> str:
+        return _STATUS_TEXTS[self]
+
+
+_STATUS_TEXTS = {
+    Status.CONVERGED: "converged",
+    Status.MAX_STEPS: "max_steps reached",
+    Status.NONFINITE: "non-finite",
+    Status.STALLED: "stalled: no descent in the last steps",
 }
+STATUS_TEXT = {int(s): s.text for s in Status}  # code → text (kept for callers of the codes)
 _STALL_STEPS = 4  # consecutive steps shorter than 1/100 of Newton's before giving up
 _MAX_BACKTRACKS = 24  # rejected trial points in all before giving up (each costs an assembly)
 
@@ -49,14 +69,14 @@ class StaticSolution(eqx.Module):
     """Equilibria of a table of load cases (leading axis = case, absent for a single case).
 
     **Fields:** `q` (mm and Gibbs vectors, 6 per part), `multipliers` (one per independent
-    constraint row: N for length rows, N·mm for angular rows), `status` (0 converged,
-    1 max_steps reached, 2 non-finite, 3 stalled), `iterations`, `residual` (largest force row
-    relative to the load scale), `constraint_error` (mm), `stable` (the reduced tangent
-    stiffness is positive definite) and `law_valid` (every bushing's projected angles within
-    their validity), both False for a case that did not converge (`diffsusp.statics.checks`).
-    The two flags are computed when `solve_statics` / `solve_sweep` are called with concrete
-    arrays; under a transformation (jit, vmap, grad) they are None: call
-    `checks.equilibrium_flags` there if they are needed.
+    constraint row: N for length rows, N·mm for angular rows), `status` (a `Status`
+    code: 0 converged, 1 max_steps reached, 2 non-finite, 3 stalled), `iterations`, `residual`
+    (largest force row relative to the load scale), `constraint_error` (mm), `stable` (the
+    reduced tangent stiffness is positive definite) and `law_valid` (every bushing's projected
+    angles within their validity), both False for a case that did not converge
+    (`diffsusp.statics.checks`). The two flags are computed when `solve_statics` /
+    `solve_sweep` are called with concrete arrays; under a transformation (jit, vmap, grad)
+    they are None: call `checks.equilibrium_flags` there if they are needed.
     """
 
     q: Float[Array, "*cases n"]
@@ -70,7 +90,7 @@ class StaticSolution(eqx.Module):
 
     @property
     def converged(self):
-        return self.status == SUCCESS
+        return self.status == Status.CONVERGED
 
 
 def _force_scale(mech: Mechanism, loads: Loads, reaction):
@@ -131,7 +151,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         return tight | floor
 
     def running(s):
-        return (s["it"] <= max_steps) & (s["status"] == MAX_STEPS) & ~s["done"]
+        return (s["it"] <= max_steps) & (s["status"] == Status.MAX_STEPS) & ~s["done"]
 
     def update(s, loads_, y_try, r_twist, jac):
         """The next state of one case, given the residual and Jacobian at its trial point."""
@@ -153,8 +173,8 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
         # batch to max_steps.
         stall = jnp.where(first, 0, jnp.where(s["alpha"] < 0.01, s["stall"] + 1, 0))
-        status = jnp.where(jnp.all(jnp.isfinite(r)), MAX_STEPS, NONFINITE)
-        status = jnp.where(stall >= _STALL_STEPS, STALLED, status)
+        status = jnp.where(jnp.all(jnp.isfinite(r)), Status.MAX_STEPS, Status.NONFINITE)
+        status = jnp.where(stall >= _STALL_STEPS, Status.STALLED, status)
         accepted = dict(
             y=y_try, r=r, dy=dy, alpha=jnp.ones_like(s["alpha"]),
             merit=_measures(mech, r, f_scale)[2], f_scale=f_scale, it=s["it"] + 1,
@@ -171,7 +191,8 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         backtracks = s["backtracks"] + 1
         rejected = dict(s, alpha=alpha * jnp.clip(shrink, 0.1, 0.5), trial=s["trial"] + 1,
                         backtracks=backtracks,
-                        status=jnp.where(backtracks >= _MAX_BACKTRACKS, STALLED, s["status"]))
+                        status=jnp.where(backtracks >= _MAX_BACKTRACKS, Status.STALLED,
+                                         s["status"]))
         new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
         return jax.tree.map(lambda a, b: jnp.where(running(s), a, b), new, s)
 
@@ -186,13 +207,13 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             y=y0[jnp.minimum(case, cases - 1)], r=jnp.zeros(case.shape + (size,), y0.dtype),
             dy=jnp.zeros(case.shape + (size,), y0.dtype), alpha=zero + 1.0,
             merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
-            status=count + MAX_STEPS, stall=count, backtracks=count,
+            status=count + Status.MAX_STEPS, stall=count, backtracks=count,
             done=case >= cases,  # an empty slot
         )
 
     def result(s):
         force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
-        status = jnp.where(s["done"], SUCCESS, s["status"])
+        status = jnp.where(s["done"], Status.CONVERGED, s["status"])
         return jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint,
                           s["backtracks"].astype(float)], 1)
 
@@ -299,7 +320,7 @@ def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk):
 def _solve_path(mech, loads, q0, rtol, atol, max_steps):
     def step(q, loads_):
         sol = _solve_one(mech, loads_, q, rtol, atol, max_steps)
-        return jnp.where(sol.status == SUCCESS, sol.q, q), sol
+        return jnp.where(sol.status == Status.CONVERGED, sol.q, q), sol
 
     _, sols = jax.lax.scan(step, q0, loads)
     return sols
@@ -342,13 +363,13 @@ def _report(sol: StaticSolution, throw: bool, what: str):
     if _is_traced(sol.status):
         return sol
     status = np.atleast_1d(np.asarray(sol.status))
-    bad = np.flatnonzero(status != SUCCESS)
+    bad = np.flatnonzero(status != Status.CONVERGED)
     if bad.size and throw:
         c = int(bad[0])
         res = float(np.atleast_1d(np.asarray(sol.residual))[c])
         con = float(np.atleast_1d(np.asarray(sol.constraint_error))[c])
         raise ConvergenceError(
-            f"{what}: load case {c} did not converge ({STATUS_TEXT[int(status[c])]}, relative "
+            f"{what}: load case {c} did not converge ({Status(int(status[c])).text}, relative "
             f"force residual {res:.3g}, constraint error {con:.3g} mm; {bad.size} of "
             f"{status.size} cases failed). Check that the loads are within what the model can "
             "carry (stops, stiffness), raise max_steps, solve the path as a sweep with "
