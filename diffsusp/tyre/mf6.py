@@ -19,7 +19,35 @@ dimensionless or already N, rad, Pa); `to_tir` converts back.
   inputs that will be saturated; the traced evaluation saturates silently.
 - `alpha_star=False` (default, as MF-Tyre): α* = α and γ* = γ; True: α* = tan α, γ* = sin γ
   (the book's (4.E3)–(4.E4)).
-- No turn slip (all ζ = 1) and no low-speed model: the formulas assume V_x > VXLOW > 0.
+- `turn_slip=None` (default): no turn slip, all ζ = 1 (ζ0 = 1); no low-speed model: the
+  formulas assume V_x > VXLOW > 0.
+
+**Turn slip** (MF 6.1/6.2, `evaluate(..., turn_slip=φ_t)`; Pacejka 2012 §4.3.3, (4.75)–(4.106),
+coefficients of [TURNSLIP_COEFFICIENTS]): spin φ = φ_t·cos α + (1 − ε_γ)·Ω·sin γ·|cos α|/V_x
+(the book's (4.76) with ψ̇ = −φ_t·V_c and V'_c = V_x/|cos α|; MFeval's φ_t·cos α; Ω from
+`vertical.spin` unless given), ε_γ = p_εγφ1(1 + p_εγφ2·df_z). ζ1 = cos atan(B_xφ·R0·φ) on D_x,
+B_xφ = p_Dxφ1(1 + p_Dxφ2·df_z)·cos atan(p_Dxφ3·κ); ζ2 = cos atan(B_yφ(R0|φ| + p_Dyφ4√(R0|φ|)))
+on D_y, S_Vy, S_Vyγ and the D_r load term, B_yφ = p_Dyφ1(1 + p_Dyφ2·df_z)·cos atan(p_Dyφ3·tan α);
+ζ3 = cos atan(p_Kyφ1·R0²φ²) on K_yα; ζ0 = 0 and ζ4 = 1 + S_Hyφ − S_Vyγ/K'_yα in S_Hy, S_Hyφ =
+D_Hyφ·sin(C_Hyφ·atan(B_Hyφ·R0φ − E_Hyφ(B_Hyφ·R0φ − atan(B_Hyφ·R0φ)))), C_Hyφ = p_Hyφ1, D_Hyφ =
+p_Hyφ2 + p_Hyφ3·df_z, E_Hyφ = p_Hyφ4 (≤ 1 with limits), B_Hyφ = K_yRφ0/(C_Hyφ·D_Hyφ·K'_yα0),
+K_yRφ0 = K_yγ0/(1 − ε_γ) (K_yα0: K_yα at γ = 0, with ζ3); ζ5 = cos atan(q_Dtφ1·R0·φ) on D_t;
+ζ6 = cos atan(q_Brφ1·R0·φ) on B_r; ζ8 − 1 = D_rφ = D_Drφ·sin(C_Drφ·atan(B_Drφ·R0φ)) added to D_r
+(whose camber term is multiplied by ζ0 = 0), C_Drφ = q_Drφ1, D_Drφ = M_zφ∞/sin(πC_Drφ/2), M_zφ∞ =
+max(q_Crφ1·|μ_y|·R0·F_z·√(F_z/F'_z0)·λ_Mφ, 1e-6), B_Drφ = K_zγr0/(C_Drφ·D_Drφ(1 − ε_γ));
+ζ7 = C_r = (2/π)·arccos(M_zφ90/|D_rφ|) (argument clipped to ±1), M_zφ90 = M_zφ∞·(2/π)·
+atan(q_Crφ2·R0·|φ_t|)·G_yκ (G_yκ = 1 for the pure-slip functions). M'_z uses F_y0 at γ = 0
+without turn slip, as before. Choices where the sources differ or are silent:
+- K_zγr0 = F_z·R0(q_Dz8 + q_Dz9·df_z)(1 + p_Pz2·dp_i)·λ_Kzγ·λ_μy, the camber slope of the
+  no-turn-slip D_r at γ = 0 (MFeval writes q_Dz8·q_Dz9·df_z + q_Dz10 + q_Dz11·df_z·|γ| and
+  marks it as doubtful). With this choice and K_yRφ0, turn-slip mode at φ_t = 0 reproduces the
+  camber slopes ∂F_y/∂γ and ∂M_z/∂γ at α = κ = γ = 0 of the plain model times R0·Ω/V_x (exactly;
+  tested), the spin a camber γ produces;
+- the spin's sign is the book's (φ = −(ψ̇ − (1 − ε_γ)Ω sin γ)/V'_c); with the opposite sign the
+  camber thrust would change sign when turn slip is switched on;
+- B_Hyφ's denominator has a further ±ε (a file without turn-slip coefficients, p_Hyφ2 = 0, gives
+  S_Hyφ = 0 instead of NaN); missing turn-slip coefficients are 0 except p_Hyφ1 = q_Drφ1 = 1;
+- MF 5.2 has no turn slip (an error).
 
 **Deviations from the book (MF-Tyre / MFeval), for 6.1 and 6.2:**
 - A_μ = 1 in (4.E8) (λ'_μ = λ*_μ) and λ_μV = 0 (not in .tir files);
@@ -40,7 +68,8 @@ scalar calls: the combined F_x, F_y, M_z cost 2.4× less CPU time per point
 compiles faster.
 
 MF 6.2 steady-state forces and moments at a given F_z are the 6.1 equations (6.2 changes the
-vertical model, the loaded and effective radius, not evaluated here). **MF 5.2** (FITTYP 5, 6):
+vertical model: loaded radius, deflection and stiffness with camber, in
+`diffsusp.tyre.vertical`). **MF 5.2** (FITTYP 5, 6):
 no pressure terms; K_yα = p_Ky1·F'_z0·sin(p_Ky4·atan(F_z/(p_Ky2·F'_z0)))(1 − p_Ky3|γ|)λ_Kyα
 (p_Ky4 = 2 when absent); S_Hy = (p_Hy1 + p_Hy2·df_z)λ_Hy + p_Hy3·γ·λ_Kyγ; K_yγ0 = (p_Hy3·K_yα0 +
 F_z(p_Vy3 + p_Vy4·df_z))λ_Kyγ; M_z = −t·(F_y − S_Vyκ) + M_zr + s·F_x; M_y =
@@ -61,6 +90,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ..errors import ModelFileError, ModelWarning
 from ..io.tir import TirFile
 from . import _math
+from .vertical import spin
 
 __all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
            "FITTYP_VERSION"]
@@ -74,9 +104,10 @@ _SCALING = ("LFZO LCX LMUX LEX LKX LHX LVX LCY LMUY LEY LKY LHY LVY LTR LRES LXA
             "LS LKYC LKZC LVMX LMX LMY LMP LGAX LGAY LGAZ").split()
 _SECTIONS = {
     "MODEL": "FITTYP LONGVL VXLOW".split(),
-    "DIMENSION": ["UNLOADED_RADIUS"],
+    "DIMENSION": ["UNLOADED_RADIUS", "WIDTH", "ASPECT_RATIO"],
     "OPERATING_CONDITIONS": ["INFLPRES", "NOMPRES"],
-    "VERTICAL": ["FNOMIN"],
+    "VERTICAL": ("FNOMIN VERTICAL_STIFFNESS BREFF DREFF FREFF Q_RE0 Q_V1 Q_V2 Q_FZ2 Q_FCX Q_FCY "
+                 "PFZ1 Q_FCY2 Q_CAM1 Q_CAM2 Q_CAM3 Q_FYS1 Q_FYS2 Q_FYS3").split(),
     "SCALING_COEFFICIENTS": _SCALING,
     "LONGITUDINAL_COEFFICIENTS": (
         "PCX1 PDX1 PDX2 PDX3 PEX1 PEX2 PEX3 PEX4 PKX1 PKX2 PKX3 PHX1 PHX2 PVX1 PVX2 PPX1 PPX2 "
@@ -92,6 +123,8 @@ _SECTIONS = {
         "QBZ1 QBZ2 QBZ3 QBZ4 QBZ5 QBZ9 QBZ10 QCZ1 QDZ1 QDZ2 QDZ3 QDZ4 QDZ6 QDZ7 QDZ8 QDZ9 QDZ10 "
         "QDZ11 QEZ1 QEZ2 QEZ3 QEZ4 QEZ5 QHZ1 QHZ2 QHZ3 QHZ4 PPZ1 PPZ2 SSZ1 SSZ2 SSZ3 SSZ4"
     ).split(),
+    "TURNSLIP_COEFFICIENTS": ("PDXP1 PDXP2 PDXP3 PKYP1 PDYP1 PDYP2 PDYP3 PDYP4 PHYP1 PHYP2 "
+                              "PHYP3 PHYP4 PECP1 PECP2 QDTP1 QCRP1 QCRP2 QBRP1 QDRP1").split(),
 }
 SECTION_OF = {name: sec for sec, names in _SECTIONS.items() for name in names}
 COEFFICIENTS = tuple(n for sec, names in _SECTIONS.items() for n in names if n != "FITTYP")
@@ -112,8 +145,10 @@ _LIMIT_SECTION = {"FZMIN": "VERTICAL_FORCE_RANGE", "FZMAX": "VERTICAL_FORCE_RANG
                   "ALPMIN": "SLIP_ANGLE_RANGE", "ALPMAX": "SLIP_ANGLE_RANGE",
                   "CAMMIN": "INCLINATION_ANGLE_RANGE", "CAMMAX": "INCLINATION_ANGLE_RANGE",
                   "PRESMIN": "INFLATION_PRESSURE_RANGE", "PRESMAX": "INFLATION_PRESSURE_RANGE"}
-_TO_LIBRARY = {"UNLOADED_RADIUS": 1000.0, "LONGVL": 1000.0, "VXLOW": 1000.0}
-"""SI → library factors (m → mm, m/s → mm/s) of the coefficients that carry a length."""
+_TO_LIBRARY = {"UNLOADED_RADIUS": 1000.0, "LONGVL": 1000.0, "VXLOW": 1000.0, "WIDTH": 1000.0,
+               "VERTICAL_STIFFNESS": 1e-3, "Q_CAM2": 1e-3}
+"""SI → library factors (m → mm, m/s → mm/s, N/m → N/mm, 1/m → 1/mm) of the coefficients
+that carry a length."""
 
 
 class TyreForces(NamedTuple):
@@ -231,8 +266,10 @@ def _check_x64():
 def _default(name: str, values: dict) -> float:
     if name in _SCALING:
         return 1.0
-    if name == "PKY4":
+    if name in ("PKY4",):
         return 2.0
+    if name in ("Q_RE0", "PHYP1", "QDRP1"):  # a radius ratio, two shape factors: 1 is neutral
+        return 1.0
     if name == "LONGVL":
         return 16.7e3
     if name == "VXLOW":
@@ -281,8 +318,9 @@ def _cosmf(B, C, E, x, fm):
     return fm.cos(C * fm.arctan(bx - E * (bx - fm.arctan(bx))))
 
 
-def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm):
-    """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0."""
+def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm, ts=None):
+    """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0, ζ2.
+    `ts`: the turn-slip state (`_TurnSlip`) or None (all ζ = 1)."""
     Fz0p = c["LFZO"] * c["FNOMIN"]
     if v52:
         Kya = (c["PKY1"] * Fz0p * fm.sin(c["PKY4"] * fm.arctan(fz / (c["PKY2"] * Fz0p)))
@@ -296,18 +334,40 @@ def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm):
                                                               * (1.0 + c["PPY2"] * dpi))))
                * c["LKY"])
         Kyg0 = fz * (c["PKY6"] + c["PKY7"] * dfz) * (1.0 + c["PPY5"] * dpi) * c["LKYC"]
-    SVyg = fz * (c["PVY3"] + c["PVY4"] * dfz) * gamma_s * c["LKYC"] * c["LMUY"]
+    zeta2 = 1.0
+    if ts is not None:
+        # turn slip (4.77–4.79): ζ2 peak, ζ3 cornering stiffness
+        zeta3 = _cos_atan(c["PKYP1"] * ts.r_phi**2, fm)
+        Kya = Kya * zeta3
+        Byp = (c["PDYP1"] * (1.0 + c["PDYP2"] * dfz)
+               * _cos_atan(c["PDYP3"] * fm.tan(ts.alpha), fm))
+        r = jnp.abs(ts.r_phi)
+        root = jnp.where(r > 0.0, jnp.sqrt(jnp.where(r > 0.0, r, 1.0)), 0.0)
+        zeta2 = _cos_atan(Byp * (r + c["PDYP4"] * root), fm)
+    SVyg = fz * (c["PVY3"] + c["PVY4"] * dfz) * gamma_s * c["LKYC"] * c["LMUY"] * zeta2
     if v52:
         SHy = (c["PHY1"] + c["PHY2"] * dfz) * c["LHY"] + c["PHY3"] * gamma_s * c["LKYC"]
+    elif ts is not None:
+        # ζ0 = 0 and ζ4 = 1 + S_Hyφ − S_Vyγ/K'_yα (4.80–4.89): the camber shift comes from spin
+        Kya0 = (c["PKY1"] * Fz0p * (1.0 + c["PPY1"] * dpi)
+                * fm.sin(c["PKY4"] * fm.arctan((fz / Fz0p) / (c["PKY2"] * (1.0 + c["PPY2"] * dpi))))
+                * zeta3 * c["LKY"])
+        Chyp = c["PHYP1"]
+        Dhyp = c["PHYP2"] + c["PHYP3"] * dfz
+        Ehyp = jnp.minimum(c["PHYP4"], 1.0) if limits else c["PHYP4"]
+        den = Chyp * Dhyp * (Kya0 + EPS * _sgn(Kya0))
+        Bhyp = Kyg0 / (1.0 - ts.eps_gamma) / (den + EPS * _sgn(den))
+        SHyp = Dhyp * _mf(Bhyp, Chyp, Ehyp, ts.r_phi, fm)
+        SHy = (c["PHY1"] + c["PHY2"] * dfz) * c["LHY"] + SHyp - SVyg / (Kya + EPS * _sgn(Kya))
     else:
         SHy = (c["PHY1"] + c["PHY2"] * dfz) * c["LHY"] + (Kyg0 * gamma_s - SVyg) / (
             Kya + EPS * _sgn(Kya))
-    SVy = fz * (c["PVY1"] + c["PVY2"] * dfz) * c["LVY"] * c["LMUY"] + SVyg
+    SVy = fz * (c["PVY1"] + c["PVY2"] * dfz) * c["LVY"] * c["LMUY"] * zeta2 + SVyg
     ay = alpha_s + SHy
     Cy = c["PCY1"] * c["LCY"]
     muy = ((c["PDY1"] + c["PDY2"] * dfz) * (1.0 + c["PPY3"] * dpi + c["PPY4"] * dpi**2)
            * (1.0 - c["PDY3"] * gamma_s**2) * c["LMUY"])
-    Dy = muy * fz
+    Dy = muy * fz * zeta2
     Ey = ((c["PEY1"] + c["PEY2"] * dfz)
           * (1.0 + c["PEY5"] * gamma_s**2 - (c["PEY3"] + c["PEY4"] * gamma_s) * _sgn(ay))
           * c["LEY"])
@@ -315,7 +375,17 @@ def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm):
         Ey = jnp.minimum(Ey, 1.0)
     By = Kya / (Cy * Dy + EPS * _sgn(Dy))
     Fy0 = Dy * _mf(By, Cy, Ey, ay, fm) + SVy
-    return Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0
+    return Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0, zeta2
+
+
+class _TurnSlip(NamedTuple):
+    """Turn-slip state: R0·φ (spin φ [1/mm] times R0 [mm]), R0·|φ_t| (turn slip as applied),
+    ε_γ, and the clipped slip angle α [rad]."""
+
+    r_phi: Array
+    r_phit: Array
+    eps_gamma: Array
+    alpha: Array
 
 
 def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
@@ -338,7 +408,8 @@ def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
 def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: ArrayLike,
              gamma: ArrayLike = 0.0, vx: ArrayLike | None = None, pressure: ArrayLike | None = None,
              *, combined: bool = True, limits: bool = True, alpha_star: bool = False,
-             outputs: tuple[str, ...] = ("fx", "fy", "mx", "my", "mz")) -> TyreForces:
+             outputs: tuple[str, ...] = ("fx", "fy", "mx", "my", "mz"),
+             turn_slip: ArrayLike | None = None, omega: ArrayLike | None = None) -> TyreForces:
     """Steady-state forces and moments of a MF 5.2/6.1/6.2 tyre (spec: tyre §7 C; Pacejka 2012
     §4.3.2; deviations in the module docstring). Elementwise: inputs broadcast together.
 
@@ -347,7 +418,11 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     `pressure` [Pa] (default INFLPRES). `combined=False`: the pure-slip functions F_x0(κ),
     F_y0(α), M_z0(α) (M_x and M_y then use F_y0 and F_x0). `limits`, `alpha_star`: the modes of
     the module docstring. `outputs`: the quantities to compute (the others are returned as NaN;
-    a smaller traced program for fits of one channel).
+    a smaller traced program for fits of one channel). `turn_slip` [1/mm]: φ_t = −ψ̇/V_c, the
+    path curvature; given (0 included), the MF 6.1/6.2 turn-slip functions ζ0…ζ8 are on (module
+    docstring, "Turn slip"), with the spin φ = φ_t·cos α + (1 − ε_γ)·Ω·sin γ/V_c; None (default):
+    no turn slip, every ζ = 1. `omega` [rad/s]: the wheel spin Ω used by turn slip (default from
+    V_x, κ and the effective rolling radius, `diffsusp.tyre.vertical.spin`).
 
     **Returns:** `TyreForces` (fx, fy [N]; mx, my, mz [N·mm]), ISO-W axes.
     """
@@ -359,7 +434,10 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     need_fy = "fy" in outputs or want_mx or want_mz
     c = model.coefficients
     v52 = model.version == "5.2"
+    if turn_slip is not None and v52:
+        raise ValueError("turn slip is defined for MF 6.1 / 6.2 files (FITTYP 61, 62), not 5.2")
     lim = model.limit
+    ukappa = kappa
     fz, ufz, kappa, alpha, gamma, vx, p = _inputs(model, fz, kappa, alpha, gamma, vx, pressure,
                                                   limits)
     shapes = [jnp.shape(x) for x in (fz, kappa, alpha, gamma, vx, p)]
@@ -377,6 +455,14 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     # V_cx·|cos α|/(|V_cx| + ε_V·|cos α|) (one cos instead of tan and sqrt; ε_V = 1e-6 m/s)
     cos_a = fm.cos(alpha)
     cos_ap = vx * jnp.abs(cos_a) / (jnp.abs(vx) + 1e3 * EPS * jnp.abs(cos_a))
+    ts = None
+    if turn_slip is not None:
+        # spin (4.75–4.76, 4.90) with V'_c = V_x/|cos α| (V_x > VXLOW) and MFeval's φ_t·cos α
+        om = spin(model, ufz, vx, ukappa, p) if omega is None else jnp.asarray(omega, float)
+        phit = jnp.asarray(turn_slip, dtype=float) * cos_a
+        eps_g = c["PECP1"] * (1.0 + c["PECP2"] * dfz)
+        phi = phit + (1.0 - eps_g) * om * fm.sin(gamma) * jnp.abs(cos_a) / jnp.abs(vx)
+        ts = _TurnSlip(R0 * phi, R0 * jnp.abs(phit), eps_g, alpha)
 
     nan = jnp.full(jnp.broadcast_shapes(jnp.shape(fz), jnp.shape(kappa), jnp.shape(alpha),
                                         jnp.shape(gamma)), jnp.nan)
@@ -387,6 +473,9 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         mux = ((c["PDX1"] + c["PDX2"] * dfz) * (1.0 + c["PPX3"] * dpi + c["PPX4"] * dpi**2)
                * (1.0 - c["PDX3"] * gamma**2) * c["LMUX"])
         Dx = mux * fz
+        if ts is not None:  # ζ1 (4.105–4.106)
+            Bxp = c["PDXP1"] * (1.0 + c["PDXP2"] * dfz) * _cos_atan(c["PDXP3"] * kappa, fm)
+            Dx = Dx * _cos_atan(Bxp * ts.r_phi, fm)
         Kxk = (fz * (c["PKX1"] + c["PKX2"] * dfz) * jnp.exp(c["PKX3"] * dfz)
                * (1.0 + c["PPX1"] * dpi + c["PPX2"] * dpi**2) * c["LKX"])
         Bx = Kxk / (Cx * Dx + EPS * _sgn(Dx))
@@ -401,7 +490,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
 
     if need_fy:
         # pure lateral
-        Fy0, muy, Kya, SHy, SVy, By, Cy, _ = _fy0(c, v52, fz, dfz, dpi, a_s, g_s, limits, fm)
+        Fy0, muy, Kya, SHy, SVy, By, Cy, _, zeta2 = _fy0(c, v52, fz, dfz, dpi, a_s, g_s,
+                                                           limits, fm, ts)
 
     if want_mz:
         # pure aligning torque (4.E31–4.E49, A58, A60)
@@ -414,6 +504,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         at = a_s + SHt
         Dt = ((c["QDZ1"] + c["QDZ2"] * dfz) * (1.0 - c["PPZ1"] * dpi)
               * (1.0 + c["QDZ3"] * gamma + c["QDZ4"] * gamma**2) * fz_mz * (R0 / Fz0p) * c["LTR"])
+        if ts is not None:  # ζ5 (4.91)
+            Dt = Dt * _cos_atan(c["QDTP1"] * ts.r_phi, fm)
         Bt = ((c["QBZ1"] + c["QBZ2"] * dfz + c["QBZ3"] * dfz**2)
               * (1.0 + c["QBZ4"] * gamma + c["QBZ5"] * jnp.abs(gamma)) * c["LKY"] / c["LMUY"])
         Ct = c["QCZ1"]
@@ -421,17 +513,35 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             1.0 + (c["QEZ4"] + c["QEZ5"] * g_s) * (2.0 / jnp.pi) * fm.arctan(Bt * Ct * at))
         if limits:
             Et = jnp.minimum(Et, 1.0)
-        Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
-                            + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
-                               + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s * c["LKZC"])
-              * c["LMUY"] * (fm.cos(a_s) if alpha_star else cos_a))
+        cos_as = fm.cos(a_s) if alpha_star else cos_a
         Br = c["QBZ9"] * c["LKY"] / c["LMUY"] + c["QBZ10"] * By * Cy
+        if ts is None:
+            Dr = (fz_mz * R0 * ((c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"]
+                                + ((c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
+                                   + (c["QDZ10"] + c["QDZ11"] * dfz) * jnp.abs(g_s)) * g_s
+                                * c["LKZC"]) * c["LMUY"] * cos_as)
+        else:
+            # ζ0 = 0, ζ2, ζ6 (4.102), ζ8 = 1 + D_rφ (4.93–4.99); C_r = ζ7 below
+            Br = Br * _cos_atan(c["QBRP1"] * ts.r_phi, fm)
+            Mzp_inf = jnp.maximum(c["QCRP1"] * jnp.abs(muy) * R0 * fz_mz
+                                  * jnp.sqrt(fz_mz / Fz0p) * c["LMP"], 1e-6)
+            Cdrp = c["QDRP1"]
+            Ddrp = Mzp_inf / jnp.sin(0.5 * jnp.pi * Cdrp)
+            Kzgr0 = (fz_mz * R0 * (c["QDZ8"] + c["QDZ9"] * dfz) * (1.0 + c["PPZ2"] * dpi)
+                     * c["LKZC"] * c["LMUY"])
+            Bdrp = Kzgr0 / (Cdrp * Ddrp * (1.0 - ts.eps_gamma))
+            Drp = Ddrp * fm.sin(Cdrp * fm.arctan(Bdrp * ts.r_phi))
+            Dr = (fz_mz * R0 * (c["QDZ6"] + c["QDZ7"] * dfz) * c["LRES"] * zeta2 * c["LMUY"]
+                  * cos_as + Drp)
+            Mzp90 = Mzp_inf * (2.0 / jnp.pi) * fm.arctan(c["QCRP2"] * ts.r_phit)
         Cr = 1.0
 
     if not combined:
         Fx = Fx0 if need_fx else nan
         Fy = Fy0 if need_fy else nan
         if want_mz:
+            if ts is not None:
+                Cr = _zeta7(Mzp90, Drp)
             t0 = Dt * _cosmf(Bt, Ct, Et, at, fm) * cos_ap
             Mz = -t0 * Fy0_g0 + Dr * fm.cos(Cr * fm.arctan(Br * ar)) * cos_ap
     else:
@@ -462,11 +572,14 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
         if want_mz:
             # combined aligning torque (4.E71–4.E78, A54–A56)
             k2 = (Kxk / Kyap) ** 2 * kappa**2
-            ar_eq = fm.arctan(fm.sqrt(fm.tan(ar) ** 2 + k2)) * _sgn_strict(ar)
-            at_eq = fm.arctan(fm.sqrt(fm.tan(at) ** 2 + k2)) * _sgn_strict(at)
+            ar_eq = _alpha_eq(ar, k2, fm)
+            at_eq = _alpha_eq(at, k2, fm)
             s = R0 * (c["SSZ1"] + c["SSZ2"] * (Fy / Fz0) + (c["SSZ3"] + c["SSZ4"] * dfz) * gamma) \
                 * c["LS"]
-            Mzr = Dr * _cos_atan(Br * ar_eq, fm)  # C_r = 1
+            if ts is None:
+                Mzr = Dr * _cos_atan(Br * ar_eq, fm)  # C_r = 1
+            else:
+                Mzr = Dr * fm.cos(_zeta7(Mzp90 * Gyk, Drp) * fm.arctan(Br * ar_eq))
             t = Dt * _cosmf(Bt, Ct, Et, at_eq, fm) * cos_ap * c["LFZO"]
             if v52:
                 Mz = -t * (Fy - SVyk) + Mzr + s * Fx
@@ -503,6 +616,24 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
                 roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
                 (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
     return TyreForces(Fx, Fy, Mx, My, Mz)
+
+
+def _alpha_eq(a, k2, fm):
+    """atan(√(tan²a + k2))·sgn a (A54–A55), = a where k2 = 0 (κ = 0): the same value, and a
+    derivative there instead of the 0·∞ of √ at a = κ = 0."""
+    pos = k2 > 0.0
+    x = fm.tan(a) ** 2 + k2
+    eq = fm.arctan(fm.sqrt(jnp.where(pos, x, 1.0))) * _sgn_strict(a)
+    return jnp.where(pos, eq, a)
+
+
+def _zeta7(mzp90, drp):
+    """ζ7 = (2/π)·arccos(M_zφ90/|D_rφ|), the argument clipped to [−1, 1] (MFeval) with a
+    derivative that stays finite at the clip (0 beyond it)."""
+    r = mzp90 / jnp.maximum(jnp.abs(drp), 1e-15)
+    inside = jnp.abs(r) < 1.0
+    return jnp.where(inside, (2.0 / jnp.pi) * jnp.arccos(jnp.where(inside, r, 0.0)),
+                     jnp.where(r >= 1.0, 0.0, 2.0))
 
 
 def _sgn_strict(x):
