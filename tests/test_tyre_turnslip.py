@@ -64,8 +64,8 @@ def test_zero_spin_is_no_turn_slip(tyres):
     """φ_t = 0 and γ = 0 give φ = 0: every ζ is 1 (ζ7 too), ζ0's terms vanish with γ, so the
     turn-slip model equals the plain one."""
     _, m = tyres["mf61"]
-    x = _points(16, 4)
-    args = (x["FZ"], x["SL"], x["SA"], 0.0, 16e3, x["P"])
+    x = _points(48, 3)  # the oracle test's shapes: its compiled operations are reused
+    args = (x["FZ"], x["SL"], x["SA"], 0.0 * x["IA"], 16e3, x["P"])
     a, b = evaluate(m, *args), evaluate(m, *args, turn_slip=0.0)
     for u, v in zip(a, b, strict=True):
         np.testing.assert_allclose(np.asarray(v), np.asarray(u), rtol=1e-12, atol=1e-9)
@@ -74,21 +74,22 @@ def test_zero_spin_is_no_turn_slip(tyres):
 def test_camber_spin_reproduces_camber_slopes(tyres):
     """With turn slip on and φ_t = 0, a camber γ acts only through the spin φ = (1 − ε_γ)Ω sin γ/V:
     ∂F_y/∂γ and ∂M_z/∂γ at α = κ = γ = 0 equal the plain model's (K_yγ0 and the camber slope of
-    D_r) times R0·Ω/V_x (closed form of the chosen K_yRφ0 and K_zγr0; symmetric book file)."""
+    D_r) times R0·Ω/V_x (closed form of the chosen K_yRφ0 and K_zγr0; symmetric book file). The
+    pure-slip path is covered by the oracle test."""
     _, m = tyres["book"]
     c = m.coefficients
     fz, vx = 4000.0, 16e3
     ratio = float(c["UNLOADED_RADIUS"] * V.spin(m, fz, vx, 0.0) / vx)
     assert abs(ratio - 1.0) > 0.01  # the effective radius differs from R0: a real check
-    for combined in (True, False):
-        def f(gamma, ts, combined=combined):
-            r = evaluate(m, fz, 0.0, 0.0, gamma, vx, turn_slip=ts, combined=combined)
-            return jnp.stack([r.fy, r.mz])
 
-        plain = np.asarray(jax.jacfwd(lambda g: f(g, None))(0.0))
-        spun = np.asarray(jax.jacfwd(lambda g: f(g, 0.0))(0.0))
-        assert np.all(np.isfinite(plain)) and np.all(np.abs(plain) > 1.0)
-        np.testing.assert_allclose(spun, plain * ratio, rtol=1e-8)
+    def f(gamma):  # rows: plain, spun; columns: F_y, M_z (combined slip at κ = 0)
+        return jnp.stack([jnp.stack([r.fy, r.mz]) for r in (
+            evaluate(m, fz, 0.0, 0.0, gamma, vx, turn_slip=ts, outputs=("fy", "mz"))
+            for ts in (None, 0.0))])
+
+    plain, spun = np.asarray(jax.jit(jax.jacfwd(f))(0.0))
+    assert np.all(np.isfinite(plain)) and np.all(np.abs(plain) > 1.0)
+    np.testing.assert_allclose(spun, plain * ratio, rtol=1e-8)
 
 
 def test_turn_slip_gradients(tyres):
@@ -96,21 +97,19 @@ def test_turn_slip_gradients(tyres):
     differences."""
     _, m = tyres["mf61"]
 
-    def out(phit, gamma, alpha, kappa, pdyp1, qcrp1, qdtp1):
-        mm = m.replace(PDYP1=pdyp1, QCRP1=qcrp1, QDTP1=qdtp1)
-        r = evaluate(mm, 5000.0, kappa, alpha, gamma, 15e3, 2.5e5, turn_slip=phit)
+    def out(x):  # x = (φ_t, γ, α, κ, PDYP1, QCRP1, QDTP1)
+        mm = m.replace(PDYP1=x[4], QCRP1=x[5], QDTP1=x[6])
+        r = evaluate(mm, 5000.0, x[3], x[2], x[1], 15e3, 2.5e5, turn_slip=x[0])
         return jnp.stack([r.fx, r.fy, r.mz / 100.0])
 
-    x0 = (2e-4, 0.03, 0.06, 0.04, float(m["PDYP1"]), float(m["QCRP1"]), float(m["QDTP1"]))
-    jac = jax.jacfwd(out, argnums=tuple(range(7)))(*x0)
-    steps = (1e-8, 1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-4)
-    for i, h in enumerate(steps):
-        xp, xm = list(x0), list(x0)
-        xp[i] += h
-        xm[i] -= h
-        fd = (np.asarray(out(*xp)) - np.asarray(out(*xm))) / (2 * h)
-        np.testing.assert_allclose(np.asarray(jac[i]), fd, rtol=2e-6,
-                                   atol=2e-6 * np.max(np.abs(fd)) + 1e-9)
+    x0 = np.array([2e-4, 0.03, 0.06, 0.04, float(m["PDYP1"]), float(m["QCRP1"]),
+                   float(m["QDTP1"])])
+    jac = np.asarray(jax.jit(jax.jacfwd(out))(x0))
+    h = np.diag([1e-8, 1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-4])
+    f = np.asarray(jax.jit(jax.vmap(out))(np.concatenate([x0 + h, x0 - h])))
+    fd = ((f[:7] - f[7:]) / (2 * np.diag(h))[:, None]).T
+    scale = np.max(np.abs(fd), axis=1, keepdims=True)  # per output
+    np.testing.assert_allclose(jac / scale, fd / scale, rtol=2e-6, atol=2e-6)
 
 
 def test_turn_slip_refused_for_mf52():
@@ -136,8 +135,9 @@ def test_loaded_radius_matches_numpy_oracle(tyres, key):
     deflection, stiffness (finite difference of the oracle) and R_e agree."""
     tir, m = tyres[key]
     x = _grid(24, 5)
-    st = V.loaded_radius(m, x["FZ"], fx=x["FX"], fy=x["FY"], gamma=x["IA"], omega=x["OM"],
-                         pressure=x["P"])
+    st = jax.jit(lambda fz, fx, fy, ia, om, p: V.loaded_radius(
+        m, fz, fx=fx, fy=fy, gamma=ia, omega=om, pressure=p))(
+        x["FZ"], x["FX"], x["FY"], x["IA"], x["OM"], x["P"])
     R0 = float(tir["UNLOADED_RADIUS"])
     for i in range(len(x["FZ"])):
         def f(rl, i=i):
@@ -191,19 +191,16 @@ def test_loaded_radius_gradients(tyres):
     solve: load, F_y, camber, spin, pressure and the coefficients Q_CAM1, Q_FYS2, PFZ1."""
     _, m = tyres["mf62"]
 
-    def rl(fz, fy, gamma, omega, p, qcam1, qfys2, pfz1):
-        mm = m.replace(Q_CAM1=qcam1, Q_FYS2=qfys2, PFZ1=pfz1)
-        return V.loaded_radius(mm, fz, fx=800.0, fy=fy, gamma=gamma, omega=omega,
-                               pressure=p).rl
+    def rl(x):  # x = (F_z, F_y, γ, Ω, p, Q_CAM1, Q_FYS2, PFZ1)
+        mm = m.replace(Q_CAM1=x[5], Q_FYS2=x[6], PFZ1=x[7])
+        return V.loaded_radius(mm, x[0], fx=800.0, fy=x[1], gamma=x[2], omega=x[3],
+                               pressure=x[4]).rl
 
-    x0 = (6000.0, 2000.0, 0.05, 40.0, 2.5e5, float(m["Q_CAM1"]), float(m["Q_FYS2"]),
-          float(m["PFZ1"]))
-    grad = jax.grad(rl, argnums=tuple(range(8)))(*x0)
-    steps = (1.0, 1.0, 1e-5, 1e-3, 10.0, 1e-3, 1.0, 1e-6)
-    for i, h in enumerate(steps):
-        xp, xm = list(x0), list(x0)
-        xp[i] += h
-        xm[i] -= h
-        fd = (float(rl(*xp)) - float(rl(*xm))) / (2 * h)
-        assert abs(fd) > 0.0
-        assert abs(float(grad[i]) - fd) <= 1e-5 * abs(fd), (i, float(grad[i]), fd)
+    x0 = np.array([6000.0, 2000.0, 0.05, 40.0, 2.5e5, float(m["Q_CAM1"]), float(m["Q_FYS2"]),
+                   float(m["PFZ1"])])
+    grad = np.asarray(jax.jit(jax.grad(rl))(x0))
+    h = np.diag([1.0, 1.0, 1e-5, 1e-3, 10.0, 1e-3, 1.0, 1e-6])
+    f = np.asarray(jax.jit(jax.vmap(rl))(np.concatenate([x0 + h, x0 - h])))
+    fd = (f[:8] - f[8:]) / (2 * np.diag(h))
+    assert np.all(np.abs(fd) > 0.0)
+    np.testing.assert_allclose(grad, fd, rtol=1e-5)
