@@ -195,6 +195,62 @@ def test_linear_regime_with_the_compliance_steer(wheel_rig, wheel_jvp, tir):
     assert abs(alpha - a_cmd) > 1e-2 * abs(a_cmd)
 
 
+# ------------------------------------------------- wheel-centre mode (a driven wheel)
+
+K_RY = 2.0e7  # N·mm/rad: the pitch stiffness of the wheel-centre test's bushing
+
+
+def pitch_wheel():
+    """The one-bushing wheel, stiff (10¹⁴) in roll and yaw, K_RY in pitch (about the spin
+    axis)."""
+    b = MechanismBuilder("tyre test wheel, pitch only")
+    b.part("hub")
+    b.marker("wheel_centre", "hub", (0.0, WHEEL_Y, R_L), z=(0.0, -1.0, 0.0), x=(1.0, 0.0, 0.0))
+    b.bushing("bush", parts=("hub", "ground"), at=(0.0, WHEEL_Y, 0.0), reuler_deg=(0.0, 0.0, 0.0),
+              k_trans=K_T, k_rot=(1.0e14, K_RY, 1.0e14))
+    b.load_point("contact_patch", part="hub", at=(0.0, WHEEL_Y, 0.0))
+    b.load_point("wheel_centre", marker="wheel_centre")
+    return b.build()
+
+
+def test_wheel_centre_mode_pitches_a_driven_wheel(tyre, tir):
+    """`longitudinal_at='wheel_centre'` (a drive shaft reacts the torque about the spin axis):
+    the carrier receives the tyre force at the wheel centre, so a bushing at the contact point
+    sees the pitch moment of F_x at the height R_l, and of F_z once the wheel centre has moved
+    forward: with roll and yaw held (10¹⁴), the forward tilt θ of the hub solves
+    K_ry·θ = R_l·(F_x·cos θ − F_z·sin θ) exactly (F_x of the tyre at the commanded κ and at the
+    equilibrium α ≈ α_cmd, γ = 0, which the pitch does not change: the spin axis stays put).
+    (In contact-patch mode the same wheel would not pitch: the brake torque is reacted by the
+    carrier and the pitch moment about the contact point is M_y = 0.) The derivatives of the
+    coupled solve are mode-independent code, checked above in contact-patch mode."""
+    from diffsusp.statics import marker_poses
+
+    rig = R.tyre_rig(pitch_wheel(), tyre, corner=CORNER, longitudinal_at="wheel_centre")
+    cases = dict(fz=np.array([4000.0, 4000.0, 6000.0]), slip_angle=np.array([0.02, 0.0, -0.04]),
+                 slip_ratio=np.array([0.05, -0.08, 0.1]))
+    lp = rig.mech.load_points
+    sol = R.solve(rig, **cases, throw=False)
+    assert np.all(np.asarray(sol.status) == 0)
+    pos = np.stack([np.asarray(marker_poses(rig.mech, q)[0]) for q in sol.q])
+    arm = (pos[:, int(lp.marker[rig.corner.wheel_centre_load])]
+           - pos[:, int(lp.marker[rig.corner.contact_point])])
+    forward = np.asarray(rig.corner.forward)  # the vehicle's forward unit vector
+    f = sol.forces
+    for c in range(3):
+        fz, a_cmd, kappa = (cases[k][c] for k in ("fz", "slip_angle", "slip_ratio"))
+        alpha, gamma = float(sol.slip_angle[c]), float(sol.inclination[c])
+        assert abs(alpha - a_cmd) < 1e-9 and abs(gamma) < 1e-9  # yaw and roll held
+        want = oracle(tir, fz, kappa, alpha, gamma)
+        np.testing.assert_allclose([float(f.fx[c]), float(f.fy[c]), float(f.mz[c])], want,
+                                   rtol=1e-9, atol=1e-7)
+        theta = brentq(lambda t, fx=want[0], fz=fz: K_RY * t - R_L * (fx * np.cos(t)
+                                                                      - fz * np.sin(t)),
+                       -0.5, 0.5, xtol=1e-15, rtol=1e-15)
+        assert abs(theta) > 0.01  # a real pitch, with a real F_z·sin θ term
+        np.testing.assert_allclose(np.linalg.norm(arm[c]), R_L, rtol=1e-12)
+        np.testing.assert_allclose(arm[c] @ forward / R_L, np.sin(theta), rtol=0, atol=1e-10)
+
+
 # ---------------------------------------------------------------------- pseudo-McPherson
 
 
