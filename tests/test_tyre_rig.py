@@ -39,12 +39,15 @@ R_L = 300.0
 WHEEL_Y = -800.0  # a left wheel in the Adams/Car frame (x rearward, y right, z up)
 
 
-def bushing_wheel(k_rz=K_RZ, stiffen=1.0):
+def bushing_wheel(k_rz=K_RZ, stiffen=1.0, k_rot=None):
+    """`k_rot` (3): the bushing's rotational stiffnesses instead of (10⁸, 10⁸, k_rz)·stiffen;
+    the structure (hence the compiled programs) is the same for every value."""
     b = MechanismBuilder("tyre test wheel on one bushing")
     b.part("hub")
     b.marker("wheel_centre", "hub", (0.0, WHEEL_Y, R_L), z=(0.0, -1.0, 0.0), x=(1.0, 0.0, 0.0))
     b.bushing("bush", parts=("hub", "ground"), at=(0.0, WHEEL_Y, 0.0), reuler_deg=(0.0, 0.0, 0.0),
-              k_trans=K_T * stiffen, k_rot=(1.0e8 * stiffen, 1.0e8 * stiffen, k_rz * stiffen))
+              k_trans=K_T * stiffen,
+              k_rot=k_rot or (1.0e8 * stiffen, 1.0e8 * stiffen, k_rz * stiffen))
     b.load_point("contact_patch", part="hub", at=(0.0, WHEEL_Y, 0.0))
     b.load_point("wheel_centre", marker="wheel_centre")
     return b.build()
@@ -96,26 +99,38 @@ def wheel_rig(tyre):
 
 @pytest.fixture(scope="module")
 def wheel_jvp(wheel_rig):
-    """Solution and its forward derivative along K_rz, one program (values reused for FD)."""
+    """Solution and its forward derivative along a tangent of the mechanism (default K_rz), one
+    program for every bushing-wheel variant and both modes (`driven` 0: contact patch, 1: wheel
+    centre); values reused for FD. Outputs: F_x, F_y, M_z, α, γ, steer, status, and the arm from
+    the contact point to the wheel centre (3)."""
+    from diffsusp.statics import marker_poses
+
     tangent = jax.tree.map(jnp.zeros_like, eqx.filter(wheel_rig.mech, eqx.is_inexact_array))
     tangent = eqx.tree_at(lambda m: m.bushings.k_rot, tangent,
                           jnp.zeros_like(wheel_rig.mech.bushings.k_rot).at[0, 2].set(1.0))
+    lp, rc = wheel_rig.mech.load_points, wheel_rig.corner
 
     @eqx.filter_jit
-    def run(mech, d_mech):
+    def program(mech, d_mech, driven):
         def f(m):
-            sol = R.solve(eqx.tree_at(lambda r: r.mech, wheel_rig, m), **CASES, throw=False)
+            sol = R.solve(eqx.tree_at(lambda r: (r.mech, r.driven), wheel_rig, (m, driven)),
+                          **CASES, throw=False)
+            pos = jax.vmap(lambda q: marker_poses(m, q)[0])(sol.q)
+            arm = (pos[:, lp.marker[rc.wheel_centre_load]] - pos[:, lp.marker[rc.contact_point]])
             return (sol.forces.fx, sol.forces.fy, sol.forces.mz, sol.slip_angle,
-                    sol.inclination, sol.steer, sol.status.astype(float))
+                    sol.inclination, sol.steer, sol.status.astype(float), arm)
 
         return jax.jvp(f, (mech,), (d_mech,))
+
+    def run(mech, d_mech, driven=0.0):
+        return program(mech, d_mech, jnp.asarray(driven))
 
     return run, tangent
 
 
 def test_bushing_wheel_matches_the_scalar_closed_form(wheel_rig, wheel_jvp, tir):
     run, tangent = wheel_jvp
-    (fx, fy, mz, alpha, gamma, steer, status), _ = run(wheel_rig.mech, tangent)
+    (fx, fy, mz, alpha, gamma, steer, status, _), _ = run(wheel_rig.mech, tangent)
     assert np.all(np.asarray(status) == 0)
     for c in range(CASES["fz"].size):
         g = -CASES["camber_offset"][c]  # left wheel: ISO inclination = −camber
@@ -200,55 +215,55 @@ def test_linear_regime_with_the_compliance_steer(wheel_rig, wheel_jvp, tir):
 K_RY = 2.0e7  # N·mm/rad: the pitch stiffness of the wheel-centre test's bushing
 
 
-def pitch_wheel():
-    """The one-bushing wheel, stiff (10¹⁴) in roll and yaw, K_RY in pitch (about the spin
-    axis)."""
-    b = MechanismBuilder("tyre test wheel, pitch only")
-    b.part("hub")
-    b.marker("wheel_centre", "hub", (0.0, WHEEL_Y, R_L), z=(0.0, -1.0, 0.0), x=(1.0, 0.0, 0.0))
-    b.bushing("bush", parts=("hub", "ground"), at=(0.0, WHEEL_Y, 0.0), reuler_deg=(0.0, 0.0, 0.0),
-              k_trans=K_T, k_rot=(1.0e14, K_RY, 1.0e14))
-    b.load_point("contact_patch", part="hub", at=(0.0, WHEEL_Y, 0.0))
-    b.load_point("wheel_centre", marker="wheel_centre")
-    return b.build()
-
-
-def test_wheel_centre_mode_pitches_a_driven_wheel(tyre, tir):
+def test_wheel_centre_mode_pitches_a_driven_wheel(wheel_jvp, tir):
     """`longitudinal_at='wheel_centre'` (a drive shaft reacts the torque about the spin axis):
     the carrier receives the tyre force at the wheel centre, so a bushing at the contact point
     sees the pitch moment of F_x at the height R_l, and of F_z once the wheel centre has moved
     forward: with roll and yaw held (10¹⁴), the forward tilt θ of the hub solves
     K_ry·θ = R_l·(F_x·cos θ − F_z·sin θ) exactly (F_x of the tyre at the commanded κ and at the
-    equilibrium α ≈ α_cmd, γ = 0, which the pitch does not change: the spin axis stays put).
-    (In contact-patch mode the same wheel would not pitch: the brake torque is reacted by the
-    carrier and the pitch moment about the contact point is M_y = 0.) The derivatives of the
-    coupled solve are mode-independent code, checked above in contact-patch mode."""
-    from diffsusp.statics import marker_poses
-
-    rig = R.tyre_rig(pitch_wheel(), tyre, corner=CORNER, longitudinal_at="wheel_centre")
-    cases = dict(fz=np.array([4000.0, 4000.0, 6000.0]), slip_angle=np.array([0.02, 0.0, -0.04]),
-                 slip_ratio=np.array([0.05, -0.08, 0.1]))
-    lp = rig.mech.load_points
-    sol = R.solve(rig, **cases, throw=False)
-    assert np.all(np.asarray(sol.status) == 0)
-    pos = np.stack([np.asarray(marker_poses(rig.mech, q)[0]) for q in sol.q])
-    arm = (pos[:, int(lp.marker[rig.corner.wheel_centre_load])]
-           - pos[:, int(lp.marker[rig.corner.contact_point])])
-    forward = np.asarray(rig.corner.forward)  # the vehicle's forward unit vector
-    f = sol.forces
-    for c in range(3):
-        fz, a_cmd, kappa = (cases[k][c] for k in ("fz", "slip_angle", "slip_ratio"))
-        alpha, gamma = float(sol.slip_angle[c]), float(sol.inclination[c])
-        assert abs(alpha - a_cmd) < 1e-9 and abs(gamma) < 1e-9  # yaw and roll held
-        want = oracle(tir, fz, kappa, alpha, gamma)
-        np.testing.assert_allclose([float(f.fx[c]), float(f.fy[c]), float(f.mz[c])], want,
+    equilibrium α ≈ α_cmd, γ = −camber offset, which the pitch does not change: the spin axis
+    stays put); dθ/dK_ry = −θ/(K_ry + R_l(F_x sin θ + F_z cos θ)) (implicit function theorem).
+    The same wheel in contact-patch mode does not pitch: the brake torque is reacted by the
+    carrier and the pitch moment about the contact point is M_y = 0 (λ_My = 0 here)."""
+    run, tangent = wheel_jvp
+    mech = bushing_wheel(k_rot=(1.0e14, K_RY, 1.0e14))
+    d_ky = eqx.tree_at(lambda m: m.bushings.k_rot, tangent,
+                       jnp.zeros_like(mech.bushings.k_rot).at[0, 1].set(1.0))
+    rig = R.tyre_rig(mech, MagicFormula6.from_tir(tir), corner=CORNER,
+                     longitudinal_at="wheel_centre")
+    assert rig.longitudinal_at == "wheel_centre" and float(rig.driven) == 1.0
+    (fx, fy, mz, alpha, gamma, _, status, arm), (*_, d_arm) = run(mech, d_ky, 1.0)
+    assert np.all(np.asarray(status) == 0)
+    arm, d_arm = np.asarray(arm), np.asarray(d_arm)
+    forward = np.asarray(CORNER_RESOLVED(mech).forward)  # the vehicle's forward unit vector
+    pitched = 0
+    for c in range(CASES["fz"].size):
+        fz, a_cmd, kappa, offset = (CASES[k][c] for k in ("fz", "slip_angle", "slip_ratio",
+                                                            "camber_offset"))
+        a, g = float(alpha[c]), float(gamma[c])
+        assert abs(a - a_cmd) < 1e-9 and abs(g + offset) < 1e-9  # yaw and roll held
+        want = oracle(tir, fz, kappa, a, g)
+        np.testing.assert_allclose([float(fx[c]), float(fy[c]), float(mz[c])], want,
                                    rtol=1e-9, atol=1e-7)
         theta = brentq(lambda t, fx=want[0], fz=fz: K_RY * t - R_L * (fx * np.cos(t)
                                                                       - fz * np.sin(t)),
                        -0.5, 0.5, xtol=1e-15, rtol=1e-15)
-        assert abs(theta) > 0.01  # a real pitch, with a real F_z·sin θ term
+        pitched += abs(theta) > 0.01  # a real pitch, with a real F_z·sin θ term
         np.testing.assert_allclose(np.linalg.norm(arm[c]), R_L, rtol=1e-12)
         np.testing.assert_allclose(arm[c] @ forward / R_L, np.sin(theta), rtol=0, atol=1e-10)
+        dtheta = -theta / (K_RY + R_L * (want[0] * np.sin(theta) + fz * np.cos(theta)))
+        np.testing.assert_allclose(d_arm[c] @ forward / R_L, np.cos(theta) * dtheta,
+                                   rtol=1e-6, atol=1e-18)
+    assert pitched >= 2
+    # contact-patch mode, same wheel and program: no pitch
+    (*_, status, arm), _ = run(mech, d_ky, 0.0)
+    assert np.all(np.asarray(status) == 0)
+    np.testing.assert_allclose(np.asarray(arm) @ forward, 0.0, atol=1e-9)
+
+
+def CORNER_RESOLVED(mech):  # noqa: N802
+    return R.tyre_rig(mech, MagicFormula6.from_tir(read_tir(example_path("mf61"))),
+                      corner=CORNER).corner
 
 
 # ---------------------------------------------------------------------- pseudo-McPherson

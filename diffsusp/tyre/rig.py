@@ -99,17 +99,23 @@ class TyreRig(eqx.Module):
     """A suspension corner on a force rig with a tyre at its contact patch (`tyre_rig`).
 
     **Fields:** `mech` (the rig's mechanism: wheel drivers removed, as `kc.force_rig`), `tyre`
-    (`MagicFormula6`), static `corner` (`ResolvedCorner`), `longitudinal_at` ('contact_patch' or
-    'wheel_centre', module docstring), `combined` and `limits` (as `mf6.evaluate`).
-    Every float leaf of `mech` and `tyre` can be differentiated.
+    (`MagicFormula6`), static `corner` (`ResolvedCorner`), `driven` (1.0: the wrench acts at
+    the wheel centre, `longitudinal_at='wheel_centre'`; 0.0: at the contact patch; a float leaf,
+    not a static switch, so that both modes of one mechanism share one compiled program),
+    `combined` and `limits` (as `mf6.evaluate`). `longitudinal_at` (property) names the mode of
+    a concrete rig. Every float leaf of `mech` and `tyre` can be differentiated.
     """
 
     mech: Mechanism
     tyre: MagicFormula6
     corner: ResolvedCorner = eqx.field(static=True)
-    longitudinal_at: str = eqx.field(static=True, default="contact_patch")
+    driven: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(0.0))
     combined: bool = eqx.field(static=True, default=True)
     limits: bool = eqx.field(static=True, default=True)
+
+    @property
+    def longitudinal_at(self) -> str:
+        return "wheel_centre" if float(self.driven) else "contact_patch"
 
 
 class TyreRigSolution(eqx.Module):
@@ -168,7 +174,8 @@ def tyre_rig(mech: Mechanism, tyre: MagicFormula6, *, corner=None,
     if longitudinal_at == "wheel_centre" and rc.wheel_centre_load < 0:
         raise InputError("longitudinal_at='wheel_centre' needs a wheel-centre load point; the "
                          "corner has none (Corner.wheel_centre_load).")
-    return TyreRig(mech=rig.mech, tyre=tyre, corner=rc, longitudinal_at=longitudinal_at,
+    return TyreRig(mech=rig.mech, tyre=tyre, corner=rc,
+                   driven=jnp.asarray(1.0 if longitudinal_at == "wheel_centre" else 0.0),
                    combined=combined, limits=limits)
 
 
@@ -180,9 +187,12 @@ def _axes(rc: ResolvedCorner):
     return jnp.asarray([rc.forward, rc.outboard, rc.up])
 
 
-def _load_point(rig: TyreRig) -> int:
+def _load_point(rig: TyreRig):
+    """Index of the load point the wrench acts at (traced: `driven` is a leaf)."""
     rc = rig.corner
-    return rc.contact_point if rig.longitudinal_at == "contact_patch" else rc.wheel_centre_load
+    if rc.wheel_centre_load < 0:
+        return rc.contact_point
+    return jnp.where(rig.driven > 0.0, rc.wheel_centre_load, rc.contact_point)
 
 
 def _loads(rig: TyreRig, w, fz) -> Loads:
@@ -215,15 +225,30 @@ def _tyre_state(rig: TyreRig, q, case, design_steer):
     f = evaluate(rig.tyre, fz, kappa, alpha, gamma, combined=rig.combined, limits=rig.limits)
     force = f.fx * h + f.fy * y_axis  # horizontal part (F_z is commanded)
     moment = f.mx * h + f.my * y_axis + f.mz * up
-    if rig.longitudinal_at == "wheel_centre":
-        pos, _ = marker_poses(mech, q)
-        c = pos[mech.load_points.marker[rc.contact_point]]
-        w = pos[mech.load_points.marker[rc.wheel_centre_load]]
-        moment = moment + jnp.cross(c - w, force + fz * up)
-        moment = moment - (moment @ s) * s  # the spin-axis torque goes to the body
+    if rc.wheel_centre_load >= 0:  # transported to the wheel centre when driven = 1
+        d = rig.driven
+        c, w = _load_point_positions(mech, rc, q, geo)
+        moment = moment + d * jnp.cross(c - w, force + fz * up)
+        moment = moment - d * (moment @ s) * s  # the spin-axis torque goes to the body
     e = _axes(rc)
     wrench = jnp.stack([force @ e[0], force @ e[1], moment @ e[0], moment @ e[1], moment @ e[2]])
     return wrench, f, alpha, gamma, geo
+
+
+def _load_point_positions(mech: Mechanism, rc: ResolvedCorner, q, geo):
+    """Positions of the contact-patch and wheel-centre load points at pose q. When both are on
+    the wheel-centre marker's part (a wheel carrier), from the wheel-centre pose that
+    `corner_geometry` has already computed (a rigid transport of their design offsets, no
+    second pass over every marker); otherwise from `marker_poses`."""
+    markers = mech.markers
+    lp = (mech.load_points.marker[rc.contact_point], mech.load_points.marker[rc.wheel_centre_load])
+    if all(markers.part[m] == markers.part[rc.wheel_centre] for m in lp):
+        centre = jnp.stack([geo["wheel_centre_x"], geo["wheel_centre_y"], geo["wheel_centre_z"]])
+        to_now = geo["_orientation"] @ markers.orientation[rc.wheel_centre].T
+        return tuple(centre + to_now @ (markers.position[m] - markers.position[rc.wheel_centre])
+                     for m in lp)
+    pos, _ = marker_poses(mech, q)
+    return pos[lp[0]], pos[lp[1]]
 
 
 def _scale(rig: TyreRig, fz):
