@@ -282,8 +282,8 @@ def test_no_retrace_on_new_values(files):
 
 
 def test_vectorised_transcendentals_match_numpy():
-    """diffsusp.tyre._math (Cephes arctan, sin, cos, tan; Newton sqrt), which the MF 6.x
-    evaluation uses instead of XLA's scalar float64 calls: values to a few ulps over the
+    """diffsusp.tyre._math (Cephes arctan, sin, cos, tan; Newton sqrt and cos∘arctan), which
+    the MF 6.x evaluation uses instead of XLA's scalar float64 calls: values to a few ulps over the
     Magic Formula's range and beyond, exact derivatives (custom JVPs)."""
     import jax
 
@@ -311,3 +311,11 @@ def test_vectorised_transcendentals_match_numpy():
     h = jnp.asarray(rng.uniform(0.1, 100, 50))
     np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(_math.sqrt))(h)),
                                0.5 / np.sqrt(np.asarray(h)), rtol=1e-14)
+    # cos(atan x) = 1/√(1 + x²), to |x| = 1e15
+    np.testing.assert_allclose(np.asarray(_math.cos_arctan(xj)), 1 / np.sqrt(1 + x * x),
+                               rtol=5e-16, atol=0)
+    big = np.logspace(8, 15, 50)
+    np.testing.assert_allclose(np.asarray(_math.cos_arctan(jnp.asarray(big))),
+                               1 / np.sqrt(1 + big * big), rtol=5e-16, atol=0)
+    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(_math.cos_arctan))(g)),
+                               -np.asarray(g) / (1 + np.asarray(g) ** 2) ** 1.5, rtol=1e-14)

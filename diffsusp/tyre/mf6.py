@@ -295,10 +295,10 @@ rig, tests) do not win back."""
 
 
 def _cos_atan(x, fm):
-    """cos(atan x) = 1/√(1 + x²); with the vectorised functions as cos(atan x): a float64 sqrt
-    in a loop fusion stops LLVM from vectorising it (see `diffsusp.tyre._math`)."""
+    """cos(atan x) = 1/√(1 + x²); with the vectorised functions `_math.cos_arctan` (a float64
+    sqrt in a loop fusion stops LLVM from vectorising it, see `diffsusp.tyre._math`)."""
     if fm is _math:
-        return fm.cos(fm.arctan(x))
+        return fm.cos_arctan(x)
     return 1.0 / jnp.sqrt(1.0 + x * x)
 
 

@@ -167,7 +167,7 @@ def loaded_radius(model, fz: ArrayLike, *, fx: ArrayLike = 0.0, fy: ArrayLike = 
     rolling radius and the spin. `omega` [rad/s] default: `spin(model, fz, vx, kappa)`. Other
     arguments as `vertical_force`. Differentiable in every input and coefficient (implicit
     function at the root)."""
-    c = _c(model)
+    _c(model)  # VERTICAL_STIFFNESS > 0
     fz = jnp.maximum(jnp.asarray(fz, dtype=float), 0.0)
     if omega is None:
         omega = spin(model, fz, vx, kappa, pressure)
