@@ -3,6 +3,9 @@
 - `mf89`: the thesis's Bakker–Pacejka 1989/1991 Magic Formula (Annex B) and its twelve
   identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);
 - `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
+  turn slip (MF 6.1/6.2, `evaluate(..., turn_slip=φ_t)`);
+- `vertical`: the vertical model (loaded radius with the MF 6.2 camber, force, speed and
+  pressure terms, vertical stiffness, effective rolling radius, wheel spin);
 - `examples`: the shipped example `.tir` files (`example_path("mf61")`);
 - `spec`: specification quantities (exact derivatives), macro-coefficients, similarity;
 - `rig`: the tyre on the K&C rig (the coupled tyre–suspension static equilibrium at a
@@ -20,7 +23,7 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 ```
 """
 
-from . import examples, fit, mf6, mf89, rig, spec, thesis_sets
+from . import examples, fit, mf6, mf89, rig, spec, thesis_sets, vertical
 from .examples import example_path
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
@@ -28,4 +31,4 @@ from .spec import specification
 
 __all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
            "check_limits", "evaluate", "example_path", "examples", "fit", "mf6", "mf89", "rig",
-           "spec", "specification", "thesis_sets"]
+           "spec", "specification", "thesis_sets", "vertical"]
