@@ -654,8 +654,8 @@ def fit_command(
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
     enable_x64()
     from .. import measure
-    from ..identify.data import from_measurements
     from ..identify.least_squares import least_squares
+    from ..measure.data import from_measurements
     from .common import load_model_file
 
     with cli_errors():

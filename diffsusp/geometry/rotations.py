@@ -22,6 +22,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
+    "NEG_LEVI_CIVITA",
+    "matrix_to_quaternion",
     "skew",
     "vee",
     "gibbs_to_matrix",
@@ -64,6 +66,9 @@ _NEG_LEVI_CIVITA = np.zeros((3, 3, 3))
 for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _NEG_LEVI_CIVITA[_i, _k, _j] = 1.0  # skew(v)[i, j] = −ε_ijk v_k
     _NEG_LEVI_CIVITA[_i, _j, _k] = -1.0
+NEG_LEVI_CIVITA = _NEG_LEVI_CIVITA
+"""−ε_ijk arranged so that `NEG_LEVI_CIVITA @ v` is skew(v) (the cross-product matrix); public
+for the kernels that build skew matrices by one contraction."""
 
 
 def _safe_atan2(y: Float[Array, "*s"], x: Float[Array, "*s"]) -> Float[Array, "*s"]:
@@ -112,7 +117,7 @@ def vee(m: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     return 0.5 * jnp.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
 
 
-def _matrix_to_quaternion(r: Float[Array, "3 3"]) -> Float[Array, "4"]:
+def matrix_to_quaternion(r: Float[Array, "3 3"]) -> Float[Array, "4"]:
     """Unnormalised quaternion `(w, x, y, z)` of a rotation matrix, Shepperd's method.
 
     Of the four algebraically equivalent formulas, the one with the largest
@@ -201,7 +206,7 @@ def matrix_to_gibbs(r: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     r = jnp.asarray(r)
     trace = r[0, 0] + r[1, 1] + r[2, 2]
     r = eqx.error_if(r, 1.0 + trace < GIBBS_SINGULARITY_TOL, _GIBBS_SINGULAR_MESSAGE)
-    q = _matrix_to_quaternion(r)
+    q = matrix_to_quaternion(r)
     w = q[0]
     # The error above guarantees w ≠ 0 for valid inputs; keep the division safe regardless.
     w_safe = jnp.where(w == 0.0, 1.0, w)
@@ -306,7 +311,7 @@ def matrix_to_rotvec(r: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     Rotation vector (rad), axis in the frame of `r`, norm in [0, π].
     """
     r = jnp.asarray(r)
-    q = _matrix_to_quaternion(r)
+    q = matrix_to_quaternion(r)
     q = q / jnp.sqrt(jnp.dot(q, q))
     q = jnp.where(q[0] < 0.0, -q, q)
     w = q[0]
@@ -364,7 +369,7 @@ def matrix_to_axis_angle(
     `(axis, angle)`: unit axis in the frame of `r`, and the angle in rad.
     """
     r = jnp.asarray(r)
-    q = _matrix_to_quaternion(r)
+    q = matrix_to_quaternion(r)
     q = q / jnp.sqrt(jnp.dot(q, q))
     q = jnp.where(q[0] < 0.0, -q, q)
     xyz = q[1:]

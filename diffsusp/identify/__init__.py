@@ -17,7 +17,14 @@ Each identification takes a mechanism and measurements and returns the identifie
 a report.
 """
 
-from .data import Channel, Deformations, Landmarks, Measurement, Poses, from_measurements
+from ..measure.data import (
+    Channel,
+    Deformations,
+    Landmarks,
+    Measurement,
+    Poses,
+    from_measurements,
+)
 from .direct import DirectReport, DirectSystem, direct, direct_system
 from .geometric import (
     CorrectionReport,

@@ -61,6 +61,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -69,8 +70,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import InputError, ModelError
+from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
+from .params import Params, selected_entries
+from .report import IdentificationReport, MeasurementResiduals
 
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_system"]
 
@@ -129,31 +133,25 @@ def _default_where(m: Mechanism):
     return (m.bushings.k_trans, m.bushings.k_rot, m.springs.k, m.springs.free_length)
 
 
-def _selected_fields(mech: Mechanism, where: Callable) -> set[str]:
-    try:
-        chosen = jax.tree_util.tree_leaves(where(mech))
-    except Exception as e:  # a selector that does not apply to this model
-        raise InputError(f"where= could not be applied to the model: {e}") from None
-    fields = {}
-    for path in _FIELDS:
-        group, name = path.split(".")
-        fields[path] = getattr(getattr(mech, group), name)
-    selected = set()
-    for leaf in chosen:
-        hit = [p for p, v in fields.items() if v is leaf]
-        if not hit:
+def _selected_fields(mech: Mechanism, where) -> dict[str, np.ndarray]:
+    """{field: flat indices of the selected entries} of a `Params` or a `where` function."""
+    selected = {}
+    for path, idx in selected_entries(mech, where).items():
+        key = ".".join(path)
+        if key not in _FIELDS:
             raise InputError(
                 "where= selected something the direct method cannot identify: it identifies "
-                "the parameters the internal forces are linear in, selected as whole fields: "
-                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements with elements=(...); "
-                "for other parameters (hardpoints, nonlinear laws) use a least-squares fit "
-                "through the equilibrium."
+                "the parameters the internal forces are linear in, entries of "
+                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements with elements=(...) "
+                "or entries with a Params; for other parameters (hardpoints, nonlinear laws) "
+                "use a least-squares fit through the equilibrium."
             )
-        selected.update(hit)
+        if idx.size:
+            selected[key] = idx
     return selected
 
 
-def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
+def _parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axisymmetric,
                 offsets_alone_ok=True) -> tuple[Parameter, ...]:
     b, s = mech.bushings, mech.springs
     names = set(b.names) | set(s.names)
@@ -172,12 +170,16 @@ def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
     if bad:
         raise InputError(f"axisymmetric= names {', '.join(map(repr, bad))}, which are not "
                          f"bushings of the model ({', '.join(b.names) or 'none'}).")
-    k_axes = set()
-    c_axes = set()
-    for path in fields:
+    # Selected axes per bushing: k (stiffness) and c (offset), (bushings, 6).
+    k_sel = np.zeros((len(b.names), 6), bool)
+    c_sel = np.zeros((len(b.names), 6), bool)
+    spring_sel = {"k": np.zeros(len(s.names), bool), "free_length": np.zeros(len(s.names), bool)}
+    for path, idx in fields.items():
         group, kind, axes = _FIELDS[path]
         if group == "bushing":
-            (k_axes if kind == "k" else c_axes).update(axes)
+            (k_sel if kind == "k" else c_sel)[idx // 3, np.asarray(axes)[idx % 3]] = True
+        else:
+            spring_sel[kind][idx] = True
     spline = np.asarray(b.spline_axes, dtype=bool).reshape(len(b.names), 6)
     cubic = np.concatenate([np.asarray(b.cubic_trans), np.asarray(b.cubic_rot)], axis=1) \
         if b.names else np.zeros((0, 6))
@@ -185,6 +187,12 @@ def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
     for e, name in enumerate(b.names):
         if name not in elements:
             continue
+        sym = name in axisym
+        if sym:  # an axisymmetric pair is one unknown: selected if either axis is
+            for sel in (k_sel, c_sel):
+                for x in (0, 3):
+                    sel[e, x:x + 2] = sel[e, x:x + 2].any()
+        k_axes, c_axes = set(np.flatnonzero(k_sel[e])), set(np.flatnonzero(c_sel[e]))
         for a in sorted(k_axes | c_axes):
             if spline[e, a]:
                 raise ModelError(
@@ -198,7 +206,6 @@ def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
                     f"bushing '{name}' has a cubic term on axis {AXES[a]}, which makes its "
                     "offset enter nonlinearly; identify its offsets with a linear law only."
                 )
-        sym = name in axisym
         for a in sorted(k_axes):
             if sym and a in (1, 4):
                 continue
@@ -212,9 +219,8 @@ def _parameters(mech: Mechanism, fields: set[str], elements, axisymmetric,
         for a in sorted(c_axes):
             params.append(Parameter(f"{name}.{OFFSET_NAMES[a]}", "constant", e, (a,),
                                     "N·mm" if a >= 3 else "N", 1.0))
-    spring_k = "springs.k" in fields
-    spring_c = "springs.free_length" in fields
     for e, name in enumerate(s.names):
+        spring_k, spring_c = spring_sel["k"][e], spring_sel["free_length"][e]
         if name not in elements or not (spring_k or spring_c):
             continue
         if s.tabulated[e]:
@@ -692,7 +698,16 @@ class _Context:
                                      cov))
 
 
+def _selection_of(params, where):
+    """The one selector of `params=` (positional, as in every identification method) and
+    `where=` (this method's historical keyword)."""
+    if params is not None and where is not None:
+        raise InputError("give the selection once: params= or where=, not both.")
+    return where if params is None else params
+
+
 def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
+    measurements = as_equilibria(measurements)
     q = _check_measurements(mech, measurements)
     fields = _selected_fields(mech, where or _default_where)
     params = _parameters(mech, fields, elements, axisymmetric)
@@ -707,8 +722,9 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
 def direct_system(
     mech: Mechanism,
     measurements: Measurements,
+    params: Params | Callable[[Mechanism], object] | None = None,
     *,
-    where: Callable[[Mechanism], object] | None = None,
+    where: Callable[[Mechanism], object] | Params | None = None,
     elements: Sequence[str] | None = None,
     axisymmetric: Sequence[str] = (),
     weights_at: Float[np.ndarray, " p"] | None = None,
@@ -721,7 +737,7 @@ def direct_system(
     unknowns, table units), each case's rows are whitened by the covariance that pose errors
     cause at those values (see `direct`, `weighting="noise"`).
     """
-    ctx = _prepare(mech, measurements, where, elements, axisymmetric)
+    ctx = _prepare(mech, measurements, _selection_of(params, where), elements, axisymmetric)
     return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
 
 
@@ -729,7 +745,7 @@ def direct_system(
 
 
 @dataclasses.dataclass(frozen=True)
-class DirectReport:
+class DirectReport(IdentificationReport):
     """What the direct identification found (values in the units of the thesis's tables).
 
     **Per unknown (p,)**, aligned with `names`: `values` (the least-squares solution; for the
@@ -767,6 +783,36 @@ class DirectReport:
     n_equations: int
     max_sigma_pct: float
     weighted: bool = False
+    equation_residuals: np.ndarray | None = None
+    whitened_equation_residuals: np.ndarray | None = None
+
+    family: ClassVar[str] = "direct"
+
+    # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
+    @property
+    def _to_model(self) -> np.ndarray:
+        return np.array([1.0 / DEG if u == "N·mm/deg" else 1.0 for u in self.units])
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return self.values * self._to_model
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return self.sigma * self._to_model
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple("N·mm/rad" if u == "N·mm/deg" else u for u in self.units)
+
+    @property
+    def residuals(self) -> dict:
+        """`{'equations': MeasurementResiduals}`: the residual of every equation (N; rows of
+        a case together, (cases, rows)), raw and as weighted in the solve."""
+        if self.equation_residuals is None:
+            return {}
+        return {"equations": MeasurementResiduals(self.equation_residuals,
+                                                  self.whitened_equation_residuals)}
 
     def value(self, name: str) -> float:
         return float(self.values[self._index(name)])
@@ -1096,8 +1142,9 @@ def _negligible(system: DirectSystem, threshold: float) -> np.ndarray:
 def direct(
     mech: Mechanism,
     measurements: Measurements,
+    params: Params | Callable[[Mechanism], object] | None = None,
     *,
-    where: Callable[[Mechanism], object] | None = None,
+    where: Callable[[Mechanism], object] | Params | None = None,
     elements: Sequence[str] | None = None,
     axisymmetric: Sequence[str] = (),
     method: str = "basic",
@@ -1120,10 +1167,13 @@ def direct(
     - `mech`: the model (its geometry is taken as exact; its values of the unknowns are the
       prior, and are kept where the data do not determine them).
     - `measurements`: `diffsusp.measure.Measurements` (part poses of every moving part and the
-      loads, per case).
-    - `where`: fields to identify, equinox style, among `m.bushings.k_trans`, `k_rot`
+      loads, per case), or a `Poses` measurement (`measure.as_equilibria`).
+    - `params` (or `where=`, the same): the selection every identification method takes: a
+      `Params` or a `where` function, equinox style, among `m.bushings.k_trans`, `k_rot`
       (stiffness per axis), `offset_trans`, `offset_rot` (offsets δ0, identified as the
-      constant force K·δ0), `m.springs.k`, `free_length` (with k: the unknowns K and K·L0).
+      constant force K·δ0), `m.springs.k`, `free_length` (with k: the unknowns K and K·L0);
+      a `Params` selects single entries (e.g. `Params.bushing_stiffness(mech, ["A"],
+      ["Ktx"])`; its start values and bounds are not used: the model's values are the prior).
       Default: all bushing stiffnesses and the springs' K and K·L0.
     - `elements`: names of the bushings and springs to identify (default all); the others
       keep their model values (their forces move to the right-hand side).
@@ -1164,7 +1214,7 @@ def direct(
     if not max_sigma_pct > 0:
         raise InputError(f"max_sigma_pct must be positive; got {max_sigma_pct!r}.")
     threshold = DEFAULT_THRESHOLD if threshold is None else float(threshold)
-    ctx = _prepare(mech, measurements, where, elements, axisymmetric)
+    ctx = _prepare(mech, measurements, _selection_of(params, where), elements, axisymmetric)
     raw = ctx.system()
     # Structure: what the equations determine (unweighted, as the thesis writes them).
     negligible = _negligible(raw, threshold)
@@ -1200,6 +1250,7 @@ def direct(
     n_cases = len(raw.cases)
     residual = raw.y - raw.W @ values  # in N, whatever the weighting of the solve
     case_res = np.linalg.norm(residual.reshape(n_cases, -1), axis=1)
+    whitened = (system.y - system.W @ values).reshape(n_cases, -1)
     case_scale = np.linalg.norm(raw.y.reshape(n_cases, -1), axis=1)
     write = ~negligible if method == "tikhonov" else identified
     notes = list(raw.notes)
@@ -1217,7 +1268,8 @@ def direct(
         derived=_derived(params, values, cov, mech, identified), case_residuals=case_res,
         case_scale=case_scale, cases=raw.cases, notes=tuple(notes), fit=fit, method=method,
         rank=int(np.sum(structure.kept)), n_equations=len(raw.y), max_sigma_pct=max_sigma_pct,
-        weighted=system.weighted,
+        weighted=system.weighted, equation_residuals=residual.reshape(n_cases, -1),
+        whitened_equation_residuals=whitened,
     )
     return _apply(mech, params, values, write), report
 

@@ -21,6 +21,7 @@ offsets E0 (eq. 5.17); the stiffnesses themselves need not be unique (§2.7).
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -29,8 +30,12 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import InputError
+from ..measure.data import Measurement, as_deformations
+from ..measure.measurements import Measurements
 from ..model.mechanism import Loads, Mechanism
 from ..statics import bushing_states, solve_statics
+from .params import Params, selected_entries
+from .report import IdentificationReport, MeasurementResiduals
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
@@ -52,7 +57,7 @@ class IterationRecord:
 
 
 @dataclasses.dataclass(frozen=True)
-class IterativeReport:
+class IterativeReport(IdentificationReport):
     """Result of `identify.iterative`.
 
     - `bushings`: names of the identified bushings; `stiffness` `(n, 6)` final values
@@ -64,6 +69,11 @@ class IterativeReport:
       intercepts E0 (mm, rad) of the last iteration.
     - `residual` `(cases, n, 6)`: model deformation − (measured − E0) at the final equilibria.
     - `iterations`, `converged`, `history` (one `IterationRecord` per iteration).
+    - `slope_sigma` `(n, 6)`: the standard error of the last regression's slope (N/mm,
+      N·mm/rad; the textbook √(Σe²/(c − 2) / Σ(δ − δ̄)²) over the c converged cases);
+      `selected` `(n, 6)`: the directions the selection asked for (the others keep their start
+      value); `weight` `(cases, n, 6)`: 1/σ of the measured deformations (1 when given as
+      plain arrays), which whitens `residual` in `residuals`.
     """
 
     bushings: tuple[str, ...]
@@ -77,6 +87,60 @@ class IterativeReport:
     iterations: int
     converged: bool
     history: tuple[IterationRecord, ...]
+    slope_sigma: np.ndarray | None = None
+    selected: np.ndarray | None = None
+    weight: np.ndarray | None = None
+
+    family: ClassVar[str] = "iterative"
+
+    # The base API (identify.report): one parameter per selected direction, model units.
+    @property
+    def _selected(self) -> np.ndarray:
+        return np.ones(self.stiffness.shape, bool) if self.selected is None else self.selected
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        sel = self._selected
+        return tuple(f"{b}.{a}" for i, b in enumerate(self.bushings)
+                     for j, a in enumerate(AXES) if sel[i, j])
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return self.stiffness[self._selected]
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        if self.slope_sigma is None:
+            return np.full(len(self.names), np.nan)
+        return self.slope_sigma[self._selected]
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * self.sigmas / np.abs(self.estimates)
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        sel = self._selected
+        return tuple("N/mm" if j < 3 else "N·mm/rad" for i in range(len(self.bushings))
+                     for j in range(6) if sel[i, j])
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        """Directions whose regression passed the gate (`identified`)."""
+        return self.identified[self._selected]
+
+    @property
+    def combinations(self) -> list[str]:
+        return []  # the correlation method identifies direction by direction
+
+    @property
+    def residuals(self) -> dict:
+        """`{'deformations': MeasurementResiduals}`: model − (measured − E0) where the
+        direction was identified, model − measured elsewhere (its E0 means nothing)."""
+        raw = np.where(self.identified, self.residual, self.residual - self.offset)
+        weight = np.ones_like(raw) if self.weight is None else self.weight
+        return {"deformations": MeasurementResiduals(raw, raw * weight)}
 
     def table(self) -> str:
         """The stiffnesses as the thesis prints them (N/mm and N·mm/deg), `*` = not identified
@@ -177,8 +241,8 @@ def _states(mech: Mechanism, q, index: tuple[int, ...]):
 
 def iterative(
     mech: Mechanism,
-    loads: Loads,
-    measured: Float[Array, "cases n 6"] | Mapping[str, Float[Array, "cases 6"]],
+    data: Measurement | Measurements | Loads,
+    params: Params | Callable[[Mechanism], object] | None = None,
     *,
     bushings: Sequence[str] | None = None,
     axisymmetric: Sequence[str] = (),
@@ -193,11 +257,17 @@ def iterative(
     **Arguments:**
     - `mech`: the model with the start stiffnesses (the thesis starts every direction at
       10⁴ N/mm and 10⁴ N·mm/deg) and the known geometry, springs and other bushings.
-    - `loads`: the load cases (leading case axis), as applied on the rig.
-    - `measured`: measured deformations of the identified bushings, `(cases, n, 6)` in the
-      order of `bushings` or a mapping name → `(cases, 6)`: Tx, Ty, Tz (mm) and projected angles
-      AX, AY, AZ (rad) of I relative to J, in J (e.g. from `measure` poses).
-    - `bushings`: names to identify (default: all of the model's bushings).
+    - `data`: the measurements every identification method takes: a `Deformations`, or
+      measured part poses (`measure.Measurements`, `Poses`) from which the bushings'
+      deformations are computed (`measure.as_deformations`); their load table is the rig's.
+      The historical form `iterative(mech, loads, measured, ...)` is still accepted: `loads`
+      (leading case axis) and `measured` deformations `(cases, n, 6)` in the order of
+      `bushings` or a mapping name → `(cases, 6)`: Tx, Ty, Tz (mm) and projected angles
+      AX, AY, AZ (rad) of I relative to J, in J.
+    - `params`: the selection every identification method takes (a `Params` or a `where`
+      function) among the bushings' `k_trans` and `k_rot` entries: the bushings with a selected
+      entry are identified, and only the selected directions are updated. Or `bushings`: names
+      to identify, every direction (default: all of the model's bushings).
     - `axisymmetric`: names whose x and y stiffnesses are merged (eq. 5.13).
     - `r_min`: correlation gate (spec: 0.75); `eps`: relative-change stop (spec: 0.01).
     - `resolution`: (mm, rad) — a direction whose measured deformation varies less than this
@@ -208,16 +278,28 @@ def iterative(
 
     **Returns:** the identified mechanism and an `IterativeReport`.
     """
-    names = tuple(mech.bushings.names if bushings is None else bushings)
+    if isinstance(data, Loads):  # the historical form (mech, loads, measured)
+        loads, measured, selected = data, params, None
+        names = tuple(mech.bushings.names if bushings is None else bushings)
+    else:
+        names, selected = _selection(mech, params, bushings)
+        measured = None
     index = np.array([mech.bushings.index(n) for n in names], dtype=int)
     unknown = set(axisymmetric) - set(names)
     if unknown:
         raise InputError(f"axisymmetric names {sorted(unknown)} are not among the identified "
                          f"bushings {list(names)}.")
+    if measured is None:
+        defo = as_deformations(mech, data, names)
+        loads, delta = defo.loads, np.asarray(defo.measured)
+        weight = np.asarray(defo.weight)
     if loads.n_cases is None or loads.n_cases < 3:
         raise InputError("iterative identification needs a table of at least 3 load cases "
                          "(a regression over cases per direction).")
-    delta = _measured_array(measured, names, loads.n_cases)
+    if measured is not None:
+        delta = _measured_array(measured, names, loads.n_cases)
+        weight = None
+    chosen = np.ones((len(names), 6), bool) if selected is None else selected
     axi = np.array([n in axisymmetric for n in names])
     resolved = np.ones((len(names), 6), bool)
     if resolution is not None:
@@ -241,8 +323,9 @@ def iterative(
         ok = status == 0
         slope, offset, r, weight = (np.asarray(a) for a in _regress(jnp.asarray(delta[ok]),
                                                                     force[ok]))
-        accepted = (r > r_min) & resolved
+        accepted = (r > r_min) & resolved & chosen
         k_new = np.where(accepted, slope, k)
+        slope_sigma = _slope_sigma(delta[ok], np.asarray(force)[ok], slope)
         k_new, equalised = _equalise(k_new, accepted, weight, axi)
         change = float(np.max(np.abs(k_new - k) / np.abs(k)))
         ever |= accepted
@@ -261,6 +344,40 @@ def iterative(
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
-        converged=converged, history=tuple(history),
+        converged=converged, history=tuple(history), slope_sigma=slope_sigma,
+        selected=chosen, weight=weight,
     )
     return final, report
+
+
+def _slope_sigma(delta: np.ndarray, force: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    """Standard error of the regression slope per (bushing, direction), `(n, 6)`."""
+    c = delta.shape[0]
+    d = delta - delta.mean(axis=0)
+    f = force - force.mean(axis=0)
+    sxx = (d * d).sum(axis=0)
+    e = f - slope * d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.sqrt((e * e).sum(axis=0) / max(c - 2, 1) / sxx)
+
+
+def _selection(mech: Mechanism, params, bushings) -> tuple[tuple[str, ...], np.ndarray | None]:
+    """(bushing names, selected directions `(n, 6)`) of a `Params`/`where` selection, or of
+    `bushings=` (every direction)."""
+    if params is None:
+        return tuple(mech.bushings.names if bushings is None else bushings), None
+    if bushings is not None:
+        raise InputError("give the selection once: params (or a where function) or "
+                         "bushings=, not both.")
+    sel = np.zeros((len(mech.bushings.names), 6), bool)
+    for path, idx in selected_entries(mech, params).items():
+        if path not in (("bushings", "k_trans"), ("bushings", "k_rot")):
+            raise InputError(f"the iterative method identifies bushing stiffnesses "
+                             f"(m.bushings.k_trans, m.bushings.k_rot); the selection has "
+                             f"m.{'.'.join(path)}. Use least_squares for other parameters.")
+        offset = 0 if path[-1] == "k_trans" else 3
+        sel[idx // 3, offset + idx % 3] = True
+    rows = np.flatnonzero(sel.any(axis=1))
+    if not rows.size:
+        raise InputError("nothing to identify: the selection picks no bushing stiffness.")
+    return tuple(mech.bushings.names[i] for i in rows), sel[rows]

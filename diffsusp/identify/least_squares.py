@@ -40,6 +40,7 @@ the trial and its failed cases. The start point must converge in every case.
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -49,10 +50,11 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..errors import InputError
+from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import solve_statics
-from .data import Measurement
 from .params import Params
+from .report import IdentificationReport, MeasurementResiduals
 
 LOSSES = {"linear": 0, "huber": 1, "cauchy": 2}
 """Loss names → codes (a runtime value: every loss shares one compiled program)."""
@@ -291,14 +293,7 @@ def _evaluate(problem: _Problem, values, u, q0, batched: bool):
 
 
 def _as_data(data) -> tuple[Measurement, ...]:
-    data = (data,) if isinstance(data, Measurement) else tuple(data)
-    if not data or not all(isinstance(m, Measurement) for m in data):
-        raise InputError("data must be a measurement (Landmarks, Poses, Deformations, Channel) "
-                         "or a sequence of them.")
-    names = [m.name for m in data]
-    if len(set(names)) != len(names):
-        raise InputError(f"measurement names {names} repeat; give each a distinct name=.")
-    return data
+    return as_fit_data(data)
 
 
 def _combined_loads(data) -> tuple[Loads, tuple[tuple[int, int], ...]]:
@@ -320,7 +315,10 @@ def _combined_loads(data) -> tuple[Loads, tuple[tuple[int, int], ...]]:
     return jax.tree.map(lambda *a: jnp.concatenate(a), *tables), tuple(slices)
 
 
-def _as_params(mech, params) -> Params:
+def _as_params(mech, params, where=None) -> Params:
+    if params is not None and where is not None:
+        raise InputError("give the selection once: params or where=, not both.")
+    params = where if params is None else params
     if isinstance(params, Params):
         return params
     if callable(params):
@@ -421,16 +419,7 @@ class NullDirection:
 
 
 @dataclasses.dataclass(frozen=True)
-class MeasurementResiduals:
-    """Residuals of one measurement at the estimate: `raw` model − measured (physical units,
-    the measured shape; 0 where masked) and `whitened` (mask·raw/σ)."""
-
-    raw: np.ndarray
-    whitened: np.ndarray
-
-
-@dataclasses.dataclass(frozen=True)
-class FitReport:
+class FitReport(IdentificationReport):
     """Result of `least_squares`.
 
     - `names`, `estimate` and `start` (physical units: N/mm, N·mm/rad, mm), `sigma` (1σ,
@@ -470,6 +459,31 @@ class FitReport:
     history: tuple[StepRecord, ...]
     message: str
     loss_name: str
+    units: tuple[str, ...] = ()
+
+    family: ClassVar[str] = "least_squares"
+
+    # The base API (identify.report): model units already.
+    @property
+    def estimates(self) -> np.ndarray:
+        return self.estimate
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return self.sigma
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        return self.sigma_percent
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return self.units or ("-",) * len(self.names)
+
+    @property
+    def combinations(self) -> list[str]:
+        """The directions the data cannot see (`null_space`), as text."""
+        return [d.text for d in self.null_space]
 
     @property
     def unidentifiable(self) -> tuple[str, ...]:
@@ -583,7 +597,8 @@ def _report(params: Params, problem: _Problem, u, last, history, converged, step
         singular_values=s, null_space=null, residuals=residuals,
         loss=float(0.5 * np.sum(z ** 2)), chi2=chi2, n_residuals=n_res, dof=n_res - rank,
         converged=converged, steps=steps, accepted_steps=accepted_steps,
-        history=tuple(history), message=message, loss_name=loss_name)
+        history=tuple(history), message=message, loss_name=loss_name,
+        units=params.units(problem.mech))
 
 
 # ----------------------------------------------------------------------------- driver
@@ -660,8 +675,9 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
 def least_squares(
     mech: Mechanism,
     data: Measurement | Sequence[Measurement],
-    params: Params | Callable[[Mechanism], object],
+    params: Params | Callable[[Mechanism], object] | None = None,
     *,
+    where: Params | Callable[[Mechanism], object] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
     prior: Mechanism | Float[Array, " p"] | Mapping[str, float] | None = None,
@@ -678,10 +694,12 @@ def least_squares(
 
     **Arguments:**
     - `mech`: the model, holding the start values and every parameter not identified.
-    - `data`: one measurement or several (`Landmarks`, `Poses`, `Deformations`, `Channel`),
-      each with its own load table; one data set each (see `least_squares_batch` for many).
-    - `params`: a `Params`, or a `where` function (`lambda m: (m.bushings.k_trans, ...)`,
-      every entry of the selected leaves; stiffnesses log-scaled).
+    - `data`: one measurement or several (`Landmarks`, `Poses`, `Deformations`, `Channel`, or
+      a `measure.Measurements`: its landmarks, or its poses, whitened by its own σ), each with
+      its own load table; one data set each (see `least_squares_batch` for many).
+    - `params` (or `where=`, the same): a `Params`, or a `where` function
+      (`lambda m: (m.bushings.k_trans, ...)`, every entry of the selected leaves; stiffnesses
+      log-scaled).
     - `loss`: `'linear'`, `'huber'` or `'cauchy'`; `loss_scale` in units of σ (default 1.345
       Huber, 2.385 Cauchy).
     - `prior`, `prior_sigma`: Tikhonov prior θ_prior (a Mechanism, a `(p,)` array or a mapping
@@ -702,7 +720,7 @@ def least_squares(
     data = _as_data(data)
     if {m.n_sets for m in data} != {None}:
         raise InputError("the measured values have a data-set axis: use least_squares_batch.")
-    params = _as_params(mech, params)
+    params = _as_params(mech, params, where)
     problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
     u0 = params.to_internal(params.start)[None]
     u, last, hist, conv, steps, acc, msg = _run(problem, None, u0, batched=False,
@@ -729,8 +747,9 @@ class BatchFitReport:
 def least_squares_batch(
     mech: Mechanism,
     data: Measurement | Sequence[Measurement],
-    params: Params | Callable[[Mechanism], object],
+    params: Params | Callable[[Mechanism], object] | None = None,
     *,
+    where: Params | Callable[[Mechanism], object] | None = None,
     start: Float[Array, "sets p"] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
@@ -760,7 +779,7 @@ def least_squares_batch(
         raise InputError("every measurement needs the same leading data-set axis for a batch; "
                          f"got {sorted(str(s) for s in sets)}.")
     n_sets = sets.pop()
-    params = _as_params(mech, params)
+    params = _as_params(mech, params, where)
     problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
     if start is None:
         u0 = jnp.broadcast_to(params.to_internal(params.start), (n_sets, len(params)))
@@ -801,7 +820,7 @@ def whitened_residuals(
     parameters θ, and its Jacobian with respect to θ (implicit differentiation through the
     equilibria, forward mode). Uses the same compiled programs as `least_squares`."""
     data = _as_data(data)
-    params = _as_params(mech, params)
+    params = _as_params(mech, params, None)
     problem = _problem(mech, data, params, loss, loss_scale, None, None, 50)
     u = params.to_internal(jnp.asarray(theta, dtype=float))
     q0 = jnp.zeros((problem.loads.n_cases, mech.n_coordinates))

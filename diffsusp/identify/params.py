@@ -29,7 +29,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import InputError
-from ..model.mechanism import Mechanism
+from ..model.mechanism import Mechanism, field_unit
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """A bushing's six stiffnesses (translations N/mm, then rotations N·mm/rad), in the J frame."""
@@ -327,6 +327,15 @@ class Params(eqx.Module):
             raise InputError(f"parameter '{self.names[k]}' starts at {start[k]:g} with bounds "
                              f"({lower[k]:g}, {upper[k]:g}): {what}.")
 
+    def units(self, mech: Mechanism) -> tuple[str, ...]:
+        """The unit of each parameter: the `unit` metadata of the field it is written into
+        (`model.mechanism.field_unit`), e.g. N/mm, N·mm/rad, mm."""
+        units = ["-"] * len(self)
+        for t in self.targets:
+            for i in t.param_index:
+                units[i] = field_unit(mech, t.path)
+        return tuple(units)
+
     # ------------------------------------------------------------------ values
 
     def values(self, mech: Mechanism) -> Float[Array, " p"]:
@@ -383,6 +392,37 @@ class Params(eqx.Module):
     def log_scaled(self) -> np.ndarray:
         """Which parameters are log-scaled (lower bound only): their σ in u is relative."""
         return np.isfinite(np.asarray(self.lower)) & ~np.isfinite(np.asarray(self.upper))
+
+
+def selected_entries(mech: Mechanism, selection) -> dict[tuple[str, ...], np.ndarray]:
+    """Which entries of which leaves a selection picks: `{field path: flat indices}`.
+
+    `selection` is a `Params` (its targets) or a `where` function (every entry of the leaves it
+    returns). This is how every identification method reads the one selector: `least_squares`
+    identifies exactly these entries; `direct` and `iterative` identify the ones their
+    equations can (and say which they cannot). No start values are checked here.
+    """
+    if isinstance(selection, Params):
+        out: dict[tuple[str, ...], set[int]] = {}
+        for t in selection.targets:
+            out.setdefault(t.path, set()).update(t.leaf_index)
+        return {path: np.array(sorted(idx), dtype=int) for path, idx in out.items()}
+    if not callable(selection):
+        raise InputError("the selection must be a Params or a `where` function selecting leaves "
+                         "of the mechanism, e.g. lambda m: (m.bushings.k_trans, m.bushings.k_rot).")
+    tagged = jax.tree_util.tree_map_with_path(
+        lambda kp, x: _Tag(_field_path(kp), tuple(np.shape(x))), mech)
+    try:
+        picked = selection(tagged)
+    except InputError:
+        raise
+    except Exception as e:  # a selector that does not apply to this model
+        raise InputError(f"where= could not be applied to the model: {e}") from None
+    picked = (picked,) if isinstance(picked, _Tag) else tuple(picked)
+    if not all(isinstance(t, _Tag) for t in picked):
+        raise InputError("`where` must return array leaves of the mechanism (one or a tuple), "
+                         "e.g. lambda m: (m.bushings.k_trans, m.springs.k).")
+    return {t.path: np.arange(int(np.prod(t.shape)) if t.shape else 1) for t in picked}
 
 
 def _bushing_index(mech: Mechanism, name: str) -> int:

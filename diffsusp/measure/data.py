@@ -1,5 +1,5 @@
-"""Measurement types for least-squares identification: what was measured, under which loads,
-with which uncertainty.
+"""Measurement types of identification: what was measured, under which loads, with which
+uncertainty; and the conversions that let every identification method take any of them.
 
 spec: stiffness §2.2 (deformations from poses), §2.8 (landmarks with σ = 0.05 mm), §6 item 8
 (marker or deformation residuals, K&C responses); DESIGN.md "Identification".
@@ -9,6 +9,12 @@ standard deviations σ and an optional mask (False = missing or excluded). The r
 is (model − measured), whitened by σ: r = mask·(model − measured)/σ. Measured values may carry
 one extra leading axis (several data sets under the same loads, σ and mask): that is what
 `least_squares_batch` identifies in one compiled call.
+
+One measurement object for every method (DESIGN.md "Identification"): `direct`, `iterative`
+and `least_squares` all accept a `measure.Measurements` (measured equilibria: part poses, with
+the landmarks they were registered from) or the types here, and take from it what their
+equations need: the part poses (`as_equilibria`), the bushing deformations
+(`as_deformations`) or whitened residuals (`as_fit_data`).
 """
 
 from collections.abc import Callable, Sequence
@@ -333,6 +339,100 @@ def from_measurements(meas, sigma: float, sigma_rotation: float) -> Measurement:
                      np.where(mask[..., None], measured, 0.0), sigma, mask=mask)
 
 
+def as_fit_data(data) -> tuple[Measurement, ...]:
+    """The measurements of a least-squares fit: `data` as a tuple of `Measurement`s, a
+    `measure.Measurements` replaced by its landmarks or poses (`from_measurements`, with its
+    own σ: `Measurements.sigma`, `sigma_rotation`).
+
+    **Raises:** `InputError` for anything else, or repeated measurement names."""
+    from .measurements import Measurements
+
+    items = (data,) if isinstance(data, Measurement | Measurements) else tuple(data)
+    items = tuple(
+        from_measurements(m, m.sigma, _pose_sigma_rotation(m))
+        if isinstance(m, Measurements) else m for m in items)
+    if not items or not all(isinstance(m, Measurement) for m in items):
+        raise InputError("data must be a measurement (measure.Measurements, Landmarks, Poses, "
+                         "Deformations, Channel) or a sequence of them.")
+    names = [m.name for m in items]
+    if len(set(names)) != len(names):
+        raise InputError(f"measurement names {names} repeat; give each a distinct name=.")
+    return items
+
+
+def _pose_sigma_rotation(meas) -> float:
+    if meas.landmarks is not None:
+        return 1.0  # unused: the landmarks themselves are the residuals
+    if meas.sigma_rotation is None:
+        raise InputError("these measurements are part poses without landmarks: give their "
+                         "rotation σ (rad), e.g. dataclasses.replace(meas, sigma_rotation=1e-3),"
+                         " or pass a Poses measurement.")
+    return meas.sigma_rotation
+
+
+def _single(data, kinds: tuple[type, ...], what: str):
+    """The one measurement of `kinds` in `data` (one measurement or a sequence)."""
+    items = (data,) if not isinstance(data, list | tuple) else tuple(data)
+    found = [m for m in items if isinstance(m, kinds)]
+    if len(found) != 1:
+        raise InputError(f"{what}; got {', '.join(type(m).__name__ for m in items) or 'nothing'}"
+                         ".")
+    if getattr(found[0], "n_sets", None):
+        raise InputError("the measured values have a data-set axis; identify one data set at a "
+                         "time (m.select(k)) or use least_squares_batch.")
+    return found[0]
+
+
+def as_equilibria(data):
+    """The measured equilibria (part poses and loads) of `data`, as a `measure.Measurements`:
+    a `Measurements` itself, or a `Poses` measurement (one data set).
+
+    **Raises:** `InputError` when `data` carries no part poses (the direct method needs the pose
+    of every moving part at every equilibrium: spec stiffness §1.1)."""
+    from .measurements import Measurements, from_poses
+
+    found = _single(data, (Measurements, Poses),
+                    "the direct method needs measured part poses: a measure.Measurements "
+                    "(from_landmarks, from_poses, synthesize, read_measurements) or a Poses")
+    if isinstance(found, Measurements):
+        return found
+    if not bool(np.all(np.asarray(found.weight) > 0)):
+        raise InputError(f"{found.name}: the direct method needs every pose of every case; "
+                         "drop the cases with masked poses.")
+    return from_poses(found.parts, np.asarray(found.rotation), np.asarray(found.translation),
+                      found.loads)
+
+
+def as_deformations(mech: Mechanism, data, bushings: Sequence[str]) -> Deformations:
+    """The measured deformations of `bushings` (in that order) from `data`: a `Deformations`
+    measurement, or the deformations at measured poses (`Measurements`, `Poses`; spec
+    stiffness §2.2, `measure.bushing_deformations`), with σ 1 where the data give none.
+
+    **Raises:** `InputError` when `data` has neither, a bushing is missing, or an entry is
+    masked (the correlation method regresses over every case)."""
+    from .measurements import Measurements, bushing_deformations
+
+    found = _single(data, (Deformations, Measurements, Poses),
+                    "the iterative method needs measured bushing deformations: a Deformations, "
+                    "or measured part poses (measure.Measurements, Poses)")
+    bushings = tuple(bushings)
+    if isinstance(found, Deformations):
+        missing = [b for b in bushings if b not in found.bushings]
+        if missing:
+            raise InputError(f"{found.name}: no measured deformation of bushing(s) {missing}; "
+                             f"measured: {', '.join(found.bushings)}.")
+        idx = np.array([found.bushings.index(b) for b in bushings], dtype=int)
+        weight = np.asarray(found.weight)[:, idx]
+        if not np.all(weight > 0):
+            raise InputError(f"{found.name}: the iterative method regresses over every case; "
+                             "drop the cases with masked deformations.")
+        return Deformations(found.loads, bushings, np.asarray(found.measured)[:, idx],
+                            1.0 / weight, name=found.name)
+    meas = found if isinstance(found, Measurements) else as_equilibria(found)
+    d_t, d_r = bushing_deformations(mech, meas, bushings)
+    return Deformations(meas.loads, bushings, np.concatenate([d_t, d_r], axis=-1), 1.0)
+
+
 def data_axes(data: Sequence[Measurement]):
     """`in_axes` for vmapping over data sets: 0 on the measured values, None elsewhere."""
     batched = set()
@@ -342,4 +442,5 @@ def data_axes(data: Sequence[Measurement]):
     return jax.tree.map(lambda x: 0 if id(x) in batched else None, tuple(data))
 
 
-__all__ = ["Channel", "Deformations", "Landmarks", "Measurement", "Poses", "data_axes"]
+__all__ = ["Channel", "Deformations", "Landmarks", "Measurement", "Poses", "as_deformations",
+           "as_equilibria", "as_fit_data", "data_axes", "from_measurements"]

@@ -21,7 +21,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..errors import InputError
 from ..geometry.registration import register_landmarks
-from ..geometry.rotations import GIBBS_SINGULARITY_TOL, _matrix_to_quaternion
+from ..geometry.rotations import GIBBS_SINGULARITY_TOL, matrix_to_quaternion
 from ..model.mechanism import GROUND, Loads, Mechanism
 from .landmarks import (
     MIN_LANDMARKS,
@@ -33,7 +33,7 @@ from .landmarks import (
     place_landmarks,
     reorder_landmarks,
 )
-from .noise import GaussianNoise
+from .noise import ARM_SIGMA, GaussianNoise
 
 
 class Measurements(eqx.Module):
@@ -50,6 +50,11 @@ class Measurements(eqx.Module):
       landmarks, else None.
     - static `parts` (part names, in the order of the part axis), `cases` (case labels) and
       `notes` (exclusions and warnings, one sentence each, shown in identification reports).
+    - static `sigma` (mm): the standard deviation of a landmark coordinate (default the
+      measuring arm's `ARM_SIGMA`), and `sigma_rotation` (rad, or None): of a pose's rotation
+      when there are no landmarks. They whiten the residuals when a least-squares fit takes
+      these measurements (`identify.least_squares`); the direct method derives its weights
+      from the registration geometry.
     """
 
     rotation: Float[Array, "cases parts 3 3"]
@@ -62,6 +67,8 @@ class Measurements(eqx.Module):
     parts: tuple[str, ...] = eqx.field(static=True, default=())
     cases: tuple[str, ...] = eqx.field(static=True, default=())
     notes: tuple[str, ...] = eqx.field(static=True, default=())
+    sigma: float = eqx.field(static=True, default=ARM_SIGMA)
+    sigma_rotation: float | None = eqx.field(static=True, default=None)
 
     @property
     def n_cases(self) -> int:
@@ -131,7 +138,7 @@ def _coordinates(rotation, translation, index):
     # repeated calls with jax 0.10 / equinox 0.13).
     idx = np.asarray(index, dtype=int)
     rot = rotation[..., idx, :, :]
-    quat = jax.vmap(_matrix_to_quaternion)(rot.reshape(-1, 3, 3))
+    quat = jax.vmap(matrix_to_quaternion)(rot.reshape(-1, 3, 3))
     gibbs = (quat[:, 1:] / quat[:, :1]).reshape(*rot.shape[:-2], 3)
     q = jnp.concatenate([translation[..., idx, :], gibbs], axis=-1)
     return q.reshape(*q.shape[:-2], -1)
@@ -356,7 +363,8 @@ def synthesize(
     - `noise`: a `GaussianNoise` (default: none); `key`: its PRNG key (default `PRNGKey(seed)`).
     - `**solve_options`: passed to `solve_statics` (e.g. `rtol`, `max_steps`).
 
-    **Returns:** `Measurements` with landmarks; noise-free poses are exact to rounding.
+    **Returns:** `Measurements` with landmarks (their `sigma` the noise's landmark σ, or
+    `ARM_SIGMA` without noise); noise-free poses are exact to rounding.
     """
     from ..statics import part_poses, solve_statics
 
@@ -372,6 +380,7 @@ def synthesize(
         rotation=rot[:, index], translation=trans[:, index], loads=loads, landmarks=true,
         weights=weights, rms=jnp.zeros(true.shape[:2]), layout=layout, parts=layout.parts,
         cases=_case_labels(true.shape[0], None),
+        sigma=noise.landmarks if noise is not None and noise.landmarks > 0 else ARM_SIGMA,
     )
     if noise is not None:
         meas = add_noise(meas, noise, jax.random.PRNGKey(seed) if key is None else key)

@@ -6,6 +6,8 @@ one kind are stacked (arrays with a leading element axis); indices into the mark
 are static Python tuples.
 """
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -51,8 +53,8 @@ class Markers(eqx.Module):
     global frame), `part` (part index, -1 for ground), `names`.
     """
 
-    position: Float[Array, "m 3"]
-    orientation: Float[Array, "m 3 3"]
+    position: Float[Array, "m 3"] = eqx.field(metadata={"unit": "mm"})
+    orientation: Float[Array, "m 3 3"] = eqx.field(metadata={"unit": "-"})
     part: tuple[int, ...] = eqx.field(static=True)
     names: tuple[str, ...] = eqx.field(static=True)
 
@@ -114,16 +116,16 @@ class Bushings(eqx.Module):
     tables (mm or rad → N or N·mm) used on the axes flagged in the static `spline_axes`.
     """
 
-    k_trans: Float[Array, "n 3"]
-    k_rot: Float[Array, "n 3"]
-    cubic_trans: Float[Array, "n 3"]
-    cubic_rot: Float[Array, "n 3"]
-    offset_trans: Float[Array, "n 3"]
-    offset_rot: Float[Array, "n 3"]
-    preload_force: Float[Array, "n 3"]
-    preload_torque: Float[Array, "n 3"]
-    spline_x: Float[Array, "n 6 k"]
-    spline_y: Float[Array, "n 6 k"]
+    k_trans: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N/mm"})
+    k_rot: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N·mm/rad"})
+    cubic_trans: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N/mm³"})
+    cubic_rot: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N·mm/rad³"})
+    offset_trans: Float[Array, "n 3"] = eqx.field(metadata={"unit": "mm"})
+    offset_rot: Float[Array, "n 3"] = eqx.field(metadata={"unit": "rad"})
+    preload_force: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N"})
+    preload_torque: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N·mm"})
+    spline_x: Float[Array, "n 6 k"] = eqx.field(metadata={"unit": "mm or rad"})
+    spline_y: Float[Array, "n 6 k"] = eqx.field(metadata={"unit": "N or N·mm"})
     i_marker: tuple[int, ...] = eqx.field(static=True)
     j_marker: tuple[int, ...] = eqx.field(static=True)
     spline_axes: tuple[tuple[bool, ...], ...] = eqx.field(static=True)
@@ -160,10 +162,10 @@ class Springs(eqx.Module):
     **Fields:** `k` (N/mm), `free_length` (mm), `table_x`, `table_y` `(n, k)`.
     """
 
-    k: Float[Array, " n"]
-    free_length: Float[Array, " n"]
-    table_x: Float[Array, "n k"]
-    table_y: Float[Array, "n k"]
+    k: Float[Array, " n"] = eqx.field(metadata={"unit": "N/mm"})
+    free_length: Float[Array, " n"] = eqx.field(metadata={"unit": "mm"})
+    table_x: Float[Array, "n k"] = eqx.field(metadata={"unit": "mm"})
+    table_y: Float[Array, "n k"] = eqx.field(metadata={"unit": "N"})
     i_marker: tuple[int, ...] = eqx.field(static=True)
     j_marker: tuple[int, ...] = eqx.field(static=True)
     tabulated: tuple[bool, ...] = eqx.field(static=True)
@@ -187,9 +189,9 @@ class Stops(eqx.Module):
     **Fields:** `length` (mm), `k` (N/mm), `cubic` (N/mm³); static `kind` ("bump"/"rebound").
     """
 
-    length: Float[Array, " n"]
-    k: Float[Array, " n"]
-    cubic: Float[Array, " n"]
+    length: Float[Array, " n"] = eqx.field(metadata={"unit": "mm"})
+    k: Float[Array, " n"] = eqx.field(metadata={"unit": "N/mm"})
+    cubic: Float[Array, " n"] = eqx.field(metadata={"unit": "N/mm³"})
     i_marker: tuple[int, ...] = eqx.field(static=True)
     j_marker: tuple[int, ...] = eqx.field(static=True)
     kind: tuple[str, ...] = eqx.field(static=True)
@@ -205,7 +207,7 @@ class Drivers(eqx.Module):
     **Fields:** `direction` (n, 3) unit vectors in the global frame.
     """
 
-    direction: Float[Array, "n 3"]
+    direction: Float[Array, "n 3"] = eqx.field(metadata={"unit": "-"})
     marker: tuple[int, ...] = eqx.field(static=True)
     names: tuple[str, ...] = eqx.field(static=True)
 
@@ -232,9 +234,9 @@ class Loads(eqx.Module):
     `driver` values (mm) per motion driver.
     """
 
-    force: Float[Array, "*cases l 3"]
-    moment: Float[Array, "*cases l 3"]
-    driver: Float[Array, "*cases d"]
+    force: Float[Array, "*cases l 3"] = eqx.field(metadata={"unit": "N"})
+    moment: Float[Array, "*cases l 3"] = eqx.field(metadata={"unit": "N·mm"})
+    driver: Float[Array, "*cases d"] = eqx.field(metadata={"unit": "mm"})
 
     @property
     def n_cases(self) -> int | None:
@@ -380,3 +382,16 @@ def row_blocks(joints: Joints) -> list[tuple[str, np.ndarray, np.ndarray]]:
         if idx.size:
             blocks.append((kind, idx, offsets[idx]))
     return blocks
+
+
+def field_unit(tree, path: tuple[str, ...]) -> str:
+    """The unit of the array field at `path` of a `Mechanism` (e.g. `("bushings", "k_rot")` →
+    `'N·mm/rad'`): the `unit` metadata each parameter field declares, so that reports,
+    tables and plots read one source. `'-'` for a field without one."""
+    node = tree
+    for name in path[:-1]:
+        node = getattr(node, name)
+    for field in dataclasses.fields(node):
+        if field.name == path[-1]:
+            return field.metadata.get("unit", "-")
+    raise KeyError(f"{type(node).__name__} has no field {path[-1]!r}")
