@@ -12,6 +12,8 @@ from diffsusp._compile import set_xla_flags  # noqa: E402
 # inherit XLA_FLAGS), set before JAX starts its backend.
 set_xla_flags(os.environ)
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", 2)  # as the CLI does: `solve_statics(devices=2)` works
+os.environ["DIFFSUSP_DEVICES"] = "1"  # but the CLI's commands run in-process keep one device
 # The CLI's own cache (DIFFSUSP_CACHE) is off inside the tests.
 os.environ["DIFFSUSP_CACHE"] = ""
 

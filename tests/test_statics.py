@@ -319,6 +319,23 @@ def test_nonconvergence_names_the_case(mount):
         ds.solve_statics(mount, loads, max_steps=8)
 
 
+def test_split_over_devices_gives_the_one_device_result(mount):
+    # 5 cases over 2 CPU devices (padded to 6), one of them without an equilibrium: the same
+    # bits as on one device, statuses and flags included.
+    jz = jnp.array([[0.0, 0.0, 0.0]] * 4 + [[0.0, 0.0, 1e12]])
+    loads = mount.loads(forces={"load": jnp.linspace(-1.0, 1.0, 15).reshape(5, 3) * 200.0},
+                        moments={"load": jz})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        one = ds.solve_statics(mount, loads, max_steps=8, throw=False, devices=1)
+        two = ds.solve_statics(mount, loads, max_steps=8, throw=False, devices=2)
+    assert list(np.asarray(one.status != 0)) == [False] * 4 + [True]
+    for a, b in zip(jax.tree.leaves(one), jax.tree.leaves(two), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    with pytest.raises(ValueError, match="local device"):
+        ds.solve_statics(mount, loads, devices=64)
+
+
 def test_bushing_rotated_past_validity_warns(iso):
     small = iso.loads(moments={"centre": [2.0e5, 0.0, 0.0]})  # ≈ 20° about x in the J frame
     with warnings.catch_warnings():

@@ -58,6 +58,13 @@ def enable_x64():
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    # Batches of load cases split over every device; on the CPU, one device per core (when
+    # JAX has not started yet: a command run inside a Python session keeps its devices).
+    os.environ.setdefault("DIFFSUSP_DEVICES", "all")
+    try:
+        jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
+    except RuntimeError:
+        pass
     cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
     if cache and not jax.config.jax_compilation_cache_dir:
         jax.config.update("jax_compilation_cache_dir", cache)

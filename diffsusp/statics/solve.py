@@ -20,7 +20,9 @@ solution (one more linear solve), in forward and reverse mode; the Newton loop i
 """
 
 import enum
+import os
 import warnings
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -123,7 +125,7 @@ _LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last)
 # one is taken anyway
 
 
-def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
+def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps, serial=False):
     """Damped Newton on the KKT system from (q0, λ = 0), for a batch of load cases (leading
     axis of `loads` and q0).
 
@@ -135,7 +137,8 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     scatter is done slot-wide (`kernel.assemble_batch`). At most `_POOL` cases are iterated at
     once and a stopped case's slot takes the next case, so a batch costs the sum of its cases'
     passes (about 5 each), not the slowest case's (up to 40 near the envelope's edge) times every
-    case; each case's iterates do not depend on the others (vmap = loop)."""
+    case; each case's iterates do not depend on the others (vmap = loop). `serial`: factorise
+    the slots' systems one by one (`scaled_solve`), for several CPU devices at once."""
     topo = mech.topology
     n = topo.n
     length = mech.length_scale
@@ -165,7 +168,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
         f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
-        dy = scaled_solve(jac, -r_twist)
+        dy = scaled_solve(jac, -r_twist, serial=serial)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
@@ -247,21 +250,22 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
 
 
 @eqx.filter_custom_jvp
-def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
+def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps, serial=False):
     """Solver coordinates and multipliers (cases, n + m) and (status, iterations, residual,
     constraint error) (cases, 4) of a batch of load cases."""
-    return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+    return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps, serial=serial)
 
 
 @_equilibrium.def_jvp
-def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
+def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps, serial=False):
     # Implicit function theorem, case by case: J·dy = −∂r/∂(mech, loads)·t (`linearize`).
     # Everything here stays differentiable (y through this same rule, J and ∂r through
     # autodiff), so derivatives of derivatives — e.g. the sensitivity of bump steer to a
     # stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
-    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps,
+                           serial=serial)
 
     def tangent(loads_, y_, t_loads_):
         return linearize_internal(mech, loads_, y_).tangent(t_mech, t_loads_)
@@ -273,10 +277,11 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
     return (y, info), (dy, jnp.zeros_like(info))
 
 
-def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps):
+def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps, serial=False):
     """Public-coordinate solutions of a batch of cases (leading axis)."""
     y0 = jax.vmap(lambda q: to_internal(mech, q))(q0)
-    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps,
+                           serial=serial)
     n = mech.topology.n
     return StaticSolution(
         q=jax.vmap(lambda y_: to_public(mech, y_))(y[:, :n]),
@@ -294,10 +299,10 @@ def _solve_one(mech, loads, q0, rtol, atol, max_steps):
     return jax.tree.map(lambda a: a[0], sol)
 
 
-def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
+def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk, serial=False):
     n_cases = loads.force.shape[0]
     if chunk is None or n_cases <= chunk:
-        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps)
+        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps, serial)
     # Chunks of `chunk` cases one after the other (the last one padded by repeating a case).
     n_chunks = -(-n_cases // chunk)
     pad = n_chunks * chunk - n_cases
@@ -306,14 +311,30 @@ def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
         a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
         return a.reshape(n_chunks, chunk, *a.shape[1:])
 
-    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps),
+    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps, serial),
                       jax.tree.map(split, (loads, q0)))
     return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], sol)
 
 
 @filter_jit
-def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk):
-    return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
+def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh=None):
+    if mesh is None:
+        return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
+    # One share of the cases per device, each solved by its own pool, no communication; the
+    # case count is padded to a multiple of the devices by repeating the last case.
+    n_cases, k = loads.force.shape[0], mesh.size
+    serial = mesh.devices.flat[0].platform == "cpu"  # see `scaled_solve`
+    pad = -n_cases % k
+
+    def padded(a):
+        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+
+    cases = jax.sharding.PartitionSpec("cases")
+    solve = jax.shard_map(
+        lambda l, q: _solve_cases(mech, l, q, rtol, atol, max_steps, chunk, serial),
+        mesh=mesh, in_specs=(cases, cases), out_specs=cases, check_vma=False)
+    sol = solve(*jax.tree.map(padded, (loads, q0)))
+    return jax.tree.map(lambda a: a[:n_cases], sol)
 
 
 @filter_jit
@@ -424,6 +445,28 @@ def _start(mech, loads, q0, n_cases):
     return q0
 
 
+def _mesh(devices):
+    """A one-axis ("cases") mesh over `devices` (see `solve_statics`), None for one device."""
+    if devices is None:
+        devices = os.environ.get("DIFFSUSP_DEVICES", "1")
+        devices = int(devices) if devices.isdigit() else devices
+    local = jax.local_devices()
+    if isinstance(devices, str):
+        if devices != "all":
+            raise ValueError(
+                f'devices must be a count, "all" or a list of devices; got {devices!r}.')
+        devices = local
+    elif isinstance(devices, int):
+        if not 1 <= devices <= len(local):
+            raise ValueError(f"devices={devices}: {len(local)} local device(s) are available "
+                             "(on the CPU, ask JAX for more with jax_num_cpu_devices).")
+        devices = local[:devices]
+    devices = tuple(devices)
+    if len(devices) <= 1:
+        return None
+    return jax.sharding.Mesh(np.array(devices), ("cases",))
+
+
 def _check_x64():
     if not jax.config.jax_enable_x64:
         warnings.warn(
@@ -443,6 +486,7 @@ def solve_statics(
     max_steps: int = 50,
     chunk: int | None = 4096,
     throw: bool = True,
+    devices: "int | str | Sequence[jax.Device] | None" = None,
 ) -> StaticSolution:
     """Static equilibria of `mech` under each load case of `loads`.
 
@@ -455,6 +499,11 @@ def solve_statics(
     - `chunk`: cases solved at once (larger tables are mapped in chunks to bound memory).
     - `throw`: raise `ConvergenceError` naming the first failed case; otherwise return the
       per-case `status`.
+    - `devices`: split a table of cases over several devices (`jax.shard_map` over the case
+      axis; each device solves its share with its own pool, and the result is the same as on
+      one device, gathered on the default device): a count of local devices, "all", or a list
+      of devices. Default: `$DIFFSUSP_DEVICES`, else 1 (the CLI sets "all" and, on the CPU,
+      one device per core). Calls inside jit / vmap / grad run on one device.
 
     **Returns:** a `StaticSolution`, differentiable (implicitly) with respect to every float
     leaf of `mech` and `loads`.
@@ -468,7 +517,12 @@ def solve_statics(
                            max_steps, chunk)
         sol = jax.tree.map(lambda a: a[0], sol)
     else:
-        sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk)
+        mesh = None if _is_traced((mech, loads, q0)) else _mesh(devices)
+        if mesh is not None and n_cases < mesh.size:
+            mesh = None
+        sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh)
+        if mesh is not None:  # later programs run on one device, as for an unsplit batch
+            sol = jax.device_put(sol, jax.devices()[0])
     sol = with_flags(mech, loads, sol)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
