@@ -8,6 +8,8 @@ benchmarks/results/tyre.json. Timings are never asserted anywhere.
   MagicFormula61 file, jitted, float64, after compilation; evaluations per second; and the ratio
   to the vectorised NumPy transcription of the tests (tests/test_tyre_oracle.py, which computes
   M_x and M_y as well: about 15 % more work) on the same points in the same run;
+- the same with turn slip on (φ_t random, ±0.3 1/m), and the MF 6.2 loaded radius of 10⁶ loads
+  (with F_y and camber), for reference (no target);
 - fit: the 20-coefficient pure-lateral fit of the tests from 10 000 noisy synthetic points
   (perturbed start ×0.7–1.3), Huber loss, after compilation (a second noise draw), with its
   Levenberg–Marquardt steps and the report (lsq) time;
@@ -116,6 +118,21 @@ def main():
                 "eval_sharded_median_s": wsm, "eval_sharded_cpu_s": cs,
                 "max_abs_difference_N": max(float(np.max(np.abs(np.asarray(a) - np.asarray(b))))
                                             for a, b in zip(out, out_libm, strict=True))}
+    # turn slip on (MF 6.1 ζ0…ζ8, spin from the effective rolling radius), same points, and
+    # the vertical model (loaded radius by Newton, MF 6.2 file): CPU per point, for reference
+    phit = jnp.asarray(rng.uniform(-0.3e-3, 0.3e-3, n))
+    run_ts = jax.jit(lambda m, *a: tuple(
+        getattr(evaluate(m, *a[:6], outputs=("fx", "fy", "mz"), turn_slip=a[6]), k)
+        for k in ("fx", "fy", "mz")))
+    (t_ts, _, cpu_ts), _ = _timings(lambda: run_ts(model, *args_j, phit), repeats)
+    from diffsusp.tyre import vertical
+
+    m62 = MagicFormula6.from_tir(read_tir(DATA / "MagicFormula62_Paramerters.tir"))
+    run_rl = jax.jit(lambda m, fz, fy, ia, p: vertical.loaded_radius(
+        m, fz, fy=fy, gamma=ia, vx=16.6e3, pressure=p).rl)
+    fy_rl = jnp.asarray(rng.uniform(-5000.0, 5000.0, n))
+    (t_rl, _, cpu_rl), _ = _timings(lambda: run_rl(m62, args_j[0], fy_rl, args_j[3], args_j[5]),
+                                    repeats)
     t0 = time.perf_counter()
     ref = oracle.mf_numpy(tir, fz, sl, sa, ia, vx, p)
     t_numpy = time.perf_counter() - t0
@@ -159,6 +176,8 @@ def main():
         "devices": len(jax.devices()), "eval_sharded_s": t_shard,
         "eval_sharded_median_s": t_shard_median, "eval_sharded_cpu_s": cpu_shard,
         "evaluations_per_s_sharded": n / t_shard, "libm": libm,
+        "turn_slip_eval_s": t_ts, "turn_slip_eval_cpu_s": cpu_ts,
+        "loaded_radius_s": t_rl, "loaded_radius_cpu_s": cpu_rl,
         "numpy_s": t_numpy, "speedup_vs_numpy": t_numpy / t_eval,
         "max_abs_difference_vs_numpy_N": agree,
         "fit_points": int(z.size), "fit_coefficients": len(NAMES), "compile_fit_s": compile_fit,
@@ -179,6 +198,9 @@ def main():
               f"(median {libm['eval_median_s'] * 1e3:.1f}, CPU {libm['eval_cpu_s'] * 1e3:.1f}),"
               f" sharded best {libm['eval_sharded_s'] * 1e3:.1f} ms; max |diff| "
               f"{libm['max_abs_difference_N']:.2e}")
+    print(f"  turn slip on: best {t_ts * 1e3:.1f} ms, CPU {cpu_ts * 1e3:.1f} ms; MF 6.2 loaded "
+          f"radius (Newton, F_y and camber terms): best {t_rl * 1e3:.1f} ms, CPU "
+          f"{cpu_rl * 1e3:.1f} ms")
     print(f"pure-lateral fit, {len(NAMES)} coefficients, {z.size} points: LM {t_solve:.3f} s in "
           f"{int(steps)} steps (converged {bool(ok)}), report {t_report:.3f} s, compile "
           f"{compile_fit:.1f} s; not identifiable: {', '.join(report.unidentifiable)}")

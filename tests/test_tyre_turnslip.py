@@ -153,10 +153,15 @@ def test_loaded_radius_matches_numpy_oracle(tyres, key):
         assert abs(float(st.secant[i]) - x["FZ"][i] / float(st.deflection[i])) <= 1e-9 * k
     np.testing.assert_allclose(np.asarray(st.re) / 1e3,
                                re_numpy(tir, x["FZ"], x["OM"], x["P"])[1], rtol=1e-13)
+    assert np.all(np.asarray(st.converged))
     if key == "mf62":  # camber changes the 6.2 deflection
         tilt = V.loaded_radius(m, 5000.0, gamma=0.08, omega=0.0)
         flat = V.loaded_radius(m, 5000.0, gamma=0.0, omega=0.0)
         assert abs(float(tilt.rl - flat.rl)) > 0.1
+        # at γ = −0.105 rad the file's F_z(R_l) stays above 732 N: 36 N has no loaded radius,
+        # which is reported, not hidden
+        assert not bool(V.loaded_radius(m, 35.6, fx=5333.0, fy=-647.0, gamma=-0.105,
+                                        omega=0.0).converged)
 
 
 def test_loaded_radius_closed_forms(tyres):

@@ -29,10 +29,16 @@ N/m → N/mm, WIDTH m → mm and Q_CAM2 1/m → 1/mm).
   stiffness at F_z = F_z0 (no other effect) exactly C_z0.
 
 **Loaded radius from the load** (`loaded_radius`): the root R_l of F_z(R_l) = F_z, by Newton's
-method from R_Ω − F_z/C_z0 (14 steps, each damped to keep ρ ≥ 0), then one Newton step taken with
-the converged point held constant, so that derivatives are those of the implicit function
-(dR_l/dθ = −(∂F_z/∂θ)/(∂F_z/∂R_l)), exact at the root. MF 5.2/6.1 could use the quadratic's closed
-form; the same solver is used for every version (the tests check it against the closed form).
+method from R_Ω − F_z/C_z0 (8 steps, each kept at ρ ≥ 0; 4 reach 1e-14 on the shipped files
+wherever a root exists), then one Newton step taken with the converged point held constant, so
+that derivatives are those of the implicit function (dR_l/dθ = −(∂F_z/∂θ)/(∂F_z/∂R_l)), exact
+at the root. `VerticalState.converged` says where |F_z(R_l) − F_z| ≤ 1e-8·F_z0. In MF 6.2 there
+may be no root: the camber deflection ρ_zγ keeps ρ_z > 0 at R_l = R_Ω, so F_z(R_l) has a positive
+minimum at a large camber (shipped 6.2 file: 732 N at γ = −0.105 rad with F_x = 5.3 kN), and a
+lighter load cannot be carried (0.6 % of random points with F_z < 930 N, |F_x|, |F_y| ≤ 8 kN,
+|γ| ≤ 0.15 rad); those points are returned with `converged` False, not silently. MF 5.2/6.1
+could use the quadratic's closed form; the same solver is used for every version (the tests
+check it against the closed form).
 
 **Not modelled** (documented choices): bottoming (BOTTOM_OFFST, BOTTOM_STIFF), the MF 6.1 paper's
 q_Fz3·γ² term (absent from the shipped files and not in MFeval), Q_CAM (6.1 camber stiffness
@@ -49,7 +55,7 @@ from jaxtyping import Array, ArrayLike
 __all__ = ["VerticalState", "effective_rolling_radius", "free_radius", "loaded_radius",
            "spin", "vertical_force"]
 
-_NEWTON_STEPS = 14
+_NEWTON_STEPS = 8
 _SPIN_STEPS = 6
 
 
@@ -58,7 +64,8 @@ class VerticalState(NamedTuple):
 
     `rl` loaded radius [mm]; `deflection` ρ (MF 6.2: ρ_z, camber included) [mm]; `stiffness`
     the tangent vertical stiffness −∂F_z/∂R_l [N/mm]; `secant` F_z/ρ [N/mm] (MFeval's C_z output);
-    `re` effective rolling radius [mm]; `romega` free radius R_Ω [mm]; `omega` wheel spin [rad/s].
+    `re` effective rolling radius [mm]; `romega` free radius R_Ω [mm]; `omega` wheel spin [rad/s];
+    `converged`: the load is reached (module docstring: there may be no root).
     """
 
     rl: Array
@@ -68,6 +75,7 @@ class VerticalState(NamedTuple):
     re: Array
     romega: Array
     omega: Array
+    converged: Array
 
 
 def _c(model):
@@ -201,5 +209,6 @@ def loaded_radius(model, fz: ArrayLike, *, fx: ArrayLike = 0.0, fy: ArrayLike = 
     stiffness = -slope
     secant = jnp.where(rho > 1e-9, fz_check / jnp.where(rho > 1e-9, rho, 1.0), stiffness)
     re = effective_rolling_radius(model, fz, omega, pressure)
+    converged = jnp.abs(fz_check - fz) <= 1e-8 * model.coefficients["FNOMIN"]
     return VerticalState(rl, rho, stiffness, secant, re, jnp.broadcast_to(romega, shape),
-                         jnp.broadcast_to(omega, shape))
+                         jnp.broadcast_to(omega, shape), converged)
