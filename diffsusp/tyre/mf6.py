@@ -83,7 +83,6 @@ import warnings
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -570,8 +569,6 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
             Gyk = (_cosmf(Byk, c["RCY1"], Eyk, kappa + SHyk, fm)
                    / _cosmf(Byk, c["RCY1"], Eyk, SHyk, fm))
             Fy = Gyk * Fy0 + SVyk
-            if fm is _math and want_mz:
-                Fy, Gyk, SVyk = _shared(Fy, Gyk, SVyk)
         if want_mz:
             # combined aligning torque (4.E71–4.E78, A54–A56)
             k2 = (Kxk / Kyap) ** 2 * kappa**2
@@ -619,15 +616,6 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
                 roll + (c["QSY5"] + c["QSY6"] * fz_my / Fz0) * gamma**2) * (
                 (fz_my / Fz0) ** c["QSY7"] * (p / c["NOMPRES"]) ** c["QSY8"])
     return TyreForces(Fx, Fy, Mx, My, Mz)
-
-
-def _shared(*values):
-    """The values, materialised once for all their users (`lax.optimization_barrier`). XLA's
-    CPU fusion duplicates an elementwise producer into each consumer fusion when it looks cheap;
-    with the polynomial transcendentals of `_math` it does look cheap, and the aligning torque's
-    fusion recomputed the lateral force's and the combined-slip factors' transcendentals
-    (measured in benchmarks/README.md, tyre section). Used on the fast path only."""
-    return jax.lax.optimization_barrier(values)
 
 
 def _alpha_eq(a, k2, fm):
