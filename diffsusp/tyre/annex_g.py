@@ -3,7 +3,8 @@
 spec: tyre §4.7 (Annex G), §4.5 (Tables 10, 11), §0.4, §0.5.9–10, CORRECTIONS 5, 10. Units of
 the thesis (spec §0.3): F_z in kN, δ′ in m, φ′ and γ in rad, F_y in N, M_z in N·m.
 
-`data/annex_g.csv` holds **every printed cell** of Tables 34–57 (2 616 cells), one row each:
+`data/annex_g.csv` holds **every printed cell** of Tables 34–57 (2 638 rows, 348 identified
+values), one row each:
 table, tyre, pressure [bar], output (Fy | Mz), block, i, j, the printed text, value, σ %,
 status and a note with the seed line. The blocks and their indices (b_{F,X,i,j}: i the power of
 the input, j the power of F_z [kN]):

@@ -553,6 +553,7 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
 @dataclasses.dataclass
 class OutputReport:
     """One output's identification: `fit` (step 1, the `lsq.Fit` with its elimination log),
+    `reduced` (the final structure refitted alone: its coefficients with their σ, σ %),
     `model` (the identified F_pneu), `compliance` K_y⁻¹ [m/N] and `compliance_sigma` (joint
     linearisation, see the module docstring), `compliance_sigma_step2` (the thesis's σ of
     the step-2 regression), `stiffness` K_y [N/m], `step2` (the step-2 `lsq.Fit`), `removed`
@@ -560,6 +561,7 @@ class OutputReport:
 
     output: str
     fit: lsq.Fit
+    reduced: lsq.Fit
     model: PolynomialModel
     compliance: float
     compliance_sigma: float
@@ -599,10 +601,7 @@ class BenchReport:
         for out, r in self.outputs.items():
             lines.append(f"== {out}: K_y = {r.stiffness:.6g} N/m (sigma {r.stiffness_sigma_pct:.3g}"
                          f" %); compliance {r.compliance:.4g} m/N")
-            kept = [(n, x, s) for n, x, s, k, f in zip(r.fit.names, r.fit.x, r.fit.sigma_pct,
-                                                       r.fit.kept, r.fit.fixed, strict=True)
-                    if k and not f]
-            for n, x, s in kept:
+            for n, x, s in zip(r.reduced.names, r.reduced.x, r.reduced.sigma_pct, strict=True):
                 lines.append(f"  {n:<20} {x:>13.6g}  ({s:.3g} %)")
             if r.removed:
                 lines.append(f"  removed by the structure search: {len(r.removed)} terms")
@@ -619,9 +618,8 @@ class BenchReport:
                 "outputs": {o: {"stiffness": r.stiffness, "compliance": r.compliance,
                                 "compliance_sigma": r.compliance_sigma,
                                 "coefficients": r.model.values(),
-                                "sigma_pct": {n: float(s) for n, s, k in zip(
-                                    r.fit.names, r.fit.sigma_pct, r.fit.kept, strict=True)
-                                    if k},
+                                "sigma_pct": {n: float(s) for n, s in zip(
+                                    r.reduced.names, r.reduced.sigma_pct, strict=True)},
                                 "removed": r.removed, "not_identifiable": r.not_identifiable}
                             for o, r in self.outputs.items()}}
 
@@ -636,11 +634,17 @@ def _joint_sigma(Wp, D, extra, b, c, y):
 
 
 def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = True,
-                    rules: bool = True, sigma_pct_threshold: float | None = 100.0,
-                    ic_threshold: float = 0.1, fixed=None, rolling_radius: float = 0.294
+                    rules: bool = True, sigma_pct_threshold: float | None = 10.0,
+                    ic_threshold: float = 0.0, fixed=None, rolling_radius: float = 0.294
                     ) -> OutputReport:
     """Two-step identification of one output ("Fy" or "Mz") on conditioned data (spec §3.3):
-    step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77)."""
+    step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77).
+
+    The search removes, one at a time, the coefficient with σ % > `sigma_pct_threshold`
+    (default 10 %: the thesis's tables print nothing above 3.9 %) or with a confidence index
+    below `ic_threshold` (default 0: off — the thesis's IC < 0.1 rule is not what its tables
+    show, which keep coefficients with IC down to 0.01, and on synthetic data it removes true
+    terms such as b_Fy_delta_5_2), then applies the behaviour rules (`structure_rules`)."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
     W = cond.regressor(lip)
@@ -657,12 +661,21 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             removed[st.removed] = st.reason
     else:
         fit = lsq.solve(W, y, names=names, fixed=fixed)
+    # The engine judges identifiability on the full model (a removed column still regroups
+    # with the kept ones), so the kept coefficients of the final structure get their σ from
+    # the reduced model itself: one more fit on the kept columns.
+    active = [i for i in range(len(names)) if fit.kept[i] and not fit.fixed[i]]
+    reduced = lsq.solve(W[:, active], y, names=[names[i] for i in active])
+    x_full = np.zeros(len(names))
+    x_full[active] = reduced.x
     for i, n in enumerate(names):
-        if not fit.identifiable[i] and n not in removed and not fit.fixed[i]:
+        # dropped for rank (neither kept nor removed by the search): no effect, or a
+        # combination of others
+        if not fit.kept[i] and not fit.fixed[i]:
             not_ident[n] = fit._status(i) or "not identifiable"
     pneu_idx = [i for i, n in enumerate(names) if parse_name(n)[1] not in ("Ly", "P2")]
     pneu_names = [names[i] for i in pneu_idx]
-    b_pneu = np.asarray(fit.x)[pneu_idx]
+    b_pneu = x_full[pneu_idx]
     model = PolynomialModel.create(output, degrees, values=dict(zip(pneu_names, b_pneu,
                                                                     strict=True)))
     # Step 2: the Ly columns are (Ḟ_y/ω)·∂(δ′^i F_z^j)/∂δ′, so (∂F̂_pneu/∂δ′)·Ḟ_y/ω = D·b̂.
@@ -678,13 +691,14 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     c = float(step2.x[0])
     keep = np.array([bool(fit.kept[i]) and not bool(fit.fixed[i]) for i in pneu_idx])
     sig = _joint_sigma(Wp[:, keep], D[:, keep], extra, b_pneu[keep], c, y)
-    return OutputReport(output, fit, model, c, sig, float(step2.sigma[0]), step2, removed,
-                        not_ident)
+    return OutputReport(output, fit, reduced, model, c, sig, float(step2.sigma[0]), step2,
+                        removed, not_ident)
 
 
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,
              rolling_radius: float = 294.0, decimate: int | None = None, search: bool = True,
-             outputs=("Fy", "Mz")) -> BenchReport:
+             outputs=("Fy", "Mz"), sigma_pct_threshold: float | None = 10.0,
+             ic_threshold: float = 0.0) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else one least-squares fit of the whole
@@ -695,7 +709,8 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     cond = condition(table, cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate)
     r_m = rolling_radius * 1e-3
     reports = {o: identify_output(cond, o, STRUCTURES[structure][o], search=search,
-                                  rolling_radius=r_m) for o in outputs}
+                                  rolling_radius=r_m, sigma_pct_threshold=sigma_pct_threshold,
+                                  ic_threshold=ic_threshold) for o in outputs}
     notes, flags = [], []
     exc = cond.excitation
     if exc["kappa"] < 1e-6:
