@@ -422,7 +422,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     path curvature; given (0 included), the MF 6.1/6.2 turn-slip functions ζ0…ζ8 are on (module
     docstring, "Turn slip"), with the spin φ = φ_t·cos α + (1 − ε_γ)·Ω·sin γ/V_c; None (default):
     no turn slip, every ζ = 1. `omega` [rad/s]: the wheel spin Ω used by turn slip (default from
-    V_x, κ and the effective rolling radius, `diffsusp.tyre.vertical.spin`).
+    V_x, κ and the effective rolling radius, `diffsusp.tyre.vertical.spin`, which needs the
+    file's VERTICAL_STIFFNESS, BREFF, DREFF, FREFF).
 
     **Returns:** `TyreForces` (fx, fy [N]; mx, my, mz [N·mm]), ISO-W axes.
     """
