@@ -370,3 +370,8 @@ def fit_command(
         if figures is not None:
             F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")
+
+
+from .tyre_identify import register as _register_identify  # noqa: E402  (issue 16)
+
+_register_identify(tyre_app)

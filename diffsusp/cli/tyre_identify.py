@@ -1,0 +1,151 @@
+"""`diffsusp tyre identify DATA`: the polynomial tyre model and the lateral stiffnesses from a
+Flat Trac table (spec: tyre §3.3–3.8; issue 16 item 8).
+
+DATA (.csv/.parquet) has the columns of `diffsusp.tyre.bench.REQUIRED`: `t` [s], `segment`,
+`steer`, `camber` [rad], `speed` [mm/s], `omega` [rad/s], `FZ`, `FX`, `FY` [N], `MZ` [N·mm]
+(a unit in the header, e.g. `speed [km/h]`, `MZ [N·m]`, `steer [deg]`, is converted).
+`--structure apriori|just-necessary` (Tables 5 / 10); the report goes to the terminal (and
+`--report` .json), the identified polynomial models to `--out` (.json), measured-vs-model
+figures to `--figures`; `--to-mf FILE.json` converts the polynomials to the Magic Formula 1989
+set (§3.8, conversion radius `--radius`). Exit codes: 2 bad input (missing channels,
+non-monotonic time, a rate too low for the filter), 4 an unstable identified model
+(∂Fy_pneu/∂δ′ ≥ 0 on the data) unless `--allow-unstable`.
+"""
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_MODEL_ERROR,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+)
+
+_UNITS = {"steer": "angle", "camber": "angle", "speed": "speed", "FZ": "force", "FX": "force",
+          "FY": "force", "MZ": "moment", "t": "time", "omega": "rate", "segment": None}
+_FACTORS = {
+    "angle": {"rad": 1.0, "deg": np.pi / 180.0},
+    "speed": {"mm/s": 1.0, "m/s": 1e3, "km/h": 1e6 / 3600.0},
+    "force": {"N": 1.0, "kN": 1e3},
+    "moment": {"N·mm": 1.0, "N*mm": 1.0, "Nmm": 1.0, "N·m": 1e3, "N*m": 1e3, "Nm": 1e3},
+    "time": {"s": 1.0, "ms": 1e-3},
+    "rate": {"rad/s": 1.0, "rpm": 2 * np.pi / 60.0},
+}
+
+
+def _columns(table) -> dict:
+    out = {}
+    for name in table.names:
+        kind = _UNITS.get(name)
+        values = np.asarray(table[name], float)
+        unit = table.units.get(name)
+        if kind is not None and unit:
+            f = _FACTORS[kind].get(unit)
+            if f is None:
+                raise fail(f"column {name}: unit [{unit}] not understood; use one of "
+                           f"{', '.join(_FACTORS[kind])}", EXIT_BAD_INPUT)
+            values = values * f
+        out[name] = values
+    return out
+
+
+def register(tyre_app: typer.Typer) -> None:
+    tyre_app.command("identify")(identify_command)
+
+
+def identify_command(
+    data: Annotated[Path, typer.Argument(help="Flat Trac table (.csv/.parquet).")],
+    structure: Annotated[str, typer.Option(help="apriori | just-necessary.")] = "just-necessary",
+    out: Annotated[Path | None, typer.Option(help="Write the polynomial models (.json).")]
+    = None,
+    report: Annotated[Path | None, typer.Option(help="Write the report (.json).")] = None,
+    figures: Annotated[Path | None, typer.Option(help="Measured-vs-model figures folder.")]
+    = None,
+    to_mf: Annotated[Path | None, typer.Option(
+        "--to-mf", help="Convert to the Magic Formula 1989 set (.json).")] = None,
+    radius: Annotated[float, typer.Option(help="Conversion radius for --to-mf [m].")] = 0.33,
+    rolling_radius: Annotated[float, typer.Option(help="Rolling radius R_r [mm].")] = 294.0,
+    cutoff: Annotated[float, typer.Option(help="Low-pass cut-off [Hz].")] = 25.0,
+    allow_unstable: Annotated[bool, typer.Option(help="Report an unstable model, exit 0.")]
+    = False,
+):
+    """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
+    if structure not in ("apriori", "just-necessary"):
+        raise fail(f"--structure must be apriori or just-necessary; got '{structure}'",
+                   EXIT_BAD_INPUT)
+    for path, suffixes, what in ((out, (".json",), "polynomial models"),
+                                 (report, (".json",), "report"),
+                                 (to_mf, (".json",), "Magic Formula set")):
+        check_output(path, suffixes=suffixes, what=what)
+    check_output(figures, what="figures folder", directory=True)
+    c = console(markup=False)
+    with cli_errors():
+        enable_x64()
+        from diffsusp.io.tables import read_table
+        from diffsusp.tyre import bench, convert
+
+        table = _columns(read_table(data))
+        rep = bench.identify(table, structure=structure, cutoff=cutoff,
+                             rolling_radius=rolling_radius)
+        c.print(rep.table())
+        if report is not None:
+            report.write_text(json.dumps(rep.to_dict(), indent=2) + "\n")
+        if out is not None:
+            out.write_text(json.dumps({o: {"degrees": dict(r.model.degrees),
+                                           "coefficients": r.model.values(),
+                                           "K_y": r.stiffness}
+                                       for o, r in rep.outputs.items()}, indent=2) + "\n")
+            c.print(f"polynomial models written to {out}")
+        if figures is not None:
+            _figures(rep, table, figures, cutoff, rolling_radius)
+            c.print(f"figures written to {figures}")
+        if to_mf is not None:
+            fy = rep.outputs["Fy"].model
+            mz = rep.outputs["Mz"].model if "Mz" in rep.outputs else None
+            fitted, mf_rep, notes, _ = convert.to_magic_formula(fy, mz, radius=radius)
+            to_mf.write_text(json.dumps({"coefficients": {k: float(v) for k, v in
+                                                          fitted.coefficients.items()},
+                                         "notes": notes, "radius_m": radius,
+                                         "converged": mf_rep.converged}, indent=2) + "\n")
+            c.print(f"Magic Formula 1989 set written to {to_mf}")
+        if not rep.stable and not allow_unstable:
+            raise fail("; ".join(f for f in rep.flags if f.startswith("unstable")),
+                       EXIT_MODEL_ERROR)
+
+
+def _figures(rep, table, folder: Path, cutoff, rolling_radius):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from diffsusp.tyre import bench
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cond = bench.condition(table, cutoff=cutoff, rolling_radius=rolling_radius)
+    from diffsusp.tyre.poly import regressor_model
+
+    for o, r in rep.outputs.items():
+        lip = regressor_model(o, dict(r.model.degrees), ly=True, p2=(o == "Mz"))
+        W = cond.regressor(lip)
+        x = np.array([dict(zip(r.reduced.names, r.reduced.x, strict=True)).get(n, 0.0)
+                      for n in lip.names])
+        y = cond.fy if o == "Fy" else cond.mz
+        fig, ax = plt.subplots(figsize=(9, 4))
+        ax.plot(y, "k-", lw=0.6, label="measured (filtered)")
+        ax.plot(W @ x, "b-", lw=0.6, label="model")
+        ax.plot(y - W @ x, "r-", lw=0.6, label="residual")
+        ax.set_xlabel("sample (conditioned)")
+        ax.set_ylabel(f"{o} [{'N' if o == 'Fy' else 'N·m'}]")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(folder / f"{o.lower()}_measured_vs_model.png", dpi=110)
+        plt.close(fig)
