@@ -71,45 +71,49 @@ def test_zero_spin_is_no_turn_slip(tyres):
         np.testing.assert_allclose(np.asarray(v), np.asarray(u), rtol=1e-12, atol=1e-9)
 
 
-def test_camber_spin_reproduces_camber_slopes(tyres):
+@pytest.fixture(scope="module")
+def book_programs(tyres):
+    """One compiled Jacobian program and one batched-values program of the book file, shared by
+    the two tests below. x = (φ_t, γ, α, κ, PDYP1, QCRP1, QDTP1); outputs: F_x, F_y, M_z/100
+    with turn slip on, F_y, M_z/100 without (combined slip, F_z = 4 kN, V_x = 16 m/s)."""
+    _, m = tyres["book"]
+
+    def out(x):
+        mm = m.replace(PDYP1=x[4], QCRP1=x[5], QDTP1=x[6])
+        r = evaluate(mm, 4000.0, x[3], x[2], x[1], 16e3, 2.5e5, turn_slip=x[0])
+        p = evaluate(mm, 4000.0, x[3], x[2], x[1], 16e3, 2.5e5)
+        return jnp.stack([r.fx, r.fy, r.mz / 100.0, p.fy, p.mz / 100.0])
+
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, float(m["PDYP1"]), float(m["QCRP1"]), float(m["QDTP1"])])
+    return m, x0, jax.jit(jax.jacfwd(out)), jax.jit(jax.vmap(out))
+
+
+def test_camber_spin_reproduces_camber_slopes(book_programs):
     """With turn slip on and φ_t = 0, a camber γ acts only through the spin φ = (1 − ε_γ)Ω sin γ/V:
     ∂F_y/∂γ and ∂M_z/∂γ at α = κ = γ = 0 equal the plain model's (K_yγ0 and the camber slope of
     D_r) times R0·Ω/V_x (closed form of the chosen K_yRφ0 and K_zγr0; symmetric book file). The
     pure-slip path is covered by the oracle test."""
-    _, m = tyres["book"]
-    c = m.coefficients
-    fz, vx = 4000.0, 16e3
-    ratio = float(c["UNLOADED_RADIUS"] * V.spin(m, fz, vx, 0.0) / vx)
+    m, x0, jac, _ = book_programs
+    ratio = float(m["UNLOADED_RADIUS"] * V.spin(m, 4000.0, 16e3, 0.0, 2.5e5) / 16e3)
     assert abs(ratio - 1.0) > 0.01  # the effective radius differs from R0: a real check
-
-    def f(gamma):  # rows: plain, spun; columns: F_y, M_z (combined slip at κ = 0)
-        return jnp.stack([jnp.stack([r.fy, r.mz]) for r in (
-            evaluate(m, fz, 0.0, 0.0, gamma, vx, turn_slip=ts, outputs=("fy", "mz"))
-            for ts in (None, 0.0))])
-
-    plain, spun = np.asarray(jax.jit(jax.jacfwd(f))(0.0))
+    d = np.asarray(jac(x0))[:, 1]  # ∂/∂γ
+    plain, spun = d[3:], d[1:3]
     assert np.all(np.isfinite(plain)) and np.all(np.abs(plain) > 1.0)
     np.testing.assert_allclose(spun, plain * ratio, rtol=1e-8)
 
 
-def test_turn_slip_gradients(tyres):
+def test_turn_slip_gradients(book_programs):
     """Derivatives with respect to φ_t, γ, α, κ and turn-slip coefficients against central
-    differences."""
-    _, m = tyres["mf61"]
-
-    def out(x):  # x = (φ_t, γ, α, κ, PDYP1, QCRP1, QDTP1)
-        mm = m.replace(PDYP1=x[4], QCRP1=x[5], QDTP1=x[6])
-        r = evaluate(mm, 5000.0, x[3], x[2], x[1], 15e3, 2.5e5, turn_slip=x[0])
-        return jnp.stack([r.fx, r.fy, r.mz / 100.0])
-
-    x0 = np.array([2e-4, 0.03, 0.06, 0.04, float(m["PDYP1"]), float(m["QCRP1"]),
-                   float(m["QDTP1"])])
-    jac = np.asarray(jax.jit(jax.jacfwd(out))(x0))
+    differences (turn slip on and off)."""
+    _, x0, jac, values = book_programs
+    x1 = x0 + np.array([2e-4, 0.03, 0.06, 0.04, 0.0, 0.0, 0.0])
+    j = np.asarray(jac(x1))
     h = np.diag([1e-8, 1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-4])
-    f = np.asarray(jax.jit(jax.vmap(out))(np.concatenate([x0 + h, x0 - h])))
+    f = np.asarray(values(np.concatenate([x1 + h, x1 - h])))
     fd = ((f[:7] - f[7:]) / (2 * np.diag(h))[:, None]).T
     scale = np.max(np.abs(fd), axis=1, keepdims=True)  # per output
-    np.testing.assert_allclose(jac / scale, fd / scale, rtol=2e-6, atol=2e-6)
+    assert np.all(scale > 0.0)
+    np.testing.assert_allclose(j / scale, fd / scale, rtol=2e-6, atol=2e-6)
 
 
 def test_turn_slip_refused_for_mf52():
