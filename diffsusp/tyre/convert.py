@@ -37,7 +37,7 @@ from ..errors import InputError
 from ..lsq import algebra
 from . import fit as mf_fit
 from . import mf89
-from .poly import PolynomialModel
+from .poly import PolynomialModel, table6_domains
 
 __all__ = ["step1", "refine", "to_magic_formula", "fit_slip_polynomial", "slip_data"]
 
@@ -50,16 +50,29 @@ def _dp_to_deg(dp, radius):
     return -np.degrees(np.arctan(np.asarray(dp) / radius))
 
 
-def _slip_features(model: PolynomialModel, fz, radius, domain, kind):
+def _slip_features(model: PolynomialModel, fz, radius, output):
+    """(x_max, y_max, kind), (x_min, y_min, kind) of P_{F,δ′} at one load: for each, the
+    real root of dP/dδ′ of smallest modulus inside its Table 6 domain (CORRECTIONS 3 signs);
+    None when either is missing."""
     c = model.input_polynomial(float(fz), "delta")
-    ex = algebra.extrema(c, *domain)
-    maxima = [e for e in ex if e[2] == "max"]
-    minima = [e for e in ex if e[2] == "min"]
+    dom = table6_domains(radius)[output]
+    maxima = [e for e in algebra.extrema(c, *dom["max"]) if e[2] == "max"]
+    minima = [e for e in algebra.extrema(c, *dom["min"]) if e[2] == "min"]
     if not maxima or not minima:
         return None
-    xmax = min(maxima, key=lambda e: abs(e[0]))
-    xmin = min(minima, key=lambda e: abs(e[0]))
-    return xmax, xmin
+    return min(maxima, key=lambda e: abs(e[0])), min(minima, key=lambda e: abs(e[0]))
+
+
+def _shift_and_peak(model, loads, radius, output):
+    feats = [(f, _slip_features(model, f, radius, output)) for f in loads]
+    feats = [(f, x) for f, x in feats if x is not None]
+    if len(feats) < 2:
+        return None
+    f = np.array([f for f, _ in feats])
+    shift = np.array([-(_dp_to_deg(a[0], radius) + _dp_to_deg(b[0], radius)) / 2
+                      for _, (a, b) in feats])
+    peak = np.array([(abs(a[1]) + abs(b[1])) / 2 for _, (a, b) in feats])
+    return f, shift, peak
 
 
 def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, *,
@@ -80,38 +93,41 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
     if fy is None:
         raise InputError("step1 needs at least the F_y polynomial")
     k_fy = -radius * math.pi / 180.0 * fy.cornering_stiffness(loads)
-    feats = [_slip_features(fy, f, radius, (_deg_to_dp(12, radius), _deg_to_dp(-12, radius)),
-                            "Fy") for f in loads]
-    if all(f is not None for f in feats):
-        shift = np.array([-(_dp_to_deg(a[0], radius) + _dp_to_deg(b[0], radius)) / 2
-                          for a, b in feats])
-        peak = np.array([(abs(a[1]) + abs(b[1])) / 2 for a, b in feats])
-        notes["Fy"] = "extrema found: S_h and D from the extrema (3-103, 3-107)"
-        spec["fy_shift"] = shift
+    sp = _shift_and_peak(fy, loads, radius, "Fy")
+    if sp is not None:
+        notes["Fy"] = (f"extrema found at {len(sp[0])} loads: S_h and D from the extrema "
+                       "(3-103, 3-107)")
+        fy_loads, fy_shift, peak = sp
     else:
         # C = 1, E = 0: D from the value at the domain edges.
         x_e = edge_deg
         d = []
         for f, k in zip(loads, k_fy, strict=True):
             c = fy.input_polynomial(float(f), "delta")
-            vals = [abs(float(algebra.poly_eval(c, _deg_to_dp(s * x_e, radius)))) for s in (-1, 1)]
+            vals = [abs(float(algebra.poly_eval(c, _deg_to_dp(s * x_e, radius))))
+                    for s in (-1, 1)]
             ratio = abs(k) * x_e / np.mean(vals)
             d.append(abs(k) * x_e / math.sqrt(ratio**2 - 1.0) if ratio > 1 else np.mean(vals))
-        peak = np.array(d)
+        peak, fy_loads, fy_shift = np.array(d), loads, None
         notes["Fy"] = ("no extremum in the useful domain (C = 1 sets are monotone): S_h not "
                        "identifiable by step 1 (0, fitted in step 2); D from the edge value")
     spec["cornering_stiffness"] = k_fy
-    spec["fy_peak"] = peak
+    # D quadratic (3-108) and S_h affine (3-104) in load, through the loads that have them
+    quad = np.linalg.lstsq(np.stack([fy_loads**2, fy_loads], 1), peak, rcond=None)[0]
+    spec["fy_peak"] = quad[0] * loads**2 + quad[1] * loads
+    if fy_shift is not None:
+        spec["fy_shift"] = np.polyval(np.polyfit(fy_loads, fy_shift, 1), loads)
     if mz is not None:
         k_mz = -radius * math.pi / 180.0 * mz.cornering_stiffness(loads)
         spec["aligning_stiffness"] = k_mz
-        feats = [_slip_features(mz, f, radius, (_deg_to_dp(6, radius), _deg_to_dp(-6, radius)),
-                               "Mz") for f in loads]
-        if all(f is not None for f in feats):
-            spec["mz_shift"] = np.array([-(_dp_to_deg(a[0], radius) + _dp_to_deg(b[0], radius))
-                                         / 2 for a, b in feats])
-            spec["mz_peak"] = np.array([(abs(a[1]) + abs(b[1])) / 2 for a, b in feats])
-            notes["Mz"] = "extrema found: S_h and D from the extrema"
+        sp = _shift_and_peak(mz, loads, radius, "Mz")
+        if sp is not None:
+            # quadratic D and affine S_h through the loads that have both extrema
+            fl, sh, pk = sp
+            spec["mz_shift"] = np.polyval(np.polyfit(fl, sh, 1), loads)
+            quad = np.linalg.lstsq(np.stack([fl**2, fl], 1), pk, rcond=None)[0]
+            spec["mz_peak"] = quad[0] * loads**2 + quad[1] * loads
+            notes["Mz"] = (f"extrema found at {len(fl)} loads: S_h and D from the extrema")
         else:
             notes["Mz"] = "no extremum: D = 0 (the linear law), S_h not identifiable"
     model = mf89.MagicFormula89.from_specification(loads, **spec)
