@@ -182,3 +182,23 @@ def test_tyre_twist_equals_the_derivative_of_the_tyre_frame():
     for t in (0.3, 1.7):
         got, expected = run(t)
         np.testing.assert_allclose(np.asarray(got), np.asarray(expected), atol=1e-12)
+
+
+def test_closed_forms_equal_the_chain():
+    """The closed forms the batched pipeline uses = the MDH-chain versions."""
+    rng = np.random.default_rng(11)
+    tw, qp, qd = rng.normal(size=6), np.array([0.3, -0.29, 0.04]), rng.normal(size=3)
+    wrench = rng.normal(size=6)
+
+    @jax.jit
+    def run(tw, qp, qd, wrench):
+        T = C.carrier_to_tyre(qp[0], qp[2], qp[1])
+        R, P = C.carrier_to_tyre_closed(qp[0], qp[2], qp[1])
+        return (T, R, P, C.tyre_twist(tw, qp, qd), C.tyre_twist_zero_wobble(tw, qp, qd),
+                C.wrench_to_tyre(wrench, T), C.wrench_to_tyre_closed(wrench, R, P))
+
+    T, R, P, t1, t2, w1, w2 = run(tw, qp, qd, wrench)
+    np.testing.assert_allclose(np.asarray(R), np.asarray(T[:3, :3]), atol=1e-15)
+    np.testing.assert_allclose(np.asarray(P), np.asarray(T[:3, 3]), atol=1e-15)
+    np.testing.assert_allclose(np.asarray(t2), np.asarray(t1), atol=1e-13)
+    np.testing.assert_allclose(np.asarray(w2), np.asarray(w1), atol=1e-13)

@@ -95,6 +95,40 @@ def carrier_to_tyre(xi_hat, gamma, h) -> Float[Array, "4 4"]:
     return mdh.forward_kinematics(chain, q)[5]
 
 
+def carrier_to_tyre_closed(xi_hat, gamma, h):
+    """(R, P) of ^{Rpf}T_{Rp} at zero wobble in closed form: R = Rot(y, ξ̂)·Rot(x, γ),
+    P = h·(sin ξ̂, 0, cos ξ̂) — what `carrier_to_tyre` computes through the chain (tested), for
+    the batched on-board pipeline."""
+    cx, sx, cg, sg = jnp.cos(xi_hat), jnp.sin(xi_hat), jnp.cos(gamma), jnp.sin(gamma)
+    z = jnp.zeros_like(cx)
+    R = jnp.stack([jnp.stack([cx, sx * sg, sx * cg]), jnp.stack([z, cg, -sg]),
+                   jnp.stack([-sx, cx * sg, cx * cg])])
+    return R, h * jnp.stack([sx, z, cx])
+
+
+def tyre_twist_zero_wobble(twist_pf: Float[Array, "6"], q_p: Float[Array, "3"],
+                           qdot_p: Float[Array, "3"]) -> Float[Array, "6"]:
+    """`tyre_twist` at zero wobble in closed form (q_p = (ξ̂, h, γ)): relative angular
+    velocity ξ̂̇·y + γ̇·Rot(y, ξ̂)x, origin velocity ḣ·(sin ξ̂, 0, cos ξ̂) + h ξ̂̇·(cos ξ̂, 0,
+    −sin ξ̂), added to the carrier's twist carried to P, all turned into R_p."""
+    xi, h, _ = q_p[0], q_p[1], q_p[2]
+    xid, hd, gd = qdot_p[0], qdot_p[1], qdot_p[2]
+    R, P = carrier_to_tyre_closed(q_p[0], q_p[2], q_p[1])
+    cx, sx = jnp.cos(xi), jnp.sin(xi)
+    z = jnp.zeros_like(cx)
+    w_rel = jnp.stack([gd * cx, xid, -gd * sx])
+    v_rel = hd * jnp.stack([sx, z, cx]) + h * xid * jnp.stack([cx, z, -sx])
+    v = twist_pf[:3] + jnp.cross(twist_pf[3:], P) + v_rel
+    w = twist_pf[3:] + w_rel
+    return jnp.concatenate([R.T @ v, R.T @ w])
+
+
+def wrench_to_tyre_closed(wrench_pf: Float[Array, "6"], R, P) -> Float[Array, "6"]:
+    """`wrench_to_tyre` (massless wheel) from (R, P) of `carrier_to_tyre_closed`."""
+    F, M = wrench_pf[:3], wrench_pf[3:]
+    return jnp.concatenate([R.T @ F, R.T @ (M - jnp.cross(P, F))])
+
+
 def ground_plane(T_pf_p: Float[Array, "4 4"]):
     """(z_r, d) in R_pf of the plane through the tyre frame's origin normal to its z axis."""
     n = T_pf_p[:3, 2]
@@ -304,7 +338,8 @@ def modal(stiffness, damping, inertia):
                                                                                  * inertia))
 
 
-__all__ = ["carrier_to_tyre", "curvature_from_phi_prime", "deformation_inputs",
+__all__ = ["carrier_to_tyre", "carrier_to_tyre_closed", "tyre_twist_zero_wobble",
+           "wrench_to_tyre_closed", "curvature_from_phi_prime", "deformation_inputs",
            "delta_prime_from_slip_angle", "flat_trac_plane", "flat_trac_transform",
            "ground_plane", "inverse_transform", "kappa_prime_from_slip", "modal",
            "patch_flexibility", "patch_geometry", "phi_prime_from_curvature", "pneumatic_matrix",

@@ -1,0 +1,515 @@
+"""Tyre identification from on-board vehicle measurements (thesis chapter 4).
+
+spec: tyre_contact_model §5.3 ((4-4)…(4-15)), §5.5 ((4-16)…(4-18)), §7 F items 24–25. From a
+record of the body sensors (four height lasers, an optical speed sensor "Correvit", an inertial
+unit), the wheels' travel, steer and spin, and the wheel-carrier wrenches (dynamometric wheels):
+
+1. the ground plane in the body frame at each instant by total least squares on the four lasers
+   (4-7), windowed (4-14);
+2. the body twist by weighted least squares on all sensors (4-8…4-13), windowed (4-14, 4-15);
+3. per wheel, the carrier's pose and twist, the ground plane in R_pf, the tyre frame (2-23…2-29),
+   its twist (2-46), the tyre-frame wrench (2-30) and the deformation inputs δ′, φ′, γ;
+4. offsets removed (all signals but the load), the reduced model (4-16…4-18) pooled over the
+   chosen wheels, solved by `diffsusp.lsq` (σ, σ %, identifiability);
+5. the Correvit's delay (8–512 ms in the thesis, unknown there) estimated by kinematic
+   consistency — the derivative of the Correvit's lateral velocity against the inertial unit's
+   lateral acceleration at the same point — and removed.
+
+Windows: Hamming or Blackman of length T (default 0.05 s, §5.3), used three ways with the same
+weights w: stacking rows (normal equations convolved with w²), smoothing (weighted mean) and
+slopes (weighted least-squares line, for the time derivatives). Rows of the tyre regression are
+taken every `stride` samples (default one window) so that their errors are nearly independent
+and the reported σ is honest.
+
+Units SI as `diffsusp.tyre.vehicle` (m, N, s, rad); F_z in kN inside the load polynomials.
+Coefficient names follow the thesis: b_delta_2, b_delta_1, b_delta_0 (K_δ = c_{Fy,δ′,1}(F_z)),
+b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (L_R), and b_offset_1 (S_v) when asked for.
+"""
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import lsq
+from ..errors import InputError
+from . import contact
+from .vehicle import WHEELS, rot_z
+
+CHANNELS = ("time", "lasers", "correvit", "imu_omega", "imu_velocity", "imu_specific_force",
+            "travel", "steer", "spin", "wrench", "laser_positions", "correvit_position",
+            "imu_position", "corners", "rolling_radius")
+GROUPINGS = {"all": (0, 1, 2, 3), "front": (0, 1), "rear": (2, 3)}
+NAMES = ("b_delta_2", "b_delta_1", "b_delta_0", "b_phi_1", "b_gamma_1", "b_L_2", "b_L_1",
+         "b_L_0")
+GRAVITY = 9.81
+
+
+@dataclasses.dataclass(frozen=True)
+class Options:
+    """Static choices of the pipeline: `window` "hamming" | "blackman", `window_time` T (s)
+    of the body estimates (§5.3), `regression_window_time` (s) of a second window applied to
+    every signal of the tyre regression alike (it lowers the noise of Ḟ_y, whose errors bias
+    the relaxation coefficient towards 0), `stride` samples between regression rows (None:
+    one regression window), noise σ of the sensors for
+    the weights (4-13): `sigma_laser` (m), `sigma_correvit` (m/s), `sigma_gyro` (rad/s),
+    `sigma_imu_velocity` (m/s)."""
+
+    window: str = "hamming"
+    window_time: float = 0.05
+    regression_window_time: float = 0.1
+    stride: int | None = None
+    sigma_laser: float = 2e-4
+    sigma_correvit: float = 0.02
+    sigma_gyro: float = 2e-3
+    sigma_imu_velocity: float = 0.3
+
+
+def window_weights(kind: str, n: int) -> np.ndarray:
+    """P(τ) of (4-14, 4-15): a Hamming or Blackman window of n (odd) samples."""
+    if kind == "hamming":
+        return np.hamming(n)
+    if kind == "blackman":
+        w = np.blackman(n + 2)[1:-1]  # the end points of np.blackman are 0: drop them
+        return w
+    raise InputError(f"window must be 'hamming' or 'blackman'; got {kind!r}.")
+
+
+def _kernels(kind, n, dt):
+    """Window weights w² (stacking), the weighted mean (smoothing) and the time derivative of
+    the smoothed signal (central difference of the smoothing kernel, 1/s, two samples longer)
+    as convolution kernels. (A weighted least-squares slope would filter the derivative
+    differently from the signal — at 6 Hz enough to bias a relaxation coefficient by 25 %.)"""
+    w = window_weights(kind, n)
+    w2 = w**2
+    smooth = w2 / w2.sum()
+    padded = np.concatenate([[0.0, 0.0], smooth, [0.0, 0.0]])
+    slope = (padded[:-2] - padded[2:])[: n + 2] / (2.0 * dt)
+    return w2, smooth, slope
+
+
+def _conv(x, kernel):
+    """Σ_τ kernel(τ)·x(t+τ) along axis 0 (same length; edges use what exists, flagged invalid
+    by the caller), for every other axis."""
+    k = jnp.asarray(kernel[::-1].copy())
+    flat = x.reshape(x.shape[0], -1)
+    out = jax.vmap(lambda c: jnp.convolve(c, k, mode="same"), in_axes=1, out_axes=1)(flat)
+    return out.reshape(x.shape)
+
+
+def _skew(a):
+    z = jnp.zeros_like(a[..., 0])
+    return jnp.stack([jnp.stack([z, -a[..., 2], a[..., 1]], -1),
+                      jnp.stack([a[..., 2], z, -a[..., 0]], -1),
+                      jnp.stack([-a[..., 1], a[..., 0], z], -1)], -2)
+
+
+# --------------------------------------------------------------------------------------------
+# Body geometry and kinematics (§5.3)
+
+
+def ground_plane(lasers, positions, valid, w2):
+    """Windowed TLS (4-7, 4-14): per instant the unit normal z_r (body frame, z_r·z_c > 0) and
+    R of the plane B·z_r + R = 0 through the laser points B_i = C_i − d_i z_c (4-5, 4-6).
+    `valid` (n, 4) masks dropped samples."""
+    rows = jnp.concatenate([jnp.broadcast_to(positions[None, :, :2], lasers.shape + (2,)),
+                            (positions[None, :, 2] - lasers)[..., None],
+                            jnp.ones(lasers.shape + (1,))], axis=-1) * valid[..., None]
+    N = jnp.einsum("tia,tib->tab", rows, rows)
+    N = _conv(N, w2)
+    _, vecs = jnp.linalg.eigh(N)
+    x = vecs[..., 0]
+    x = x / jnp.linalg.norm(x[..., :3], axis=-1, keepdims=True)
+    x = x * jnp.sign(x[..., 2:3])
+    return x[..., :3], x[..., 3]
+
+
+def body_twist(data, normal, R, opts: Options, kernels):
+    """Windowed WLS (4-8…4-15) of the body twist (V | ω) at the body frame's origin, body frame,
+    from the lasers' vertical velocities, the Correvit (at its ground projection B_5, (4-10,
+    4-11)) and the inertial unit (velocity and angular velocity at C_0)."""
+    w2, _, slope = kernels
+    C = data["laser_positions"]
+    valid = data["laser_valid"]
+    heights = jnp.where(valid, data["lasers"], 0.0) * normal[:, None, 2]
+    h_rate = _conv(heights, slope)
+    sig_rate = opts.sigma_laser * math.sqrt(float(np.sum(slope**2)))
+    eye = jnp.eye(3)
+    # rows S_i·M_{D_i,A} and their measurements, per instant
+    Ml = jnp.concatenate([jnp.broadcast_to(eye, (4, 3, 3)), -_skew(C)], axis=-1)  # (4, 3, 6)
+    laser_rows = jnp.einsum("ta,iab->tib", normal, Ml)  # n_rᵀ [I, −C×]
+    C5 = data["correvit_position"]
+    d5 = (normal @ C5 + R) / normal[:, 2]
+    B5 = C5[None, :] - d5[:, None] * jnp.array([0.0, 0.0, 1.0])
+    cv_rows = jnp.concatenate([jnp.broadcast_to(eye, B5.shape[:1] + (3, 3)), -_skew(B5)],
+                              axis=-1)[:, :2]
+    C0 = data["imu_position"]
+    imu_v = jnp.concatenate([eye, -_skew(C0)], axis=-1)
+    imu_w = jnp.concatenate([jnp.zeros((3, 3)), eye], axis=-1)
+    rows = jnp.concatenate([laser_rows / sig_rate, cv_rows / opts.sigma_correvit,
+                            jnp.broadcast_to(imu_v / opts.sigma_imu_velocity, (len(R), 3, 6)),
+                            jnp.broadcast_to(imu_w / opts.sigma_gyro, (len(R), 3, 6))], axis=1)
+    y = jnp.concatenate([h_rate / sig_rate, data["correvit"] / opts.sigma_correvit,
+                         data["imu_velocity"] / opts.sigma_imu_velocity,
+                         data["imu_omega"] / opts.sigma_gyro], axis=1)
+    # dropped laser samples: no row
+    rw = jnp.concatenate([data["laser_window_ok"], jnp.ones((len(R), 8), bool)], axis=1)
+    rows, y = rows * rw[..., None], y * rw
+    A = _conv(jnp.einsum("tia,tib->tab", rows, rows), w2)
+    b = _conv(jnp.einsum("tia,ti->ta", rows, y), w2)
+    return jnp.linalg.solve(A, b[..., None])[..., 0]
+
+
+# --------------------------------------------------------------------------------------------
+# Tyre inputs (§1.5, §1.6)
+
+
+def tyre_inputs(data, normal, R, twist, kernels):
+    """Per instant and wheel (n, 4): F_z, F_y (tyre frame), δ′, φ′, γ, ω."""
+    _, smooth, slope = kernels
+    # every per-wheel channel smoothed once, as the twist and the plane are by their windows
+    steer, travel = _conv(data["steer"], smooth), _conv(data["travel"], smooth)
+    steer_rate, travel_rate = _conv(data["steer"], slope), _conv(data["travel"], slope)
+    spin = _conv(data["spin"], smooth)
+    corners = data["corners"]
+    ez = jnp.array([0.0, 0.0, 1.0])
+
+    def frame(n_b, R_b, tw, beta, z):
+        Rc = jax.vmap(rot_z)(beta)  # body ← carrier
+        O = corners + z[:, None] * ez
+        n_pf = jnp.einsum("kji,j->ki", Rc, n_b)
+        d = -(O @ n_b + R_b)
+        f = jax.vmap(contact.tyre_frame_zero_wobble)(n_pf, d)
+        return Rc, O, n_pf, d, jnp.stack([f["xi_hat"], f["h"], f["gamma"]], axis=-1)
+
+    Rc, O, _, _, qp = jax.vmap(frame)(normal, R, twist, steer, travel)
+    qp_rate = _conv(qp, slope)
+
+    def wheel(tw, Rci, Oi, zdi, bdi, q, qd, wrench, spin):
+        v, w = tw[:3], tw[3:]
+        w_pf = Rci.T @ (w + bdi * ez)
+        v_pf = Rci.T @ (v + jnp.cross(w, Oi) + zdi * ez)
+        tau_p = contact.tyre_twist_zero_wobble(jnp.concatenate([v_pf, w_pf]), q, qd)
+        Rp, Pp = contact.carrier_to_tyre_closed(q[0], q[2], q[1])
+        F = contact.wrench_to_tyre_closed(wrench, Rp, Pp)
+        return F[2], F[1], tau_p[1] / spin, tau_p[5] / spin, q[2]
+
+    per = jax.vmap(jax.vmap(wheel, in_axes=(None, 0, 0, 0, 0, 0, 0, 0, 0)))
+    fz, fy, delta_p, phi_p, gamma = per(twist, Rc, O, travel_rate, steer_rate, qp, qp_rate,
+                                        data["wrench"], spin)
+    return {"fz": fz, "fy": fy, "delta_p": delta_p, "phi_p": phi_p, "gamma": gamma,
+            "spin": spin}
+
+
+# --------------------------------------------------------------------------------------------
+# Regression (§5.5)
+
+
+def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True,
+                       second=None):
+    """Smoothed signals and Ḟ_y at the regression instants (every `stride` samples away from
+    the edges), offsets (record means) removed from all but the load (§5.5 item 1) when
+    `remove_offsets`; returns dict of (m, 4) and the row mask (m,)."""
+    _, smooth, slope = kernels
+    n = inputs["fy"].shape[0]
+    margin = half + 1 + len(second if second is not None else [0]) // 2
+    idx = np.arange(margin, n - margin, stride)  # the derivative kernel is 2 longer
+    # δ′, φ′, γ, ω come out of windowed estimates already (twist, plane, smoothed channels):
+    # smoothing them again would filter them twice and F_y once (a bias at the top
+    # frequencies of the sweep); the wrench (raw in `inputs`) is smoothed here
+    second = np.ones(1) if second is None else second
+    s = {k: _conv(_conv(v, smooth) if k in ("fy", "fz") else v, second)[idx]
+         for k, v in inputs.items()}
+    s["fy_rate"] = _conv(_conv(inputs["fy"], slope), second)[idx]
+    ok = valid[idx]
+    weight = ok.astype(float)[:, None]
+    for k in ("fy", "delta_p", "phi_p", "gamma", "fy_rate"):
+        mean = jnp.sum(s[k] * weight, axis=0) / jnp.maximum(jnp.sum(weight), 1.0)
+        s[k] = (s[k] - (mean if remove_offsets else 0.0)) * weight
+    s["fz"] = s["fz"] * weight
+    return s, ok
+
+
+def regressor(signals, wheels, *, camber=True, offset=False):
+    """Rows of (4-16…4-18) pooled over `wheels`: columns b_delta_2, b_delta_1, b_delta_0,
+    b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (+ b_offset_1). y = F_y."""
+    fz = signals["fz"][:, wheels] / 1000.0
+    d, p, g = (signals[k][:, wheels] for k in ("delta_p", "phi_p", "gamma"))
+    rel = signals["fy_rate"][:, wheels] / signals["spin"][:, wheels]
+    cols = [d * fz**2, d * fz, d, p * fz, g * fz * (1.0 if camber else 0.0), rel * fz**2,
+            rel * fz, rel]
+    if offset:
+        cols.append(fz)
+    W = jnp.stack(cols, axis=-1).reshape(-1, len(cols))
+    return W, signals["fy"][:, wheels].reshape(-1)
+
+
+def names(offset=False):
+    return NAMES + (("b_offset_1",) if offset else ())
+
+
+# --------------------------------------------------------------------------------------------
+# Delay (§5.5 item 2; not in the thesis)
+
+
+def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float):
+    """Delay (s) of the Correvit's lateral velocity behind the inertial unit, by kinematic
+    consistency: d/dt v_{B5,y} (body-frame component) must equal [a_{B5} − ω × v_{B5}]_y with
+    a_{B5} = f + g + ω̇ × (B5 − C0) + ω × (ω × (B5 − C0)) from the inertial unit (specific force
+    f, gravity −9.81·z_r in the body frame, flat road). Cross-correlation of the two over lags
+    0…`max_delay`, peak refined by a parabola (sub-sample); `dt` the sampling step (s)."""
+    _, smooth, slope = kernels
+    w = _conv(data["imu_omega"], smooth)
+    wd = _conv(data["imu_omega"], slope)
+    f = _conv(data["imu_specific_force"], smooth)
+    g = -GRAVITY * normal
+    C0 = data["imu_position"]
+    C5 = data["correvit_position"]
+    d5 = (normal @ C5 + R) / normal[:, 2]  # (4-11)
+    B = C5[None, :] - d5[:, None] * jnp.array([0.0, 0.0, 1.0]) - C0
+    a = f + g + jnp.cross(wd, B) + jnp.cross(w, jnp.cross(w, B))
+    v = _conv(data["imu_velocity"], smooth) + jnp.cross(w, B)
+    target = (a - jnp.cross(w, v))[:, 1]
+    meas = _conv(data["correvit"][:, 1], slope)
+    half = len(smooth)
+    target, meas = target[half:-half], meas[half:-half]
+    target = target - target.mean()
+    meas = meas - meas.mean()
+    lags = int(round(max_delay / dt))
+    n = target.shape[0]
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    xc = jnp.fft.irfft(jnp.fft.rfft(meas, nfft) * jnp.conj(jnp.fft.rfft(target, nfft)), nfft)
+    xc = xc[: lags + 1]
+    k = jnp.clip(jnp.argmax(xc), 1, lags - 1)
+    y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
+    frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
+    return (k + frac) * dt
+
+
+def shift_channel(x, time, delay):
+    """x(t + delay) by linear interpolation (ends held): undoes a delay."""
+    return jax.vmap(lambda c: jnp.interp(time + delay, time, c), in_axes=1, out_axes=1)(
+        x.reshape(x.shape[0], -1)).reshape(x.shape)
+
+
+# --------------------------------------------------------------------------------------------
+# Pipeline
+
+
+def check(data: dict, opts: Options = Options()) -> dict:
+    """Validate a record (clear errors for missing channels, wrong shapes, non-finite values
+    outside the lasers, a window longer than the record) and mark laser dropouts (NaN) as
+    excluded samples. Returns the arrays as float64 JAX arrays plus `laser_valid` (n, 4) and
+    `laser_window_ok` (n, 4)."""
+    missing = [c for c in CHANNELS if c not in data]
+    if missing:
+        raise InputError(f"on-board record: missing channel(s) {missing}; the pipeline needs "
+                         f"{list(CHANNELS)} (see diffsusp.tyre.vehicle.measure for units).")
+    out = {k: jnp.asarray(np.asarray(data[k], float)) for k in CHANNELS}
+    n = out["time"].shape[0]
+    shapes = {"lasers": (n, 4), "correvit": (n, 2), "imu_omega": (n, 3),
+              "imu_velocity": (n, 3), "imu_specific_force": (n, 3), "travel": (n, 4),
+              "steer": (n, 4), "spin": (n, 4), "wrench": (n, 4, 6), "laser_positions": (4, 3),
+              "correvit_position": (3,), "imu_position": (3,), "corners": (4, 3),
+              "rolling_radius": ()}
+    for k, shape in shapes.items():
+        if out[k].shape != shape:
+            raise InputError(f"on-board record: channel {k!r} has shape {out[k].shape}; "
+                             f"expected {shape}.")
+    half = _window_length(opts, out["time"])
+    if 2 * half + 1 > n:
+        raise InputError(f"window of {opts.window_time} s ({2 * half + 1} samples) is longer "
+                         f"than the record ({n} samples); shorten window_time or give a "
+                         "longer record.")
+    for k in CHANNELS:
+        if k != "lasers" and not bool(jnp.all(jnp.isfinite(out[k]))):
+            bad = int(jnp.sum(~jnp.isfinite(out[k])))
+            raise InputError(f"on-board record: channel {k!r} has {bad} non-finite value(s); "
+                             "only laser dropouts (NaN in 'lasers') are excluded "
+                             "automatically. Remove or interpolate those samples.")
+    valid = jnp.isfinite(out["lasers"])
+    out["lasers"] = jnp.where(valid, out["lasers"], 0.0)
+    out["laser_valid"] = valid
+    w2, _, _ = _kernels(opts.window, 2 * half + 1, 1.0)
+    ok = _conv(valid.astype(float), w2) > 0.5 * w2.max()
+    out["laser_window_ok"] = ok & valid
+    return out
+
+
+def _window_length(opts, time):
+    return max(int(round(opts.window_time / _step(time) / 2)), 1)
+
+
+def _step(time):
+    """The sampling step (s), from a concrete time vector."""
+    return float(time[1] - time[0]) if len(time) > 1 else 1.0
+
+
+def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half: int,
+           dt: float):
+    """Steps 1–3 of the pipeline on a checked record: ground plane, body twist, tyre inputs per
+    wheel (n, 4) and the per-instant validity (n,) (≥ 3 lasers in every window); `half` the
+    window's half length in samples and `dt` the sampling step (s) (static)."""
+    kernels = _kernels(opts.window, 2 * half + 1, dt)
+    data = dict(data, correvit=shift_channel(data["correvit"], data["time"], correvit_delay_s))
+    normal, R = ground_plane(data["lasers"], data["laser_positions"],
+                             data["laser_window_ok"], kernels[0])
+    twist = body_twist(data, normal, R, opts, kernels)
+    tyre = tyre_inputs(data, normal, R, twist, kernels)
+    valid = jnp.sum(data["laser_window_ok"], axis=1) >= 3
+    valid = _conv(valid.astype(float), np.ones(2 * half + 1)) > 2 * half + 0.5
+    return {"normal": normal, "R": R, "twist": twist, "tyre": tyre, "valid": valid,
+            "kernels": kernels, "half": half}
+
+
+def regression(data: dict, opts: Options = Options(), *, half: int, dt: float,
+               correvit_delay_s=0.0, wheels=(0, 1, 2, 3), camber=True, offset=False,
+               remove_offsets=True):
+    """(W, y, row mask, signals) of the pooled reduced tyre model on a checked record."""
+    res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt)
+    half2 = max(int(round(opts.regression_window_time / dt / 2)), 0)
+    second = _kernels(opts.window, 2 * half2 + 1, dt)[1] if half2 else None
+    stride = opts.stride or 2 * max(half, half2) + 1
+    sig, ok = regression_signals(res["tyre"], res["valid"], res["kernels"], stride, half,
+                                 remove_offsets, second)
+    W, y = regressor(sig, np.asarray(wheels), camber=camber, offset=offset)
+    mask = jnp.repeat(ok, len(wheels))
+    return W, y, mask, sig
+
+
+@dataclasses.dataclass(frozen=True)
+class Report:
+    """One grouping's identification (Tables 32/33 layout): the `lsq.Fit`, the grouping, whether
+    camber was in the model, the Correvit delay removed (s), the regression rows used and the
+    instants excluded (laser dropouts)."""
+
+    grouping: str
+    camber: bool
+    delay: float
+    fit: lsq.Fit
+    rows: int
+    excluded: int
+
+    def table(self) -> str:
+        head = (f"{self.grouping} wheels, camber {'in' if self.camber else 'out'}, Correvit "
+                f"delay removed {1000 * self.delay:.1f} ms, {self.rows} rows, "
+                f"{self.excluded} instants excluded (laser dropouts)")
+        return head + "\n" + self.fit.table()
+
+    def to_dict(self) -> dict:
+        return {"grouping": self.grouping, "camber": self.camber, "delay_s": self.delay,
+                "rows": self.rows, "excluded": self.excluded, "fit": self.fit.to_dict()}
+
+
+def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, False),
+             estimate_delay: bool = True, delay: float | None = None, offset: bool = False,
+             options: Options = Options()) -> dict:
+    """The on-board pipeline (§5.3, §5.5) on a record (dict of arrays, as
+    `diffsusp.tyre.vehicle.measure` returns): per grouping ("all", "front", "rear") and camber
+    choice a `Report`. The Correvit delay is estimated (`estimate_delay`) or given (`delay`, s)
+    and removed before the identification; `delay=0, estimate_delay=False` is the thesis's
+    naive pipeline.
+
+    **Returns:** {"delay": s, "reports": [Report, …], "excluded": int}.
+    """
+    data = check(data, options)
+    half = _window_length(options, data["time"])
+    dt = _step(data["time"])
+    kernels = _kernels(options.window, 2 * half + 1, dt)
+    if delay is None:
+        if estimate_delay:
+            normal, R = ground_plane(data["lasers"], data["laser_positions"],
+                                     data["laser_window_ok"], kernels[0])
+            delay = float(correvit_delay(data, normal, R, kernels, dt=dt))
+        else:
+            delay = 0.0
+    reports = []
+    excluded = 0
+    for grouping in groupings:
+        if grouping not in GROUPINGS:
+            raise InputError(f"grouping must be one of {list(GROUPINGS)}; got {grouping!r}.")
+        for cam in camber:
+            W, y, mask, _ = _regression_jit(data, options, half, dt, delay,
+                                            GROUPINGS[grouping], cam, offset)
+            mask = np.asarray(mask)
+            n_wheels = len(GROUPINGS[grouping])
+            excluded = int(np.sum(~mask)) // n_wheels
+            W, y = np.asarray(W)[mask], np.asarray(y)[mask]
+            fixed = () if cam else ("b_gamma_1",)
+            fit = lsq.solve(W, y, names=names(offset), fixed=fixed)
+            reports.append(Report(grouping, cam, delay, fit, int(mask.sum()), excluded))
+    return {"delay": delay, "reports": reports, "excluded": excluded}
+
+
+def quantities(loads_kn):
+    """The matrix C (5, 8) of the physical quantities as combinations of the coefficients:
+    cornering stiffness K_δ at the two loads (N/m), torsion stiffness K_φ (N/rad), relaxation
+    L_R and camber stiffness K_γ (N/rad) at the first load (F_z in kN)."""
+    f, r = loads_kn
+    z = 0.0
+    return np.array([[f * f, f, 1, z, z, z, z, z], [r * r, r, 1, z, z, z, z, z],
+                     [z, z, z, f, z, z, z, z], [z, z, z, z, z, f * f, f, 1],
+                     [z, z, z, z, f, z, z, z]])
+
+
+QUANTITIES = ("K_delta_front", "K_delta_rear", "K_phi", "L_R", "K_gamma")
+
+
+def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, correct_delay=None,
+                options: Options = Options(), wheels=(0, 1, 2, 3), camber=True,
+                remove_offsets=False, loads_kn=(4.0, 3.3)):
+    """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`), one
+    vmapped program: per key, the coefficients x (8,), their covariance, the `QUANTITIES`
+    (C x) and their σ, and the estimated Correvit delay. `delay` (s) delays the Correvit;
+    `correct_delay`: None (naive, nothing removed), "estimate" (remove the estimated delay) or
+    a number (s) to remove. No laser dropouts (use `identify` for those)."""
+    from .vehicle import add_noise
+
+    dt = _step(np.asarray(truth["time"]))
+    half = _window_length(options, np.asarray(truth["time"]))
+    C = jnp.asarray(quantities(loads_kn))
+    kernels = _kernels(options.window, 2 * half + 1, dt)
+
+    def one(key):
+        d = add_noise(truth, sensors, key, delay=delay)
+        d = {k: d[k] for k in CHANNELS}
+        d["laser_valid"] = jnp.ones(d["lasers"].shape, bool)
+        d["laser_window_ok"] = d["laser_valid"]
+        normal, R = ground_plane(d["lasers"], d["laser_positions"], d["laser_window_ok"],
+                                 kernels[0])
+        est = correvit_delay(d, normal, R, kernels, dt=dt)
+        shift = (0.0 if correct_delay is None else est if correct_delay == "estimate"
+                 else correct_delay)
+        W, y, mask, _ = regression(d, options, half=half, dt=dt, correvit_delay_s=shift,
+                                   wheels=wheels, camber=camber,
+                                   remove_offsets=remove_offsets)
+        if not camber:
+            W = W.at[:, 4].set(0.0)
+        sol = lsq.solve_arrays(W, y)
+        q = C @ sol.x
+        qs = jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, sol.covariance, C))
+        return {"x": sol.x, "covariance": sol.covariance, "quantities": q,
+                "quantities_sigma": qs, "delay": est}
+
+    return jax.jit(jax.vmap(one))(keys)
+
+
+_regression_cache = {}
+
+
+def _regression_jit(data, options, half, dt, delay, wheels, camber, offset):
+    key = (options, half, dt, wheels, camber, offset)
+    if key not in _regression_cache:
+        _regression_cache[key] = jax.jit(
+            lambda d, s: regression(d, options, half=half, dt=dt, correvit_delay_s=s,
+                                    wheels=wheels, camber=camber, offset=offset))
+    return _regression_cache[key](data, jnp.asarray(delay))
+
+
+__all__ = ["CHANNELS", "GROUPINGS", "NAMES", "QUANTITIES", "Options", "Report",
+           "monte_carlo", "quantities", "body_twist", "check",
+           "correvit_delay", "ground_plane", "identify", "inputs", "names", "regression",
+           "regressor", "shift_channel", "window_weights"]
+_ = WHEELS
