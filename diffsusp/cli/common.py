@@ -50,8 +50,8 @@ def _main(
 
 def enable_x64():
     """float64, and a persistent compilation cache so that the second run of a command does
-    not compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an empty
-    string to disable)."""
+    not trace or compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an
+    empty string to disable)."""
     from .._compile import set_xla_flags
 
     set_xla_flags(os.environ)  # before JAX starts its backend
@@ -67,8 +67,11 @@ def enable_x64():
         pass
     cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
     if cache and not jax.config.jax_compilation_cache_dir:
+        from .._compile import enable_program_cache
+
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        enable_program_cache(os.path.join(cache, "programs"))  # and skip tracing (see there)
 
 
 def console(stderr: bool = False, *, markup: bool = True) -> Console:
