@@ -20,7 +20,7 @@ import numpy as np
 import oracle
 import pytest
 
-from diffsusp import kc
+from diffsusp import kc, solve_statics
 from diffsusp.errors import ConvergenceError, InputError
 from diffsusp.model.combine import combine
 from diffsusp.model.mirror import mirror
@@ -422,6 +422,12 @@ def test_anti_pitch_from_recession(pm_travel):
 def test_dw_vertical_force_metrics_match_oracle(dw_vertical):
     assert dw_vertical.converged.all()
     assert_geometry(dw_vertical, (0, 6, 12), dw_spec())
+    # The flags, computed inside the metrics program, are solve_statics's.
+    sol = solve_statics(dw_vertical.rig.mech, dw_vertical.loads)
+    np.testing.assert_array_equal(np.asarray(dw_vertical.solution.stable), np.asarray(sol.stable))
+    np.testing.assert_array_equal(np.asarray(dw_vertical.solution.law_valid),
+                                  np.asarray(sol.law_valid))
+    assert np.asarray(sol.stable).all()
 
 
 def test_dw_derivatives_and_compliance_matrix(dw_vertical):
@@ -491,6 +497,7 @@ def test_axle_left_and_mirrored_right_agree_per_side(axle, axle_opposite):
     wheel at −t equals the left at +t (same compiled program: the travel pattern is data)."""
     ev = kc.parallel_travel(axle, TRAVEL)
     assert "roll_stiffness" not in ev.metrics
+    assert not any(k.rsplit("/", 1)[-1] in ("roll_stiffness", "roll_steer") for k in ev.metrics)
     np.testing.assert_allclose(ev.metrics["roll_angle"], 0.0, atol=1e-12)
     # Steer is signed for the vehicle (left turn +): opposite on the two sides for a toe-in.
     np.testing.assert_allclose(ev.metrics["right/steer"], -ev.metrics["left/steer"], atol=1e-12)
@@ -507,6 +514,30 @@ def test_axle_left_and_mirrored_right_agree_per_side(axle, axle_opposite):
         np.testing.assert_allclose(op.metrics["right/" + name][::-1], op.metrics["left/" + name],
                                    rtol=0, atol=1e-9 * float(np.abs(op.metrics["left/" + name])
                                                              .max()), err_msg=name)
+
+
+def test_axle_roll_steer_is_steer_per_roll_angle(dw, axle_opposite):
+    """roll_steer (per corner, opposite travel): d(steer)/d(roll angle), against central
+    differences of the oracle's half-axle equilibria (left at t ± h, mirrored right at
+    −(t ± h)), steer from the definitions here and φ = atan2(z_R − z_L, T); none in parallel
+    travel, where the body does not roll."""
+    ev = axle_opposite
+    track = 2 * HARDPOINTS["spindle"][1]
+    h = 0.1
+    for c in (2, 10):
+        dphi = (np.arctan2(-2 * (TRAVEL[c] + h), track)
+                - np.arctan2(-2 * (TRAVEL[c] - h), track))
+        for mech, prefix, sign in ((dw, "left/", 1.0), (mirror(dw), "right/", -1.0)):
+            rig = kc.travel_rig(mech)
+            zero = np.zeros((len(rig.mech.load_points.names), 3))
+            steer = []
+            for step in (h, -h):
+                sol = oracle.solve(rig.mech, zero, zero, np.array([sign * (TRAVEL[c] + step)]))
+                steer.append(reference_metrics(rig.mech, dw_spec(), sol.p, sol.R, zero, zero,
+                                               sol.lam, rig.multiplier_index(0))["steer"])
+            want = (steer[0] - steer[1]) / dphi
+            assert close(ev.metrics[prefix + "roll_steer"][c], want, 1e-4), (prefix, c)
+    assert kc.METRICS["roll_steer"].per_roll and "roll_steer" in kc.DERIVATIVE_METRICS
 
 
 # ----------------------------------------------------------------------------- errors

@@ -35,9 +35,17 @@ from .._compile import filter_jit
 from ..errors import ConvergenceError, InputError
 from ..model import GROUND, Loads, Mechanism
 from ..models.loadcases import TABLE_4_4, TABLE_5_1
-from ..statics import STATUS_TEXT, StaticSolution, linearize, solve_statics, to_public
+from ..statics import (
+    STATUS_TEXT,
+    StaticSolution,
+    bushing_states,
+    linearize,
+    solve_statics,
+    to_public,
+)
+from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margin, warn_law_validity
 from .corner import Corner, ResolvedCorner, corners_of
-from .metrics import corner_geometry
+from .metrics import METRICS, Derivatives, corner_geometry
 from .rig import add_driver, remove_drivers
 
 TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
@@ -196,7 +204,7 @@ def _basis(rig: Rig) -> Loads:
     return Loads(force=force, moment=moment, driver=driver)
 
 
-def _raw_metrics(rig: Rig, loads: Loads, q, multipliers) -> dict:
+def raw_metrics(rig: Rig, loads: Loads, q, multipliers) -> dict:
     """Geometric metrics and per-side loads of every corner, one case (scalars)."""
     mech = rig.mech
     out = {}
@@ -247,26 +255,11 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
     k = 4
     for rc in rig.corners:
         p = rc.prefix
-        o, up, r = (jnp.asarray(v) for v in (rc.outboard, rc.up, rc.rearward))
-
-        def d(key, u, p=p):
-            return jac[p + key][u]
-
-        dz = d("wheel_travel", 0)
-        out[p + "bump_steer"] = d("toe", 0) / dz
-        out[p + "bump_camber"] = d("camber", 0) / dz
-        out[p + "wheel_rate"] = d("vertical_force", 0) / dz
-        v = jnp.stack([d(f"contact_patch_{a}", 0) for a in "xyz"])
-        vw = jnp.stack([d(f"wheel_centre_{a}", 0) for a in "xyz"])
-        out[p + "roll_centre_height"] = m[p + "_lateral_position"] * (v @ o) / (v @ up)
-        out[p + "contact_recession_rate"] = (v @ r) / dz
-        out[p + "wheel_centre_recession_rate"] = (vw @ r) / dz
-        if rig.rack_driver >= 0:
-            out[p + "steer_gain"] = d("steer", rig.n_inputs - 1)
-            out[p + "camber_steer_gain"] = d("camber", rig.n_inputs - 1)
-        for u, what in ((1, "lateral"), (2, "longitudinal"), (3, "aligning_torque")):
-            out[p + f"{what}_compliance_steer"] = d("toe", u)
-            out[p + f"{what}_compliance_camber"] = d("camber", u)
+        at = Derivatives(jac, m, rc, rig)
+        for name, metric in METRICS.items():  # the registry's per-corner derivative metrics
+            value = None if metric.derive is None else metric.derive(at)
+            if value is not None:
+                out[p + name] = value
         if rig.mode == "force" and rc.wheel_centre_load >= 0:
             cols = slice(k, k + 6)
             dw = jnp.stack([jac[p + f"wheel_centre_{a}"][cols] for a in "xyz"])  # (3, 6)
@@ -287,7 +280,8 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
 def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
-    solve as `solve_statics`'s custom JVP rule)."""
+    solve as `solve_statics`'s custom JVP rule), and the checks `solve_statics` would do
+    (stability margin from the same linearisation, the bushings' projected angles)."""
     mech = rig.mech
     n = mech.n_coordinates
     basis = _basis(rig)
@@ -299,21 +293,25 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
         dy = jax.vmap(lambda b: lin.tangent(d_loads=b))(basis)
 
         def metrics(y_, lam_, l_):
-            return _raw_metrics(rig, l_, to_public(mech, y_), lam_)
+            return raw_metrics(rig, l_, to_public(mech, y_), lam_)
 
         m = metrics(y, lam, loads_c)
         jac_m = jax.vmap(lambda dy_u, b_u: jax.jvp(metrics, (y, lam, loads_c),
                                                    (dy_u[:n], dy_u[n:], b_u))[1])(dy, basis)
-        return m, jac_m
+        margin = stability_margin(mech, loads_c, q, lam, linearization=lin)
+        angles = bushing_states(mech, q)[1]
+        return m, jac_m, margin, angles
 
-    m, jac = jax.vmap(one)(loads, sol.q, sol.multipliers)
+    m, jac, margin, angles = jax.vmap(one)(loads, sol.q, sol.multipliers)
     derived, compliance = jax.vmap(lambda m_, j_: _derived(rig, m_, j_))(m, jac)
     metrics = {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
     metrics.update(derived)
     ok = sol.status == 0
     metrics = {k: jnp.where(ok, v, jnp.nan) for k, v in metrics.items()}
     compliance = {k: jnp.where(ok[:, None, None], v, jnp.nan) for k, v in compliance.items()}
-    return metrics, compliance
+    law = jax.vmap(lambda a: law_validity(mech, None, angles=a))(angles)
+    flags = (ok & (margin > STABILITY_TOLERANCE), ok & (law <= 1.0))
+    return metrics, compliance, flags, jnp.where(ok[:, None, None], angles, 0.0)
 
 
 def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = None,
@@ -337,11 +335,15 @@ def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = Non
     if loads.n_cases is None:
         raise InputError("evaluate needs loads with a leading case axis.")
     with warnings.catch_warnings():
-        # Failed cases are reported by status (and by the events); keep the validity warning.
+        # Failed cases are reported by status (and by the events).
         warnings.filterwarnings("ignore", message=r"solve_statics: \d+ of \d+ cases did not")
         sol = solve_statics(rig.mech, loads, q0=q0, rtol=rtol, atol=atol, max_steps=max_steps,
-                            throw=False)
-    return (sol, *_metrics_kernel(rig, loads, sol))
+                            throw=False, checks=False)
+    metrics, compliance, (stable, law_valid), angles = _metrics_kernel(rig, loads, sol)
+    if not isinstance(sol.q, jax.core.Tracer):  # as `solve_statics` does for concrete calls
+        sol = dataclasses.replace(sol, stable=stable, law_valid=law_valid)
+        warn_law_validity(rig.mech, angles)
+    return sol, metrics, compliance
 
 
 # ----------------------------------------------------------------------------- events
@@ -474,7 +476,9 @@ def parallel_travel(mech: Mechanism, travel, *, corner=None, drive: str = "wheel
     loads = _loads(rig, x.size, travel=x)
     ev = _run("parallel_travel", rig, loads, x, "wheel_travel", "mm", "wheel height", q0,
               throw, label, **solver)
-    ev.metrics.pop("roll_stiffness", None)  # no roll in parallel travel (0/0)
+    for key in [k for k in ev.metrics if METRICS.get(k.rsplit("/", 1)[-1], ()) and
+                METRICS[k.rsplit("/", 1)[-1]].per_roll]:
+        ev.metrics.pop(key)  # no roll in parallel travel (0/0)
     return ev
 
 

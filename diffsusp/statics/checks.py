@@ -40,6 +40,8 @@ by 170°: a true equilibrium of the linear law, meaningless for the part it stan
 Cases that did not converge have both flags False.
 """
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -47,6 +49,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._compile import filter_jit
+from ..errors import ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from .linearize import linearize
 
@@ -66,15 +69,17 @@ def _coordinate_scale(mech: Mechanism):
 
 
 def reduced_stiffness(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
-                      multipliers: Float[Array, " m"]) -> Float[Array, "d d"]:
+                      multipliers: Float[Array, " m"], *, linearization=None
+                      ) -> Float[Array, "d d"]:
     """The reduced tangent stiffness K_r = Nᵀ K N (N/mm) of one equilibrium, in scaled
     solver coordinates (rotations × L), N an orthonormal basis of the null space of Φ_q
     (d = n − m columns, the kinematic degrees of freedom). Not symmetric in general.
 
     **Arguments:** `mech`, one load case `loads`, its public coordinates `q` and `multipliers`
-    (e.g. `sol.q[c]`, `sol.multipliers[c]`); `jax.vmap` it over cases.
+    (e.g. `sol.q[c]`, `sol.multipliers[c]`); `jax.vmap` it over cases. `linearization`: the
+    case's `linearize(mech, loads, q, multipliers)` when the caller has it already.
     """
-    lin = linearize(mech, loads, q, multipliers)
+    lin = linearize(mech, loads, q, multipliers) if linearization is None else linearization
     d = _coordinate_scale(mech)
     k = d[:, None] * lin.stiffness * d[None, :]
     a = lin.constraint_jacobian * d[None, :]
@@ -82,22 +87,28 @@ def reduced_stiffness(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
     if m == 0:
         return k
     # Full SVD of the (m, n) constraint Jacobian; the last n − m right singular vectors span
-    # its null space (the independent rows have full rank at a regular configuration).
+    # its null space (the independent rows have full rank at a regular configuration). A
+    # non-finite one (a case that did not converge) is replaced, so no NaN reaches LAPACK.
+    a = jnp.where(jnp.all(jnp.isfinite(a)), a, jnp.eye(*a.shape, dtype=a.dtype))
     _, _, vt = jnp.linalg.svd(a, full_matrices=True)
     basis = vt[m:].T
     return basis.T @ k @ basis
 
 
 def stability_margin(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
-                     multipliers: Float[Array, " m"]) -> Float[Array, ""]:
+                     multipliers: Float[Array, " m"], *, linearization=None
+                     ) -> Float[Array, ""]:
     """λ_min(S) / max|λ(S)| of the symmetric part S of `reduced_stiffness`, one case: positive
     for a stable equilibrium, negative for an unstable one (1 when there is no degree of
-    freedom)."""
-    kr = reduced_stiffness(mech, loads, q, multipliers)
+    freedom; NaN when the stiffness is not finite)."""
+    kr = reduced_stiffness(mech, loads, q, multipliers, linearization=linearization)
     if kr.shape[0] == 0:
         return jnp.ones((), kr.dtype)
-    eig = jnp.linalg.eigvalsh(0.5 * (kr + kr.T))
-    return eig[0] / jnp.maximum(jnp.max(jnp.abs(eig)), jnp.finfo(kr.dtype).tiny)
+    finite = jnp.all(jnp.isfinite(kr))
+    sym = jnp.where(finite, 0.5 * (kr + kr.T), jnp.eye(kr.shape[0], dtype=kr.dtype))
+    eig = jnp.linalg.eigvalsh(sym)
+    margin = eig[0] / jnp.maximum(jnp.max(jnp.abs(eig)), jnp.finfo(kr.dtype).tiny)
+    return jnp.where(finite, margin, jnp.nan)
 
 
 def _carried_rotations(mech: Mechanism):
@@ -108,17 +119,39 @@ def _carried_rotations(mech: Mechanism):
     return (b.k_rot != 0) | (b.cubic_rot != 0) | spline
 
 
-def law_validity(mech: Mechanism, q: Float[Array, " n"]) -> Float[Array, ""]:
+def law_validity(mech: Mechanism, q: Float[Array, " n"], *, angles=None) -> Float[Array, ""]:
     """The largest ratio |angle| / limit over every bushing rotation axis that carries a law,
-    one case (public coordinates q): ≤ 1 where the laws are valid (`ANGLE_LIMITS_DEG`);
-    0 for a model without bushings."""
+    one case (public coordinates q, or the bushings' projected `angles` (bushings, 3) when the
+    caller has them): ≤ 1 where the laws are valid (`ANGLE_LIMITS_DEG`); 0 for a model without
+    bushings."""
     if not mech.bushings.names:
         return jnp.zeros((), jnp.result_type(q))
-    from .outputs import bushing_states
+    if angles is None:
+        from .outputs import bushing_states
 
-    angles = jnp.abs(bushing_states(mech, q)[1])
-    ratio = angles / jnp.radians(jnp.asarray(ANGLE_LIMITS_DEG))
+        angles = bushing_states(mech, q)[1]
+    ratio = jnp.abs(angles) / jnp.radians(jnp.asarray(ANGLE_LIMITS_DEG))
     return jnp.max(jnp.where(_carried_rotations(mech), ratio, 0.0))
+
+
+def warn_law_validity(mech: Mechanism, angles, stacklevel: int = 2) -> None:
+    """Warn (`ModelWarning`) about the largest projected angle of a bushing axis that carries
+    a law beyond its validity, if any; `angles` (cases, bushings, 3) rad, concrete."""
+    if not mech.bushings.names:
+        return
+    angles = np.abs(np.asarray(angles)).reshape(-1, len(mech.bushings.names), 3)
+    angles = np.where(np.asarray(_carried_rotations(mech)), angles, 0.0)
+    ratio = angles / np.radians(ANGLE_LIMITS_DEG)
+    if np.any(ratio > 1.0):
+        c, e, a = np.unravel_index(np.argmax(ratio), ratio.shape)
+        warnings.warn(
+            f"bushing '{mech.bushings.names[e]}' is rotated by {np.degrees(angles[c, e, a]):.1f}° "
+            f"about its {'xyz'[a]} axis (case {c}), beyond the projected angles' validity "
+            f"(|AX|, |AY| < 15°, |AZ| < 90°): its law is not meaningful there. Check the loads "
+            "or model a joint instead of the bushing.",
+            ModelWarning,
+            stacklevel=stacklevel + 1,
+        )
 
 
 def equilibrium_flags(mech: Mechanism, loads: Loads, q: Float[Array, "cases n"],

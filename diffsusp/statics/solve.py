@@ -31,9 +31,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._compile import filter_jit
-from ..errors import ConvergenceError, ModelWarning
+from ..errors import ConvergenceError
 from ..model.mechanism import Loads, Mechanism
-from .checks import with_flags
+from .checks import warn_law_validity, with_flags
 from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
 
@@ -413,24 +413,7 @@ def _check_validity(mech: Mechanism, sol: StaticSolution):
     |AZ| < 90°; spec stiffness §0)."""
     if not mech.bushings.names or _is_traced(sol.q):
         return
-    angles = np.abs(np.asarray(_bushing_angles(mech, sol.q)))
-    angles = angles.reshape(-1, len(mech.bushings.names), 3)
-    b = mech.bushings
-    carries = (np.asarray(b.k_rot) != 0) | (np.asarray(b.cubic_rot) != 0) | np.asarray(
-        b.spline_axes, dtype=bool).reshape(-1, 6)[:, 3:]
-    angles = np.where(carries, angles, 0.0)  # an axis with no law has no validity to leave
-    limits = np.radians([15.0, 15.0, 90.0])
-    ratio = angles / limits
-    if np.any(ratio > 1.0):
-        c, e, a = np.unravel_index(np.argmax(ratio), ratio.shape)
-        warnings.warn(
-            f"bushing '{mech.bushings.names[e]}' is rotated by {np.degrees(angles[c, e, a]):.1f}° "
-            f"about its {'xyz'[a]} axis (case {c}), beyond the projected angles' validity "
-            f"(|AX|, |AY| < 15°, |AZ| < 90°): its law is not meaningful there. Check the loads "
-            "or model a joint instead of the bushing.",
-            ModelWarning,
-            stacklevel=3,
-        )
+    warn_law_validity(mech, _bushing_angles(mech, sol.q), stacklevel=3)
 
 
 def _start(mech, loads, q0, n_cases):
@@ -487,6 +470,7 @@ def solve_statics(
     chunk: int | None = 4096,
     throw: bool = True,
     devices: "int | str | Sequence[jax.Device] | None" = None,
+    checks: bool = True,
 ) -> StaticSolution:
     """Static equilibria of `mech` under each load case of `loads`.
 
@@ -504,6 +488,9 @@ def solve_statics(
       one device, gathered on the default device): a count of local devices, "all", or a list
       of devices. Default: `$DIFFSUSP_DEVICES`, else 1 (the CLI sets "all" and, on the CPU,
       one device per core). Calls inside jit / vmap / grad run on one device.
+    - `checks`: compute the `stable` / `law_valid` flags and warn about bushing laws beyond
+      their validity (one more compiled program per model); False leaves the flags None, for
+      a caller that checks in its own program (`kc.evaluate`).
 
     **Returns:** a `StaticSolution`, differentiable (implicitly) with respect to every float
     leaf of `mech` and `loads`.
@@ -523,8 +510,9 @@ def solve_statics(
         sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh)
         if mesh is not None:  # later programs run on one device, as for an unsplit batch
             sol = jax.device_put(sol, jax.devices()[0])
-    sol = with_flags(mech, loads, sol)
-    _check_validity(mech, sol)
+    if checks:
+        sol = with_flags(mech, loads, sol)
+        _check_validity(mech, sol)
     return _report(sol, throw, "solve_statics")
 
 
