@@ -14,7 +14,7 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from .common import EXIT_NOT_CONVERGED, app, check_output, cli_errors, console, enable_x64
+from .common import EXIT_NOT_CONVERGED, check_output, cli_errors, console, enable_x64
 
 
 def _timed(fn):
@@ -26,7 +26,6 @@ def _timed(fn):
     return out, time.perf_counter() - t0
 
 
-@app.command()
 def demo(
     out: Annotated[pathlib.Path, typer.Option(
         help="Folder for the figures (PNG and SVG); created if missing.")] = pathlib.Path(
@@ -85,15 +84,14 @@ def demo(
                     box=box.SIMPLE_HEAD)
     for col in ("metric", "value", "unit", "range over the travel"):
         summary.add_column(col, justify="right" if col != "metric" else "left", no_wrap=True)
-    for name in ("toe", "camber", "half_track_change", "bump_steer", "bump_camber",
-                 "wheel_rate", "roll_centre_height"):
+    for name in kc.flagged("summary"):
         v = np.asarray(kc.display(name, t[name]))
         summary.add_row(name, f"{v[i0]:+.4g}", kc.display_unit(name),
                         f"{np.nanmin(v):+.4g} … {np.nanmax(v):+.4g}")
     term.print(summary)
 
     out.mkdir(parents=True, exist_ok=True)
-    written = plot.save(plot.kc_curves(travel, ["toe", "camber", "half_track_change"],
+    written = plot.save(plot.kc_curves(travel, kc.default_plots(travel.name, t)[0],
                                        title=f"{mech.name}: parallel wheel travel"),
                         out / "parallel_travel")
     written += plot.save(plot.kc_curves(cases, ["toe", "camber"],

@@ -32,7 +32,6 @@ from .identify import (
     ReorderOpt,
     _check_paths,
     _write_model,
-    identify_app,
 )
 
 
@@ -73,7 +72,6 @@ def _joints_file(path: Path):
     return joints
 
 
-@identify_app.command("geometry")
 def geometry(
     model: ModelArg,
     measurements: MeasurementsOpt,
@@ -171,10 +169,10 @@ def _figure(mech, report, joints, directory: Path):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from ..identify.geometric import _element_table
+    from ..identify.geometric import element_table
 
     directory.mkdir(parents=True, exist_ok=True)
-    table = _element_table(mech)
+    table = element_table(mech)
     pos = np.asarray(mech.markers.position)
     fig, axes = plt.subplots(1, 2, figsize=(11, 5))
     for ax, (a, b, label) in zip(axes, ((0, 1, "top view (x, y)"), (0, 2, "side view (x, z)")),
@@ -202,7 +200,6 @@ def _figure(mech, report, joints, directory: Path):
     plt.close(fig)
 
 
-@identify_app.command("correct")
 def correct(
     model: ModelArg,
     measurements: MeasurementsOpt,

@@ -25,9 +25,15 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
+from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the other verbs)
+    EVENTS,
+    corner_with,
+    parse_range,
+    reference_case,
+    run_event,
+)
 from .common import (
     EXIT_BAD_INPUT,
-    app,
     check_output,
     cli_errors,
     console,
@@ -38,163 +44,31 @@ from .common import (
     warn,
 )
 
-EVENTS = {
-    "parallel-travel": "wheel travel (mm), --travel",
-    "opposite-travel": "wheel travel (mm), --travel; axle = model + its mirror image",
-    "vertical-force": "vertical force (N), --fz",
-    "lateral-force": "lateral force (N, inboard +), --force, at --fz",
-    "braking": "braking force (N) at the contact patch, --force, at --fz",
-    "traction": "traction force (N) at the wheel centre, --force, at --fz",
-    "aligning-torque": "aligning torque (N·m, toe-out +), --torque, at --fz",
-    "steering": "rack travel (mm, left +), --rack",
-    "table-5-1": "the 13 cases of the thesis's Table 5-1",
-    "table-4-4": "the 17 cases of the thesis's Table 4.4",
-}
-
-_FIGURE_METRICS = {
-    "parallel-travel": ("toe", "camber", "half_track_change"),
-    "opposite-travel": ("toe", "camber", "half_track_change"),
-    "vertical-force": ("wheel_travel", "toe", "camber"),
-    "steering": ("steer", "camber", "mechanical_trail"),
-}
-
-
-def parse_range(text: str, what: str):
-    """`start:stop:count` → numpy.linspace(start, stop, count); a single number → [number]."""
-    import numpy as np
-
-    from diffsusp.errors import InputError
-
-    parts = text.split(":")
-    try:
-        if len(parts) == 1:
-            return np.array([float(parts[0])])
-        if len(parts) == 3:
-            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
-            if count < 1:
-                raise ValueError
-            return np.linspace(start, stop, count)
-    except ValueError:
-        pass
-    raise InputError(f"--{what} '{text}' is not a range: give start:stop:count (e.g. "
-                     "-80:80:161) or one number.")
-
 
 def _model(name: str):
-    """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file
-    (`diffsusp.io.load_model`)."""
+    """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file, through the
+    library's one resolver (`diffsusp.io.load_model_file`)."""
     from diffsusp.errors import InputError
+    from diffsusp.io import load_model_file
     from diffsusp.models import STOP_VARIANTS, ZOO
 
-    if name in ZOO:
-        return ZOO[name]()
-    if name in STOP_VARIANTS and not pathlib.Path(name).exists():
-        return STOP_VARIANTS[name]()
-    path = pathlib.Path(name)
-    if not path.exists():
+    if name not in ZOO and name not in STOP_VARIANTS and not pathlib.Path(name).exists():
         raise InputError(
             f"model '{name}' is neither a built-in model ({', '.join([*ZOO, *STOP_VARIANTS])}) "
             "nor an existing file. Give a built-in name or the path of a model file (.toml, "
             ".adm, .json)."
         )
-    from diffsusp.io import load_model
-
-    return load_model(path)
+    return load_model_file(name).mechanism
 
 
 def _corner(mech, frame, loaded_radius, kingpin, side):
-    from diffsusp import kc
-    from diffsusp.errors import InputError
-
-    if frame is None and loaded_radius is None and kingpin is None and side is None:
-        return None  # the model's registered corner
-    try:
-        base = kc.default_corner(mech)
-    except InputError:
-        base = kc.Corner()
-    changes = {}
-    if frame is not None:
-        changes["frame"] = frame
-    if loaded_radius is not None:
-        changes["loaded_radius"] = loaded_radius
-    if side is not None:
-        changes["side"] = side
-    if kingpin is not None:
-        names = kingpin.split(",")
-        if len(names) != 2:
-            raise InputError("--kingpin must be two marker names 'upper,lower'.")
-        changes["kingpin"] = tuple(n.strip() for n in names)
-    import dataclasses
-
-    return dataclasses.replace(base, **changes)
+    return corner_with(mech, frame=frame, loaded_radius=loaded_radius, kingpin=kingpin,
+                       side=side)
 
 
 def _run_event(mech, event, corner, travel, fz, force, torque, rack):
-    from diffsusp import kc
-    from diffsusp.errors import InputError
-    from diffsusp.model.combine import combine
-    from diffsusp.model.mirror import mirror
-
-    fz_value = None
-    if fz is not None and event != "vertical-force":
-        values = parse_range(fz, "fz")
-        if values.size != 1:
-            raise InputError(f"--fz must be one value (N) for the {event} event.")
-        fz_value = float(values[0])
-    if event == "parallel-travel":
-        return kc.parallel_travel(mech, parse_range(travel, "travel"), corner=corner)
-    if event == "opposite-travel":
-        from diffsusp.model.combine import component_names
-
-        axle = mech if component_names(mech) else combine({"left": mech, "right": mirror(mech)})
-        corners = None if corner is None else {"left": corner,
-                                               "right": _mirrored_corner(corner)}
-        return kc.opposite_travel(axle, parse_range(travel, "travel"), corner=corners)
-    if event == "vertical-force":
-        if fz is None:
-            fz = _default_fz_range(mech, corner)
-        return kc.vertical_force(mech, parse_range(fz, "fz"), corner=corner)
-    if event == "lateral-force":
-        return kc.lateral_force(mech, parse_range(force, "force"), fz=fz_value, corner=corner)
-    if event == "braking":
-        return kc.braking(mech, parse_range(force, "force"), fz=fz_value, corner=corner)
-    if event == "traction":
-        return kc.traction(mech, parse_range(force, "force"), fz=fz_value, corner=corner)
-    if event == "aligning-torque":
-        return kc.aligning_torque(mech, 1e3 * parse_range(torque, "torque"), fz=fz_value,
-                                  corner=corner)
-    if event == "steering":
-        frame = (corner or kc.corners_of(mech)[""]).frame
-        return kc.steering(kc.with_rack(mech, frame=frame), parse_range(rack, "rack"),
-                           corner=corner)
-    table = kc.TABLES["table_5_1" if event == "table-5-1" else "table_4_4"]
-    return kc.load_table(mech, table, corner=corner)
-
-
-def _mirrored_corner(corner):
-    import dataclasses
-
-    side = {"left": "right", "right": "left"}.get(corner.side, corner.side)
-    return dataclasses.replace(corner, side=side)
-
-
-def _default_fz_range(mech, corner) -> str:
-    from diffsusp import kc
-
-    fz0 = (corner or kc.corners_of(mech)[""]).design_load
-    return f"{0.5 * fz0}:{1.5 * fz0}:21"
-
-
-def _reference_case(ev) -> int:
-    import numpy as np
-
-    if ev.x_name == "vertical_force":
-        target = ev.rig.corners[0].design_load
-    elif ev.x_name == "case":
-        return 0
-    else:
-        target = 0.0
-    return int(np.argmin(np.abs(np.asarray(ev.x) - target)))
+    return run_event(mech, event, corner, travel=travel, fz=fz, force=force, torque=torque,
+                     rack=rack)
 
 
 def _json(ev, mech_name: str) -> dict:
@@ -276,7 +150,7 @@ def _table(ev, mech_name: str) -> Table:
 
     from diffsusp import kc
 
-    ref = _reference_case(ev)
+    ref = reference_case(ev)
     x_scale = 1e-3 if ev.x_unit == "N·mm" else 1.0
     x_unit = "N·m" if ev.x_unit == "N·mm" else ev.x_unit
     x_ref = float(np.asarray(ev.x)[ref]) * x_scale
@@ -294,7 +168,6 @@ def _table(ev, mech_name: str) -> Table:
     return table
 
 
-@app.command("kc")
 def kc_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
     event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
@@ -335,12 +208,12 @@ def kc_command(
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
         elapsed = time.perf_counter() - t0
         if out is not None:
-            from diffsusp import plot
+            from diffsusp import kc, plot
 
-            names = _FIGURE_METRICS.get(event, ("steer", "camber", "wheel_travel"))
+            names, derivatives = kc.default_plots(ev.name, ev.metrics)
             fig = plot.kc_curves(ev, names, title=f"{mech.name}: {ev.name.replace('_', ' ')}")
             paths = plot.save(fig, out / f"kc_{ev.name}")
-            fig = plot.kc_curves(ev, _derivative_names(ev), title=f"{mech.name}: derivatives")
+            fig = plot.kc_curves(ev, derivatives, title=f"{mech.name}: derivatives")
             paths += plot.save(fig, out / f"kc_{ev.name}_derivatives")
     show_warnings(caught)
     for note in _flag_notes(ev):
@@ -356,9 +229,3 @@ def kc_command(
     if out is not None:
         con.print(Text("figures: " + ", ".join(str(p) for p in paths)), highlight=False)
 
-
-def _derivative_names(ev) -> tuple[str, ...]:
-    keys = {k.rsplit("/", 1)[-1] for k in ev.metrics}
-    if "bump_steer" in keys:
-        return ("bump_steer", "bump_camber", "wheel_rate")
-    return ("steer_gain", "lateral_compliance_steer", "aligning_torque_compliance_steer")

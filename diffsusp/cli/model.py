@@ -14,11 +14,11 @@ from rich import box
 from rich.table import Table as RichTable
 from rich.text import Text
 
+from ..model.mechanism import PARAMETER_UNITS
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
     EXIT_NOT_CONVERGED,
-    app,
     check_output,
     cli_errors,
     console,
@@ -27,30 +27,6 @@ from .common import (
     print_json,
     warn,
 )
-
-PARAMETER_UNITS = {
-    "markers.position": "mm",
-    "markers.orientation": "1 (rotation matrix, columns = axes)",
-    "bushings.k_trans": "N/mm",
-    "bushings.k_rot": "N·mm/rad",
-    "bushings.cubic_trans": "N/mm³",
-    "bushings.cubic_rot": "N·mm/rad³",
-    "bushings.offset_trans": "mm",
-    "bushings.offset_rot": "rad",
-    "bushings.preload_force": "N",
-    "bushings.preload_torque": "N·mm",
-    "bushings.spline_x": "mm (tx, ty, tz) | rad (rx, ry, rz)",
-    "bushings.spline_y": "N (tx, ty, tz) | N·mm (rx, ry, rz)",
-    "springs.k": "N/mm",
-    "springs.free_length": "mm",
-    "springs.table_x": "mm (extension)",
-    "springs.table_y": "N (tension)",
-    "stops.length": "mm",
-    "stops.k": "N/mm",
-    "stops.cubic": "N/mm³",
-    "drivers.direction": "1 (unit vector)",
-}
-"""Unit of every float leaf of a `Mechanism` (the parameters one can differentiate and fit)."""
 
 _CHUNK = 256
 """Cases per solve when a table is large enough to show a progress bar (the last chunk is
@@ -77,7 +53,6 @@ def _load(model: str, *, check: bool = True):
     return load_model_file(model, check=check)
 
 
-@app.command()
 def info(
     model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
     json_output: bool = typer.Option(False, "--json", help="Machine-readable output."),
@@ -295,7 +270,6 @@ def _unsolved(mech, n):
         law_valid=np.zeros(n, bool))
 
 
-@app.command()
 def simulate(
     model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
     loads: str = typer.Option(..., "--loads", "-l",

@@ -16,9 +16,9 @@ import typer
 from rich import box
 from rich.table import Table
 
+from ..identify.sensitivity import PARAMETER_SETS
 from .common import (
     EXIT_BAD_INPUT,
-    app,
     check_output,
     cli_errors,
     console,
@@ -28,37 +28,7 @@ from .common import (
 )
 from .kc import EVENTS, _corner, _model, _nan_to_none, _run_event
 
-PARAMETER_SETS = {
-    "stiffness": "every non-zero bushing stiffness and spring rate (log-scaled: per relative "
-                 "change)",
-    "centres": "the centre of every bushing (x, y, z in mm)",
-    "hardpoints": "the position of every marker on a moving part (x, y, z in mm)",
-}
 
-_DEFAULT_METRICS = ("toe", "camber", "half_track_change", "bump_steer", "bump_camber",
-                    "wheel_rate", "lateral_compliance_steer", "steer_gain")
-
-
-def _params(mech, which: str):
-    import numpy as np
-
-    from diffsusp.identify.params import Params
-
-    if which == "stiffness":
-        where = [lambda m: m.bushings.k_trans, lambda m: m.bushings.k_rot,
-                 lambda m: m.springs.k]
-        leaves = [np.asarray(w(mech)) for w in where]
-        picked = [(w, v > 0) for w, v in zip(where, leaves, strict=True) if np.any(v > 0)]
-        return Params.leaves(mech, lambda m: tuple(w(m) for w, _ in picked),
-                             tuple(mask for _, mask in picked))
-    if which == "centres":
-        return Params.bushing_centres(mech, mech.bushings.names)
-    moving = np.asarray(mech.markers.part) >= 0
-    mask = np.repeat(moving[:, None], 3, axis=1)
-    return Params.leaves(mech, lambda m: m.markers.position, mask)
-
-
-@app.command("sensitivity")
 def sensitivity_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
     event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
@@ -99,7 +69,7 @@ def sensitivity_command(
         raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
     check_output(out, what="figures folder", directory=True)
     enable_x64()
-    from diffsusp.identify.sensitivity import sensitivity
+    from diffsusp.identify.sensitivity import parameter_set, sensitivity
 
     err = console(stderr=True, markup=False)
     with cli_errors():
@@ -109,7 +79,7 @@ def sensitivity_command(
         with err.status(f"running {event} on {mech.name} and differentiating (the first run "
                         "compiles, 1–3 min)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
-            selection = _params(ev.rig.mech, params)
+            selection = parameter_set(ev.rig.mech, params)
             names = _metric_names(ev, metric, derivatives)
             report = sensitivity(ev, selection, metrics=names, derivatives=derivatives)
         elapsed = time.perf_counter() - t0
@@ -134,7 +104,7 @@ def sensitivity_command(
 
 def _metric_names(ev, asked, derivatives: bool) -> tuple[str, ...]:
     from diffsusp.errors import InputError
-    from diffsusp.kc.metrics import DERIVATIVE_METRICS
+    from diffsusp.kc.metrics import DERIVATIVE_METRICS, flagged
 
     available = {k for k in ev.metrics if not k.rsplit("/", 1)[-1].startswith("_")}
     if not derivatives:
@@ -145,7 +115,7 @@ def _metric_names(ev, asked, derivatives: bool) -> tuple[str, ...]:
             raise InputError(f"unknown metric(s) {unknown} for the {ev.name} event; available: "
                              f"{', '.join(sorted(available))}.")
         return tuple(asked)
-    return tuple(k for k in sorted(available) if k.rsplit("/", 1)[-1] in _DEFAULT_METRICS)
+    return tuple(k for k in sorted(available) if k.rsplit("/", 1)[-1] in flagged("sensitivity"))
 
 
 def _table(report, mech_name, ev, params, top) -> Table:

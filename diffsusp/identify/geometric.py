@@ -43,6 +43,10 @@ spec geometry §4.8, §4.10).
 
 Units: mm, rad. Every solver is written for one joint and the whole stack of cases; all joints
 of a list are located by one compiled program.
+
+**Size.** About 1 200 lines: the five joint solvers of chapter 3, their σ and observability
+verdicts, the experiment design and the equilibrium-consistent correction share the relative
+operators and the joint description; they are read together with the thesis's chapter.
 """
 
 import dataclasses
@@ -870,7 +874,7 @@ def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):
         mech, (jnp.asarray(x0), jnp.asarray(o0), jnp.asarray(off_t), jnp.asarray(off_r)))
 
 
-def _element_table(mech):
+def element_table(mech):
     """name → (group, kind, I part, J part, I marker, J marker) of every joint and bushing."""
     part_of = mech.markers.part
     out = {}
@@ -902,7 +906,7 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
 
     **Returns:** `(joints, notes)`: the list, and one sentence per element left out.
     """
-    table = _element_table(mech)
+    table = element_table(mech)
     measured = {mech.part_index(p) for p in parts if p != GROUND}
     name_of = {i: p for i, p in enumerate(mech.parts)}
     name_of[-1] = GROUND
@@ -987,7 +991,7 @@ def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoi
     """
     import equinox as eqx
 
-    table = _element_table(mech)
+    table = element_table(mech)
     x0 = np.array(mech.markers.position)
     o0 = np.array(mech.markers.orientation)
     moved = {}

@@ -30,6 +30,34 @@ from ..model.mechanism import Loads, Mechanism
 from ..statics import marker_poses, solve_statics
 from .params import Params
 
+PARAMETER_SETS = {
+    "stiffness": "every non-zero bushing stiffness and spring rate (log-scaled: per relative "
+                 "change)",
+    "centres": "the centre of every bushing (x, y, z in mm)",
+    "hardpoints": "the position of every marker on a moving part (x, y, z in mm)",
+}
+"""Named parameter sets of a model for a sensitivity study (`parameter_set`)."""
+
+
+def parameter_set(mech: Mechanism, which: str) -> Params:
+    """The parameters `which` (a key of `PARAMETER_SETS`) of `mech`.
+
+    **Raises:** `InputError` for an unknown name."""
+    if which not in PARAMETER_SETS:
+        raise InputError(f"--params must be one of {', '.join(PARAMETER_SETS)}; got '{which}'.")
+    if which == "stiffness":
+        where = [lambda m: m.bushings.k_trans, lambda m: m.bushings.k_rot,
+                 lambda m: m.springs.k]
+        leaves = [np.asarray(w(mech)) for w in where]
+        picked = [(w, v > 0) for w, v in zip(where, leaves, strict=True) if np.any(v > 0)]
+        return Params.leaves(mech, lambda m: tuple(w(m) for w, _ in picked),
+                             tuple(mask for _, mask in picked))
+    if which == "centres":
+        return Params.bushing_centres(mech, mech.bushings.names)
+    moving = np.asarray(mech.markers.part) >= 0
+    mask = np.repeat(moving[:, None], 3, axis=1)
+    return Params.leaves(mech, lambda m: m.markers.position, mask)
+
 
 def _as_params(mech: Mechanism, params) -> Params:
     if isinstance(params, Params):
@@ -95,14 +123,14 @@ def _check_metric(report, metric):
 
 @eqx.filter_jit
 def _metric_jacobian(rig, loads, params: Params, theta, derivatives: bool):
-    from ..kc.events import _raw_metrics, evaluate
+    from ..kc.events import evaluate, raw_metrics
 
     def metrics(th):
         r = eqx.tree_at(lambda r_: r_.mech, rig, params.apply(rig.mech, th))
         if derivatives:
             return evaluate(r, loads)[1]
         sol = solve_statics(r.mech, loads, throw=False)
-        m = jax.vmap(lambda l_, q, lam: _raw_metrics(r, l_, q, lam))(loads, sol.q,
+        m = jax.vmap(lambda l_, q, lam: raw_metrics(r, l_, q, lam))(loads, sol.q,
                                                                       sol.multipliers)
         return {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
 
@@ -305,5 +333,5 @@ def design_experiment(
                         targets=tuple(names[j] for j in tgt), relative=relative)
 
 
-__all__ = ["DesignReport", "SensitivityReport", "design_experiment", "landmark_model",
-           "sensitivity"]
+__all__ = ["PARAMETER_SETS", "DesignReport", "SensitivityReport", "design_experiment",
+           "landmark_model", "parameter_set", "sensitivity"]

@@ -81,6 +81,11 @@ Reading never evaluates anything: strings are names, numbers are TOML numbers. E
 Saving writes mm, N, rad and every float with the digits that read back to the same bits, so
 save → load reproduces the mechanism exactly (orientations are written as `axes`, or as `z`
 alone when that rebuilds the same matrix).
+
+**Size.** About 1 100 lines: one file format, read and written both ways (every element kind
+of a `Mechanism`, named load tables, units, comment-preserving saves), with line-numbered
+errors for each field; reader and writer are kept side by side so they stay each other's
+inverse.
 """
 
 import dataclasses

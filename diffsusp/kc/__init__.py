@@ -35,14 +35,23 @@ from .events import (
     travel_rig,
     vertical_force,
 )
-from .metrics import DERIVATIVE_METRICS, METRICS, corner_geometry, display, display_unit
+from .metrics import (
+    DERIVATIVE_METRICS,
+    METRICS,
+    Metric,
+    corner_geometry,
+    default_plots,
+    display,
+    display_unit,
+    flagged,
+)
 from .rig import add_driver, remove_drivers, with_rack
 
 __all__ = [
-    "DEFAULT_CORNERS", "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent",
+    "DEFAULT_CORNERS", "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric",
     "ResolvedCorner", "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking",
-    "compliance_matrix", "corner_geometry", "corners_of", "default_corner",
-    "derivative_metrics", "display", "display_unit", "evaluate", "force_rig", "lateral_force",
-    "load_table", "longitudinal_force", "opposite_travel", "parallel_travel", "remove_drivers",
-    "steering", "traction", "travel_rig", "vertical_force", "with_rack",
+    "compliance_matrix", "corner_geometry", "corners_of", "default_corner", "default_plots",
+    "derivative_metrics", "display", "display_unit", "evaluate", "flagged", "force_rig",
+    "lateral_force", "load_table", "longitudinal_force", "opposite_travel", "parallel_travel",
+    "remove_drivers", "steering", "traction", "travel_rig", "vertical_force", "with_rack",
 ]

@@ -63,13 +63,21 @@ input (the travel driver, or the vertical load: d m/dz = (∂m/∂F_z)/(∂z/∂
   wheel-centre heights: atan2(z_R − z_L, track)) and `roll_stiffness` (N·mm/rad: −(T/2)
   d(F_L − F_R)/dφ with T the design track of the wheel centres).
 
+Every metric has an entry in the registry `METRICS` (`Metric`: units, display, default
+figures, and for a per-corner derivative metric the function that computes it from the
+derivatives of the raw metrics): the K&C kernel, the CLI, the demo, `sensitivity` and the
+figures read it, so a new derivative metric is added here (and tested) only.
+
 `compliance_matrix` (force events, per corner): the 6×6 derivative of the wheel centre's
 displacement (mm) and rotation (rad, global rotation vector) with respect to a force (N) and
 moment (N·mm) at the wheel-centre load point, global components, rows and columns
 (x, y, z, rx, ry, rz).
 """
 
+import dataclasses
 import math
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -79,63 +87,169 @@ from .corner import ResolvedCorner
 
 _DEG = 180.0 / math.pi
 
-METRICS = {
-    # name: (internal unit, display unit, display scale, description)
-    "toe": ("rad", "deg", _DEG, "toe angle (toe-in +)"),
-    "steer": ("rad", "deg", _DEG, "steer angle (left turn +)"),
-    "camber": ("rad", "deg", _DEG, "camber angle (top outboard +)"),
-    "caster": ("rad", "deg", _DEG, "caster angle (top rearward +)"),
-    "kingpin_inclination": ("rad", "deg", _DEG, "kingpin inclination (top inboard +)"),
-    "scrub_radius": ("mm", "mm", 1.0, "scrub radius (axis meets ground inboard +)"),
-    "mechanical_trail": ("mm", "mm", 1.0, "mechanical trail (axis meets ground ahead +)"),
-    "wheel_centre_x": ("mm", "mm", 1.0, "wheel centre x (model frame)"),
-    "wheel_centre_y": ("mm", "mm", 1.0, "wheel centre y (model frame)"),
-    "wheel_centre_z": ("mm", "mm", 1.0, "wheel centre z (model frame)"),
-    "wheel_travel": ("mm", "mm", 1.0, "wheel travel (bump +)"),
-    "contact_patch_x": ("mm", "mm", 1.0, "contact point x (model frame)"),
-    "contact_patch_y": ("mm", "mm", 1.0, "contact point y (model frame)"),
-    "contact_patch_z": ("mm", "mm", 1.0, "contact point z (model frame)"),
-    "spin_axis_x": ("-", "-", 1.0, "spin axis x (outboard unit vector)"),
-    "spin_axis_y": ("-", "-", 1.0, "spin axis y (outboard unit vector)"),
-    "spin_axis_z": ("-", "-", 1.0, "spin axis z (outboard unit vector)"),
-    "half_track_change": ("mm", "mm", 1.0, "half-track change (outboard +)"),
-    "wheelbase_change": ("mm", "mm", 1.0, "wheel base change (wheel centre rearward +)"),
-    "vertical_force": ("N", "N", 1.0, "vertical wheel load (up +)"),
-    "lateral_force": ("N", "N", 1.0, "lateral force (inboard +)"),
-    "longitudinal_force": ("N", "N", 1.0, "longitudinal force (rearward/braking +)"),
-    "aligning_torque": ("N·mm", "N·m", 1e-3, "aligning torque (toe-out +)"),
-    "bump_steer": ("rad/mm", "deg/m", _DEG * 1e3, "bump steer (toe per travel)"),
-    "bump_camber": ("rad/mm", "deg/m", _DEG * 1e3, "bump camber (camber per travel)"),
-    "wheel_rate": ("N/mm", "N/mm", 1.0, "wheel rate"),
-    "roll_centre_height": ("mm", "mm", 1.0, "kinematic roll centre height above ground"),
-    "contact_recession_rate": ("mm/mm", "mm/mm", 1.0, "contact point rearward per travel"),
-    "wheel_centre_recession_rate": ("mm/mm", "mm/mm", 1.0, "wheel centre rearward per travel"),
-    "lateral_compliance_steer": ("rad/N", "deg/kN", _DEG * 1e3, "lateral force compliance steer"),
-    "lateral_compliance_camber": ("rad/N", "deg/kN", _DEG * 1e3,
-                                  "lateral force compliance camber"),
-    "longitudinal_compliance_steer": ("rad/N", "deg/kN", _DEG * 1e3,
-                                      "longitudinal (braking) force compliance steer"),
-    "longitudinal_compliance_camber": ("rad/N", "deg/kN", _DEG * 1e3,
-                                       "longitudinal (braking) force compliance camber"),
-    "aligning_torque_compliance_steer": ("rad/(N·mm)", "deg/(kN·m)", _DEG * 1e6,
-                                         "aligning torque compliance steer"),
-    "aligning_torque_compliance_camber": ("rad/(N·mm)", "deg/(kN·m)", _DEG * 1e6,
-                                          "aligning torque compliance camber"),
-    "steer_gain": ("rad/mm", "deg/mm", _DEG, "steer per rack travel"),
-    "camber_steer_gain": ("rad/mm", "deg/mm", _DEG, "camber per rack travel"),
-    "roll_angle": ("rad", "deg", _DEG, "body roll angle (right side down +)"),
-    "roll_stiffness": ("N·mm/rad", "N·m/deg", 1e-3 / _DEG, "roll stiffness"),
-}
-"""Every metric: (internal unit, display unit, display = internal × scale, description)."""
+EVENTS = ("parallel_travel", "opposite_travel", "vertical_force", "lateral_force",
+          "longitudinal_force", "aligning_torque", "steering", "load_table")
+"""The K&C events (`KCEvent.name`), for the metrics' default figures."""
+_TRAVEL = ("parallel_travel", "opposite_travel")
+_FORCES = ("lateral_force", "longitudinal_force", "aligning_torque", "load_table")
 
-DERIVATIVE_METRICS = (
-    "bump_steer", "bump_camber", "wheel_rate", "roll_centre_height", "contact_recession_rate",
-    "wheel_centre_recession_rate", "lateral_compliance_steer", "lateral_compliance_camber",
-    "longitudinal_compliance_steer", "longitudinal_compliance_camber",
-    "aligning_torque_compliance_steer", "aligning_torque_compliance_camber", "steer_gain",
-    "camber_steer_gain", "roll_stiffness",
-)
+
+class Derivatives(NamedTuple):
+    """What a derivative metric is computed from, for one corner and one case: `jac` the
+    derivatives (n_u,) of every raw metric with respect to the rig inputs (see
+    `events._basis`: 0 the primary input, 1–3 lateral force, longitudinal force, aligning
+    torque, last the rack), `m` the raw metrics, `rc` the corner, `rig` the rig."""
+
+    jac: dict
+    m: dict
+    rc: ResolvedCorner
+    rig: object
+
+    def d(self, key: str, u: int):
+        """Derivative of this corner's raw metric `key` with respect to input `u`."""
+        return self.jac[self.rc.prefix + key][u]
+
+    def per_travel(self, key: str):
+        """d key / d wheel travel along the primary input."""
+        return self.d(key, 0) / self.d("wheel_travel", 0)
+
+    def path(self, point: str):
+        """d(point)/d(primary input) of `contact_patch` or `wheel_centre`, (3,)."""
+        return jnp.stack([self.d(f"{point}_{a}", 0) for a in "xyz"])
+
+
+@dataclasses.dataclass(frozen=True)
+class Metric:
+    """One K&C metric: units, display, and (derivative metrics) how it is computed.
+
+    **Fields:** `unit` (internal), `display_unit`, `scale` (display = internal × scale),
+    `description`; `derive(Derivatives) -> value | None` for a per-corner derivative metric
+    (None where the rig does not have it); `derivative` (computed from derivatives through
+    the equilibrium); `plots` the events (`EVENTS`) whose default figures show it;
+    `sensitivity` shown by default by `diffsusp sensitivity`; `summary` in the demo's table;
+    `per_roll` a derivative with respect to the body roll angle (an axle in opposite travel:
+    left out of parallel travel, where the roll angle does not move).
+    Unpacks as the tuple (unit, display unit, scale, description).
+    """
+
+    unit: str
+    display_unit: str
+    scale: float
+    description: str
+    derive: Callable[[Derivatives], object] | None = None
+    derivative: bool = False
+    plots: tuple[str, ...] = ()
+    sensitivity: bool = False
+    summary: bool = False
+    per_roll: bool = False
+
+    def __post_init__(self):
+        if self.derive is not None:
+            object.__setattr__(self, "derivative", True)
+
+    def __iter__(self):
+        return iter((self.unit, self.display_unit, self.scale, self.description))
+
+    def __getitem__(self, i):
+        return tuple(self)[i]
+
+
+def _gain(key):
+    def gain(at: Derivatives):
+        return at.d(key, at.rig.n_inputs - 1) if at.rig.rack_driver >= 0 else None
+    return gain
+
+
+METRICS: dict[str, Metric] = {
+    "toe": Metric("rad", "deg", _DEG, "toe angle (toe-in +)",
+                  plots=(*_TRAVEL, "vertical_force"), sensitivity=True, summary=True),
+    "steer": Metric("rad", "deg", _DEG, "steer angle (left turn +)",
+                    plots=(*_FORCES, "steering")),
+    "camber": Metric("rad", "deg", _DEG, "camber angle (top outboard +)", plots=EVENTS,
+                     sensitivity=True, summary=True),
+    "caster": Metric("rad", "deg", _DEG, "caster angle (top rearward +)"),
+    "kingpin_inclination": Metric("rad", "deg", _DEG, "kingpin inclination (top inboard +)"),
+    "scrub_radius": Metric("mm", "mm", 1.0, "scrub radius (axis meets ground inboard +)"),
+    "mechanical_trail": Metric("mm", "mm", 1.0, "mechanical trail (axis meets ground ahead +)",
+                               plots=("steering",)),
+    "wheel_centre_x": Metric("mm", "mm", 1.0, "wheel centre x (model frame)"),
+    "wheel_centre_y": Metric("mm", "mm", 1.0, "wheel centre y (model frame)"),
+    "wheel_centre_z": Metric("mm", "mm", 1.0, "wheel centre z (model frame)"),
+    "wheel_travel": Metric("mm", "mm", 1.0, "wheel travel (bump +)",
+                           plots=("vertical_force", *_FORCES)),
+    "contact_patch_x": Metric("mm", "mm", 1.0, "contact point x (model frame)"),
+    "contact_patch_y": Metric("mm", "mm", 1.0, "contact point y (model frame)"),
+    "contact_patch_z": Metric("mm", "mm", 1.0, "contact point z (model frame)"),
+    "spin_axis_x": Metric("-", "-", 1.0, "spin axis x (outboard unit vector)"),
+    "spin_axis_y": Metric("-", "-", 1.0, "spin axis y (outboard unit vector)"),
+    "spin_axis_z": Metric("-", "-", 1.0, "spin axis z (outboard unit vector)"),
+    "half_track_change": Metric("mm", "mm", 1.0, "half-track change (outboard +)",
+                                plots=_TRAVEL, sensitivity=True, summary=True),
+    "wheelbase_change": Metric("mm", "mm", 1.0, "wheel base change (wheel centre rearward +)"),
+    "vertical_force": Metric("N", "N", 1.0, "vertical wheel load (up +)"),
+    "lateral_force": Metric("N", "N", 1.0, "lateral force (inboard +)"),
+    "longitudinal_force": Metric("N", "N", 1.0, "longitudinal force (rearward/braking +)"),
+    "aligning_torque": Metric("N·mm", "N·m", 1e-3, "aligning torque (toe-out +)"),
+    "bump_steer": Metric("rad/mm", "deg/m", _DEG * 1e3, "bump steer (toe per travel)",
+                         derive=lambda at: at.per_travel("toe"), plots=EVENTS,
+                         sensitivity=True, summary=True),
+    "bump_camber": Metric("rad/mm", "deg/m", _DEG * 1e3, "bump camber (camber per travel)",
+                          derive=lambda at: at.per_travel("camber"), plots=EVENTS,
+                          sensitivity=True, summary=True),
+    "wheel_rate": Metric("N/mm", "N/mm", 1.0, "wheel rate",
+                         derive=lambda at: at.per_travel("vertical_force"), plots=EVENTS,
+                         sensitivity=True, summary=True),
+    "roll_centre_height": Metric(
+        "mm", "mm", 1.0, "kinematic roll centre height above ground",
+        derive=lambda at: at.m[at.rc.prefix + "_lateral_position"] * (
+            at.path("contact_patch") @ jnp.asarray(at.rc.outboard)) / (
+            at.path("contact_patch") @ jnp.asarray(at.rc.up)), summary=True),
+    "contact_recession_rate": Metric(
+        "mm/mm", "mm/mm", 1.0, "contact point rearward per travel",
+        derive=lambda at: (at.path("contact_patch") @ jnp.asarray(at.rc.rearward))
+        / at.d("wheel_travel", 0)),
+    "wheel_centre_recession_rate": Metric(
+        "mm/mm", "mm/mm", 1.0, "wheel centre rearward per travel",
+        derive=lambda at: (at.path("wheel_centre") @ jnp.asarray(at.rc.rearward))
+        / at.d("wheel_travel", 0)),
+    **{f"{what}_compliance_{angle}": Metric(
+        unit, shown, scale, f"{text} compliance {'steer' if angle == 'steer' else 'camber'}",
+        derive=lambda at, u=u, key=("toe" if angle == "steer" else "camber"): at.d(key, u),
+        sensitivity=(what, angle) == ("lateral", "steer"))
+       for u, what, unit, shown, scale, text in (
+           (1, "lateral", "rad/N", "deg/kN", _DEG * 1e3, "lateral force"),
+           (2, "longitudinal", "rad/N", "deg/kN", _DEG * 1e3, "longitudinal (braking) force"),
+           (3, "aligning_torque", "rad/(N·mm)", "deg/(kN·m)", _DEG * 1e6, "aligning torque"))
+       for angle in ("steer", "camber")},
+    "steer_gain": Metric("rad/mm", "deg/mm", _DEG, "steer per rack travel",
+                         derive=_gain("steer"), sensitivity=True),
+    "camber_steer_gain": Metric("rad/mm", "deg/mm", _DEG, "camber per rack travel",
+                                derive=_gain("camber")),
+    "roll_angle": Metric("rad", "deg", _DEG, "body roll angle (right side down +)"),
+    "roll_stiffness": Metric("N·mm/rad", "N·m/deg", 1e-3 / _DEG, "roll stiffness",
+                             derivative=True, per_roll=True),
+}
+"""The metric registry: every metric the K&C kernel returns, with its units and display
+(`Metric`). A per-corner derivative metric is added here only: its `derive` function is what
+the kernel evaluates (`events._derived`), and the CLI, the demo, `sensitivity` and the figures
+read its entry."""
+
+DERIVATIVE_METRICS = tuple(name for name, m in METRICS.items() if m.derivative)
 """Metrics computed from derivatives through the equilibrium."""
+
+
+def default_plots(event: str, available) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(metrics, derivative metrics) the default figures of `event` (a `KCEvent.name`) show,
+    among the metric names `available` (with or without a corner prefix 'left/')."""
+    have = {k.rsplit("/", 1)[-1] for k in available}
+    chosen = [n for n, m in METRICS.items() if event in m.plots and n in have]
+    return (tuple(n for n in chosen if not METRICS[n].derivative),
+            tuple(n for n in chosen if METRICS[n].derivative))
+
+
+def flagged(flag: str) -> tuple[str, ...]:
+    """The metrics whose `flag` ('sensitivity', 'summary') is set, in registry order."""
+    return tuple(n for n, m in METRICS.items() if getattr(m, flag))
 
 
 def display(name: str, value):

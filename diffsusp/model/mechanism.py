@@ -54,7 +54,8 @@ class Markers(eqx.Module):
     """
 
     position: Float[Array, "m 3"] = eqx.field(metadata={"unit": "mm"})
-    orientation: Float[Array, "m 3 3"] = eqx.field(metadata={"unit": "-"})
+    orientation: Float[Array, "m 3 3"] = eqx.field(
+        metadata={"unit": "1 (rotation matrix, columns = axes)"})
     part: tuple[int, ...] = eqx.field(static=True)
     names: tuple[str, ...] = eqx.field(static=True)
 
@@ -124,8 +125,10 @@ class Bushings(eqx.Module):
     offset_rot: Float[Array, "n 3"] = eqx.field(metadata={"unit": "rad"})
     preload_force: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N"})
     preload_torque: Float[Array, "n 3"] = eqx.field(metadata={"unit": "N·mm"})
-    spline_x: Float[Array, "n 6 k"] = eqx.field(metadata={"unit": "mm or rad"})
-    spline_y: Float[Array, "n 6 k"] = eqx.field(metadata={"unit": "N or N·mm"})
+    spline_x: Float[Array, "n 6 k"] = eqx.field(
+        metadata={"unit": "mm (tx, ty, tz) | rad (rx, ry, rz)"})
+    spline_y: Float[Array, "n 6 k"] = eqx.field(
+        metadata={"unit": "N (tx, ty, tz) | N·mm (rx, ry, rz)"})
     i_marker: tuple[int, ...] = eqx.field(static=True)
     j_marker: tuple[int, ...] = eqx.field(static=True)
     spline_axes: tuple[tuple[bool, ...], ...] = eqx.field(static=True)
@@ -164,8 +167,8 @@ class Springs(eqx.Module):
 
     k: Float[Array, " n"] = eqx.field(metadata={"unit": "N/mm"})
     free_length: Float[Array, " n"] = eqx.field(metadata={"unit": "mm"})
-    table_x: Float[Array, "n k"] = eqx.field(metadata={"unit": "mm"})
-    table_y: Float[Array, "n k"] = eqx.field(metadata={"unit": "N"})
+    table_x: Float[Array, "n k"] = eqx.field(metadata={"unit": "mm (extension)"})
+    table_y: Float[Array, "n k"] = eqx.field(metadata={"unit": "N (tension)"})
     i_marker: tuple[int, ...] = eqx.field(static=True)
     j_marker: tuple[int, ...] = eqx.field(static=True)
     tabulated: tuple[bool, ...] = eqx.field(static=True)
@@ -207,7 +210,7 @@ class Drivers(eqx.Module):
     **Fields:** `direction` (n, 3) unit vectors in the global frame.
     """
 
-    direction: Float[Array, "n 3"] = eqx.field(metadata={"unit": "-"})
+    direction: Float[Array, "n 3"] = eqx.field(metadata={"unit": "1 (unit vector)"})
     marker: tuple[int, ...] = eqx.field(static=True)
     names: tuple[str, ...] = eqx.field(static=True)
 
@@ -395,3 +398,13 @@ def field_unit(tree, path: tuple[str, ...]) -> str:
         if field.name == path[-1]:
             return field.metadata.get("unit", "-")
     raise KeyError(f"{type(node).__name__} has no field {path[-1]!r}")
+
+
+PARAMETER_UNITS = {
+    f"{group}.{field.name}": field.metadata["unit"]
+    for group, cls in (("markers", Markers), ("bushings", Bushings), ("springs", Springs),
+                       ("stops", Stops), ("drivers", Drivers))
+    for field in dataclasses.fields(cls) if "unit" in field.metadata
+}
+"""Unit of every float leaf of a `Mechanism` (the parameters one can differentiate and fit),
+from the fields' `unit` metadata."""

@@ -1,0 +1,160 @@
+"""K&C events by name: what the `diffsusp kc` and `diffsusp sensitivity` verbs call, so that the
+command line only parses and formats (DESIGN.md "Architecture": a thin edge).
+
+`run_event(mech, 'opposite-travel', travel=...)` dispatches to the event functions of
+`diffsusp.kc` and builds what an event needs that the model may not have: the axle (the model
+and its mirror image) for opposite travel, a rack at the tie rod for steering. Ranges are arrays
+or the command line's `start:stop:count` text (`parse_range`). Units: mm, N, N·mm (the aligning
+torque is given in N·m, as on the command line).
+"""
+
+import dataclasses
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.combine import combine, component_names
+from ..model.mirror import mirror
+from .corner import Corner, corners_of, default_corner
+from .events import (
+    TABLES,
+    aligning_torque,
+    braking,
+    lateral_force,
+    load_table,
+    opposite_travel,
+    parallel_travel,
+    steering,
+    traction,
+    vertical_force,
+)
+from .rig import with_rack
+
+EVENTS = {
+    "parallel-travel": "wheel travel (mm), --travel",
+    "opposite-travel": "wheel travel (mm), --travel; axle = model + its mirror image",
+    "vertical-force": "vertical force (N), --fz",
+    "lateral-force": "lateral force (N, inboard +), --force, at --fz",
+    "braking": "braking force (N) at the contact patch, --force, at --fz",
+    "traction": "traction force (N) at the wheel centre, --force, at --fz",
+    "aligning-torque": "aligning torque (N·m, toe-out +), --torque, at --fz",
+    "steering": "rack travel (mm, left +), --rack",
+    "table-5-1": "the 13 cases of the thesis's Table 5-1",
+    "table-4-4": "the 17 cases of the thesis's Table 4.4",
+}
+"""The events `run_event` knows, with their input."""
+
+
+def parse_range(text, what: str) -> np.ndarray:
+    """`start:stop:count` → numpy.linspace(start, stop, count); a single number → [number];
+    an array is returned as it is. `what` names the option in the error."""
+    if not isinstance(text, str):
+        return np.asarray(text, dtype=float).reshape(-1)
+    parts = text.split(":")
+    try:
+        if len(parts) == 1:
+            return np.array([float(parts[0])])
+        if len(parts) == 3:
+            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+            if count < 1:
+                raise ValueError
+            return np.linspace(start, stop, count)
+    except ValueError:
+        pass
+    raise InputError(f"--{what} '{text}' is not a range: give start:stop:count (e.g. "
+                     "-80:80:161) or one number.")
+
+
+def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None):
+    """The model's registered corner with some of its settings replaced (None: the model's
+    own corner, unchanged). `kingpin`: two marker names, a tuple or the text 'upper,lower'."""
+    if frame is None and loaded_radius is None and kingpin is None and side is None:
+        return None  # the model's registered corner
+    try:
+        base = default_corner(mech)
+    except InputError:
+        base = Corner()
+    changes = {}
+    if frame is not None:
+        changes["frame"] = frame
+    if loaded_radius is not None:
+        changes["loaded_radius"] = loaded_radius
+    if side is not None:
+        changes["side"] = side
+    if kingpin is not None:
+        names = kingpin.split(",") if isinstance(kingpin, str) else list(kingpin)
+        if len(names) != 2:
+            raise InputError("--kingpin must be two marker names 'upper,lower'.")
+        changes["kingpin"] = tuple(n.strip() for n in names)
+    return dataclasses.replace(base, **changes)
+
+
+def mirrored_corner(corner: Corner) -> Corner:
+    """The same corner on the other side (for the mirror image of a half axle)."""
+    side = {"left": "right", "right": "left"}.get(corner.side, corner.side)
+    return dataclasses.replace(corner, side=side)
+
+
+def default_fz_range(mech, corner=None) -> str:
+    """0.5–1.5× the corner's design load, 21 cases (N)."""
+    fz0 = (corner or corners_of(mech)[""]).design_load
+    return f"{0.5 * fz0}:{1.5 * fz0}:21"
+
+
+def run_event(mech, event: str, corner=None, *, travel="-80:80:161", fz=None,
+              force="-4000:4000:17", torque="-200:200:17", rack="-30:30:61"):
+    """Run the K&C event `event` (a key of `EVENTS`) on `mech`; returns its `KCEvent`.
+
+    **Arguments:** `corner` (None: the model's registered corner); the ranges of the event's
+    input (an array, or `start:stop:count` text): `travel` (mm), `fz` (N: one value for the
+    force events, default the design load; a range for vertical-force, default
+    `default_fz_range`), `force` (N), `torque` (N·m), `rack` (mm). Only the event's own input
+    is read.
+
+    **Raises:** `InputError` for an unknown event or a bad range.
+    """
+    if event not in EVENTS:
+        raise InputError(f"unknown event '{event}'; known events: {', '.join(EVENTS)}.")
+    fz_value = None
+    if fz is not None and event != "vertical-force":
+        values = parse_range(fz, "fz")
+        if values.size != 1:
+            raise InputError(f"--fz must be one value (N) for the {event} event.")
+        fz_value = float(values[0])
+    if event == "parallel-travel":
+        return parallel_travel(mech, parse_range(travel, "travel"), corner=corner)
+    if event == "opposite-travel":
+        axle = mech if component_names(mech) else combine({"left": mech, "right": mirror(mech)})
+        corners = None if corner is None else {"left": corner, "right": mirrored_corner(corner)}
+        return opposite_travel(axle, parse_range(travel, "travel"), corner=corners)
+    if event == "vertical-force":
+        if fz is None:
+            fz = default_fz_range(mech, corner)
+        return vertical_force(mech, parse_range(fz, "fz"), corner=corner)
+    forces = {"lateral-force": lateral_force, "braking": braking, "traction": traction}
+    if event in forces:
+        return forces[event](mech, parse_range(force, "force"), fz=fz_value, corner=corner)
+    if event == "aligning-torque":
+        return aligning_torque(mech, 1e3 * parse_range(torque, "torque"), fz=fz_value,
+                               corner=corner)
+    if event == "steering":
+        frame = (corner or corners_of(mech)[""]).frame
+        return steering(with_rack(mech, frame=frame), parse_range(rack, "rack"), corner=corner)
+    table = TABLES["table_5_1" if event == "table-5-1" else "table_4_4"]
+    return load_table(mech, table, corner=corner)
+
+
+def reference_case(ev) -> int:
+    """The event's reference case: the design load (vertical-force), the first case (load
+    tables), else zero input."""
+    if ev.x_name == "vertical_force":
+        target = ev.rig.corners[0].design_load
+    elif ev.x_name == "case":
+        return 0
+    else:
+        target = 0.0
+    return int(np.argmin(np.abs(np.asarray(ev.x) - target)))
+
+
+__all__ = ["EVENTS", "corner_with", "default_fz_range", "mirrored_corner", "parse_range",
+           "reference_case", "run_event"]
