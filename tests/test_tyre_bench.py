@@ -176,3 +176,23 @@ def test_identify_structure_search_and_flags(campaign):
     bad = poly.PolynomialModel.create("Fy", {"delta": 1}, values={"b_Fy_delta_1_1": 3e4})
     margin = np.asarray(relaxation.stability_margin(bad, cond.inputs))
     assert np.all(margin > 0)
+
+
+def test_batched_elimination_matches_lsq_eliminate():
+    """`bench.eliminate_r` (traced, vmappable: the benchmark's batched structure search) makes
+    the same removals as `lsq.eliminate` with the σ % rule."""
+    import jax
+
+    from diffsusp import lsq
+
+    n, p = 60, 6
+    W = RNG.normal(size=(2, n, p))
+    x = np.array([2.0, -1.0, 0.0, 0.5, 0.0, 0.01])
+    Y = W @ x + 0.05 * RNG.normal(size=(2, n))
+    R = np.stack([np.asarray(lsq.qr_r(np.concatenate([W[k], -Y[k][:, None]], 1)))
+                  for k in range(2)])
+    fixed, xb, _ = jax.vmap(lambda r: bench.eliminate_r(r, n, sigma_pct_threshold=10.0))(R)
+    for k in range(2):
+        fit, _ = lsq.eliminate(W[k], Y[k], sigma_pct_threshold=10.0, ic_threshold=0.0)
+        np.testing.assert_array_equal(np.asarray(fixed[k]), fit.fixed)
+        np.testing.assert_allclose(np.asarray(xb[k]), fit.x, rtol=1e-10, atol=1e-12)

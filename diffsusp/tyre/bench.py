@@ -816,3 +816,49 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
     return {"names": names, "x": np.asarray(x), "sigma": np.asarray(sigma),
             "compliance": np.asarray(c), "sigma_step2": np.asarray(s2),
             "sigma_joint": np.asarray(sj)}
+
+
+# --------------------------------------------------------------------------------------------
+# Batched structure search (many tyres in one program)
+
+
+def eliminate_r(R, n, *, sigma_pct_threshold: float = 10.0, max_steps: int | None = None):
+    """The σ % elimination loop of `identify_output` (without the behaviour rules), traced:
+    from the augmented R-factor of one data set (`lsq.qr_r` of [W, −y]), repeatedly hold at 0
+    the kept coefficient whose combination has the largest σ % above `sigma_pct_threshold`,
+    refitting from R alone (spec: guaranteed_least_squares §3.9), until none is left.
+    `jax.vmap` it over stacked R-factors (4 tyres × 3 pressures: one program).
+
+    **Returns:** (fixed mask, x, σ) of the final fit (x = 0 where fixed or not kept)."""
+    from ..lsq import core
+
+    p = R.shape[-1] - 1
+    dtype = R.dtype
+    thr = jnp.asarray(0.0, dtype)
+    prior, prior_sigma, lower, upper, _ = core.fill_defaults(p, dtype, "basic", None, None,
+                                                             None, None, None)
+    n = jnp.asarray(n, dtype)
+    ident = core._identifiability(R, n, thr, True)
+
+    def solve(fixed):
+        return core._solve_r(R, n, prior, prior_sigma, lower, upper, fixed, thr, ident,
+                             method="basic", pivot=True, dof="n-rank")
+
+    def worst(sol, fixed):
+        rel = 100.0 * jnp.abs(sol.relation_sigma / sol.relation_values)
+        bad = sol.kept & ~fixed & (jnp.nan_to_num(rel) > sigma_pct_threshold)
+        score = jnp.where(bad, jnp.nan_to_num(rel), -jnp.inf)
+        return jnp.any(bad), jnp.argmax(score)
+
+    def cond(state):
+        fixed, go, k = state
+        return go & (k < (max_steps if max_steps is not None else p))
+
+    def body(state):
+        fixed, _, k = state
+        any_bad, i = worst(solve(fixed), fixed)
+        return jnp.where(any_bad, fixed.at[i].set(True), fixed), any_bad, k + 1
+
+    fixed, _, _ = jax.lax.while_loop(cond, body, (jnp.zeros(p, bool), jnp.asarray(True), 0))
+    sol = solve(fixed)
+    return fixed, sol.x, sol.sigma
