@@ -60,8 +60,10 @@ input (the travel driver, or the vertical load: d m/dz = (∂m/∂F_z)/(∂z/∂
 - models with a steering rack (`with_rack`; any event): `steer_gain` (rad/mm: steer per mm of
   rack travel), `camber_steer_gain`;
 - axles in opposite travel: `roll_angle` (rad, ISO 8855: right side down positive, from the
-  wheel-centre heights: atan2(z_R − z_L, track)) and `roll_stiffness` (N·mm/rad: −(T/2)
-  d(F_L − F_R)/dφ with T the design track of the wheel centres).
+  wheel-centre heights: atan2(z_R − z_L, track)), `roll_stiffness` (N·mm/rad: −(T/2)
+  d(F_L − F_R)/dφ with T the design track of the wheel centres) and, per corner, the
+  roll-steer coefficient `roll_steer` = d(steer)/dφ (rad/rad: steer with the vehicle sign,
+  left turn positive, per roll angle φ, right side down positive).
 
 Every metric has an entry in the registry `METRICS` (`Metric`: units, display, default
 figures, and for a per-corner derivative metric the function that computes it from the
@@ -228,6 +230,11 @@ METRICS: dict[str, Metric] = {
     "roll_angle": Metric("rad", "deg", _DEG, "body roll angle (right side down +)"),
     "roll_stiffness": Metric("N·mm/rad", "N·m/deg", 1e-3 / _DEG, "roll stiffness",
                              derivative=True, per_roll=True),
+    "roll_steer": Metric(
+        "rad/rad", "deg/deg", 1.0, "roll steer (steer per body roll, left turn +)",
+        derive=lambda at: (at.d("steer", 0) / at.jac["roll_angle"][0]
+                           if "roll_angle" in at.jac else None),
+        plots=("opposite_travel",), per_roll=True),
 }
 """The metric registry: every metric the K&C kernel returns, with its units and display
 (`Metric`). A per-corner derivative metric is added here only: its `derive` function is what
