@@ -11,10 +11,10 @@ that moves most in it.
 
 import dataclasses
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._compile import filter_jit
 from ..errors import ModelError
 from .mechanism import JOINT_ROWS, Mechanism
 
@@ -55,7 +55,7 @@ def _row_names(mech: Mechanism) -> list[str]:
     return names
 
 
-@eqx.filter_jit
+@filter_jit
 def _at_design(mech: Mechanism):
     from ..statics.kernel import assemble, constraint_values, to_internal
 
