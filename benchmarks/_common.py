@@ -10,6 +10,8 @@ from diffsusp._compile import set_xla_flags
 set_xla_flags(os.environ)  # the CLI's compiler flags, before JAX starts its backend
 import jax  # noqa: E402
 
+jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)  # as the CLI: one per core
+
 RESULTS = pathlib.Path(__file__).parent / "results"
 
 

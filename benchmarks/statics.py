@@ -44,18 +44,30 @@ def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
 
 def bench_model(name, mech, rng, sizes, baseline_cases):
     rows = []
+    n_devices = len(jax.local_devices())
     for n in sizes:
         loads = mech.loads(forces={"contact_patch": envelope(n, rng)})
-        t0 = time.perf_counter()
-        sol = ds.solve_statics(mech, loads, throw=False)
-        jax.block_until_ready(sol.q)
-        first = time.perf_counter() - t0
-        dt, cpu, sol = timed_cpu(lambda loads=loads: ds.solve_statics(mech, loads, throw=False),
-                                 repeats=3 if n >= 1000 else 10)
-        rows.append(dict(model=name, cases=n, seconds=dt, per_second=n / dt, cpu_seconds=cpu,
-                         per_cpu_second=n / cpu,
-                         compile_and_first=first, mean_iterations=float(np.mean(sol.iterations)),
-                         failed=int(np.sum(np.asarray(sol.status) != 0))))
+        # Newton + checks on one device; for large batches also the Newton alone (no flags),
+        # and split over every local device.
+        variants = [("one device", dict(devices=1))]
+        if n >= 1000:
+            variants.append(("Newton alone", dict(devices=1, checks=False)))
+            if n_devices > 1:
+                variants += [(f"{n_devices} devices", dict(devices=n_devices)),
+                             (f"{n_devices} devices, Newton alone",
+                              dict(devices=n_devices, checks=False))]
+        for label, options in variants:
+            t0 = time.perf_counter()
+            sol = ds.solve_statics(mech, loads, throw=False, **options)
+            jax.block_until_ready(sol.q)
+            first = time.perf_counter() - t0
+            dt, cpu, sol = timed_cpu(
+                lambda loads=loads, o=options: ds.solve_statics(mech, loads, throw=False, **o),
+                repeats=3 if n >= 1000 else 10)
+            rows.append(dict(model=name, cases=n, variant=label, seconds=dt, per_second=n / dt,
+                             cpu_seconds=cpu, per_cpu_second=n / cpu, compile_and_first=first,
+                             mean_iterations=float(np.mean(sol.iterations)),
+                             failed=int(np.sum(np.asarray(sol.status) != 0))))
     one = mech.loads(forces={"contact_patch": jnp.array([0.0, 0.0, 4500.0])})
     latency, _ = timed(lambda: ds.solve_statics(mech, one), repeats=20)
     # Baseline: the NumPy/SciPy Newton with a finite-difference Jacobian, same cases.
@@ -113,20 +125,26 @@ def jacobian_cost(mech):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="small batches only (CI smoke)")
+    parser.add_argument("--throughput", action="store_true",
+                        help="only the 1 000-case batches and the NumPy baseline")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     sizes = (1, 13, 100) if args.quick else (1, 13, 100, 1000, 10000)
+    if args.throughput:
+        sizes = (1000,)
     results = dict(rows=[], models=[], programs=[])
     for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
                        ("double_wishbone", double_wishbone())):
-        results["programs"].append(program_cost(name, mech, 13, rng))
+        if not args.throughput:
+            results["programs"].append(program_cost(name, mech, 13, rng))
     for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
                        ("double_wishbone", double_wishbone())):
         rows, info = bench_model(name, mech, rng, sizes, baseline_cases=3 if args.quick else 13)
         results["rows"] += rows
         results["models"].append(info)
-    results["jacobian_13_cases"] = jacobian_cost(pseudo_mcpherson())
-    if not args.quick:
+    if not args.throughput:
+        results["jacobian_13_cases"] = jacobian_cost(pseudo_mcpherson())
+    if not (args.quick or args.throughput):
         mech = pseudo_mcpherson()
         loads = mech.loads(forces={"contact_patch": envelope(100_000, rng)})
         t0 = time.perf_counter()
@@ -142,10 +160,10 @@ def main():
               f"equations, {p['stablehlo_mb']:.2f} MB StableHLO; trace {p['trace']:.2f} s, "
               f"lower {p['lower']:.2f} s, compile {p['compile']:.2f} s, run "
               f"{p['run'] * 1e3:.2f} ms")
-    print(f"{'model':18s} {'cases':>7s} {'solves/s':>10s} {'per CPU s':>10s} {'iters':>6s} "
-          f"{'failed':>6s} {'compile+1st s':>13s}")
+    print(f"{'model':18s} {'cases':>7s} {'variant':>28s} {'solves/s':>10s} {'per CPU s':>10s} "
+          f"{'iters':>6s} {'failed':>6s} {'compile+1st s':>13s}")
     for r in results["rows"]:
-        print(f"{r['model']:18s} {r['cases']:7d} {r['per_second']:10.0f} "
+        print(f"{r['model']:18s} {r['cases']:7d} {r['variant']:>28s} {r['per_second']:10.0f} "
               f"{r['per_cpu_second']:10.0f} "
               f"{r['mean_iterations']:6.2f} {r['failed']:6d} {r['compile_and_first']:13.2f}")
     for info in results["models"]:
@@ -154,14 +172,15 @@ def main():
               f"NumPy/SciPy baseline {info['baseline_per_solve'] * 1e3:.1f} ms per solve; "
               f"ratio (best batched throughput / baseline) "
               f"{best * info['baseline_per_solve']:.0f}x")
-    jac = results["jacobian_13_cases"]
-    print(f"Jacobian of all marker positions w.r.t. {jac['n_params']} stiffnesses, 13 cases: "
-          f"{jac['seconds'] * 1e3:.1f} ms (compile+first {jac['compile_and_first']:.1f} s)")
+    if "jacobian_13_cases" in results:
+        jac = results["jacobian_13_cases"]
+        print(f"Jacobian of all marker positions w.r.t. {jac['n_params']} stiffnesses, 13 cases: "
+              f"{jac['seconds'] * 1e3:.1f} ms (compile+first {jac['compile_and_first']:.1f} s)")
     if "batch_100k" in results:
         print(f"100 000 cases (chunks of 4096): {results['batch_100k']['seconds']:.1f} s")
     print(f"load average during the run (1, 5, 15 min): {results['load_average']}")
     print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
-    save_results("statics", results, args.quick)
+    save_results("statics_throughput" if args.throughput else "statics", results, args.quick)
 
 
 if __name__ == "__main__":
