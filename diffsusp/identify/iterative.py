@@ -33,7 +33,7 @@ from ..errors import InputError
 from ..measure.data import Measurement, as_deformations
 from ..measure.measurements import Measurements
 from ..model.mechanism import Loads, Mechanism
-from ..statics import bushing_states, solve_statics
+from ..statics import Status, bushing_states, solve_statics
 from .params import Params, selected_entries
 from .report import IdentificationReport, MeasurementResiduals
 
@@ -315,12 +315,12 @@ def iterative(
         current = _with_stiffness(mech, index, k)
         sol = solve_statics(current, loads, q0=q, throw=False)
         status = np.asarray(sol.status)
-        if np.all(status != 0):
+        if np.all(status != Status.CONVERGED):
             raise InputError(f"iteration {it}: no load case converged with the stiffnesses "
                              f"{k.tolist()}; start from values closer to the expected ones.")
-        q = jnp.where((status == 0)[:, None], sol.q, sol.q if q is None else q)
+        q = jnp.where((status == Status.CONVERGED)[:, None], sol.q, sol.q if q is None else q)
         _, force = _states(current, q, tuple(int(i) for i in index))
-        ok = status == 0
+        ok = status == Status.CONVERGED
         slope, offset, r, weight = (np.asarray(a) for a in _regress(jnp.asarray(delta[ok]),
                                                                     force[ok]))
         accepted = (r > r_min) & resolved & chosen

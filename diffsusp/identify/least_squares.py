@@ -56,7 +56,7 @@ from jaxtyping import Array, Float
 from ..errors import InputError
 from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
-from ..statics import solve_statics
+from ..statics import Status, solve_statics
 from .params import Params
 from .report import IdentificationReport, MeasurementResiduals
 
@@ -146,7 +146,7 @@ def _equilibria_impl(mech, loads, q0, tangents, max_steps: int):
 
 
 def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents):
-    ok = status == 0
+    ok = status == Status.CONVERGED
 
     def rows(m, qq):
         zs, raws = [], []
@@ -262,10 +262,11 @@ _lm_step = eqx.filter_jit(
 def _bookkeep(params, accepted, trial_u, u, new, last, q, status, q0):
     """After an LM step: keep the evaluation of accepted trials, warm starts, physical values."""
     last = new if last is None else _select(accepted, new, last)
-    q0 = _select(accepted, jnp.where((status == 0)[..., None], q, q0), q0)
+    q0 = _select(accepted, jnp.where((status == Status.CONVERGED)[..., None], q, q0), q0)
     to_physical = jax.vmap(params.to_physical)
     loss = 0.5 * jnp.sum(new[0] ** 2, axis=1)
-    return last, q0, to_physical(trial_u), to_physical(u), loss, jnp.sum(status != 0, axis=1)
+    failed = jnp.sum(status != Status.CONVERGED, axis=1)
+    return last, q0, to_physical(trial_u), to_physical(u), loss, failed
 
 
 def _values_of(data: Sequence[Measurement]):
@@ -638,9 +639,9 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
             z, jac, raw, q, status = (a[None] for a in out)
         if k == 0:
             status_np = np.asarray(status)
-            bad = np.flatnonzero(np.any(status_np != 0, axis=1))
+            bad = np.flatnonzero(np.any(status_np != Status.CONVERGED, axis=1))
             if bad.size:
-                cases = np.flatnonzero(status_np[bad[0]] != 0)
+                cases = np.flatnonzero(status_np[bad[0]] != Status.CONVERGED)
                 raise InputError(
                     "the start parameters give no equilibrium in load case(s) "
                     f"{cases.tolist()} (numbered across the measurements' load tables"
@@ -829,9 +830,9 @@ def whitened_residuals(
     u = params.to_internal(jnp.asarray(theta, dtype=float))
     q0 = jnp.zeros((problem.loads.n_cases, mech.n_coordinates))
     z, jac, _, _, status = _evaluate(problem, None, u, q0, False)
-    if np.any(np.asarray(status) != 0):
-        raise InputError(f"no equilibrium in load case(s) "
-                         f"{np.flatnonzero(np.asarray(status) != 0).tolist()} at these "
+    failed = np.flatnonzero(np.asarray(status) != Status.CONVERGED)
+    if failed.size:
+        raise InputError(f"no equilibrium in load case(s) {failed.tolist()} at these "
                          "parameters.")
     n = z.size - len(params)
     return z[:n], jac[:n] / params.derivative(u)[None, :]
@@ -851,9 +852,9 @@ def predict(mech: Mechanism, data: Measurement | Sequence[Measurement],
     tangents = jax.tree.map(lambda a: jnp.zeros((TANGENT_BLOCK, *a.shape), a.dtype), mech)
     q0 = jnp.zeros((loads.n_cases, mech.n_coordinates))
     q, status, _ = _equilibria(mech, loads, q0, tangents, int(inner_max_steps))
-    if np.any(np.asarray(status) != 0):
+    if np.any(np.asarray(status) != Status.CONVERGED):
         raise InputError(f"no equilibrium in load case(s) "
-                         f"{np.flatnonzero(np.asarray(status) != 0).tolist()}.")
+                         f"{np.flatnonzero(np.asarray(status) != Status.CONVERGED).tolist()}.")
     single = tuple(m.select(0) if m.n_sets else m for m in data)
     out = _predict(single, mech, q, slices)
     return {m.name: v for m, v in zip(data, out, strict=True)}

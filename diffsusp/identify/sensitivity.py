@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.mechanism import Loads, Mechanism
-from ..statics import marker_poses, solve_statics
+from ..statics import Status, marker_poses, solve_statics
 from .params import Params
 
 PARAMETER_SETS = {
@@ -312,7 +312,7 @@ def design_experiment(
     chosen = list(start)
     total = infos[chosen].sum(axis=0) if chosen else np.zeros(infos.shape[1:])
     log, sig = [], []
-    ok = status == 0
+    ok = status == Status.CONVERGED
     while len(chosen) < n:
         best, best_score = None, None
         for c in range(len(infos)):
