@@ -121,7 +121,7 @@ def main():
           f"K_y error {100 * np.max(np.abs(K / K_true - 1)):.3f} % max")
 
     # ---- NumPy/SciPy baseline, one set after the other
-    sos_np = np.asarray(sos)
+    sos_np = np.array(sos)  # writable (scipy's sosfilt needs it)
 
     def numpy_one(tb):
         c = {k2: np.array(tb[k2]).reshape(n_seg, m) for k2 in bench.REQUIRED
