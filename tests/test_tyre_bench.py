@@ -197,3 +197,22 @@ def test_batched_elimination_matches_lsq_eliminate():
         fit, _ = lsq.eliminate(W[k], Y[k], sigma_pct_threshold=10.0, ic_threshold=0.0)
         np.testing.assert_array_equal(np.asarray(fixed[k]), fit.fixed)
         np.testing.assert_allclose(np.asarray(xb[k]), fit.x, rtol=1e-10, atol=1e-12)
+
+
+def test_cli_identify_bad_input(tmp_path):
+    from typer.testing import CliRunner
+
+    from diffsusp.cli import app
+    from diffsusp.io.tables import write_table
+
+    t = np.arange(60) / 200.0
+    cols = {"t": t, "segment": np.zeros(60), "steer": np.zeros(60), "camber": np.zeros(60),
+            "speed": np.full(60, 2e4), "omega": np.full(60, 70.0), "FZ": np.full(60, 4e3),
+            "FX": np.zeros(60), "FY": np.zeros(60)}  # no MZ
+    path = tmp_path / "bench.csv"
+    write_table(path, cols)
+    runner = CliRunner()
+    r = runner.invoke(app, ["tyre", "identify", str(path)])
+    assert r.exit_code == 2 and "missing channel(s) MZ" in r.output
+    r = runner.invoke(app, ["tyre", "identify", str(path), "--structure", "cubic"])
+    assert r.exit_code == 2 and "apriori or just-necessary" in r.output
