@@ -375,3 +375,6 @@ def fit_command(
 from .tyre_identify import register as _register_identify  # noqa: E402  (issue 16)
 
 _register_identify(tyre_app)
+
+from .tyre_onboard import register as _register_onboard  # noqa: E402  (issue 17)
+_register_onboard(tyre_app)

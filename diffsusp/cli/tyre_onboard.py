@@ -1,0 +1,98 @@
+"""`diffsusp tyre onboard DATA`: tyre identification from on-board vehicle measurements (spec:
+tyre §5.3–5.6; issue 17 item 5).
+
+DATA is a .npz archive with the channels of `diffsusp.tyre.onboard.CHANNELS` (SI units, as
+`diffsusp.tyre.vehicle.measure` writes them; laser dropouts as NaN). The report has one column
+per grouping and camber choice, as the thesis's Tables 32/33 (value and σ % per coefficient);
+the Correvit delay is estimated and removed unless `--delay` gives it (`--delay 0` and
+`--no-estimate-delay` is the thesis's naive pipeline). `--json` machine-readable, `--figures
+DIR` measured vs model F_y. Exit code 2 for bad input (missing channels, non-finite values
+outside the lasers, a window longer than the record).
+"""
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from .common import EXIT_BAD_INPUT, check_output, cli_errors, console, enable_x64, fail, print_json
+
+
+def _load(path: Path) -> dict:
+    if path.suffix != ".npz":
+        raise fail(f"{path}: the on-board record must be a .npz archive of arrays (channels "
+                   "as diffsusp.tyre.onboard.CHANNELS).", EXIT_BAD_INPUT)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise fail(f"{path}: cannot read the archive ({exc}).", EXIT_BAD_INPUT) from None
+
+
+def register(tyre_app: typer.Typer) -> None:
+    @tyre_app.command("onboard")
+    def onboard_command(
+        data: Annotated[Path, typer.Argument(help="On-board record (.npz, SI channels).")],
+        grouping: Annotated[str, typer.Option(
+            help="Wheel groupings, comma separated: all, front, rear.")] = "all,front,rear",
+        delay: Annotated[float | None, typer.Option(
+            help="Correvit delay to remove [s] (default: estimated).")] = None,
+        estimate_delay: Annotated[bool, typer.Option(
+            help="Estimate the Correvit delay when --delay is not given.")] = True,
+        window: Annotated[str, typer.Option(help="hamming or blackman.")] = "hamming",
+        window_time: Annotated[float, typer.Option(help="Window length T [s].")] = 0.05,
+        json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
+        figures: Annotated[Path | None, typer.Option(
+            help="Folder for measured-vs-model figures.")] = None,
+    ):
+        """Identify the reduced lateral tyre model (4-16…4-18) from on-board measurements."""
+        from diffsusp.tyre import onboard
+
+        check_output(figures, what="figures folder", directory=True)
+        with cli_errors():
+            enable_x64()
+            record = _load(data)
+            groups = tuple(g.strip() for g in grouping.split(",") if g.strip())
+            out = onboard.identify(record, groupings=groups, camber=(True, False),
+                                   delay=delay, estimate_delay=estimate_delay,
+                                   options=onboard.Options(window=window,
+                                                           window_time=window_time))
+        if figures is not None:
+            _figures(out, figures)
+        if json_out:
+            print_json({"delay_s": out["delay"],
+                        "reports": [r.to_dict() for r in out["reports"]]})
+            return
+        con = console(markup=False)
+        con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} ms; "
+                  f"instants excluded (laser dropouts): {out['excluded']}")
+        cols = [f"{r.grouping}{'' if r.camber else ', γ = 0'}" for r in out["reports"]]
+        width = max(len(c) for c in cols) + 2
+        con.print("parameter".ljust(14) + "".join(c.rjust(max(width, 22)) for c in cols))
+        for i, name in enumerate(onboard.NAMES):
+            cells = []
+            for r in out["reports"]:
+                x, s = r.fit.x[i], r.fit.sigma_pct[i]
+                cells.append(("0" if x == 0 else f"{x:.5g} ({s:.2g}%)").rjust(max(width, 22)))
+            con.print(name.ljust(14) + "".join(cells))
+
+
+def _figures(out, folder: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for r in out["reports"]:
+        fig, ax = plt.subplots(figsize=(6, 3))
+        res = r.fit.residuals
+        if res is not None:
+            ax.plot(res, lw=0.6)
+        ax.set_title(f"F_y residuals, {r.grouping}, camber {'in' if r.camber else 'out'}")
+        ax.set_xlabel("row")
+        ax.set_ylabel("N")
+        fig.tight_layout()
+        fig.savefig(folder / f"onboard_{r.grouping}_{'camber' if r.camber else 'nocamber'}.png")
+        plt.close(fig)
