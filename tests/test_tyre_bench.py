@@ -169,8 +169,8 @@ def test_identify_structure_search_and_flags(campaign):
     back["t"][5], back["t"][6] = back["t"][6], back["t"][5]
     with pytest.raises(InputError, match="not increasing"):
         bench.condition(back)
-    slow = {k: v[::3] for k, v in table.items()}
-    slow["t"] = np.tile(np.arange(67) / (200.0 / 3), SEGMENTS.n)[:len(slow["t"])]
+    slow = {k: v[::4] for k, v in table.items()}  # 50 Hz: 50 samples per segment
+    slow["t"] = np.tile(np.arange(50) / 50.0, SEGMENTS.n)
     with pytest.raises(InputError, match="too low for the 25 Hz"):
         bench.condition(slow)
     # an identified model past its grip peak on the data is flagged, not hidden
