@@ -43,7 +43,7 @@ from ..statics import (
     solve_statics,
     to_public,
 )
-from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margin, warn_law_validity
+from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margins, warn_law_validity
 from .corner import Corner, ResolvedCorner, corners_of
 from .metrics import METRICS, Derivatives, corner_geometry
 from .rig import add_driver, remove_drivers
@@ -298,11 +298,11 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
         m = metrics(y, lam, loads_c)
         jac_m = jax.vmap(lambda dy_u, b_u: jax.jvp(metrics, (y, lam, loads_c),
                                                    (dy_u[:n], dy_u[n:], b_u))[1])(dy, basis)
-        margin = stability_margin(mech, loads_c, q, lam, linearization=lin)
         angles = bushing_states(mech, q)[1]
-        return m, jac_m, margin, angles
+        return m, jac_m, (lin.stiffness, lin.constraint_jacobian), angles
 
-    m, jac, margin, angles = jax.vmap(one)(loads, sol.q, sol.multipliers)
+    m, jac, lin, angles = jax.vmap(one)(loads, sol.q, sol.multipliers)
+    margin = stability_margins(mech, *lin)
     derived, compliance = jax.vmap(lambda m_, j_: _derived(rig, m_, j_))(m, jac)
     metrics = {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
     metrics.update(derived)

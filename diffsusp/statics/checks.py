@@ -69,20 +69,22 @@ def _coordinate_scale(mech: Mechanism):
 
 
 def reduced_stiffness(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
-                      multipliers: Float[Array, " m"], *, linearization=None
-                      ) -> Float[Array, "d d"]:
+                      multipliers: Float[Array, " m"]) -> Float[Array, "d d"]:
     """The reduced tangent stiffness K_r = Nᵀ K N (N/mm) of one equilibrium, in scaled
     solver coordinates (rotations × L), N an orthonormal basis of the null space of Φ_q
     (d = n − m columns, the kinematic degrees of freedom). Not symmetric in general.
 
     **Arguments:** `mech`, one load case `loads`, its public coordinates `q` and `multipliers`
-    (e.g. `sol.q[c]`, `sol.multipliers[c]`); `jax.vmap` it over cases. `linearization`: the
-    case's `linearize(mech, loads, q, multipliers)` when the caller has it already.
+    (e.g. `sol.q[c]`, `sol.multipliers[c]`); `jax.vmap` it over cases.
     """
-    lin = linearize(mech, loads, q, multipliers) if linearization is None else linearization
+    lin = linearize(mech, loads, q, multipliers)
+    return _reduced(mech, lin.stiffness, lin.constraint_jacobian)
+
+
+def _reduced(mech: Mechanism, stiffness, constraint_jacobian):
     d = _coordinate_scale(mech)
-    k = d[:, None] * lin.stiffness * d[None, :]
-    a = lin.constraint_jacobian * d[None, :]
+    k = d[:, None] * stiffness * d[None, :]
+    a = constraint_jacobian * d[None, :]
     m = a.shape[0]
     if m == 0:
         return k
@@ -96,19 +98,34 @@ def reduced_stiffness(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
 
 
 def stability_margin(mech: Mechanism, loads: Loads, q: Float[Array, " n"],
-                     multipliers: Float[Array, " m"], *, linearization=None
-                     ) -> Float[Array, ""]:
+                     multipliers: Float[Array, " m"]) -> Float[Array, ""]:
     """λ_min(S) / max|λ(S)| of the symmetric part S of `reduced_stiffness`, one case: positive
     for a stable equilibrium, negative for an unstable one (1 when there is no degree of
     freedom; NaN when the stiffness is not finite)."""
-    kr = reduced_stiffness(mech, loads, q, multipliers, linearization=linearization)
-    if kr.shape[0] == 0:
-        return jnp.ones((), kr.dtype)
-    finite = jnp.all(jnp.isfinite(kr))
-    sym = jnp.where(finite, 0.5 * (kr + kr.T), jnp.eye(kr.shape[0], dtype=kr.dtype))
-    eig = jnp.linalg.eigvalsh(sym)
-    margin = eig[0] / jnp.maximum(jnp.max(jnp.abs(eig)), jnp.finfo(kr.dtype).tiny)
-    return jnp.where(finite, margin, jnp.nan)
+    lin = linearize(mech, loads, q, multipliers)
+    return stability_margins(mech, lin.stiffness[None], lin.constraint_jacobian[None])[0]
+
+
+def stability_margins(mech: Mechanism, stiffness: Float[Array, "cases n n"],
+                      constraint_jacobian: Float[Array, "cases m n"]) -> Float[Array, " cases"]:
+    """`stability_margin` of a batch of linearised equilibria (their `Linearization.stiffness`
+    and `constraint_jacobian`), for a caller that has them. Case after case (`lax.map`): each
+    SVD and eigen-decomposition is then one small LAPACK call that runs inline. jaxlib splits a
+    batched call over the CPU thread pool and waits for it from a pool thread, so two batched
+    calls that run at once (e.g. beside a batched LU of the same program) can deadlock a
+    2-thread pool."""
+
+    def one(k_a):
+        kr = _reduced(mech, *k_a)
+        if kr.shape[0] == 0:
+            return jnp.ones((), kr.dtype)
+        finite = jnp.all(jnp.isfinite(kr))
+        sym = jnp.where(finite, 0.5 * (kr + kr.T), jnp.eye(kr.shape[0], dtype=kr.dtype))
+        eig = jnp.linalg.eigvalsh(sym)
+        margin = eig[0] / jnp.maximum(jnp.max(jnp.abs(eig)), jnp.finfo(kr.dtype).tiny)
+        return jnp.where(finite, margin, jnp.nan)
+
+    return jax.lax.map(one, (stiffness, constraint_jacobian))
 
 
 def _carried_rotations(mech: Mechanism):
