@@ -27,6 +27,7 @@ b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (L_R), and b_offset_1 (S_v) when asked f
 """
 
 import dataclasses
+import functools
 import math
 
 import jax
@@ -36,7 +37,7 @@ import numpy as np
 from .. import lsq
 from ..errors import InputError
 from . import contact
-from .vehicle import WHEELS, rot_z
+from .vehicle import WHEELS, add_noise, rot_z
 
 CHANNELS = ("time", "lasers", "correvit", "imu_omega", "imu_velocity", "imu_specific_force",
             "travel", "steer", "spin", "wrench", "laser_positions", "correvit_position",
@@ -91,12 +92,21 @@ def _kernels(kind, n, dt):
 
 
 def _conv(x, kernel):
-    """Σ_τ kernel(τ)·x(t+τ) along axis 0 (same length; edges use what exists, flagged invalid
-    by the caller), for every other axis."""
-    k = jnp.asarray(kernel[::-1].copy())
-    flat = x.reshape(x.shape[0], -1)
-    out = jax.vmap(lambda c: jnp.convolve(c, k, mode="same"), in_axes=1, out_axes=1)(flat)
-    return out.reshape(x.shape)
+    """Σ_τ kernel(τ)·x(t+τ) along axis 0 (same length; beyond the ends the signal is 0, and the
+    caller flags those instants invalid), for every other axis. A loop over the taps of
+    shifted multiply-adds: it vectorises over channels and batches (a `vmap`ped
+    `jnp.convolve` became a slow convolution op) and compiles once per shape."""
+    k = jnp.asarray(kernel)
+    m = len(kernel)
+    half = m // 2
+    pad = jnp.concatenate([jnp.zeros((half,) + x.shape[1:], x.dtype), x,
+                           jnp.zeros((half,) + x.shape[1:], x.dtype)])
+    n = x.shape[0]
+
+    def body(j, acc):
+        return acc + k[j] * jax.lax.dynamic_slice_in_dim(pad, j, n, axis=0)
+
+    return jax.lax.fori_loop(0, m, body, jnp.zeros_like(x))
 
 
 def _skew(a):
@@ -123,6 +133,10 @@ def ground_plane(lasers, positions, valid, w2):
     x = vecs[..., 0]
     x = x / jnp.linalg.norm(x[..., :3], axis=-1, keepdims=True)
     x = x * jnp.sign(x[..., 2:3])
+    # instants without 3 lasers in the window have no plane: a placeholder (they are excluded
+    # from the identification) that keeps NaNs out of the windows around them
+    good = jnp.all(jnp.isfinite(x), axis=-1, keepdims=True) & (x[..., 2:3] > 0.1)
+    x = jnp.where(good, x, jnp.array([0.0, 0.0, 1.0, 0.0]))
     return x[..., :3], x[..., 3]
 
 
@@ -457,20 +471,33 @@ def quantities(loads_kn):
 QUANTITIES = ("K_delta_front", "K_delta_rear", "K_phi", "L_R", "K_gamma")
 
 
-def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, correct_delay=None,
-                options: Options = Options(), wheels=(0, 1, 2, 3), camber=True,
-                remove_offsets=False, loads_kn=(4.0, 3.3)):
+def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Options(),
+                wheels=(0, 1, 2, 3), camber=True, remove_offsets=False, loads_kn=(4.0, 3.3)):
     """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`), one
-    vmapped program: per key, the coefficients x (8,), their covariance, the `QUANTITIES`
-    (C x) and their σ, and the estimated Correvit delay. `delay` (s) delays the Correvit;
-    `correct_delay`: None (naive, nothing removed), "estimate" (remove the estimated delay) or
-    a number (s) to remove. No laser dropouts (use `identify` for those)."""
-    from .vehicle import add_noise
+    vmapped program: per key, the Correvit delay estimate and two identifications, "naive"
+    (nothing removed: the thesis's pipeline) and "corrected" (the estimated delay removed), each
+    with the coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ.
+    `delay` (s) delays the Correvit in the noisy copies. No laser dropouts (use `identify`)."""
+    time = np.asarray(truth["time"])
+    dt, half = _step(time), _window_length(options, time)
+    return _monte_carlo(truth, sensors, keys, jnp.asarray(delay, float), options, half, dt,
+                        tuple(wheels), camber, remove_offsets, tuple(loads_kn))
 
-    dt = _step(np.asarray(truth["time"]))
-    half = _window_length(options, np.asarray(truth["time"]))
+
+@functools.partial(jax.jit, static_argnums=tuple(range(4, 11)))
+def _monte_carlo(truth, sensors, keys, delay, options, half, dt, wheels, camber,
+                 remove_offsets, loads_kn):
     C = jnp.asarray(quantities(loads_kn))
     kernels = _kernels(options.window, 2 * half + 1, dt)
+
+    def fit(d, shift):
+        W, y, _, _ = regression(d, options, half=half, dt=dt, correvit_delay_s=shift,
+                                wheels=wheels, camber=camber, remove_offsets=remove_offsets)
+        if not camber:
+            W = W.at[:, 4].set(0.0)
+        sol = lsq.solve_arrays(W, y)
+        return {"x": sol.x, "covariance": sol.covariance, "quantities": C @ sol.x,
+                "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, sol.covariance, C))}
 
     def one(key):
         d = add_noise(truth, sensors, key, delay=delay)
@@ -480,20 +507,11 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, correct_delay=None,
         normal, R = ground_plane(d["lasers"], d["laser_positions"], d["laser_window_ok"],
                                  kernels[0])
         est = correvit_delay(d, normal, R, kernels, dt=dt)
-        shift = (0.0 if correct_delay is None else est if correct_delay == "estimate"
-                 else correct_delay)
-        W, y, mask, _ = regression(d, options, half=half, dt=dt, correvit_delay_s=shift,
-                                   wheels=wheels, camber=camber,
-                                   remove_offsets=remove_offsets)
-        if not camber:
-            W = W.at[:, 4].set(0.0)
-        sol = lsq.solve_arrays(W, y)
-        q = C @ sol.x
-        qs = jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, sol.covariance, C))
-        return {"x": sol.x, "covariance": sol.covariance, "quantities": q,
-                "quantities_sigma": qs, "delay": est}
+        both = jax.vmap(lambda shift: fit(d, shift))(jnp.stack([0.0 * est, est]))
+        return {"delay": est, "naive": jax.tree.map(lambda a: a[0], both),
+                "corrected": jax.tree.map(lambda a: a[1], both)}
 
-    return jax.jit(jax.vmap(one))(keys)
+    return jax.vmap(one)(keys)
 
 
 _regression_cache = {}
