@@ -23,7 +23,7 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 ```
 """
 
-from . import examples, fit, mf6, mf89, rig, spec, thesis_sets, vertical
+from . import contact, examples, fit, mf6, mf89, rig, spec, thesis_sets, vertical  # noqa: F401
 from .examples import example_path
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
