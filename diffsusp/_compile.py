@@ -55,11 +55,26 @@ def _spec(x):
     return jax.ShapeDtypeStruct(aval.shape, aval.dtype, weak_type=aval.weak_type)
 
 
+class _KeyPickler(pickle.Pickler):
+    """Pickles the static arguments for the key; devices and meshes by their ids and axes."""
+
+    def reducer_override(self, obj):
+        if isinstance(obj, jax.sharding.Mesh):
+            return str, (f"Mesh{tuple(d.id for d in obj.devices.flat)}{obj.axis_names}",)
+        if isinstance(obj, jax.Device):
+            return str, (f"Device({obj.platform}, {obj.id})",)
+        return NotImplemented
+
+
 def _key(fn, dynamic, static) -> str:
+    import io
+
     import jaxlib
 
     avals = [(s.shape, str(s.dtype), s.weak_type) for s in map(_spec, jax.tree.leaves(dynamic))]
-    parts = (fn.__module__, fn.__qualname__, pickle.dumps(static), repr(avals),
+    buffer = io.BytesIO()
+    _KeyPickler(buffer).dump(static)
+    parts = (fn.__module__, fn.__qualname__, buffer.getvalue(), repr(avals),
              jax.__version__, jaxlib.__version__, jax.default_backend(), _source_digest())
     return hashlib.sha256(pickle.dumps(parts)).hexdigest()
 
@@ -68,7 +83,13 @@ class _Exported:
     """A deserialised program: call it with the array leaves, get the output pytree."""
 
     def __init__(self, exported, skeleton, options):
-        self.call = jax.jit(exported.call, compiler_options=options)
+        shardings = None
+        if exported.nr_devices > 1:  # a program split over devices: inputs on all of them
+            import numpy as np
+
+            mesh = jax.sharding.Mesh(np.array(jax.local_devices()[:exported.nr_devices]), ("d",))
+            shardings = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+        self.call = jax.jit(exported.call, compiler_options=options, in_shardings=shardings)
         self.skeleton = skeleton
 
     def __call__(self, leaves):

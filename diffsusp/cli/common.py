@@ -70,7 +70,7 @@ def enable_x64():
         from .._compile import enable_program_cache
 
         jax.config.update("jax_compilation_cache_dir", cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         enable_program_cache(os.path.join(cache, "programs"))  # and skip tracing (see there)
 
 
