@@ -125,7 +125,10 @@ def corner_poses(vehicle: Vehicle, travel: Float[Array, "4"], steer: Float[Array
     return jax.vmap(rot_z)(steer), O
 
 
-def steering_sine(t, *, duration, f0=0.2, f1=6.0, amplitude=math.radians(1.2), start=0.0):
+AMPLITUDE = math.radians(1.2)
+
+
+def steering_sine(t, *, duration, f0=0.2, f1=6.0, amplitude=AMPLITUDE, start=0.0):
     """The front road-wheel angle of the steering-wheel sine (§5.4): constant amplitude, the
     frequency swept linearly from f0 to f1 over `duration` (starting at `start`), and its rate."""
     tau = jnp.clip(t - start, 0.0, duration)
@@ -271,7 +274,7 @@ class Record(eqx.Module):
 @eqx.filter_jit
 def simulate(vehicle: Vehicle, *, duration: float, rate: float = 1000.0, speed: float = 25.0,
              settle: float = 1.0, f0: float = 0.2, f1: float = 6.0,
-             amplitude: float = math.radians(1.2)) -> Record:
+             amplitude: float = AMPLITUDE) -> Record:
     """Drive the steering-wheel sine at constant speed (§5.4): `settle` s straight, then the sine
     swept f0 → f1 over `duration` s; states sampled at `rate` Hz over the sine (diffrax, Tsit5 at
     the sampling step).
