@@ -7,6 +7,14 @@ CPU), so the programs below are compiled without them. Set on the CPU only, when
 first called (asking for the backend at import time would initialise it too early for a user who
 configures JAX after importing diffsusp).
 
+They are also compiled without Eigen's intra-op thread pool (`xla_cpu_multi_thread_eigen`):
+jaxlib's batched LAPACK kernels (LU, eigen-decomposition, SVD) split a batch over that pool and
+wait for it from a pool thread, so two such calls running at once — two independent ones in one
+program, or one per device — leave every thread of a 2-core machine's pool waiting: a deadlock,
+met in the K&C metrics program, the on-board tyre pipeline and the statics split over devices.
+Without the pool each call runs on its own thread; a batch uses both cores when it is split
+over the devices (`solve_statics(devices=...)`).
+
 **Program cache.** JAX's persistent compilation cache skips XLA's compilation on a second run,
 but not the tracing and lowering of the Python code, which cost a warm `diffsusp demo` most of
 its time. With `enable_program_cache(dir)` (the CLI turns it on beside the compilation cache),
@@ -29,8 +37,9 @@ import pickle
 import equinox as eqx
 import jax
 
-CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
-XLA_FLAG = "--xla_cpu_experimental_ynn_fusion_type="  # the same, for XLA_FLAGS (CLI, tests)
+CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_multi_thread_eigen": False}
+XLA_FLAGS = ("--xla_cpu_experimental_ynn_fusion_type=",  # the same, for XLA_FLAGS (CLI, tests)
+             "--xla_cpu_multi_thread_eigen=false")
 
 _PROGRAM_DIR: list = [None]  # where exported programs are kept (None: off)
 
@@ -177,7 +186,10 @@ def filter_jit(fn):
 
 
 def set_xla_flags(environ):
-    """Add `XLA_FLAG` to `environ["XLA_FLAGS"]` (before JAX starts its backend)."""
+    """Add `XLA_FLAGS` to `environ["XLA_FLAGS"]` (before JAX starts its backend); a flag the
+    user set already is kept."""
     flags = environ.get("XLA_FLAGS", "")
-    if "ynn_fusion_type" not in flags:
-        environ["XLA_FLAGS"] = f"{flags} {XLA_FLAG}".strip()
+    for flag in XLA_FLAGS:
+        if flag.split("=")[0] not in flags:
+            flags = f"{flags} {flag}".strip()
+    environ["XLA_FLAGS"] = flags

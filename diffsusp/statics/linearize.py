@@ -26,31 +26,14 @@ def _ruiz(jac):
     return d_r, d_c
 
 
-@jax.custom_batching.custom_vmap
-def _serial_solve(a, b):
-    return jnp.linalg.solve(a, b)
-
-
-@_serial_solve.def_vmap
-def _serial_solve_vmap(axis_size, in_batched, a, b):
-    # Batched, one system at a time: jaxlib's batched CPU LU splits a batch over the CPU
-    # thread pool and waits for it from a pool thread, which deadlocks when several CPU
-    # devices run at once (all pool threads waiting). Not differentiable (the Newton only).
-    a = a if in_batched[0] else jnp.broadcast_to(a, (axis_size,) + a.shape)
-    b = b if in_batched[1] else jnp.broadcast_to(b, (axis_size,) + b.shape)
-    return jax.lax.map(lambda ab: _serial_solve(*ab), (a, b)), True
-
-
-def scaled_solve(jac, rhs, *, serial: bool = False):
+def scaled_solve(jac, rhs):
     """J⁻¹·rhs after a Ruiz row/column equilibration (forces in N, moments in N·mm and
-    constraint rows in mm or rad differ by orders of magnitude). `rhs` (k,) or (k, p).
-    `serial`: under vmap, factorise the systems one by one (see `_serial_solve`)."""
+    constraint rows in mm or rad differ by orders of magnitude). `rhs` (k,) or (k, p)."""
     d_r, d_c = _ruiz(jax.lax.stop_gradient(jac))
     scaled = jac * d_r[:, None] * d_c[None, :]
-    solve = _serial_solve if serial else jnp.linalg.solve
     if rhs.ndim == 1:
-        return d_c * solve(scaled, d_r * rhs)
-    return d_c[:, None] * solve(scaled, d_r[:, None] * rhs)
+        return d_c * jnp.linalg.solve(scaled, d_r * rhs)
+    return d_c[:, None] * jnp.linalg.solve(scaled, d_r[:, None] * rhs)
 
 
 def residual(mech: Mechanism, loads: Loads, y):

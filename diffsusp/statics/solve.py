@@ -125,7 +125,7 @@ _LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last)
 # one is taken anyway
 
 
-def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps, serial=False):
+def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     """Damped Newton on the KKT system from (q0, λ = 0), for a batch of load cases (leading
     axis of `loads` and q0).
 
@@ -137,8 +137,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps, serial=
     scatter is done slot-wide (`kernel.assemble_batch`). At most `_POOL` cases are iterated at
     once and a stopped case's slot takes the next case, so a batch costs the sum of its cases'
     passes (about 5 each), not the slowest case's (up to 40 near the envelope's edge) times every
-    case; each case's iterates do not depend on the others (vmap = loop). `serial`: factorise
-    the slots' systems one by one (`scaled_solve`), for several CPU devices at once."""
+    case; each case's iterates do not depend on the others (vmap = loop)."""
     topo = mech.topology
     n = topo.n
     length = mech.length_scale
@@ -168,7 +167,7 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps, serial=
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
         f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
-        dy = scaled_solve(jac, -r_twist, serial=serial)
+        dy = scaled_solve(jac, -r_twist)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
@@ -250,22 +249,21 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps, serial=
 
 
 @eqx.filter_custom_jvp
-def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps, serial=False):
+def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
     """Solver coordinates and multipliers (cases, n + m) and (status, iterations, residual,
     constraint error) (cases, 4) of a batch of load cases."""
-    return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps, serial=serial)
+    return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
 
 
 @_equilibrium.def_jvp
-def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps, serial=False):
+def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
     # Implicit function theorem, case by case: J·dy = −∂r/∂(mech, loads)·t (`linearize`).
     # Everything here stays differentiable (y through this same rule, J and ∂r through
     # autodiff), so derivatives of derivatives — e.g. the sensitivity of bump steer to a
     # stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
-    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps,
-                           serial=serial)
+    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
 
     def tangent(loads_, y_, t_loads_):
         return linearize_internal(mech, loads_, y_).tangent(t_mech, t_loads_)
@@ -277,11 +275,10 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps, serial=False):
     return (y, info), (dy, jnp.zeros_like(info))
 
 
-def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps, serial=False):
+def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps):
     """Public-coordinate solutions of a batch of cases (leading axis)."""
     y0 = jax.vmap(lambda q: to_internal(mech, q))(q0)
-    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps,
-                           serial=serial)
+    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
     n = mech.topology.n
     return StaticSolution(
         q=jax.vmap(lambda y_: to_public(mech, y_))(y[:, :n]),
@@ -299,10 +296,10 @@ def _solve_one(mech, loads, q0, rtol, atol, max_steps):
     return jax.tree.map(lambda a: a[0], sol)
 
 
-def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk, serial=False):
+def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
     n_cases = loads.force.shape[0]
     if chunk is None or n_cases <= chunk:
-        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps, serial)
+        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps)
     # Chunks of `chunk` cases one after the other (the last one padded by repeating a case).
     n_chunks = -(-n_cases // chunk)
     pad = n_chunks * chunk - n_cases
@@ -311,7 +308,7 @@ def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk, serial=False):
         a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
         return a.reshape(n_chunks, chunk, *a.shape[1:])
 
-    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps, serial),
+    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps),
                       jax.tree.map(split, (loads, q0)))
     return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], sol)
 
@@ -321,9 +318,9 @@ def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh=None):
     if mesh is None:
         return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
     # One share of the cases per device, each solved by its own pool, no communication; the
-    # case count is padded to a multiple of the devices by repeating the last case.
+    # case count is padded to a multiple of the devices by repeating the last case. (On the
+    # CPU this needs `_compile.CPU_OPTIONS`: see there.)
     n_cases, k = loads.force.shape[0], mesh.size
-    serial = mesh.devices.flat[0].platform == "cpu"  # see `scaled_solve`
     pad = -n_cases % k
 
     def padded(a):
@@ -331,7 +328,7 @@ def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh=None):
 
     cases = jax.sharding.PartitionSpec("cases")
     solve = jax.shard_map(
-        lambda l, q: _solve_cases(mech, l, q, rtol, atol, max_steps, chunk, serial),
+        lambda l, q: _solve_cases(mech, l, q, rtol, atol, max_steps, chunk),
         mesh=mesh, in_specs=(cases, cases), out_specs=cases, check_vma=False)
     sol = solve(*jax.tree.map(padded, (loads, q0)))
     return jax.tree.map(lambda a: a[:n_cases], sol)
