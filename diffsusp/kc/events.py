@@ -309,6 +309,7 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     ok = sol.status == 0
     metrics = {k: jnp.where(ok, v, jnp.nan) for k, v in metrics.items()}
     compliance = {k: jnp.where(ok[:, None, None], v, jnp.nan) for k, v in compliance.items()}
+    angles = jax.lax.stop_gradient(angles)  # for the flags and the warning only
     law = jax.vmap(lambda a: law_validity(mech, None, angles=a))(angles)
     flags = (ok & (margin > STABILITY_TOLERANCE), ok & (law <= 1.0))
     return metrics, compliance, flags, jnp.where(ok[:, None, None], angles, 0.0)

@@ -115,6 +115,10 @@ def stability_margins(mech: Mechanism, stiffness: Float[Array, "cases n n"],
     calls that run at once (e.g. beside a batched LU of the same program) can deadlock a
     2-thread pool."""
 
+    # Not differentiated: the margin feeds a boolean flag, and the SVD of a full basis has no
+    # JVP (a program that differentiates the K&C metrics computes the flags too).
+    stiffness, constraint_jacobian = jax.lax.stop_gradient((stiffness, constraint_jacobian))
+
     def one(k_a):
         kr = _reduced(mech, *k_a)
         if kr.shape[0] == 0:
