@@ -146,7 +146,7 @@ def law_validity(mech: Mechanism, q: Float[Array, " n"], *, angles=None) -> Floa
     caller has them): ≤ 1 where the laws are valid (`ANGLE_LIMITS_DEG`); 0 for a model without
     bushings."""
     if not mech.bushings.names:
-        return jnp.zeros((), jnp.result_type(q))
+        return jnp.zeros((), jnp.result_type(q if angles is None else angles))
     if angles is None:
         from .outputs import bushing_states
 
