@@ -58,9 +58,8 @@ def enable_x64():
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    # Batches of load cases split over every device; on the CPU, one device per core (when
-    # JAX has not started yet: a command run inside a Python session keeps its devices).
-    os.environ.setdefault("DIFFSUSP_DEVICES", "all")
+    # One CPU device per core, for `DIFFSUSP_DEVICES=all` (when JAX has not started yet). Not
+    # the default: a split batch still deadlocked jaxlib's batched CPU LU on 2 cores.
     try:
         jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
     except RuntimeError:
