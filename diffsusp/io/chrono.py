@@ -89,11 +89,23 @@ import numpy as np
 
 from ..errors import ModelError, ModelFileError, ModelWarning
 from ..model import Mechanism, MechanismBuilder
+from ..model.corner import Corner, common_perpendicular_midpoint, design_offset
 
 DEFAULT_LOADED_RADIUS = 330.0
 """Loaded tyre radius (mm) used when `loaded_radius` is None: the contact patch is this far below
 the wheel centre. The JSON files carry no tyre (`Spindle/Radius` is the spindle's drawing size),
 so this is a chosen value, the one of `diffsusp.models.double_wishbone`."""
+
+STOP_CURVE = ((0.0, 0.0), (2.0, 200.0), (4.0, 400.0), (6.0, 600.0), (8.0, 800.0),
+              (10.0, 1000.0), (20.0, 2500.0), (30.0, 4500.0), (40.0, 7500.0),
+              (50.0, 12500.0), (60.0, 125000.0))
+"""Chrono's bump and rebound stop curve (`SpringForce::enable_stops`, "from an ADAMS/Car
+example"): (penetration mm, force N) beyond 'Minimum Length' / 'Maximum Length', interpolated
+linearly."""
+
+SPRING_INTERPOLATIONS = ("linear", "akima")
+"""How `read_chrono` interpolates a spring curve: 'linear' as Chrono does (exactly: a linear
+spring plus one-sided stops at the knots), 'akima' the smooth spline of a tabulated spring."""
 
 TEMPLATES = ("DoubleWishbone", "MacPhersonStrut", "MultiLink")
 """Chrono::Vehicle suspension templates read by `read_chrono`."""
@@ -411,34 +423,89 @@ def _tierod(b, doc, pts):
                bushing=data)
 
 
-def _spring(b, doc, pts, chassis_key, other_key, other_part, marker_name):
+def _spring(b, doc, pts, chassis_key, other_key, other_part, marker_name, interpolation):
     section = "Spring"
     doc.section(section)
     chassis = pts.point(section, chassis_key)
     other = pts.point(section, other_key)
     b.marker("spring_chassis", "ground", chassis)
     b.marker(marker_name, other_part, other)
-    if doc.get(section, "Minimum Length", required=False) is not None or doc.get(
-            section, "Maximum Length", required=False) is not None:
-        warnings.warn(f"{doc.path}: the spring's bump and rebound stops ('Minimum Length', "
-                      "'Maximum Length') are not modelled.", ModelWarning, stacklevel=4)
     free = doc.number(section, "Free Length", positive=True) * _M_TO_MM
     preload = doc.number(section, "Preload", required=False) or 0.0
     curve_key = next((k for k in ("Spring Curve Data", "Curve Data")
                       if doc.get(section, k, required=False) is not None), None)
     keys = (section,)
+    pair = ("spring_chassis", marker_name)
     if curve_key is None:
         k = doc.number(section, "Spring Coefficient", positive=True) / _M_TO_MM
         effective = free + preload / k
         if effective <= 0:
             raise doc.error(f"free length + preload/k = {effective:.6g} mm is not positive.",
                             (section, "Preload"))
-        _check(b.spring, doc, keys, "spring", "spring_chassis", marker_name, k=k,
-               free_length=effective)
+        _check(b.spring, doc, keys, "spring", *pair, k=k, free_length=effective)
     else:
         data = doc.table(section, curve_key)
-        _check(b.spring, doc, (section, curve_key), "spring", "spring_chassis", marker_name,
-               table=(data[:, 0] * _M_TO_MM, data[:, 1] - preload), free_length=free)
+        x, y = data[:, 0] * _M_TO_MM, data[:, 1] - preload
+        keys = (section, curve_key)
+        if interpolation == "akima":
+            _check(b.spring, doc, keys, "spring", *pair, table=(x, y), free_length=free)
+        else:
+            k, offset, hinges = piecewise_linear_hinges(x, y)
+            if not k > 0 or not free - offset > 0:
+                raise doc.error(
+                    f"the spring curve is not a linear spring plus one-sided stops (base rate "
+                    f"{k:.6g} N/mm, free length {free - offset:.6g} mm); read it with "
+                    "spring_interpolation='akima'.", keys)
+            _check(b.spring, doc, keys, "spring", *pair, k=k, free_length=free - offset)
+            for j, (at, kind, rate) in enumerate(hinges):
+                _check(b.stop, doc, keys, f"spring_knot_{j + 1}", *pair, kind=kind,
+                       length=free + at, k=rate)
+    lengths = [doc.get(section, key, required=False) is not None
+               for key in ("Minimum Length", "Maximum Length")]
+    if all(lengths):
+        low = doc.number(section, "Minimum Length", positive=True) * _M_TO_MM
+        high = doc.number(section, "Maximum Length", positive=True) * _M_TO_MM
+        if not low < high:
+            raise doc.error(f"'Minimum Length' ({low:g} mm) must be below 'Maximum Length' "
+                            f"({high:g} mm).", (section, "Maximum Length"))
+        x, y = (np.asarray(v, dtype=float) for v in zip(*STOP_CURVE, strict=True))
+        _, _, steps = piecewise_linear_hinges(x, y)
+        # The curve starts at (0, 0) with slope s0: one more hinge there.
+        steps = [(0.0, "rebound", (y[1] - y[0]) / (x[1] - x[0])), *steps]
+        for j, (pen, _, rate) in enumerate(steps):
+            if low - pen <= 0:  # never reached: the spring cannot be shorter than 0
+                continue
+            _check(b.stop, doc, (section, "Minimum Length"), f"spring_bump_{j + 1}", *pair,
+                   kind="bump", length=low - pen, k=rate)
+        for j, (pen, _, rate) in enumerate(steps):
+            _check(b.stop, doc, (section, "Maximum Length"), f"spring_rebound_{j + 1}", *pair,
+                   kind="rebound", length=high + pen, k=rate)
+    elif any(lengths):
+        warnings.warn(f"{doc.path}: Chrono uses the spring's stops only when both 'Minimum "
+                      "Length' and 'Maximum Length' are given; the one given is ignored.",
+                      ModelWarning, stacklevel=4)
+
+
+def piecewise_linear_hinges(x, y):
+    """A piecewise-linear law y(x) through the knots (x, y) (Chrono's `ChFunctionInterp`) as a
+    linear law plus one-sided hinges: y(t) = k·(t + offset) + Σ hinge, each hinge (x_j, kind,
+    rate) at an interior knot where the slope changes by c: 'rebound' (c > 0) adds
+    c·max(t − x_j, 0), 'bump' (c < 0) adds −|c|·max(x_j − t, 0) — exactly the tension of a
+    diffsusp rebound or bump stop of rate |c| at length free + x_j. Beyond the end knots the
+    end segments continue.
+
+    **Returns:** (k, offset, hinges) with k = the first slope plus every slope decrease.
+    """
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    slope = np.diff(y) / np.diff(x)
+    change = np.diff(slope)
+    k = slope[0] + change[change < 0].sum()
+    # Value at t = 0 of the linear part: y0 + s0·(0 − x0) plus −c·(0 − x_j) = c·x_j... of the
+    # flipped hinges (c·max(t − x_j, 0) = c·(t − x_j) + c·max(x_j − t, 0)).
+    value = y[0] - slope[0] * x[0] - np.sum(change[change < 0] * x[1:-1][change < 0])
+    hinges = [(float(xj), "rebound" if c > 0 else "bump", float(abs(c)))
+              for xj, c in zip(x[1:-1], change, strict=True) if c != 0]
+    return float(k), float(value / k) if k != 0 else math.inf, hinges
 
 
 def _shock(b, doc, pts, other_key, other_part, marker_name):
@@ -449,7 +516,7 @@ def _shock(b, doc, pts, other_key, other_part, marker_name):
     b.marker(marker_name, other_part, pts.point("Shock", other_key))
 
 
-def _double_wishbone(b, doc, pts):
+def _double_wishbone(b, doc, pts, interpolation):
     for section in ("Upper Control Arm", "Lower Control Arm", "Tierod", "Spring", "Spindle"):
         doc.section(section)
     for part in ("upper_control_arm", "lower_control_arm", "upright"):
@@ -457,18 +524,20 @@ def _double_wishbone(b, doc, pts):
     _arm(b, doc, pts, "Upper Control Arm", "uca", "upper_control_arm")
     _arm(b, doc, pts, "Lower Control Arm", "lca", "lower_control_arm")
     _tierod(b, doc, pts)
-    _spring(b, doc, pts, "Location Chassis", "Location Arm", "lower_control_arm", "spring_arm")
+    _spring(b, doc, pts, "Location Chassis", "Location Arm", "lower_control_arm", "spring_arm",
+            interpolation)
     _shock(b, doc, pts, "Location Arm", "lower_control_arm", "shock_arm")
 
 
-def _macpherson(b, doc, pts):
+def _macpherson(b, doc, pts, interpolation):
     for section in ("Control Arm", "Tierod", "Spring", "Spindle"):
         doc.section(section)
     for part in ("lower_control_arm", "strut", "upright"):
         b.part(part)
     _arm(b, doc, pts, "Control Arm", "lca", "lower_control_arm")
     _tierod(b, doc, pts)
-    _spring(b, doc, pts, "Location Chassis", "Location Upright", "upright", "spring_upright")
+    _spring(b, doc, pts, "Location Chassis", "Location Upright", "upright", "spring_upright",
+            interpolation)
     _shock(b, doc, pts, "Location Upright", "upright", "shock_upright")
     top = pts.point("Spring", "Location Chassis")
     bottom = pts.point("Spring", "Location Upright")
@@ -506,7 +575,7 @@ def _link(b, doc, pts, section, name):
                chassis, on_link, on_chassis)
 
 
-def _multilink(b, doc, pts):
+def _multilink(b, doc, pts, interpolation):
     for section in ("Upper Arm", "Lateral", "Trailing Link", "Tierod", "Spring", "Spindle"):
         doc.section(section)
     for part in ("upper_arm", "lateral", "trailing_link", "upright"):
@@ -515,7 +584,8 @@ def _multilink(b, doc, pts):
     _link(b, doc, pts, "Lateral", "lateral")
     _link(b, doc, pts, "Trailing Link", "trailing_link")
     _tierod(b, doc, pts)
-    _spring(b, doc, pts, "Location Chassis", "Location Link", "trailing_link", "spring_link")
+    _spring(b, doc, pts, "Location Chassis", "Location Link", "trailing_link", "spring_link",
+            interpolation)
     _shock(b, doc, pts, "Location Link", "trailing_link", "shock_link")
 
 
@@ -537,8 +607,28 @@ def _outboard_axis(toe: float, camber: float, side: str) -> np.ndarray:
     return spin if side == "left" else -spin
 
 
+def _corner(pts, template, side, radius, centre):
+    """The wheel: ISO frame, this side, `radius` below the wheel centre, design load computed
+    (None), steering axis through the ball joints (DoubleWishbone), from the strut top to the
+    lower ball joint (MacPhersonStrut), or from the upper ball joint to the virtual pivot of
+    the lateral and trailing links (MultiLink: the midpoint of their lines' common
+    perpendicular at design, fixed on the upright)."""
+    if template == "DoubleWishbone":
+        kingpin = ("uca_upright", "lca_upright")
+    elif template == "MacPhersonStrut":
+        kingpin = ("spring_chassis", "lca_upright")
+    else:
+        pivot = common_perpendicular_midpoint(
+            pts.point("Lateral", "Location Chassis"), pts.point("Lateral", "Location Upright"),
+            pts.point("Trailing Link", "Location Chassis"),
+            pts.point("Trailing Link", "Location Upright"))
+        kingpin = ("ua_upright", ("upright", design_offset(pivot, centre, "iso", side)))
+    return Corner(kingpin=kingpin, side=side, frame="iso", loaded_radius=radius,
+                  design_load=None)
+
+
 def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
-                wheel_travel: bool = False) -> Mechanism:
+                wheel_travel: bool = False, spring_interpolation: str = "linear") -> Mechanism:
     """Read a Chrono::Vehicle suspension JSON file (DoubleWishbone, MacPhersonStrut, MultiLink)
     into a K&C half-axle `Mechanism` of one side (see the module docstring for the semantics).
 
@@ -547,15 +637,21 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
     - `path`: the JSON file (comments // and /* */ are allowed, as in Chrono).
     - `side`: 'left' (the file's points) or 'right' (mirrored in y).
     - `loaded_radius`: distance (mm) from the wheel centre down to the contact patch load
-      point; default `DEFAULT_LOADED_RADIUS` (330 mm).
+      point, and the corner's loaded radius; default `DEFAULT_LOADED_RADIUS` (330 mm).
     - `wheel_travel`: add driver 'wheel_travel' (wheel-centre z travel, mm).
+    - `spring_interpolation`: 'linear' (Chrono's) or 'akima' (smooth) for a spring curve
+      (`SPRING_INTERPOLATIONS`).
 
     **Returns:** the `Mechanism` (mm, N; Chrono frame x forward, y left, z up; design position =
-    the file's points). Raises `ModelFileError` with the line and field for a missing or invalid
-    field, an unknown template, or a model that cannot be assembled.
+    the file's points) with its wheel corner (`Mechanism.corners`). Raises `ModelFileError`
+    with the line and field for a missing or invalid field, an unknown template, or a model
+    that cannot be assembled.
 
     spec: DESIGN.md "Frames" (Chrono: x forward, y left, z up).
     """
+    if spring_interpolation not in SPRING_INTERPOLATIONS:
+        raise ValueError(f"spring_interpolation must be one of {SPRING_INTERPOLATIONS}; got "
+                         f"{spring_interpolation!r}.")
     if side not in ("left", "right"):
         raise ValueError(f"side must be 'left' or 'right'; got {side!r}.")
     radius = DEFAULT_LOADED_RADIUS if loaded_radius is None else float(loaded_radius)
@@ -577,7 +673,7 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
     build = {"DoubleWishbone": _double_wishbone, "MacPhersonStrut": _macpherson,
              "MultiLink": _multilink}[template]
     try:
-        build(b, doc, pts)
+        build(b, doc, pts, spring_interpolation)
         toe = math.radians(doc.number("Toe Angle (deg)", required=False) or 0.0)
         camber = math.radians(doc.number("Camber Angle (deg)", required=False) or 0.0)
         outboard = _outboard_axis(toe, camber, side)
@@ -588,6 +684,7 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
         b.load_point("wheel_centre", marker="wheel_centre")
         if wheel_travel:
             b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))
+        b.corner(_corner(pts, template, side, radius, centre))
     except ModelError as e:
         if isinstance(e, ModelFileError):
             raise

@@ -2,7 +2,7 @@
 
 ```toml
 # Comments are allowed anywhere (and kept when diffsusp saves over the file).
-diffsusp = 1                          # file format version
+diffsusp = 2                          # file format version
 name = "isolated bushing"
 parts = ["arm"]                       # moving parts; 'ground' always exists
 
@@ -26,7 +26,8 @@ k_rot = [10000.0, 10000.0, 10000.0]   # force·length/angle: N·mm/deg here
 marker = "tip"
 ```
 
-**Top level:** `diffsusp` (format version, 1; optional), `name` (optional; default the file
+**Top level:** `diffsusp` (format version, 2 — version 1, without corners, is read too;
+optional), `name` (optional; default the file
 name), `parts` (required, at least one), `[units]` (required).
 
 **Units** (`[units]`, all three keys required): `length` = mm | cm | m | in, `force` = N | daN
@@ -72,6 +73,14 @@ linear `k`, `free_length`, or `[springs.<name>.table]` with `x` (extension), `y`
 **Load points** (`[load_points.<name>]`): `marker` (or `part` and `at`), `frame` (a marker: load
 components in its axes; default global).
 
+**Corners** (`[[corner]]`, format 2; one per wheel): which markers are the wheel
+(`diffsusp.model.corner.Corner`): `wheel_centre` (marker), `contact_point` and
+`wheel_centre_load` (load points; `false`: none), `kingpin = [upper, lower]` (each a marker or
+`{part = "...", offset = [forward, outboard, up]}` from the wheel centre, length), `side`
+(left | right | auto), `frame` (adams | iso), `loaded_radius` (length), `design_load` (force;
+absent: the load that holds the design position, computed), `prefix` (in a combined axle).
+Every key but `design_load` defaults to `Corner`'s default. A version-1 file has no corner.
+
 **Load tables** (`[load_tables.<name>]`): `columns` (names as in `diffsusp.io.tables`, each
 optionally with a unit: `"contact_patch.fz [kN]"`; without one, in the file's units) and `rows`
 (one list of numbers per load case).
@@ -101,7 +110,10 @@ from ..model import GROUND, Mechanism, MechanismBuilder
 from ..model.mechanism import BUSHING_AXES, JOINT_ROWS
 from .tables import Table, split_header, unit_factor
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""Version written: 2 adds the wheel corners (`[[corner]]`); version-1 files (no corner) are
+still read."""
+READ_VERSIONS = (1, 2)
 MAX_MAGNITUDE = 1e15
 """Largest magnitude of any number in a model file, in mm, N and rad (beyond it a value is a
 typo or a unit mistake, and products in the checks would overflow)."""
@@ -124,7 +136,9 @@ _BUSHING_FIELDS = {
 _ORIENTATION_KEYS = ("axes", "reuler", "z", "x")
 _LOAD_COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _TOP_KEYS = ("diffsusp", "name", "parts", "units", "markers", "joints", "bushings", "springs",
-             "stops", "drivers", "load_points", "load_tables")
+             "stops", "drivers", "load_points", "corner", "load_tables")
+_CORNER_KEYS = ("prefix", "wheel_centre", "contact_point", "wheel_centre_load", "kingpin",
+                "side", "frame", "loaded_radius", "design_load")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -434,12 +448,16 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
             f"unknown key or section '{unknown[0]}'; a model file has: {', '.join(_TOP_KEYS)}.",
             (unknown[0],),
         )
+    version = FORMAT_VERSION
     if "diffsusp" in doc:
         version = doc["diffsusp"]
-        if isinstance(version, bool) or version != FORMAT_VERSION:
+        if isinstance(version, bool) or version not in READ_VERSIONS:
             raise src.error(
                 f"format version {version!r} is not supported; this diffsusp reads "
-                f"diffsusp = {FORMAT_VERSION}.", ("diffsusp",))
+                f"diffsusp = {' or '.join(map(str, READ_VERSIONS))}.", ("diffsusp",))
+    if "corner" in doc and version < 2:
+        raise src.error("[[corner]] tables need format version 2: write diffsusp = 2 (a "
+                        "version-1 file states no wheel corner).", ("corner",))
     units, factors = _units(doc, src)
     rd = _Reader(src, factors)
     name = doc.get("name")
@@ -546,6 +564,13 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
             else None
         with _located(src, keys):
             b.load_point(l_name, **kw, frame=frame)
+
+    corners = doc.get("corner", [])
+    if not isinstance(corners, list) or not all(isinstance(c, dict) for c in corners):
+        raise src.error("corner must be [[corner]] tables (one per wheel).", ("corner",))
+    for c in corners:
+        with _located(src, ("corner",)):
+            b.corner(_read_corner(rd, c, ("corner",)))
 
     try:
         mech = b.build(check=check)
@@ -694,6 +719,81 @@ def _no_orientation(rd, e, keys):
             raise rd.src.error(
                 f"'{k}' is only read with parts and at (markers i and j carry their own "
                 "orientation).", (*keys, k))
+
+
+def _read_corner(rd: _Reader, c: dict, keys):
+    """A `[[corner]]` table → `Corner`: every key optional with `Corner`'s defaults, except
+    `design_load` (absent: computed, the load that holds the design position);
+    `wheel_centre_load = false` for none; `kingpin` two points, each a marker name or
+    {part = "...", offset = [forward, outboard, up]} (length units)."""
+    from ..model.corner import Corner
+
+    rd.keys(c, keys, _CORNER_KEYS)
+    kw = {}
+    for key in ("prefix", "wheel_centre", "contact_point", "side", "frame"):
+        if key in c:
+            kw[key] = rd.string(c[key], (*keys, key), "a name")
+    if "wheel_centre_load" in c:
+        value = c["wheel_centre_load"]
+        kw["wheel_centre_load"] = None if value is False else rd.string(
+            value, (*keys, "wheel_centre_load"), "a load point name or false")
+    if "kingpin" in c:
+        refs = c["kingpin"]
+        if not isinstance(refs, list) or len(refs) != 2:
+            raise rd.src.error(f"kingpin must be two points [upper, lower]; got {_kind(refs)}.",
+                               (*keys, "kingpin"))
+        points = []
+        for ref in refs:
+            if isinstance(ref, dict):
+                rd.keys(ref, (*keys, "kingpin"), ("part", "offset"), ("part", "offset"))
+                points.append((rd.string(ref["part"], (*keys, "kingpin"), "a part name"),
+                               tuple(float(v) for v in rd.vector(ref["offset"],
+                                                                 (*keys, "kingpin"), _LEN))))
+            else:
+                points.append(rd.string(ref, (*keys, "kingpin"), "a marker name or "
+                                        "{part, offset}"))
+        kw["kingpin"] = tuple(points)
+    if "loaded_radius" in c:
+        kw["loaded_radius"] = rd.number(c["loaded_radius"], (*keys, "loaded_radius"), _LEN)
+    kw["design_load"] = (rd.number(c["design_load"], (*keys, "design_load"), _FORCE)
+                         if "design_load" in c else None)
+    try:
+        return Corner(**kw)
+    except ValueError as e:
+        raise rd.src.error(str(e), keys) from None
+
+
+def _write_corners(doc, mech, put, factor):
+    import tomlkit
+
+    corners = tomlkit.aot()
+    for c in mech.corners:
+        t = tomlkit.table()
+        if c.prefix:
+            t.add("prefix", c.prefix)
+        t.add("wheel_centre", c.wheel_centre)
+        t.add("contact_point", c.contact_point)
+        t.add("wheel_centre_load", False if c.wheel_centre_load is None else c.wheel_centre_load)
+        if c.kingpin is not None:
+            refs = tomlkit.array()
+            for ref in c.kingpin:
+                if isinstance(ref, str):
+                    refs.append(ref)
+                else:
+                    it = tomlkit.inline_table()
+                    it.add("part", ref[0])
+                    it.add("offset", _floats(ref[1], factor(_LEN)))
+                    refs.append(it)
+            t.add("kingpin", refs)
+            t["kingpin"].comment("steering axis [upper, lower]: markers or {part, offset = "
+                                 "[forward, outboard, up] from the wheel centre}")
+        t.add("side", c.side)
+        t.add("frame", c.frame)
+        put(t, "loaded_radius", c.loaded_radius, _LEN, vector=False)
+        if c.design_load is not None:
+            put(t, "design_load", c.design_load, _FORCE, vector=False)
+        corners.append(t)
+    doc.add("corner", corners)
 
 
 def _point(rd: _Reader, e: dict, keys) -> dict:
@@ -936,6 +1036,9 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
                 t.add("frame", names[lp.frame[e]])
             points.add(name, t)
         doc.add("load_points", points)
+
+    if mech.corners:
+        _write_corners(doc, mech, put, factor)
 
     if load_tables:
         tables = tomlkit.table(is_super_table=True)

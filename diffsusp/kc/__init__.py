@@ -10,10 +10,10 @@ kc.compliance_matrix(fz)                           # (cases, 6, 6) at the wheel 
 ```
 
 Definitions and signs (Adams/Car, per side): `diffsusp.kc.metrics`. Which markers are the wheel:
-`Corner` (defaults registered for the built-in models). Events: `diffsusp.kc.events`.
+`Corner` (stored with the model: `Mechanism.corners`). Events: `diffsusp.kc.events`.
 """
 
-from .corner import DEFAULT_CORNERS, Corner, ResolvedCorner, corners_of, default_corner
+from .corner import Corner, ResolvedCorner, corners_of, default_corner
 from .events import (
     TABLES,
     KCEvent,
@@ -48,7 +48,7 @@ from .metrics import (
 from .rig import add_driver, remove_drivers, with_rack
 
 __all__ = [
-    "DEFAULT_CORNERS", "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric",
+    "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric",
     "ResolvedCorner", "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking",
     "compliance_matrix", "corner_geometry", "corners_of", "default_corner", "default_plots",
     "derivative_metrics", "display", "display_unit", "evaluate", "flagged", "force_rig",

@@ -68,6 +68,7 @@ class MechanismBuilder:
 
     def __init__(self, name: str = "mechanism"):
         self.name = name
+        self._corners = []
         self._parts: list[str] = []
         self._markers: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         self._joints: list[tuple[str, str, str, str]] = []
@@ -262,6 +263,21 @@ class MechanismBuilder:
             raise ModelError(f"'{name}' refers to unknown marker '{marker}'.")
         return marker
 
+    def corner(self, corner=None, **fields) -> "MechanismBuilder":
+        """Say which markers are the wheel: a `diffsusp.model.corner.Corner`, or its fields
+        (`wheel_centre`, `contact_point`, `kingpin`, `side`, `frame`, `loaded_radius`,
+        `design_load`, ...). The names are checked at build."""
+        from .corner import Corner
+
+        if corner is None:
+            corner = Corner(**fields)
+        elif fields:
+            raise ModelError("corner: give a Corner or its fields, not both.")
+        if any(c.prefix == corner.prefix for c in self._corners):
+            raise ModelError(f"corner with prefix '{corner.prefix}' given twice.")
+        self._corners.append(corner)
+        return self
+
     # -- build --------------------------------------------------------------------------------
 
     def build(self, *, check: bool = True) -> Mechanism:
@@ -328,7 +344,10 @@ class MechanismBuilder:
                 for part in self._parts
             ),
             name=self.name,
+            corners=tuple(self._corners),
         )
+        for c in self._corners:
+            c.check_names(mech)
         return finalize(mech, check=check)
 
     def _stack_bushings(self, index) -> Bushings:

@@ -178,6 +178,7 @@ def combine(mechs: dict[str, Mechanism], *, name: str | None = None) -> Mechanis
         length_scale=max(float(np.sqrt(np.mean(spread))), 1.0),
         reference_points=tuple(reference),
         name=default_name if name is None else name,
+        corners=tuple(c.with_prefix(prefix) for prefix, m in items for c in m.corners),
     )
 
 

@@ -254,7 +254,8 @@ class Mechanism(eqx.Module):
     `independent_rows` lists the constraint rows (joints then drivers) kept in the solve: rows
     found redundant at design are dropped, as Adams does, and reported by `validate`.
     `reference_points` (one per part, its markers' centroid at design, mm) are where the solver
-    measures each part's translation internally; they do not change any result.
+    measures each part's translation internally; they do not change any result. `corners`
+    describe the wheel(s) (`diffsusp.model.corner.Corner`; empty when the model states none).
     """
 
     parts: tuple[str, ...] = eqx.field(static=True)
@@ -269,6 +270,9 @@ class Mechanism(eqx.Module):
     length_scale: float = eqx.field(static=True)
     reference_points: tuple[tuple[float, float, float], ...] = eqx.field(static=True)
     name: str = eqx.field(static=True, default="mechanism")
+    corners: tuple = eqx.field(static=True, default=())
+    """The wheels of the model (`diffsusp.model.corner.Corner`, one per half axle, each with the
+    name prefix of its half in a combined axle): which markers and load points K&C uses."""
     topology: object = eqx.field(static=True, default=None, init=False, repr=False)
     """Index data of the solver (`diffsusp.model.topology.Topology`), resolved once here."""
 

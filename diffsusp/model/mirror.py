@@ -10,6 +10,7 @@ right-handed). Under this map every element law mirrors exactly:
   forces; offsets and preloads are mirrored the same way (y of translations, x and z of
   rotations change sign) and splines on those axes become y'(e) = −y(−e);
 - joint rows keep their zero level (some change sign), springs and stops keep their lengths;
+- the model's corners change side (`Corner.mirrored`);
 - a driver's direction is mirrored (d' = M d), so the same driver value gives the mirrored
   motion; load components, global or in a marker frame, map as F' = M F and, for moments (axial
   vectors), T' = −M T (`mirror_loads`).
@@ -84,7 +85,23 @@ def mirror(mech: Mechanism, *, suffix: str = "", name: str | None = None) -> Mec
         load_points=dataclasses.replace(mech.load_points, names=names(mech.load_points.names)),
         reference_points=tuple((x, -y, z) for x, y, z in mech.reference_points),
         name=mech.name + " (mirrored)" if name is None else name,
+        corners=tuple(_mirrored_corner(c, names) for c in mech.corners),
     )
+
+
+def _mirrored_corner(corner, names):
+    """The corner on the other side, its names carrying the mirror's suffix (the prefix
+    stays in front of them)."""
+    def name(n):
+        return None if n is None else names((n,))[0]
+
+    kingpin = None
+    if corner.kingpin is not None:
+        kingpin = tuple(name(r) if isinstance(r, str) else (name(r[0]), r[1])
+                        for r in corner.kingpin)
+    return dataclasses.replace(corner.mirrored(), wheel_centre=name(corner.wheel_centre),
+                               contact_point=name(corner.contact_point),
+                               wheel_centre_load=name(corner.wheel_centre_load), kingpin=kingpin)
 
 
 def mirror_loads(loads: Loads) -> Loads:

@@ -207,4 +207,16 @@ def double_wishbone(bushings: bool = False, wheel_travel: bool = False, *,
     b.load_point("wheel_centre", marker="wheel_centre")
     if wheel_travel:
         b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))
+    b.corner(corner())
     return b.build()
+
+
+def corner():
+    """The wheel (`diffsusp.model.corner.Corner`): ISO frame (x forward, y left), the left side,
+    spin axis +y, contact patch `LOADED_RADIUS` below the wheel centre, steering axis through
+    the two ball joints, design load `DOUBLE_WISHBONE_DESIGN_LOAD` (the Chrono importer
+    attaches the same corner to the file, with the design load computed: None)."""
+    from ..model.corner import Corner
+
+    return Corner(kingpin=("uca_upright", "lca_upright"), side="left", frame="iso",
+                  loaded_radius=LOADED_RADIUS, design_load=DOUBLE_WISHBONE_DESIGN_LOAD)

@@ -67,6 +67,32 @@ Chosen: the thesis tabulates no stop."""
 _NMM_PER_DEG_TO_RAD = 180.0 / math.pi
 
 
+def virtual_lower_pivot() -> tuple[float, float, float]:
+    """The design virtual lower steering pivot as a (forward, outboard, up) offset (mm) from the
+    wheel centre L9: the midpoint of the common perpendicular of the two lower links' lines
+    (front arm L1–L8, rear arm L2–L7, Table 2.2), at (−1.62, −716.49, 197.11) mm in the
+    Adams/Car frame. The two lines pass 70 mm apart vertically; in plan view they cross 8–12 %
+    beyond the ball joints."""
+    from ..model.corner import common_perpendicular_midpoint, design_offset
+
+    p = JOINT_POSITIONS
+    pivot = common_perpendicular_midpoint(p["L1"], p["L8"], p["L2"], p["L7"])
+    return design_offset(pivot, p["L9"], "adams", "left")
+
+
+def corner(*, strut: bool = True):
+    """The wheel of the half axle (`diffsusp.model.corner.Corner`): Adams/Car frame, side from
+    the wheel centre (left as built), wheel centre L9 (its z axis is the spin axis, outboard),
+    contact patch `LOADED_RADIUS` below it, steering axis from the strut top L4 (None without
+    the strut) to the design virtual lower pivot of the two lower links (`virtual_lower_pivot`,
+    fixed on the hub carrier), design load `DESIGN_LOAD`."""
+    from ..model.corner import Corner
+
+    kingpin = ("L4_strut_top", ("hub_carrier", virtual_lower_pivot())) if strut else None
+    return Corner(kingpin=kingpin, frame="adams", loaded_radius=LOADED_RADIUS,
+                  design_load=DESIGN_LOAD)
+
+
 def pseudo_mcpherson(wheel_travel: bool = False, *,
                      spring_free_length: float = SPRING_FREE_LENGTH,
                      stops: bool = False) -> Mechanism:
@@ -252,4 +278,5 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
     b.load_point("wheel_centre", marker="wheel_centre")
     if wheel_travel:
         b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))
+    b.corner(corner())
     return b

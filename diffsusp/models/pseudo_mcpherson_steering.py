@@ -12,6 +12,7 @@ from .pseudo_mcpherson import (
     LOADED_RADIUS,
     SPRING_FREE_LENGTH,
     SPRING_RATE,
+    corner,
 )
 
 RACK_AXIS = (0.0, 1.0, 0.0)
@@ -147,6 +148,7 @@ def pseudo_mcpherson_steering(*, strut: bool = True, rack: bool = True,
     x9, y9, z9 = p["L9"]
     b.load_point("contact_patch", part="hub_carrier", at=(x9, y9, z9 - LOADED_RADIUS))
     b.load_point("wheel_centre", marker="wheel_centre")
+    b.corner(corner(strut=strut))
     if wheel_travel:
         b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))
     return b.build()
