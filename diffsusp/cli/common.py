@@ -11,11 +11,13 @@ the `error:` and `warning:` labels, never for text that comes from a file, a nam
 """
 
 import contextlib
+import enum
 import json
 import os
 import signal
 import sys
 import warnings
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -225,11 +227,31 @@ def check_output(path, *, suffixes=None, what: str = "output", directory: bool =
                    EXIT_BAD_INPUT)
 
 
-def load_model_file(model, *, check: bool = True):
-    """`diffsusp.io.load_model_file` (built-in names, the stop variants included)."""
+class Side(enum.StrEnum):
+    """A side of the vehicle (`--side`)."""
+
+    left = "left"
+    right = "right"
+
+
+SideOption = Annotated[Side | None, typer.Option(
+    "--side", case_sensitive=False,
+    help="the vehicle side to load the model on: a Chrono file is read on that side, any other "
+    "half axle whose corner is on the other side is mirrored (default: as the model is)")]
+"""The one `--side` option of every verb that loads a model."""
+
+
+def side_value(side) -> str | None:
+    """The text of a `SideOption` value (None: as the model is)."""
+    return None if side is None else Side(side).value
+
+
+def load_model_file(model, *, check: bool = True, side=None):
+    """`diffsusp.io.load_model_file` (built-in names, the stop variants included), on `side`
+    (a `SideOption` value)."""
     from ..io import load_model_file as load
 
-    return load(model, check=check)
+    return load(model, check=check, side=side_value(side))
 
 
 def print_json(obj) -> None:

@@ -33,6 +33,7 @@ from rich.table import Table as RichTable
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_CONVERGED,
+    SideOption,
     check_output,
     cli_errors,
     console,
@@ -75,6 +76,7 @@ def _check_choice(name: str, value: str):
 def direct(
     model: ModelArg,
     measurements: MeasurementsOpt,
+    side: SideOption = None,
     out: OutOpt = None,
     write_model: WriteModelOpt = None,
     method: Annotated[str, typer.Option(
@@ -111,7 +113,7 @@ def direct(
     from .common import load_model_file
 
     with cli_errors():
-        model_file = load_model_file(model)
+        model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
         where = None
@@ -372,6 +374,7 @@ def _progress():
 def iterative_command(
     model: ModelArg,
     measurements: MeasurementsOpt,
+    side: SideOption = None,
     bushing: Annotated[list[str] | None, typer.Option(
         "--bushing", "-b", help="Bushing to identify (repeatable; default: every bushing "
         "between measured parts).")] = None,
@@ -413,7 +416,7 @@ def iterative_command(
     from .common import load_model_file
 
     with cli_errors():
-        model_file = load_model_file(model)
+        model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
         names = _measured_bushings(mech, meas, bushing)
@@ -617,6 +620,7 @@ def fit_command(
         "--measurements", "-m",
         help="Landmark or pose table with the loads of each case (.csv or .parquet); any "
         "subset of the parts.")],
+    side: SideOption = None,
     bushing: Annotated[list[str] | None, typer.Option(
         "--bushing", "-b", help="Bushing whose stiffnesses are identified (repeatable; default: "
         "all).")] = None,
@@ -659,7 +663,7 @@ def fit_command(
     from .common import load_model_file
 
     with cli_errors():
-        model_file = load_model_file(model)
+        model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
         data = from_measurements(meas, sigma, sigma_rotation * _DEG)

@@ -34,6 +34,7 @@ from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the oth
 )
 from .common import (
     EXIT_BAD_INPUT,
+    SideOption,
     check_output,
     cli_errors,
     console,
@@ -41,13 +42,14 @@ from .common import (
     fail,
     print_json,
     show_warnings,
+    side_value,
     warn,
 )
 
 
-def _model(name: str):
+def _model(name: str, side=None):
     """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file, through the
-    library's one resolver (`diffsusp.io.load_model_file`)."""
+    library's one resolver (`diffsusp.io.load_model_file`), on `side` (`SideOption`)."""
     from diffsusp.errors import InputError
     from diffsusp.io import load_model_file
     from diffsusp.models import STOP_VARIANTS, ZOO
@@ -58,12 +60,11 @@ def _model(name: str):
             "nor an existing file. Give a built-in name or the path of a model file (.toml, "
             ".adm, .json)."
         )
-    return load_model_file(name).mechanism
+    return load_model_file(name, side=side_value(side)).mechanism
 
 
-def _corner(mech, frame, loaded_radius, kingpin, side):
-    return corner_with(mech, frame=frame, loaded_radius=loaded_radius, kingpin=kingpin,
-                       side=side)
+def _corner(mech, frame, loaded_radius, kingpin):
+    return corner_with(mech, frame=frame, loaded_radius=loaded_radius, kingpin=kingpin)
 
 
 def _run_event(mech, event, corner, travel, fz, force, torque, rack):
@@ -181,10 +182,11 @@ def kc_command(
     = "-4000:4000:17",
     torque: Annotated[str, typer.Option(help="aligning torque range (N·m)")] = "-200:200:17",
     rack: Annotated[str, typer.Option(help="rack travel range (mm)")] = "-30:30:61",
+    side: SideOption = None,
     frame: Annotated[str | None, typer.Option(
-        help="model frame: adams or iso (default: the model's registered corner)")] = None,
-    side: Annotated[str | None, typer.Option(help="left, right or auto")] = None,
-    loaded_radius: Annotated[float | None, typer.Option(help="loaded tyre radius (mm)")] = None,
+        help="model frame: adams or iso (default: the model's own corner)")] = None,
+    loaded_radius: Annotated[float | None, typer.Option(
+        help="loaded tyre radius (mm; default: the model's own corner)")] = None,
     kingpin: Annotated[str | None, typer.Option(
         help="steering axis markers 'upper,lower'")] = None,
     out: Annotated[pathlib.Path | None, typer.Option(
@@ -201,8 +203,8 @@ def kc_command(
     err = console(stderr=True, markup=False)
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        mech = _model(model)
-        corner = _corner(mech, frame, loaded_radius, kingpin, side)
+        mech = _model(model, side)
+        corner = _corner(mech, frame, loaded_radius, kingpin)
         t0 = time.perf_counter()
         with err.status(f"running {event} on {mech.name} (the first run compiles, ~30 s)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)

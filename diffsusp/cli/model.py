@@ -19,6 +19,7 @@ from .common import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
     EXIT_NOT_CONVERGED,
+    SideOption,
     check_output,
     cli_errors,
     console,
@@ -47,14 +48,15 @@ def parameter_leaves(mech) -> list[dict]:
     return out
 
 
-def _load(model: str, *, check: bool = True):
+def _load(model: str, *, check: bool = True, side=None):
     from .common import load_model_file
 
-    return load_model_file(model, check=check)
+    return load_model_file(model, check=check, side=side)
 
 
 def info(
     model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
+    side: SideOption = None,
     json_output: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ):
     """Describe a model: parts, markers, joints, elements, DOF, rank, redundant rows, free modes
@@ -63,7 +65,7 @@ def info(
     with cli_errors():
         from ..model import validate
 
-        mf = _load(model, check=False)
+        mf = _load(model, check=False, side=side)
         mech = mf.mechanism
         report = validate(mech)
     names = mech.markers.names
@@ -80,6 +82,7 @@ def info(
         stops=list(mech.stops.names),
         drivers=list(mech.drivers.names),
         load_points=list(mech.load_points.names),
+        corners=[_corner_summary(c, mech) for c in mech.corners],
         load_tables={k: dict(rows=t.n_rows, columns=list(t.names))
                      for k, t in mf.load_tables.items()},
         coordinates=report.n_coordinates,
@@ -102,6 +105,14 @@ def info(
                          ("stops", summary["stops"]), ("drivers", summary["drivers"]),
                          ("load points", summary["load_points"])):
         out.print(Text(f"{label} ({len(items)}): {', '.join(items) or '-'}"), highlight=False)
+    for c in summary["corners"]:
+        kingpin = " – ".join(map(str, c["kingpin"])) if c["kingpin"] else "none"
+        load = "computed" if c["design_load"] is None else f"{c['design_load']:g} N"
+        out.print(Text(
+            f"corner {c['prefix'] or ''}: {c['side']} side, {c['frame']} frame, wheel centre "
+            f"{c['wheel_centre']}, contact point {c['contact_point']}, loaded radius "
+            f"{c['loaded_radius']:g} mm, kingpin {kingpin}, design load {load}"),
+            highlight=False)
     joints = ", ".join(f"{j['name']} ({j['kind']})" for j in summary["joints"])
     out.print(Text(f"joints ({len(summary['joints'])}): {joints or '-'}"), highlight=False)
     if mf.load_tables:
@@ -118,6 +129,17 @@ def info(
     for p in summary["parameters"]:
         table.add_row(p["path"], "×".join(map(str, p["shape"])), p["unit"])
     out.print(table)
+
+
+def _corner_summary(c, mech) -> dict:
+    """A corner as JSON: names, side (resolved), frame, radius (mm), design load (N or None)."""
+    return dict(prefix=c.prefix, wheel_centre=c.wheel_centre, contact_point=c.contact_point,
+                wheel_centre_load=c.wheel_centre_load,
+                kingpin=None if c.kingpin is None else [
+                    r if isinstance(r, str) else {"part": r[0], "offset": list(r[1])}
+                    for r in c.kingpin],
+                side=c.side_in(mech), frame=c.frame, loaded_radius=c.loaded_radius,
+                design_load=c.design_load)
 
 
 def _load_table(mf, loads: str):
@@ -275,6 +297,7 @@ def simulate(
     loads: str = typer.Option(..., "--loads", "-l",
                               help="Load table (.csv, .parquet) or a load table of the model."),
     out: str = typer.Option(..., "--out", "-o", help="Results table to write (.csv, .parquet)."),
+    side: SideOption = None,
     max_steps: int = typer.Option(50, "--max-steps", help="Newton iterations per case."),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ):
@@ -299,7 +322,7 @@ def simulate(
     enable_x64()
     t0 = time.perf_counter()
     with cli_errors():
-        mf = _load(model)
+        mf = _load(model, side=side)
         mech = mf.mechanism
         table = _load_table(mf, loads)
         if table.n_rows == 0:

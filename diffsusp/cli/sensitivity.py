@@ -19,6 +19,7 @@ from rich.table import Table
 from ..identify.sensitivity import PARAMETER_SETS
 from .common import (
     EXIT_BAD_INPUT,
+    SideOption,
     check_output,
     cli_errors,
     console,
@@ -31,6 +32,7 @@ from .kc import EVENTS, _corner, _model, _nan_to_none, _run_event
 
 def sensitivity_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
+    side: SideOption = None,
     event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
                                        + ", ".join(EVENTS))] = "parallel-travel",
     params: Annotated[str, typer.Option(
@@ -73,8 +75,8 @@ def sensitivity_command(
 
     err = console(stderr=True, markup=False)
     with cli_errors():
-        mech = _model(model)
-        corner = _corner(mech, None, None, None, None)
+        mech = _model(model, side)
+        corner = _corner(mech, None, None, None)
         t0 = time.perf_counter()
         with err.status(f"running {event} on {mech.name} and differentiating (the first run "
                         "compiles, 1–3 min)..."):

@@ -30,13 +30,51 @@ from .tir import TirFile, read_tir, tir_from_text, write_tir
 
 __all__ = [
     "IgesFile", "TirFile", "read_iges", "read_tir", "tir_from_text", "write_tir",
-    "ModelFile", "Table", "load_columns", "load_model", "load_model_file", "loads_from_table",
-    "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml", "read_table",
-    "results_table", "save_model", "write_model_toml", "write_table",
+    "SIDES", "ModelFile", "Table", "load_columns", "load_model", "load_model_file",
+    "loads_from_table", "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml",
+    "read_table", "results_table", "save_model", "write_model_toml", "write_table",
 ]
 
 
-def load_model_file(source, *, check: bool = True) -> ModelFile:
+SIDES = ("left", "right")
+"""The sides `load_model(side=...)` gives a half axle."""
+
+
+def load_model_file(source, *, check: bool = True, side: str | None = None) -> ModelFile:
+    """`_load_model_file` on the requested side of the vehicle.
+
+    `side` ('left', 'right', or None: as the model is): a Chrono file is read on that side
+    (`read_chrono(side=...)`); any other half axle whose corner (`Mechanism.corners`) is on the
+    other side is mirrored (`diffsusp.model.mirror.mirror`, its corner follows). Raises
+    `InputError` for a model without a corner, or with more than one (an axle)."""
+    from ..errors import InputError
+
+    if side is not None and side not in SIDES:
+        raise InputError(f"side must be 'left' or 'right'; got '{side}'.")
+    text = os.fspath(source)
+    if side is not None and os.path.splitext(text)[1].lower() == ".json":
+        from .chrono import read_chrono
+
+        if os.path.isfile(text):
+            return ModelFile(mechanism=read_chrono(text, side=side), load_tables={},
+                             units=dict(_LIBRARY), path=text)
+    out = _load_model_file(source, check=check)
+    if side is None:
+        return out
+    mech = out.mechanism
+    if len(mech.corners) != 1 or mech.corners[0].prefix:
+        raise InputError(
+            f"--side needs a half axle that states its wheel corner; model '{mech.name}' has "
+            f"{len(mech.corners) or 'no'} corner(s). Describe the wheel in a [[corner]] table "
+            "of a native file, or load the model without a side.")
+    if mech.corners[0].side_in(mech) == side:
+        return out
+    from ..model.mirror import mirror
+
+    return dataclasses.replace(out, mechanism=mirror(mech, name=f"{mech.name} ({side})"))
+
+
+def _load_model_file(source, *, check: bool = True) -> ModelFile:
     """Read a model and whatever comes with it (named load tables for native files).
 
     **Arguments:** `source`: a path (`.toml`, `.adm`, `.json`) or a built-in model name (a key
@@ -56,7 +94,7 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
     text = os.fspath(source)
     if text in STOP_VARIANTS and not os.path.exists(text):
         # An axle with bump and rebound stops: the load tables of the model it adds them to.
-        base = load_model_file(text.removesuffix("_stops"), check=False)
+        base = _load_model_file(text.removesuffix("_stops"), check=False)
         return dataclasses.replace(base, mechanism=STOP_VARIANTS[text]())
     if text in ZOO and not os.path.exists(text):
         mech = ZOO[text]()
@@ -93,9 +131,10 @@ def load_model_file(source, *, check: bool = True) -> ModelFile:
 _LIBRARY = {"length": "mm", "force": "N", "angle": "rad"}
 
 
-def load_model(source, *, check: bool = True):
-    """The `Mechanism` of a model file or built-in model name (see `load_model_file`)."""
-    return load_model_file(source, check=check).mechanism
+def load_model(source, *, check: bool = True, side: str | None = None):
+    """The `Mechanism` of a model file or built-in model name (see `load_model_file`), on
+    `side` ('left', 'right'; None: as the model is)."""
+    return load_model_file(source, check=check, side=side).mechanism
 
 
 def save_model(mech, path, *, load_tables: dict | None = None, units: dict | None = None,

@@ -95,6 +95,15 @@ class Corner:
         side = {"left": "right", "right": "left"}.get(self.side, self.side)
         return dataclasses.replace(self, side=side)
 
+    def side_in(self, mech) -> str:
+        """'left' or 'right': the stated side, or with 'auto' the side of the vehicle's
+        centreline the wheel centre is on at design."""
+        if self.side != "auto":
+            return self.side
+        k = mech.markers.names.index(self.prefix + self.wheel_centre)
+        w0 = np.asarray(mech.markers.position[k], dtype=float)
+        return "right" if float(w0 @ np.array(FRAMES[self.frame][1])) > 0 else "left"
+
     def check_names(self, mech) -> None:
         """Raise `ModelError` if a marker, load point or part this corner names is not in
         `mech` (what the builder and the file readers check)."""
