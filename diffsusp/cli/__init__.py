@@ -6,7 +6,7 @@ Exit codes (`diffsusp.cli.common`): 0 success, 2 bad input (paths, files, tables
 3 a load case did not converge, 4 a model that cannot be solved as given.
 """
 
-from . import demo, geometry, identify, kc, model, sensitivity
+from . import demo, fleet, geometry, identify, kc, model, sensitivity
 from .common import app
 
 # The verbs, registered here explicitly (help lists commands in this order, then groups).
@@ -21,6 +21,7 @@ identify.identify_app.command("iterative")(identify.iterative_command)
 identify.identify_app.command("fit")(identify.fit_command)
 identify.identify_app.command("geometry")(geometry.geometry)
 identify.identify_app.command("correct")(geometry.correct)
+app.add_typer(fleet.fleet_app, name="fleet")  # its verbs register in cli/fleet.py
 
 from . import tyre  # noqa: E402, F401  (registers its group on import, after identify)
 

@@ -1,0 +1,155 @@
+"""`diffsusp fleet RECIPE --items GLOB|LIST --out DIR [--workers N | --scheduler ADDRESS]` and
+`diffsusp fleet status DIR`: one identification per data set, many data sets
+(`diffsusp.fleet`).
+
+RECIPE is `direct`, `iterative` or `least-squares`. `--items` is a glob (quote it: the
+program expands it, so a remote scheduler sees the same list), a table path, or a `.txt` file
+listing one path per line; repeatable. Each item's report goes to `DIR/reports/ITEM.json` (the
+JSON of `diffsusp identify … --out report.json`) as soon as its batch is done, one row per item
+to `DIR/summary.csv`; a second run in the same DIR skips the items done (same content hash).
+Without `--workers` or `--scheduler` the fleet runs in this process. Exit codes: 0 every item
+ok, 3 some items failed (listed, and in the summary), 2 bad input.
+"""
+
+import json
+import pathlib
+from typing import Annotated
+
+import typer
+
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_NOT_CONVERGED,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+)
+
+fleet_app = typer.Typer(add_completion=False, no_args_is_help=True,
+                        help="Many identifications, one per data set, in-process or on a Dask "
+                        "cluster; resumable.")
+
+ItemsOpt = Annotated[list[str], typer.Option(
+    "--items", "-i", help="Data sets: a glob ('data/*.csv', quoted), a table, or a .txt list "
+    "of paths (repeatable).")]
+OutOpt = Annotated[pathlib.Path, typer.Option("--out", "-o", help="Output folder.")]
+ModelOpt = Annotated[str, typer.Option(
+    "--model", "-M", help="Model file (.toml, .adm, .json) or built-in name, for every item.")]
+WorkersOpt = Annotated[int | None, typer.Option(
+    help="Start a local Dask cluster of N worker processes.")]
+SchedulerOpt = Annotated[str | None, typer.Option(
+    help="Address of a running Dask scheduler (tcp://host:8786).")]
+BatchOpt = Annotated[int, typer.Option(help="Items per task (and padded batch of a fit).")]
+TimeOpt = Annotated[float | None, typer.Option(help="Time limit per item, seconds.")]
+OptionOpt = Annotated[list[str] | None, typer.Option(
+    "--option", help="Recipe option KEY=VALUE (VALUE as JSON, else text), e.g. hold=model, "
+    "eliminate=true (repeatable): the identification function's keyword arguments.")]
+RetryOpt = Annotated[bool, typer.Option(help="Also re-run the items that failed before.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable result.")]
+
+
+def _items(values: list[str]) -> list[str]:
+    out = []
+    for v in values:
+        if v.lower().endswith(".txt") and pathlib.Path(v).is_file():
+            out += [line.strip() for line in pathlib.Path(v).read_text().splitlines()
+                    if line.strip() and not line.lstrip().startswith("#")]
+        else:
+            out.append(v)
+    return out
+
+
+def _options(values: list[str] | None) -> dict:
+    options = {}
+    for v in values or ():
+        key, sep, text = v.partition("=")
+        if not sep or not key.strip():
+            raise fail(f"--option must be KEY=VALUE; got '{v}'.", EXIT_BAD_INPUT)
+        try:
+            options[key.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            options[key.strip()] = text
+    return options
+
+
+def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, option,
+         retry_failed, json_output):
+    if workers is not None and scheduler is not None:
+        raise fail("give --workers or --scheduler, not both.", EXIT_BAD_INPUT)
+    if workers is not None and workers < 1:
+        raise fail("--workers must be at least 1.", EXIT_BAD_INPUT)
+    check_output(out, what="fleet folder", directory=True)
+    options = _options(option)
+    enable_x64()
+    from .. import fleet
+
+    with cli_errors():
+        result = fleet.run(recipe, _items(items), out, model=model, options=options,
+                           workers=workers, scheduler=scheduler, batch_size=batch_size,
+                           time_limit=time_limit, retry_failed=retry_failed,
+                           progress=not json_output)
+        state = fleet.status(out)
+    if json_output:
+        print_json({"ok": result.ok, "failed": result.failed, "skipped": result.skipped,
+                    "total": result.total, "seconds": result.seconds,
+                    "items_per_s": result.items_per_s, "compiled": result.compiled,
+                    "cache_hits": result.cache_hits, "summary": str(result.summary),
+                    "failures": [list(f) for f in state.failures]})
+    else:
+        con = console(markup=False)
+        con.print(result.text(), highlight=False)
+        for item, st, msg in state.failures:
+            con.print(f"  {item}: {st}: {msg}", highlight=False)
+    if state.failed:
+        raise typer.Exit(code=EXIT_NOT_CONVERGED)
+
+
+@fleet_app.command("direct")
+def direct(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+           scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+           option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+    """The direct (linear) stiffness identification on every data set."""
+    _run("direct", items, out, model, workers, scheduler, batch_size, time_limit, option,
+         retry_failed, json_output)
+
+
+@fleet_app.command("iterative")
+def iterative(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+              scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
+              time_limit: TimeOpt = None, option: OptionOpt = None,
+              retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+    """The iterative (correlation loop) identification on every data set."""
+    _run("iterative", items, out, model, workers, scheduler, batch_size, time_limit, option,
+         retry_failed, json_output)
+
+
+@fleet_app.command("least-squares")
+def least_squares(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+                  scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
+                  time_limit: TimeOpt = None, option: OptionOpt = None,
+                  retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+    """Least squares through the equilibrium on every data set, a batch at a time (vmapped)."""
+    _run("least_squares", items, out, model, workers, scheduler, batch_size, time_limit,
+         option, retry_failed, json_output)
+
+
+@fleet_app.command("status")
+def status(
+    out: Annotated[pathlib.Path, typer.Argument(help="The fleet's output folder.")],
+    json_output: JsonOpt = False,
+):
+    """Items done, failed (with their messages) and still to do in a fleet's folder."""
+    from .. import fleet
+
+    with cli_errors():
+        state = fleet.status(out)
+    if json_output:
+        print_json({"recipe": state.recipe, "total": state.total, "ok": state.ok,
+                    "failed": state.failed, "pending": state.pending,
+                    "items_per_s": state.items_per_s,
+                    "failures": [list(f) for f in state.failures]})
+        return
+    console(markup=False).print(state.text(), highlight=False)

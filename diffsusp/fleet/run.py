@@ -1,0 +1,482 @@
+"""The fleet driver: items → content hashes → batches of one shape → an engine → the store.
+
+**Batches and shapes.** Items are grouped by a cheap shape key read without parsing (a CSV
+table's header and number of rows, a Parquet file's schema and row count, an in-memory
+measurement's array shapes), sorted by name, and cut into batches of `batch_size`. A worker
+compiles each program once per shape (and loads it from the shared persistent compilation
+cache when another worker compiled it already); a batched recipe also pads every batch to
+`batch_size` data sets, so a fleet of ragged data sets compiles one program per distinct table
+shape, not one per item or per batch length. The batches are the same whatever the engine, so
+an in-process run and a cluster run compute the same numbers.
+
+**Faults.** An item that fails (unreadable file, a fit that raises) gets status `error` and the
+message; a batch past its time (`time_limit` seconds per item, checked between items and
+between the steps of a fit) gets `timeout`; a batch whose workers kept dying (Dask gives up
+after `distributed.scheduler.allowed-failures` deaths) gets `error` with the reason. None of
+these stops the fleet. A worker killed mid-batch loses only that batch, which the scheduler runs
+again elsewhere.
+"""
+
+import dataclasses
+import glob
+import hashlib
+import json
+import os
+import pathlib
+import pickle
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from .engine import DaskEngine, Engine, InProcessEngine, worker_environment
+from .recipes import ItemTimeout, Recipe
+from .recipes import recipe as make_recipe
+from .store import Store
+
+__all__ = ["FleetResult", "Item", "run"]
+
+FORMAT = "diffsusp-fleet-1"
+
+
+@dataclasses.dataclass(frozen=True)
+class Item:
+    """One data set of a fleet: a `path` (CSV or Parquet table), or in-memory `data` (what the
+    recipe's `read` would return, e.g. a `measure.Measurements`), under a unique `name`."""
+
+    name: str
+    path: str | None = None
+    data: object = None
+
+
+@dataclasses.dataclass
+class _Prepared:
+    name: str
+    hash: str
+    shape: tuple
+    suffix: str = ""
+    content: bytes | None = None
+    data: object = None
+
+
+@dataclasses.dataclass
+class _Batch:
+    """One task: the items of a batch and everything a worker needs to run them."""
+
+    key: str
+    recipe: Recipe
+    model: object
+    items: list
+    time_limit: float | None
+    cache_dir: str | None
+    cache_min_seconds: float
+    x64: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class FleetResult:
+    """What a `run` did: item counts (`ok`, `failed`, `skipped` because already done with the
+    same hash), batches, wall `seconds` and `items_per_s` (items run / seconds), the programs
+    the workers compiled and loaded from the persistent cache, and where the summary is."""
+
+    out: pathlib.Path
+    total: int
+    ok: int
+    failed: int
+    skipped: int
+    batches: int
+    seconds: float
+    items_per_s: float
+    compiled: int
+    cache_hits: int
+    engine: str
+    summary: pathlib.Path
+
+    def text(self) -> str:
+        return (f"{self.total} items: {self.ok} ok, {self.failed} failed, {self.skipped} "
+                f"already done; {self.batches} batches on {self.engine} in {self.seconds:.1f} s "
+                f"({self.items_per_s:.3g} items/s); programs compiled {self.compiled}, loaded "
+                f"from the cache {self.cache_hits}; summary {self.summary}")
+
+
+# ----------------------------------------------------------------------------- items
+
+
+def _as_items(items) -> list[Item]:
+    from ..errors import InputError
+
+    if isinstance(items, str | os.PathLike):
+        items = [items]
+    out: list[Item] = []
+    for it in items:
+        if isinstance(it, Item):
+            out.append(it)
+            continue
+        text = os.fspath(it)
+        paths = sorted(glob.glob(text)) if glob.has_magic(text) else [text]
+        if not paths:
+            raise InputError(f"--items {text!r} matches no file.")
+        out += [Item(name=pathlib.Path(p).stem, path=p) for p in paths]
+    seen: dict[str, str] = {}
+    for it in out:
+        if it.name in seen:
+            raise InputError(f"two items are named {it.name!r} ({seen[it.name]} and "
+                             f"{it.path}): item names (file stems) must be unique.")
+        seen[it.name] = it.path or "<data>"
+        if (it.path is None) == (it.data is None):
+            raise InputError(f"item {it.name!r}: give a path or data (one of them).")
+    if not out:
+        raise InputError("the fleet has no items.")
+    return out
+
+
+def _numpy_tree(tree):
+    """Array leaves as NumPy (they pickle the same whatever the receiver's JAX settings)."""
+    import equinox as eqx
+    import jax
+
+    return jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, tree)
+
+
+def _jax_tree(tree):
+    import jax
+    import jax.numpy as jnp
+
+    return jax.tree.map(lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, tree)
+
+
+def _digest(*parts: bytes) -> str:
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(len(p).to_bytes(8, "little"))
+        h.update(p)
+    return h.hexdigest()
+
+
+def _shape_of_file(path: str, content: bytes) -> tuple:
+    suffix = pathlib.Path(path).suffix.lower()
+    if suffix == ".parquet":
+        try:
+            import io
+
+            import pyarrow.parquet as pq
+
+            meta = pq.ParquetFile(io.BytesIO(content)).metadata
+            return (suffix, str(meta.schema.to_arrow_schema()), meta.num_rows)
+        except Exception:
+            return (suffix, "unreadable")
+    lines = content.splitlines()
+    return (suffix, lines[0].strip() if lines else b"", len([x for x in lines if x.strip()]))
+
+
+def _prepare(items: list[Item], salt: bytes) -> list[_Prepared]:
+    out = []
+    for it in items:
+        if it.path is not None:
+            try:
+                content = pathlib.Path(it.path).read_bytes()
+            except OSError as e:
+                content = None
+                shape = ("unreadable", str(e))
+                digest = _digest(salt, b"missing", str(it.path).encode())
+            else:
+                shape = _shape_of_file(it.path, content)
+                digest = _digest(salt, content)
+            out.append(_Prepared(it.name, digest, shape, pathlib.Path(it.path).suffix.lower(),
+                                 content=content))
+        else:
+            import jax
+
+            data = _numpy_tree(it.data)
+            leaves = jax.tree.leaves(data)
+            shape = ("data", type(it.data).__name__,
+                     tuple(np.shape(x) for x in leaves if isinstance(x, np.ndarray)))
+            digest = _digest(salt, pickle.dumps(
+                [x.tobytes() if isinstance(x, np.ndarray) else repr(x) for x in leaves]),
+                repr(jax.tree.structure(data)).encode())
+            out.append(_Prepared(it.name, digest, shape, data=data))
+    return out
+
+
+def _batches(prepared: list[_Prepared], batch_size: int) -> list[list[_Prepared]]:
+    groups: dict[str, list[_Prepared]] = {}
+    for p in prepared:
+        groups.setdefault(repr(p.shape), []).append(p)
+    out = []
+    for key in sorted(groups):
+        members = sorted(groups[key], key=lambda p: p.name)
+        out += [members[i:i + batch_size] for i in range(0, len(members), batch_size)]
+    return out
+
+
+def _model_of(model):
+    from ..model.mechanism import Mechanism
+
+    if isinstance(model, Mechanism):
+        return model
+    from ..io import load_model_file
+
+    return load_model_file(model).mechanism
+
+
+def _fingerprint(mech) -> bytes:
+    import jax
+
+    leaves, treedef = jax.tree.flatten(_numpy_tree(mech))
+    return pickle.dumps(([x.tobytes() if isinstance(x, np.ndarray) else repr(x) for x in leaves],
+                         repr(treedef)))
+
+
+# ----------------------------------------------------------------------------- worker side
+
+_WORKER = {"setup": False, "compiled": 0, "hits": 0}
+
+
+def _count_compiles():
+    import jax
+
+    def duration(event, seconds, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            _WORKER["compiled"] += 1
+
+    def counter(event, **kwargs):
+        if event == "/jax/compilation_cache/cache_hits":
+            _WORKER["hits"] += 1
+
+    jax.monitoring.register_event_duration_secs_listener(duration)
+    jax.monitoring.register_event_listener(counter)
+
+
+def _setup(batch: _Batch, own_process: bool) -> None:
+    """Once per process: count compilations; in a worker process (not the caller's), also
+    the driver's float64 setting and the shared persistent compilation cache."""
+    if _WORKER["setup"]:
+        return
+    _WORKER["setup"] = True
+    if own_process:
+        from .._compile import set_xla_flags
+
+        set_xla_flags(os.environ)  # before JAX starts its backend (a fresh worker)
+        import jax
+
+        jax.config.update("jax_enable_x64", batch.x64)
+        if batch.cache_dir and not jax.config.jax_compilation_cache_dir:
+            jax.config.update("jax_compilation_cache_dir", batch.cache_dir)
+            jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                              batch.cache_min_seconds)
+    _count_compiles()
+
+
+def run_batch(batch: _Batch, own_process: bool = True) -> dict:
+    """Run one batch (in a worker): `{"results": [...], "worker", "compiled", "hits"}`, one
+    result per item: `{"item", "status", "message", "report", "values", "seconds"}`."""
+    import tempfile
+
+    _setup(batch, own_process)
+    compiled0, hits0 = _WORKER["compiled"], _WORKER["hits"]
+    mech = _jax_tree(batch.model)
+    start = time.monotonic()
+    deadline = None if batch.time_limit is None else start + batch.time_limit * len(batch.items)
+    results: list[dict] = []
+    data, where = [], []
+    with tempfile.TemporaryDirectory(prefix="diffsusp-fleet-") as tmp:
+        for k, p in enumerate(batch.items):
+            folder = pathlib.Path(tmp)
+            entry = {"item": p.name, "status": "ok", "message": "", "report": None,
+                     "values": None}
+            results.append(entry)
+            try:
+                if p.data is not None:
+                    data.append(_jax_tree(p.data))
+                else:
+                    if p.content is None:
+                        raise FileNotFoundError(p.shape[1])
+                    folder = pathlib.Path(tmp) / str(k)
+                    folder.mkdir()
+                    path = folder / f"{p.name}{p.suffix}"
+                    path.write_bytes(p.content)
+                    data.append(batch.recipe.read(mech, path))
+                where.append(k)
+            except Exception as e:
+                entry.update(status="error", message=_message(e, f"{folder}{os.sep}"))
+        outcomes = batch.recipe.run(mech, data, deadline) if data else []
+    for k, outcome in zip(where, outcomes, strict=True):
+        entry = results[k]
+        if isinstance(outcome, ItemTimeout):
+            entry.update(status="timeout", message=str(outcome))
+        elif isinstance(outcome, Exception):
+            entry.update(status="error", message=_message(outcome))
+        else:
+            entry["report"], entry["values"] = outcome
+    seconds = (time.monotonic() - start) / max(len(batch.items), 1)
+    for entry in results:
+        entry["seconds"] = seconds
+    import socket
+
+    hits = _WORKER["hits"] - hits0  # a cache hit is also a backend-compile event
+    return {"results": results, "worker": f"{socket.gethostname()}:{os.getpid()}",
+            "compiled": _WORKER["compiled"] - compiled0 - hits, "hits": hits}
+
+
+def _message(e: BaseException, hide: str = "") -> str:
+    """One line; `hide` (the worker's temporary folder) removed, so that the message names the
+    item's file the same on every engine."""
+    text = str(e).strip().replace("\n", " ")
+    if hide:
+        text = text.replace(hide, "")
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+def _progress_printer(stream=None) -> Callable[[dict], None]:
+    stream = stream or sys.stderr
+    tty = getattr(stream, "isatty", lambda: False)()
+
+    def show(p):
+        line = (f"fleet: {p['done']}/{p['total']} items, {p['failed']} failed, "
+                f"{p['items_per_s']:.3g} items/s")
+        stream.write(("\r" + line) if tty else line + "\n")
+        if tty and p["done"] == p["total"]:
+            stream.write("\n")
+        stream.flush()
+
+    return show
+
+
+def run(
+    recipe: str | Recipe,
+    items: str | os.PathLike | Sequence,
+    out: str | os.PathLike,
+    *,
+    model,
+    options: dict | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client=None,
+    engine: Engine | None = None,
+    batch_size: int = 16,
+    time_limit: float | None = None,
+    cache_dir: str | None = None,
+    retry_failed: bool = False,
+    progress: bool | Callable[[dict], None] = False,
+) -> FleetResult:
+    """Run one identification per item, on this process or a Dask cluster, streaming the
+    reports to `out` and skipping what an earlier run there finished (see `diffsusp.fleet`).
+
+    **Arguments:**
+    - `recipe`: `'direct'`, `'iterative'`, `'least_squares'` (with `options`, the function's
+      keyword arguments), or a `Recipe` object.
+    - `items`: a glob (`'data/*.csv'`), a path, or a list of paths and `Item`s (in-memory data).
+      An item's name is its file stem; its report is `out/reports/NAME.json`.
+    - `out`: the output folder (made if needed): see `diffsusp.fleet.store`.
+    - `model`: a `Mechanism`, a model file or a built-in name, the same for every item.
+    - `workers` (start a local Dask cluster of that many processes), `scheduler` (address of a
+      running Dask scheduler), `client` (a `distributed.Client`), or `engine`; none: in-process.
+    - `batch_size`: items per task (and the padded batch of a batched recipe).
+    - `time_limit`: seconds per item (a batch gets `time_limit × its items`); checked between
+      items and between the steps of an iterative fit.
+    - `cache_dir`: the persistent compilation cache the workers share (default: this
+      process's, else `$DIFFSUSP_CACHE` or `~/.cache/diffsusp/jax` as the CLI).
+    - `retry_failed`: also re-run the items that failed before.
+    - `progress`: True prints a progress line on stderr; or a function of a dict (`done`,
+      `failed`, `total`, `items_per_s`, `batch_worker`).
+
+    **Returns:** a `FleetResult`.
+    """
+    import jax
+
+    from ..errors import InputError
+
+    rec = make_recipe(recipe, **(options or {}))
+    if batch_size < 1:
+        raise InputError(f"batch_size must be at least 1; got {batch_size}.")
+    if time_limit is not None and not time_limit > 0:
+        raise InputError(f"time_limit must be positive (seconds per item); got {time_limit}.")
+    if rec.batched and rec.options.get("pad_to") is None:
+        rec = dataclasses.replace(rec, options={**rec.options, "pad_to": batch_size})
+    mech = _model_of(model)
+    item_list = _as_items(items)
+    salt = _digest(FORMAT.encode(), rec.name.encode(),
+                   json.dumps(rec.options, sort_keys=True, default=str).encode(),
+                   _fingerprint(mech)).encode()
+    prepared = _prepare(item_list, salt)
+    store = Store(out)
+    done = store.entries()
+    todo = [p for p in prepared if not (
+        p.name in done and done[p.name]["hash"] == p.hash
+        and (done[p.name]["status"] == "ok" or not retry_failed)
+        and (done[p.name]["status"] != "ok" or (store.reports / f"{p.name}.json").exists()))]
+    manifest = {"format": FORMAT, "recipe": rec.name, "options": rec.options,
+                "model": mech.name, "batch_size": batch_size,
+                "items": [{"item": p.name, "hash": p.hash} for p in prepared],
+                "last_run": store.manifest().get("last_run")}
+    store.open(manifest)
+    if cache_dir is None:
+        cache_dir = jax.config.jax_compilation_cache_dir or os.environ.get(
+            "DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax")) or None
+    cache_min = (float(jax.config.jax_persistent_cache_min_compile_time_secs)
+                 if jax.config.jax_compilation_cache_dir else 0.0)
+    model_np = _numpy_tree(mech)
+    tasks = [_Batch(key=_digest(*(p.hash.encode() for p in b))[:16], recipe=rec, model=model_np,
+                    items=b, time_limit=time_limit, cache_dir=cache_dir,
+                    cache_min_seconds=cache_min, x64=bool(jax.config.jax_enable_x64))
+             for b in _batches(todo, batch_size)]
+    show = _progress_printer() if progress is True else (progress or None)
+    owned = engine is None
+    if engine is None:
+        if workers is None and scheduler is None and client is None:
+            engine = InProcessEngine()
+        else:
+            engine = DaskEngine(workers=workers, scheduler=scheduler, client=client,
+                                env=worker_environment())
+    in_process = isinstance(engine, InProcessEngine)
+    counts = {"ok": 0, "failed": 0, "compiled": 0, "hits": 0}
+    t0 = time.perf_counter()
+    try:
+        fn = _run_here if in_process else run_batch
+        for i, result in engine.map_unordered(fn, tasks):
+            batch = tasks[i]
+            if isinstance(result, BaseException):  # the batch itself failed (lost workers…)
+                result = {"worker": None, "compiled": 0, "hits": 0, "results": [
+                    {"item": p.name, "status": "error", "values": None, "report": None,
+                     "seconds": None, "message": f"the batch failed: {_message(result)}"}
+                    for p in batch.items]}
+            counts["compiled"] += result["compiled"]
+            counts["hits"] += result["hits"]
+            hashes = {p.name: p.hash for p in batch.items}
+            for r in result["results"]:
+                entry = {"item": r["item"], "hash": hashes[r["item"]], "status": r["status"],
+                         "message": r["message"], "values": r["values"],
+                         "seconds": r["seconds"], "worker": result["worker"],
+                         "batch": batch.key}
+                store.record(entry, r["report"])
+                counts["ok" if r["status"] == "ok" else "failed"] += 1
+            if show is not None:
+                elapsed = time.perf_counter() - t0
+                n = counts["ok"] + counts["failed"]
+                show({"done": n, "failed": counts["failed"], "total": len(todo),
+                      "items_per_s": n / elapsed if elapsed > 0 else 0.0,
+                      "batch_worker": result["worker"]})
+    finally:
+        seconds = time.perf_counter() - t0
+        description = engine.describe()
+        if owned:
+            engine.close()
+        n = counts["ok"] + counts["failed"]
+        manifest["last_run"] = {"engine": description, "seconds": seconds, "items": n,
+                                "items_per_s": n / seconds if seconds > 0 and n else 0.0}
+        store.open(manifest)
+        summary = store.write_summary()
+    return FleetResult(out=store.out, total=len(prepared), ok=counts["ok"],
+                       failed=counts["failed"], skipped=len(prepared) - len(todo),
+                       batches=len(tasks), seconds=seconds,
+                       items_per_s=n / seconds if seconds > 0 and n else 0.0,
+                       compiled=counts["compiled"], cache_hits=counts["hits"],
+                       engine=description, summary=summary)
+
+
+def _run_here(batch: _Batch) -> dict:
+    return run_batch(batch, own_process=False)

@@ -1,0 +1,166 @@
+"""A fleet's output folder: reports streamed to disk as they finish, a journal, a summary.
+
+```
+OUT/
+  fleet.json          what ran: recipe, options, model fingerprint, the items and their hashes
+  journal.jsonl       one line per finished item (appended and flushed at once): item, hash,
+                      status, message, summary values, seconds, worker, batch
+  reports/ITEM.json   the item's report, as the single-item verb writes it (--out x.json)
+  summary.csv         one row per item: item, status, message, hash, then the estimates
+```
+
+Nothing finished is lost: a line is in the journal (and the report on disk) as soon as its
+batch returns. A re-run skips every item whose journal line has the same content hash (the
+item's bytes, the recipe and its options, the model); `retry_failed=True` re-runs the failed
+ones. The summary is rebuilt from the journal (the last line of each item) at the end of a run
+and by `status`; it holds no timing or worker, so the same fleet on any engine gives the same
+summary.
+"""
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import pathlib
+
+__all__ = ["FleetStatus", "Store", "status"]
+
+SUMMARY_HEAD = ("item", "status", "message", "hash")
+
+
+def _write_atomic(path: pathlib.Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _number(v):
+    return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+
+class Store:
+    """The output folder of a fleet (see the module docstring)."""
+
+    def __init__(self, out):
+        self.out = pathlib.Path(out)
+        self.reports = self.out / "reports"
+        self.journal_path = self.out / "journal.jsonl"
+
+    def open(self, manifest: dict) -> None:
+        self.reports.mkdir(parents=True, exist_ok=True)
+        _write_atomic(self.out / "fleet.json", json.dumps(manifest, indent=1) + "\n")
+
+    def entries(self) -> dict[str, dict]:
+        """The last journal line of every item."""
+        last: dict[str, dict] = {}
+        if not self.journal_path.exists():
+            return last
+        with open(self.journal_path, encoding="utf-8") as f:
+            for line in f:
+                line = line.strip()
+                if not line:
+                    continue
+                try:
+                    entry = json.loads(line)
+                except json.JSONDecodeError:  # a line cut by a crash: that item re-runs
+                    continue
+                last[entry["item"]] = entry
+        return last
+
+    def record(self, entry: dict, report: dict | None) -> None:
+        """Write an item's report, then its journal line (flushed)."""
+        if report is not None:
+            _write_atomic(self.reports / f"{entry['item']}.json",
+                          json.dumps(report, indent=1, default=_jsonable) + "\n")
+        with open(self.journal_path, "a", encoding="utf-8") as f:
+            f.write(json.dumps(entry, default=_jsonable) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+    def manifest(self) -> dict:
+        path = self.out / "fleet.json"
+        return json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+
+    def write_summary(self) -> pathlib.Path:
+        """summary.csv from the journal: one row per item of the manifest that has a line,
+        in item order."""
+        entries = self.entries()
+        order = [i["item"] for i in self.manifest().get("items", [])] or sorted(entries)
+        names: list[str] = []
+        for item in order:
+            for name in entries.get(item, {}).get("values") or {}:
+                if name not in names:
+                    names.append(name)
+        path = self.out / "summary.csv"
+        tmp = path.with_name(f".summary.{os.getpid()}.tmp")
+        with open(tmp, "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f)
+            writer.writerow([*SUMMARY_HEAD, *names])
+            for item in order:
+                if item not in entries:
+                    continue
+                e = entries[item]
+                values = e.get("values") or {}
+                writer.writerow([item, e["status"], e.get("message") or "", e["hash"],
+                                 *(repr(values[n]) if values.get(n) is not None else ""
+                                   for n in names)])
+        os.replace(tmp, path)
+        return path
+
+
+def _jsonable(x):
+    import numpy as np
+
+    if isinstance(x, np.ndarray | np.generic):
+        return x.tolist()
+    if hasattr(x, "__array__"):
+        return np.asarray(x).tolist()
+    if isinstance(x, float):
+        return _number(x)
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+@dataclasses.dataclass(frozen=True)
+class FleetStatus:
+    """What a fleet's folder holds: items in the manifest, finished ok, failed (with their
+    messages), still to do, and the rate of the last run (items per second of wall time)."""
+
+    out: pathlib.Path
+    recipe: str
+    total: int
+    ok: int
+    failed: int
+    pending: int
+    failures: tuple[tuple[str, str, str], ...]  # (item, status, message)
+    items_per_s: float
+
+    def text(self) -> str:
+        lines = [f"{self.out}: recipe {self.recipe}, {self.total} items: {self.ok} ok, "
+                 f"{self.failed} failed, {self.pending} to do"
+                 + (f"; last run {self.items_per_s:.3g} items/s" if self.items_per_s else "")]
+        lines += [f"  {item}: {st}: {msg}" for item, st, msg in self.failures]
+        return "\n".join(lines)
+
+
+def status(out) -> FleetStatus:
+    """The state of the fleet in folder `out` (also `diffsusp fleet status OUT`)."""
+    from ..errors import InputError
+
+    store = Store(out)
+    manifest = store.manifest()
+    if not manifest:
+        raise InputError(f"{out} holds no fleet (no fleet.json): run one there first.")
+    entries = store.entries()
+    hashes = {i["item"]: i["hash"] for i in manifest.get("items", [])}
+    current = {k: e for k, e in entries.items() if hashes.get(k) == e["hash"]}
+    ok = sum(e["status"] == "ok" for e in current.values())
+    failures = tuple((k, e["status"], e.get("message") or "") for k, e in sorted(current.items())
+                     if e["status"] != "ok")
+    run = manifest.get("last_run") or {}
+    return FleetStatus(out=pathlib.Path(out), recipe=manifest.get("recipe", "?"),
+                       total=len(hashes), ok=ok, failed=len(failures),
+                       pending=len(hashes) - len(current), failures=failures,
+                       items_per_s=float(run.get("items_per_s") or 0.0))
+
+
