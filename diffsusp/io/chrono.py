@@ -628,7 +628,8 @@ def _corner(pts, template, side, radius, centre):
 
 
 def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
-                wheel_travel: bool = False, spring_interpolation: str = "linear") -> Mechanism:
+                wheel_travel: bool = False, spring_interpolation: str = "linear",
+                check: bool = True) -> Mechanism:
     """Read a Chrono::Vehicle suspension JSON file (DoubleWishbone, MacPhersonStrut, MultiLink)
     into a K&C half-axle `Mechanism` of one side (see the module docstring for the semantics).
 
@@ -641,6 +642,7 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
     - `wheel_travel`: add driver 'wheel_travel' (wheel-centre z travel, mm).
     - `spring_interpolation`: 'linear' (Chrono's) or 'akima' (smooth) for a spring curve
       (`SPRING_INTERPOLATIONS`).
+    - `check`: validate the model at build (`MechanismBuilder.build`).
 
     **Returns:** the `Mechanism` (mm, N; Chrono frame x forward, y left, z up; design position =
     the file's points) with its wheel corner (`Mechanism.corners`). Raises `ModelFileError`
@@ -690,7 +692,7 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
             raise
         raise doc.error(str(e), ("Template",)) from None
     try:
-        return b.build()
+        return b.build(check=check)
     except ModelError as e:
         error = doc.error(f"the model cannot be assembled: {e}", ("Template",))
         error.bad_input = getattr(e, "bad_input", False)  # unsolvable: exit 4, as .toml/.adm
