@@ -155,8 +155,9 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
     def running(s):
         return (s["it"] <= max_steps) & (s["status"] == Status.MAX_STEPS) & ~s["done"]
 
-    def update(s, loads_, y_try, r_twist, jac):
-        """The next state of one case, given the residual and Jacobian at its trial point."""
+    def update(s, loads_, y_try, r_twist, jac, dy):
+        """The next state of one case, given the residual, the Jacobian and the Newton step
+        J⁻¹·(−r) at its trial point."""
         # Convergence and the merit are measured on the generalised forces of the Gibbs
         # coordinates (F, G(b)ᵀM), as `residual` reports them; the step uses the twist form.
         r = generalised_residual(y_try[:n], r_twist)
@@ -167,7 +168,6 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
             s["trial"] >= _LINE_SEARCH - 1)
         # The next Newton step from the trial point (used only if it is accepted).
         f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
-        dy = scaled_solve(jac, -r_twist)
         cap = jnp.max(jnp.abs(dy * rot))
         dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
         step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
@@ -227,7 +227,12 @@ def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
         loads_s = jax.tree.map(lambda a: a[jnp.minimum(case, cases - 1)], loads)
         y_try = jax.vmap(lambda y, d: retract(y, d, n))(s["y"], s["alpha"][:, None] * s["dy"])
         r, jac = assemble_batch(mech, loads_s, y_try[:, :n], y_try[:, n:])
-        s = jax.vmap(update)(s, loads_s, y_try, r, jac)
+        # The slots' systems are factorised one by one (the same CPU time as one batched call):
+        # jaxlib's batched CPU LU splits a batch over its intra-op thread pool and waits for
+        # it from a pool thread, and two such calls at once (the batch split over two devices)
+        # deadlocked this 2-core machine; a single system is factorised inline.
+        dy = jax.lax.map(lambda a: scaled_solve(a[0], -a[1]), (jac, r))
+        s = jax.vmap(update)(s, loads_s, y_try, r, jac, dy)
         stopped = ~jax.vmap(running)(s) & (case < cases)
         dest = jnp.where(stopped, case, cases)  # out of range: dropped
         y_out = y_out.at[dest].set(s["y"], mode="drop")
