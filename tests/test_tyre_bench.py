@@ -3,6 +3,7 @@ synthetic campaign, its Monte-Carlo and bad input (issue 16; spec: tyre §3.3–
 §7 D items 16–20)."""
 
 import math
+import pathlib
 
 import jax.numpy as jnp
 import numpy as np
@@ -18,6 +19,8 @@ K_MZ = annex_g.lateral_stiffness("dunlop_r16", 2.0, "Mz")
 
 
 def test_filter_derivative_and_conversions():
+    import jax
+
     x = RNG.standard_normal((2, 150)).cumsum(axis=1)
     for order in (2, 4):
         sos = bench.butterworth(25.0, 200.0, order)
@@ -25,12 +28,18 @@ def test_filter_derivative_and_conversions():
         w = np.linspace(0.01, 3.0, 30)
         np.testing.assert_allclose(np.abs(scipy.signal.sosfreqz(sos, w)[1]),
                                    np.abs(scipy.signal.sosfreqz(ref, w)[1]), atol=1e-12)
-        np.testing.assert_allclose(bench.filtfilt(sos, x), scipy.signal.sosfiltfilt(ref, x),
-                                   atol=1e-10)
+        # the conditioning's matrix form of the zero-phase filter
+        F = bench.filter_matrix(25.0, 200.0, 150, order)
+        np.testing.assert_allclose(x @ F.T, scipy.signal.sosfiltfilt(ref, x), atol=1e-10)
+    # the scan form (long records)
+    np.testing.assert_allclose(jax.jit(bench.filtfilt)(sos, x), scipy.signal.sosfiltfilt(ref, x),
+                               atol=1e-10)
     t = np.arange(200) / 200.0
     d = np.asarray(bench._centred_derivative(np.sin(2 * np.pi * 6 * t), 1 / 200.0))
     np.testing.assert_allclose(d[2:-2], 2 * np.pi * 6 * np.cos(2 * np.pi * 6 * t[2:-2]),
                                rtol=0, atol=2e-4 * 2 * np.pi * 6)
+    np.testing.assert_allclose(bench.difference_matrix(200, 1 / 200.0) @ np.sin(t),
+                               bench._centred_derivative(np.sin(t), 1 / 200.0), rtol=1e-12)
     # (2-101…2-104) and their inverse; δ′ = −R_r·tan δ
     k, dl, ph, pb = 0.03, math.radians(2.0), 0.01, -0.02
     out = bench.deformation_from_psa(k, dl, ph, pb, rolling_radius=0.3)
@@ -78,17 +87,35 @@ SEGMENTS = bench.make_segments(
             sequence=5) for v in (40.0, 120.0) for f in (3.0, 6.0)])
 
 
-@pytest.fixture(scope="module")
-def campaign():
-    """A reduced steering-feel campaign (slip sines, load sines, medium slip ramps; 2 speeds)
-    simulated from Annex G Tables 34/46 and the G.2 stiffnesses, noise-free."""
+def _generate_campaign():
+    """How tests/data/tyre_flat_trac_campaign.npz was made (stored as float32, the time and
+    segment columns rebuilt): the reduced steering-feel campaign `SEGMENTS` (slip sines, load
+    sines, medium slip ramps; 2 speeds; 1 s at 200 Hz) simulated through the state-space model
+    from Annex G Tables 34/46 and the G.2 stiffnesses, noise-free. Shipped because its
+    simulation program costs more to compile than the tests that use it (notebook 07 runs
+    the generator)."""
     fy = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.0, "Fy")
     mz = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.0, "Mz")
     fx = poly.PolynomialModel.create("Fx", {"one": 1}, values={"b_Fx_one_1_1": -12.0})
-    table = bench.synthetic_flat_trac(fy, mz, k_fy=K_FY, k_mz=K_MZ, segments=SEGMENTS,
-                                      duration=1.0, rate=200.0, fx_model=fx,
-                                      noise={"FY": 0.0, "MZ": 0.0, "FX": 0.0, "FZ": 0.0})
+    return bench.synthetic_flat_trac(fy, mz, k_fy=K_FY, k_mz=K_MZ, segments=SEGMENTS,
+                                     duration=1.0, rate=200.0, fx_model=fx,
+                                     noise={"FY": 0.0, "MZ": 0.0, "FX": 0.0, "FZ": 0.0})
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    fy = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.0, "Fy")
+    mz = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.0, "Mz")
+    z = np.load(pathlib.Path(__file__).parent / "data" / "tyre_flat_trac_campaign.npz")
+    table = {c: np.asarray(z[c], dtype=float) for c in z.files}
+    n = len(table["FY"]) // SEGMENTS.n
+    table["t"] = np.tile(np.arange(n) / 200.0, SEGMENTS.n)
+    table["segment"] = np.repeat(np.arange(SEGMENTS.n, dtype=float), n)
     return fy, mz, table
+
+
+# a reduced a-priori structure holding the unexcited inputs of §3.4.1 (κ′, γ·β̇/ω)
+DEGREES = {"kappa": 1, "delta": 3, "phi": 1, "pi_gamma_bdot": 1, "one": 1}
 
 
 def _truth(fy):
@@ -101,50 +128,43 @@ def _truth(fy):
 
 
 def test_two_step_monte_carlo(campaign):
-    """20 noisy copies of the campaign (σ_FY = 6 N white at 200 Hz), one vmapped program:
-    the two-step method on the true structure (Table 34's terms and their Ly images)."""
+    """40 noisy copies of the campaign (σ_FY = 6 N white at 200 Hz, F_z and F_x 3 N), one
+    vmapped program: the two-step method (`bench.two_step`: instrumental variables, σ from the
+    filtered noise model) on the true structure (Table 34's terms and their Ly images)
+    recovers every coefficient and K_y within its reported σ, without bias."""
     fy, _, table = campaign
     truth = _truth(fy)
     keep = list(truth)
+    seeds = 40
     r = bench.monte_carlo(table, "Fy", poly.JUST_NECESSARY["Fy"], keep,
-                          noise={"FY": 6.0, "FZ": 3.0, "FX": 3.0, "MZ": 0.0}, seeds=20)
+                          noise={"FY": 6.0, "FZ": 3.0, "FX": 3.0}, seeds=seeds)
     names = r["names"]
-    c = r["compliance"]
-    spread = np.std(c, ddof=1)
-    # K_y: the spread matches the reported (joint-linearisation) σ within a factor 1.5; the
-    # thesis's step-2 σ alone understates it.
-    assert 1 / 1.5 < spread / np.mean(r["sigma_joint"]) < 1.5
-    assert spread / np.mean(r["sigma_step2"]) > 1.5
-    assert abs(np.mean(c) * K_FY - 1) < 3e-3  # K_y within 0.3 % (see the bias note below)
-    ratios, biases = {}, {}
+    # measured (40 seeds): spread/σ 0.90–1.06, |bias| ≤ 0.22 σ; K_y 0.95 and 0.07 σ. The
+    # least squares with the white-residual σ gave spread/σ 0.3–0.5 on the slip and offset
+    # terms and a 1 σ bias of φ′ and the relaxation terms (errors in variables).
     for n in keep:
         i = names.index(n)
         s = np.mean(r["sigma"][:, i])
-        ratios[n] = np.std(r["x"][:, i], ddof=1) / s
-        biases[n] = (np.mean(r["x"][:, i]) - truth[n]) / s
-    # The interaction coefficients are unbiased (within 1 σ) but their reported σ is about
-    # twice their spread (measured 0.48–0.57): the noise of Ḟ_y (from the noisy F_y, in the
-    # relaxation regressor: errors in variables) inflates the residual more than it moves them.
-    # The φ′ and relaxation terms, collinear with Ḟ_y, have spread ≈ σ (0.68–1.31) and a
-    # bias of about 1 σ. Spec target "spread/σ within 1.5" met for K_y, φ′ and Ly only.
-    for n in ("b_Fy_delta_1_1", "b_Fy_delta_1_3", "b_Fy_delta_3_1", "b_Fy_delta_5_2",
-              "b_Fy_one_1_1", "b_Fy_gamma_1_1"):
-        assert 0.4 < ratios[n] < 1.0, (n, ratios[n])
-        assert abs(biases[n]) < 1.0, (n, biases[n])
-    for n in ("b_Fy_phi_1_1", "b_Fy_Ly_0_1", "b_Fy_Ly_2_1", "b_Fy_Ly_4_2"):
-        assert 1 / 1.5 < ratios[n] < 1.5, (n, ratios[n])
-        assert abs(biases[n]) < 2.0, (n, biases[n])
+        assert 1 / 1.5 < np.std(r["x"][:, i], ddof=1) / s < 1.5, n
+        assert abs(np.mean(r["x"][:, i]) - truth[n]) < 3 * s / math.sqrt(seeds), n
+    c = r["compliance"]
+    s = np.mean(r["sigma_joint"])
+    assert 1 / 1.5 < np.std(c, ddof=1) / s < 1.5
+    assert abs(np.mean(c) - 1 / K_FY) < 3 * s / math.sqrt(seeds)
+    # the thesis's step-2 σ (its one-parameter regression) understates the spread (1.47×)
+    assert np.std(c, ddof=1) / np.mean(r["sigma_step2"]) > 1.2
+    # the noise level comes back from the residual (the filter's correlations accounted for)
+    assert np.mean(r["noise_sigma"]) == pytest.approx(6.0, rel=0.03)
 
 
 def test_identify_structure_search_and_flags(campaign):
     fy, mz, table = campaign
+    rng = np.random.default_rng(0)
     noisy = dict(table)
-    noisy["FY"] = table["FY"] + 6.0 * RNG.standard_normal(len(table["FY"]))
-    noisy["MZ"] = table["MZ"] + 600.0 * RNG.standard_normal(len(table["FY"]))
-    # a reduced a-priori structure holding the unexcited inputs of §3.4.1 (κ′, γ·β̇/ω)
-    degrees = {"kappa": 1, "delta": 3, "phi": 1, "pi_gamma_bdot": 1, "one": 1}
+    noisy["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(table["FY"]))
+    noisy["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(table["FY"]))
     cond = bench.condition(noisy)
-    rep = bench.identify_output(cond, "Fy", degrees)
+    rep = bench.identify_output(cond, "Fy", DEGREES)
     kept = {n for n, k, f in zip(rep.fit.names, rep.fit.kept, rep.fit.fixed, strict=True)
             if k and not f}
     # the unexcited terms are gone: κ′ (free rolling: a zero column, not identifiable) and the
@@ -152,14 +172,14 @@ def test_identify_structure_search_and_flags(campaign):
     assert not any("kappa" in n or "pi_gamma" in n for n in kept)
     assert all(n in rep.removed or n in rep.not_identifiable for n in rep.fit.names
                if "kappa" in n)
-    # the excited terms of the true model survive and K_y comes back
-    for n in ("b_Fy_delta_1_1", "b_Fy_phi_1_1", "b_Fy_Ly_0_1"):
-        assert n in kept
-    # the δ′³ term is kept (its load power may move: two load levels on the sines)
-    assert any(n.startswith("b_Fy_delta_3_") for n in kept)
-    assert np.all(np.isfinite(rep.reduced.sigma))
-    # K_y within 5 % (measured 3.3 %: this cubic structure cannot hold Table 34's δ′⁵ term;
-    # the just-necessary degree 5 gets 0.05 %, notebook 07 and the CLI run of the report)
+    # the excited terms of the true model survive (their load powers may move: three load
+    # levels, and this cubic structure cannot hold Table 34's δ′⁵ term) and K_y comes back
+    assert "b_Fy_phi_1_1" in kept
+    for prefix in ("b_Fy_delta_1_", "b_Fy_delta_3_", "b_Fy_Ly_0_"):
+        assert any(n.startswith(prefix) for n in kept), prefix
+    assert np.all(np.isfinite(rep.reduced.sigma)) and np.all(rep.reduced.sigma > 0)
+    # K_y within 5 % (measured 1.7–3 % over three noise draws; the just-necessary degree 5
+    # gets 0.05 %, notebook 07)
     assert rep.stiffness == pytest.approx(K_FY, rel=0.05)
     # bad input: each a clear error naming the fix
     with pytest.raises(InputError, match="missing channel.*FY"):
@@ -179,24 +199,32 @@ def test_identify_structure_search_and_flags(campaign):
     assert np.all(margin > 0)
 
 
-def test_batched_elimination_matches_lsq_eliminate():
+def test_batched_elimination_matches_lsq_eliminate(campaign):
     """`bench.eliminate_r` (traced, vmappable: the benchmark's batched structure search) makes
-    the same removals as `lsq.eliminate` with the σ % rule."""
+    the same removals as `lsq.eliminate` with the σ % rule, on two noisy copies of the
+    campaign (the structure of the search test: its least-squares programs are shared)."""
     import jax
 
     from diffsusp import lsq
 
-    n, p = 60, 6
-    W = RNG.normal(size=(2, n, p))
-    x = np.array([2.0, -1.0, 0.0, 0.5, 0.0, 0.01])
-    Y = W @ x + 0.05 * RNG.normal(size=(2, n))
-    R = np.stack([np.asarray(lsq.qr_r(np.concatenate([W[k], -Y[k][:, None]], 1)))
-                  for k in range(2)])
+    _, _, table = campaign
+    lip = poly.regressor_model("Fy", DEGREES, ly=True)
+    W, Y = [], []
+    for _ in range(2):
+        noisy = dict(table)
+        noisy["FY"] = table["FY"] + 6.0 * RNG.standard_normal(len(table["FY"]))
+        cond = bench.condition(noisy)
+        W.append(cond.regressor(lip))
+        Y.append(cond.fy)
+    n = len(Y[0])
+    R = jax.vmap(lambda w, y: lsq.qr_r(jnp.concatenate([w, -y[:, None]], axis=1)))(
+        jnp.asarray(np.stack(W)), jnp.asarray(np.stack(Y)))
     fixed, xb, _ = jax.vmap(lambda r: bench.eliminate_r(r, n, sigma_pct_threshold=10.0))(R)
     for k in range(2):
-        fit, _ = lsq.eliminate(W[k], Y[k], sigma_pct_threshold=10.0, ic_threshold=0.0)
+        fit, _ = lsq.eliminate(W[k], Y[k], names=lip.names, sigma_pct_threshold=10.0,
+                               ic_threshold=0.0)
         np.testing.assert_array_equal(np.asarray(fixed[k]), fit.fixed)
-        np.testing.assert_allclose(np.asarray(xb[k]), fit.x, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(xb[k]), fit.x, rtol=1e-8, atol=1e-12)
 
 
 def test_cli_identify_bad_input(tmp_path):

@@ -33,6 +33,7 @@ plus the bench's noise.
 """
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 
@@ -49,7 +50,8 @@ from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model, tabl
 __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "segment_inputs",
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
-           "BenchReport", "OutputReport"]
+           "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
+           "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT", "eliminate_r"]
 
 REQUIRED = ("t", "segment", "steer", "camber", "speed", "omega", "FZ", "FX", "FY", "MZ")
 UNITS = {"t": "s", "segment": None, "steer": "rad", "camber": "rad", "speed": "mm/s",
@@ -312,6 +314,56 @@ def _sos_one(sec, v, zi):
     return jax.lax.scan(step, zi * v[0], v)[1]
 
 
+MAX_SEGMENT = 2048
+"""Longest segment filtered as one block (samples); longer ones are cut into equal pieces."""
+
+
+@functools.lru_cache(maxsize=16)
+def filter_matrix(cutoff: float, rate: float, m: int, order: int = 4) -> np.ndarray:
+    """The zero-phase filter of a segment of m samples as an (m, m) matrix: `filtfilt(sos, x)
+    = F @ x` (NumPy, cached). `filtfilt` is linear in x (odd extension, steady-state initial
+    conditions scaled by the end samples), so F is the filter applied to the identity; it
+    makes the conditioning a few matrix products and gives the noise model of the
+    identification (`identify_output`) its correlations."""
+    sos = butterworth(cutoff, rate, order)
+    n_sec = sos.shape[0]
+    pad = 3 * (2 * n_sec + 1)
+    if m <= pad:
+        raise InputError(f"a segment of {m} samples is too short for the zero-phase filter "
+                         f"(more than {pad} needed)")
+    gains = sos[:, :3].sum(axis=1) / sos[:, 3:].sum(axis=1)
+    scale = np.concatenate([[1.0], np.cumprod(gains)[:-1]])
+    zis = [np.linalg.solve(np.array([[1.0 + c[4], -1.0], [c[5], 1.0]]),
+                           np.array([c[1] - c[4] * c[0], c[2] - c[5] * c[0]])) * scale[s]
+           for s, c in enumerate(sos)]
+
+    def section(sec, v, zi):
+        b0, b1, b2, _, a1, a2 = sec
+        z0, z1 = zi[0] * v[0], zi[1] * v[0]
+        out = np.empty_like(v)
+        for i in range(v.shape[0]):
+            y = b0 * v[i] + z0
+            z0, z1 = b1 * v[i] - a1 * y + z1, b2 * v[i] - a2 * y
+            out[i] = y
+        return out
+
+    def run(v):
+        for s in range(n_sec):
+            v = section(sos[s], v, zis[s])
+        return v
+
+    x = np.eye(m)
+    ext = np.concatenate([2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2:-pad - 2:-1]])
+    y = run(run(ext)[::-1])[::-1]
+    return np.ascontiguousarray(y[pad:-pad])
+
+
+@functools.lru_cache(maxsize=16)
+def difference_matrix(m: int, dt: float) -> np.ndarray:
+    """`_centred_derivative` as an (m, m) matrix (NumPy, cached)."""
+    return np.asarray(_centred_derivative(np.eye(m).T, dt)).T.copy()
+
+
 @dataclasses.dataclass(frozen=True)
 class Conditioned:
     """Conditioned bench data (polynomial units: fz [kN], delta, kappa [m], phi, gamma [rad],
@@ -321,14 +373,20 @@ class Conditioned:
     columns* of the regressor built from the unfiltered inputs, H(y) = H(W(u))·b, which holds
     exactly for any linear filter H; filtering the inputs instead, W(H(u)), misses the
     harmonics that the nonlinear terms create (at 25 Hz the δ′³ term of a 6 Hz slip sine is
-    off by several newtons). Only Ḟ_y is taken from the filtered F_y (the raw one is noise).
+    off by several newtons). Ḟ_y too is taken by centred differences of the *unfiltered* F_y
+    inside the relaxation columns, which are then low-passed with the others: the same 25 Hz
+    band as the thesis's filter-then-differentiate, without a second attenuation of the F_y
+    harmonics near the cut-off (filtering F_y before differencing biased the δ′², δ′⁴
+    relaxation terms by one σ on noise-free synthetic data; the noise is removed by the outer
+    filter alike).
 
-    **Fields:** `samples` (input → (segments, samples) unfiltered, full rate), `sos` (the
-    filter's second-order sections), `rows` (the kept sample indices after trimming the ends
-    and thinning), `inputs`
-    (the same inputs at the kept rows, for checks and plots), `fy` [N], `mz` [N·m] (filtered,
-    kept rows), `rate` [Hz] after thinning, `segment` per kept row, `excitation` (input →
-    standard deviation)."""
+    **Fields:** `samples` (input → (segments, samples) unfiltered, full rate, with `omega`),
+    `operator` (the filter's rows at the kept samples, (rows, samples): H_rows),
+    `difference` (the centred-difference matrix), `sos` (the filter's second-order
+    sections), `rows` (the kept sample indices after trimming the ends and thinning),
+    `inputs` (the same inputs at the kept rows, for checks and plots), `fy` [N], `mz` [N·m]
+    (filtered, kept rows), `rate` [Hz] after thinning, `segment` per kept row,
+    `excitation` (input → standard deviation), `dt` [s] the sampling step."""
 
     samples: dict
     sos: np.ndarray
@@ -339,10 +397,68 @@ class Conditioned:
     rate: float
     segment: np.ndarray
     excitation: dict
+    operator: np.ndarray
+    difference: np.ndarray
+    dt: float
 
     def regressor(self, model) -> np.ndarray:
         """H(W(u)) at the kept rows, (n, p), for a `lsq.algebra.LinearModel`."""
-        return np.asarray(_filtered_regressor(model, self.samples, self.sos, self.rows))
+        W = np.asarray(_regressor_program(model)(self.samples))
+        return np.einsum("rm,smp->srp", self.operator, W).reshape(-1, W.shape[-1])
+
+
+_PROGRAMS: dict = {}
+
+
+def _regressor_program(model):
+    """One compiled regressor per model structure (its names and inputs), reused by every
+    call with equal shapes."""
+    key = (model.names, model.inputs)
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = jax.jit(lambda s: model.regressor(s))
+    return _PROGRAMS[key]
+
+
+def _centred_derivative(v, dt):
+    """dv/dt by the five-point centred difference (−v₊₂ + 8v₊₁ − 8v₋₁ + v₋₂)/12h, error
+    O(h⁴) (the three-point one, O(h²), is 0.6 % off at 6 Hz sampled at 200 Hz, which biases
+    the relaxation terms by several σ); three-point at the second and penultimate samples and
+    one-sided at the ends (trimmed away by `condition`). NumPy in, NumPy out."""
+    xp = np if isinstance(v, np.ndarray) else jnp
+    inner = (-v[..., 4:] + 8 * v[..., 3:-1] - 8 * v[..., 1:-3] + v[..., :-4]) / (12 * dt)
+    two = (v[..., 2:] - v[..., :-2]) / (2 * dt)
+    first = (v[..., 1:2] - v[..., 0:1]) / dt
+    last = (v[..., -1:] - v[..., -2:-1]) / dt
+    return xp.concatenate([first, two[..., :1], inner, two[..., -1:], last], axis=-1)
+
+
+def _kinematics(cols, Dm, rolling_radius):
+    """(segments, samples) channels (table units) → the deformation inputs and Ḟ_y/ω at full
+    rate, polynomial units; NumPy or JAX arrays (the difference as the matrix Dm)."""
+    xp = np if isinstance(cols["FY"], np.ndarray) else jnp
+    speed = cols["speed"] * 1e-3
+    steer = cols["steer"]
+    omega = cols["omega"]
+    vx, vy = speed * xp.cos(steer), -speed * xp.sin(steer)
+    bdot = steer @ Dm.T
+    g = cols["camber"]
+    return {
+        "fz": cols["FZ"] * 1e-3, "kappa": vx / omega - rolling_radius, "delta": vy / omega,
+        "phi": bdot / omega, "gamma": g, "pi_gamma_vx": g * vx / omega,
+        "pi_gamma_bdot": g * bdot / omega, "pi_gamma2_bdot": g * g * bdot / omega,
+        "fydot_w": (cols["FY"] @ Dm.T) / omega, "fy": cols["FY"], "fx": cols["FX"],
+        "omega": omega}
+
+
+@jax.jit
+def _condition_block(cols, sos, dt, rolling_radius):
+    """(segments, samples) arrays → deformation inputs (unfiltered kinematics), Ḟ_y/ω,
+    filtered F_y and M_z, by the scan filter (`filtfilt`): the benchmark's long-record path."""
+    m = cols["FY"].shape[-1]
+    eye = jnp.eye(m)
+    Dm = _centred_derivative(eye, dt).T
+    samples = _kinematics(cols, Dm, rolling_radius)
+    return samples, filtfilt(sos, cols["FY"]), filtfilt(sos, cols["MZ"]) * 1e-3
 
 
 @eqx.filter_jit
@@ -352,38 +468,11 @@ def _filtered_regressor(model, samples, sos, rows):
     return jnp.moveaxis(Wf[..., rows], -1, -2).reshape(-1, W.shape[-1])
 
 
-def _centred_derivative(v, dt):
-    """dv/dt by the five-point centred difference (−v₊₂ + 8v₊₁ − 8v₋₁ + v₋₂)/12h, error
-    O(h⁴) (the three-point one, O(h²), is 0.6 % off at 6 Hz sampled at 200 Hz, which biases
-    the relaxation terms by several σ); three-point at the second and penultimate samples and
-    one-sided at the ends (trimmed away by `condition`)."""
-    inner = (-v[..., 4:] + 8 * v[..., 3:-1] - 8 * v[..., 1:-3] + v[..., :-4]) / (12 * dt)
-    two = (v[..., 2:] - v[..., :-2]) / (2 * dt)
-    first = (v[..., 1:2] - v[..., 0:1]) / dt
-    last = (v[..., -1:] - v[..., -2:-1]) / dt
-    return jnp.concatenate([first, two[..., :1], inner, two[..., -1:], last], axis=-1)
-
-
-@jax.jit
-def _condition_block(cols, sos, dt, rolling_radius):
-    """(segments, samples) arrays → deformation inputs (unfiltered kinematics), Ḟ_y/ω from
-    the filtered F_y, filtered F_y and M_z."""
-    speed = cols["speed"] * 1e-3
-    steer = cols["steer"]
-    omega = cols["omega"]
-    vx, vy = speed * jnp.cos(steer), -speed * jnp.sin(steer)
-    bdot = _centred_derivative(steer, dt)
-    g = cols["camber"]
-    fy_f = filtfilt(sos, cols["FY"])
-    return {
-        "fz": cols["FZ"] * 1e-3, "kappa": vx / omega - rolling_radius, "delta": vy / omega,
-        "phi": bdot / omega, "gamma": g, "pi_gamma_vx": g * vx / omega,
-        "pi_gamma_bdot": g * bdot / omega, "pi_gamma2_bdot": g * g * bdot / omega,
-        "fydot_w": _centred_derivative(fy_f, dt) / omega, "fy": cols["FY"], "fx": cols["FX"],
-    }, fy_f, filtfilt(sos, cols["MZ"]) * 1e-3
-
-
 def _check_table(table, cutoff):
+    """Check a bench table; returns (channels as (segments, samples) arrays, number of
+    segments, samples per segment, rate [Hz]). Segments longer than `MAX_SEGMENT` samples are
+    cut into equal pieces (each filtered on its own; the tail beyond a whole number of pieces
+    is dropped)."""
     missing = [c for c in REQUIRED if c not in table]
     if missing:
         raise InputError(f"bench table: missing channel(s) {', '.join(missing)}; a Flat Trac "
@@ -431,7 +520,24 @@ def _check_table(table, cutoff):
     if np.any(cols["omega"] <= 0):
         raise InputError("bench table: omega must be > 0 (the wheel rolls); the deformation "
                          "inputs divide by it.")
-    return cols, len(ids), m, rate
+    blocks = {c: v.reshape(len(ids), m) for c, v in cols.items()}
+    pieces = -(-m // MAX_SEGMENT)
+    if pieces > 1:
+        mm = m // pieces
+        blocks = {c: v[:, :pieces * mm].reshape(len(ids) * pieces, mm)
+                  for c, v in blocks.items()}
+        m = mm
+    return blocks, blocks["FY"].shape[0], m, rate
+
+
+def _rows(m, rate, cutoff, decimate, trim):
+    k = decimate if decimate is not None else max(1, int(rate // (2 * cutoff)))
+    trim = trim if trim is not None else max(5, int(2 * rate / cutoff))
+    rows = np.arange(trim, m - trim, k)
+    if len(rows) < 2:
+        raise InputError(f"bench table: segments of {m} samples leave nothing after trimming "
+                         f"{trim} samples at each end; record longer segments.")
+    return rows, k
 
 
 def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 294.0,
@@ -446,24 +552,18 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
     each end of a segment (the filter's edge transient; default 2·rate/cutoff, at least 5).
     """
     cols, n_seg, m, rate = _check_table(table, cutoff)
-    sos = butterworth(cutoff, rate, order)
-    block = {c: jnp.asarray(cols[c].reshape(n_seg, m)) for c in REQUIRED
-             if c not in ("t", "segment")}
-    samples, fy_f, mz_f = _condition_block(block, sos, 1.0 / rate, rolling_radius * 1e-3)
-    k = decimate if decimate is not None else max(1, int(rate // (2 * cutoff)))
-    trim = trim if trim is not None else max(5, int(2 * rate / cutoff))
-    rows = np.arange(trim, m - trim, k)
-    if len(rows) < 2:
-        raise InputError(f"bench table: segments of {m} samples leave nothing after trimming "
-                         f"{trim} samples at each end; record longer segments.")
+    rows, k = _rows(m, rate, cutoff, decimate, trim)
+    H = filter_matrix(float(cutoff), float(rate), m, order)[rows]
+    Dm = difference_matrix(m, 1.0 / rate)
+    samples = _kinematics(cols, Dm, rolling_radius * 1e-3)
     inputs = {c: np.asarray(v)[:, rows].ravel() for c, v in samples.items()}
-    segment = np.repeat(np.unique(cols["segment"]), len(rows))
+    segment = np.repeat(np.arange(n_seg, dtype=float), len(rows))
     exc = {c: float(np.std(inputs[c])) for c in ("kappa", "delta", "phi", "gamma", "fz",
                                                    "pi_gamma_vx", "pi_gamma_bdot",
                                                    "pi_gamma2_bdot")}
-    return Conditioned(samples, sos, rows, inputs, np.asarray(fy_f)[:, rows].ravel(),
-                       np.asarray(mz_f)[:, rows].ravel(), rate / k, segment, exc)
-
+    return Conditioned(samples, butterworth(cutoff, rate, order), rows, inputs,
+                       (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3,
+                       rate / k, segment, exc, H, Dm, 1.0 / rate)
 
 # --------------------------------------------------------------------------------------------
 # Structure search rules (spec §3.3 validation criteria, §7 item 19)
@@ -551,24 +651,42 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
 
 
 @dataclasses.dataclass
+class Coefficients:
+    """Estimated coefficients with their σ: `names`, `x`, `sigma` (same units), `sigma_pct`."""
+
+    names: tuple
+    x: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * self.sigma / np.abs(self.x)
+
+
+@dataclasses.dataclass
 class OutputReport:
-    """One output's identification: `fit` (step 1, the `lsq.Fit` with its elimination log),
-    `reduced` (the final structure refitted alone: its coefficients with their σ, σ %),
-    `model` (the identified F_pneu), `compliance` K_y⁻¹ [m/N] and `compliance_sigma` (joint
-    linearisation, see the module docstring), `compliance_sigma_step2` (the thesis's σ of
-    the step-2 regression), `stiffness` K_y [N/m], `step2` (the step-2 `lsq.Fit`), `removed`
-    (name → reason), `not_identifiable` (name → why)."""
+    """One output's identification: `fit` (step 1 by the guaranteed least squares with the
+    structure search, the `lsq.Fit` and its log: the structure), `reduced` (the final
+    structure's coefficients by the instrumental-variable estimate, with their σ from the
+    noise model, see `two_step`), `model` (the identified F_pneu), `compliance` K_y⁻¹ [m/N]
+    and `compliance_sigma` (joint linearisation), `compliance_sigma_step2` (the thesis's σ of
+    the step-2 regression, white residual), `stiffness` K_y [N/m], `noise_sigma` (the white
+    noise σ of the output channel estimated from the residual, N or N·m), `removed`
+    (name → reason), `not_identifiable` (name → why), `fydot_hat` (the instrument's Ḟ_y/ω,
+    (segments, samples), F_y only)."""
 
     output: str
     fit: lsq.Fit
-    reduced: lsq.Fit
+    reduced: Coefficients
     model: PolynomialModel
     compliance: float
     compliance_sigma: float
     compliance_sigma_step2: float
-    step2: lsq.Fit
+    noise_sigma: float
     removed: dict
     not_identifiable: dict
+    fydot_hat: np.ndarray | None = None
 
     @property
     def stiffness(self) -> float:
@@ -577,8 +695,6 @@ class OutputReport:
     @property
     def stiffness_sigma_pct(self) -> float:
         return 100.0 * self.compliance_sigma / abs(self.compliance)
-
-
 @dataclasses.dataclass
 class BenchReport:
     """The result of `identify`: `outputs` ("Fy", "Mz" → `OutputReport`), `stable` (the
@@ -624,31 +740,221 @@ class BenchReport:
                             for o, r in self.outputs.items()}}
 
 
-def _joint_sigma(Wp, D, extra, b, c, y):
-    """σ of c in the joint model y = W b + c·(D b + extra) (the relaxation written with the
-    interaction coefficients, (3-49…3-52)), linearised at the two-step estimate (b, c)."""
-    w = D @ b + extra
-    J = np.concatenate([Wp + c * D, w[:, None]], axis=1)
-    f = lsq.solve(J, y - (Wp @ b + c * w) + J @ np.append(b, c))
-    return float(f.sigma[-1])
+def _relax(xp, P, G, omega, dt):
+    """F_y of the fitted relaxation F = P + G·(Ḟ/ω) along each segment (G < 0: a first-order
+    lag of time constant |G|/ω; exponential step, P averaged over the step; G ≥ 0, an unstable
+    estimate, gives F = P), from its steady state: (segments, samples)."""
+    a = xp.exp(omega * dt / xp.minimum(G, -1e-12))
+    if xp is np:
+        F = np.empty_like(P)
+        F[:, 0] = P[:, 0]
+        for i in range(1, P.shape[1]):
+            F[:, i] = a[:, i] * F[:, i - 1] + (1.0 - a[:, i]) * 0.5 * (P[:, i] + P[:, i - 1])
+        return F
+
+    def step(f, z):
+        ai, p0, p1 = z
+        f = ai * f + (1.0 - ai) * 0.5 * (p0 + p1)
+        return f, f
+
+    _, F = jax.lax.scan(step, P[:, 0], (a.T[1:], P.T[:-1], P.T[1:]))
+    return jnp.concatenate([P[:, :1], F.T], axis=1)
+
+
+def _iv(xp, Ws, Zs, y):
+    """Instrumental-variable estimate b = (ZᵀW)⁻¹Zᵀy (Z = W: the least squares); returns
+    (b, Q, M) with b = M·Qᵀy: Q the orthogonal factor of Z and M = (QᵀW)⁻¹ in NumPy (robust),
+    Q = Z and M = (ZᵀW)⁻¹ when traced (one LU: the Monte-Carlo program compiles faster)."""
+    Q = np.linalg.qr(Zs)[0] if xp is np else Zs
+    M = xp.linalg.inv(Q.T @ Ws)
+    return M @ (Q.T @ y), Q, M
+
+
+def _sandwich(xp, Q, M, Ws, e, sources, s, r):
+    """σ of an IV estimate b = M·Qᵀy whose equation error is ε = Σ_k A_k·e_k, e_k white noise
+    of variance v_k per sample (A_k: (r, m) shared or (s, r, m) per segment, acting on the
+    full-rate samples of each segment): cov b = M·(Σ_k v_k·QᵀA_kA_kᵀQ)·Mᵀ. The one unknown
+    variance (v_k None) is estimated from the residual e: E[eᵀe] = Σ_k v_k·‖(I − P)A_k‖²_F
+    with P = W·M·Qᵀ. Returns (σ, estimated variance)."""
+    Qs, Wss = Q.reshape(s, r, -1), Ws.reshape(s, r, -1)
+    WtW = Ws.T @ Ws
+    terms = []
+    for A, var in sources:
+        spec = "srp,rm->spm" if A.ndim == 2 else "srp,srm->spm"
+        Bq = xp.einsum(spec, Qs, A)
+        Bw = xp.einsum(spec, Wss, A)
+        tr = xp.sum(A * A) * (s if A.ndim == 2 else 1)
+        Gq = xp.einsum("spm,sqm->pq", Bq, Bq)
+        T = (tr - 2.0 * xp.trace(M @ xp.einsum("spm,sqm->pq", Bq, Bw))
+             + xp.trace(M.T @ WtW @ M @ Gq))
+        terms.append((Gq, T, var))
+    known = sum(var * T for _, T, var in terms if var is not None)
+    (T_u,) = [T for _, T, var in terms if var is None]
+    var_u = xp.maximum((e @ e - known) / T_u, 0.0)
+    cov = sum((var_u if var is None else var) * Gq for Gq, _, var in terms)
+    return xp.sqrt(xp.abs(xp.diag(M @ cov @ M.T))), var_u
+
+
+def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
+             instrument=None, sigma_fy=0.0, passes: int = 2) -> dict:
+    """The two-step identification (3-40…3-46, 3-76, 3-77) of one output on conditioned
+    segments, with NumPy (`xp = np`) or traced (`xp = jax.numpy`, vmappable) arrays.
+
+    **Arguments:** the regressor at full rate split as W = X + L·(Ḟ_y/ω) (`X`: the columns
+    without Ḟ_y, zero in the relaxation columns; `L`: the relaxation columns' factors, zero
+    elsewhere), `Dp` ∂X/∂δ′ (F_pneu's columns), all (segments, samples, p); `fydot` the
+    measured Ḟ_y/ω (segments, samples); `y` the filtered output at the kept rows
+    (segments, rows); `H` the filter's kept rows (rows, samples); `Dm` the difference matrix;
+    `omega` [rad/s] (segments, samples); `dt` [s]; boolean masks of the relaxation, F_pneu and
+    coupling (−F_y·F_x) columns (NumPy, static).
+
+    **Step 1** (the LIP model with free relaxation terms): the least squares are biased,
+    because Ḟ_y/ω comes from the noisy F_y (errors in variables: its noise is strongly
+    correlated with the output's), by about one σ on the φ′ and relaxation terms on synthetic
+    data. The estimate is an **instrumental variable** one: the relaxation columns are
+    instrumented by the Ḟ_y/ω of the noise-free F_y that the current estimate predicts (the
+    relaxation F = F_pneu + G·Ḟ/ω integrated along each segment, `_relax`), refined `passes`
+    times from the least squares (the simplified refined IV of system identification). For
+    M_z, `instrument` gives that Ḟ_y/ω from the F_y identification.
+
+    **σ:** the equation error is not white: it is the filtered noise minus the relaxation
+    columns' noise, ε = H·(I − diag(G/ω)·D)·e for white F_y noise e (`sigma_fy` and an own
+    white noise for M_z), strongly coloured (its spectrum sits near the cut-off, where the
+    slip regressors have little content). The white-residual σ of the least squares was twice
+    the spread of the slip and offset coefficients. The σ here is the sandwich of that
+    noise model, its variance estimated from the residual with the filter's and the
+    difference's correlations accounted for (`_sandwich`).
+
+    **Step 2** K_y⁻¹ = c from F − F̂_pneu = c·((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) (3-76, 3-77),
+    instrumented likewise; its σ is that of the linearised joint model F = W_pneu·b + c·d(b)
+    (the step-2 regression alone ignores step 1's uncertainty: `sigma_step2`, the thesis's).
+
+    **Returns** dict: `x`, `sigma` (p,), `compliance`, `compliance_sigma`, `sigma_step2`,
+    `noise_sigma` (the output channel's white noise σ), `fydot_hat` (the instrument)."""
+    s, m, p = X.shape
+    r = H.shape[0]
+    n = s * r
+    ly, pn, p2 = (np.flatnonzero(np.asarray(k)) for k in (is_ly, is_pneu, is_p2))
+
+    def filt(V):
+        return xp.einsum("rm,smk->srk", H, V).reshape(n, -1)
+
+    def filt1(v):
+        return xp.einsum("rm,sm->sr", H, v).reshape(n)
+
+    def lag(g):  # H·diag(g/ω)·D per segment: the noise of Ḟ_y/ω·g in a filtered column
+        return xp.einsum("rm,sm,mk->srk", H, g / omega, Dm)
+
+    def scale(A):
+        sc = xp.sqrt(xp.sum(A * A, axis=0))
+        return xp.where(sc > 0, sc, 1.0)
+
+    W = filt(X + L * fydot[..., None])
+    yv = y.reshape(n)
+    sc = scale(W)
+    Ws = W / sc
+
+    def gain(b):
+        return xp.einsum("smk,k->sm", L[..., ly], b[ly])
+
+    def instrumented(fh):
+        return filt(X + L * fh[..., None]) / sc
+
+    def refine(fh):  # one pass: the IV estimate, then the Ḟ_y/ω its F_y predicts
+        b = _iv(xp, Ws, instrumented(fh), yv)[0] / sc
+        P = xp.einsum("smk,k->sm", X[..., pn], b[pn])
+        return (_relax(xp, P, gain(b), omega, dt) @ Dm.T) / omega
+
+    own = instrument is None
+    if own:  # least squares (the measured Ḟ_y as its own instrument), then `passes` IV
+        fh = fydot
+        if xp is np:
+            for _ in range(max(passes, 1)):
+                fh = refine(fh)
+        else:
+            fh = jax.lax.fori_loop(0, max(passes, 1), lambda _, f: refine(f), fydot)
+    else:
+        fh = instrument
+    bs, Q, M = _iv(xp, Ws, instrumented(fh), yv)
+    b = bs / sc
+
+    def sources(g):
+        if own:
+            return [(H[None] - lag(g), None)]
+        return [(H, None), (-lag(g), sigma_fy**2)]
+
+    sig, var = _sandwich(xp, Q, M, Ws, yv - Ws @ bs, sources(gain(b)), s, r)
+    # step 2 and the joint σ of c
+    bp = b[pn]
+    gd = xp.einsum("smk,k->sm", Dp[..., pn], bp)
+    extra = filt(X[..., p2]).sum(axis=1) if len(p2) else 0.0
+    d = filt1(fydot * gd) + extra
+    dz = filt1(fh * gd) + extra
+    Xp = filt(X[..., pn])
+    r2 = yv - Xp @ bp
+    c = (dz @ r2) / (dz @ d)
+    sig2 = xp.sqrt(xp.sum((r2 - c * d) ** 2) / (n - 1) / (d @ d))
+    J = xp.concatenate([Xp + c * filt(Dp[..., pn] * fydot[..., None]), d[:, None]], axis=1)
+    Jz = xp.concatenate([Xp + c * filt(Dp[..., pn] * fh[..., None]), dz[:, None]], axis=1)
+    scj = scale(J)
+    _, Qj, Mj = _iv(xp, J / scj, Jz / scj, yv)
+    sj, _ = _sandwich(xp, Qj, Mj, J / scj, r2 - c * d, sources(c * gd), s, r)
+    return {"x": b, "sigma": sig / sc, "compliance": c, "compliance_sigma": sj[-1] / scj[-1],
+            "sigma_step2": sig2, "noise_sigma": xp.sqrt(var), "fydot_hat": fh}
+
+
+def _masks(names):
+    blocks = [parse_name(n)[1] for n in names]
+    return (np.array([b == "Ly" for b in blocks], bool),
+            np.array([b not in ("Ly", "P2") for b in blocks], bool),
+            np.array([b == "P2" for b in blocks], bool))
+
+
+def _parts_fn(model):
+    """samples → (X, L, Dp) of `two_step` for a LIP model with relaxation columns."""
+    is_ly, is_pneu, _ = _masks(model.names)
+    dmodel = model.derivative("delta")
+
+    def run(samples):
+        u = dict(samples)
+        u["fydot_w"] = jnp.ones_like(samples["fz"])
+        W1 = model.regressor(u)
+        return (jnp.where(is_ly, 0.0, W1), jnp.where(is_ly, W1, 0.0),
+                jnp.where(is_pneu, dmodel.regressor(u), 0.0))
+    return run
+
+
+def _parts_program(model):
+    key = ("parts", model.names, model.inputs)
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = jax.jit(_parts_fn(model))
+    return _PROGRAMS[key]
 
 
 def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = True,
                     rules: bool = True, sigma_pct_threshold: float | None = 10.0,
-                    ic_threshold: float = 0.0, fixed=None, rolling_radius: float = 0.294
-                    ) -> OutputReport:
+                    ic_threshold: float = 0.0, fixed=None, rolling_radius: float = 0.294,
+                    fy_report: "OutputReport | None" = None) -> OutputReport:
     """Two-step identification of one output ("Fy" or "Mz") on conditioned data (spec §3.3):
-    step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77).
+    step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77);
+    the final structure estimated by `two_step` (instrumental variables, noise-model σ).
 
-    The search removes, one at a time, the coefficient with σ % > `sigma_pct_threshold`
-    (default 10 %: the thesis's tables print nothing above 3.9 %) or with a confidence index
-    below `ic_threshold` (default 0: off — the thesis's IC < 0.1 rule is not what its tables
-    show, which keep coefficients with IC down to 0.01, and on synthetic data it removes true
-    terms such as b_Fy_delta_5_2), then applies the behaviour rules (`structure_rules`)."""
+    The search (the guaranteed least squares, `lsq.eliminate`) removes, one at a time, the
+    coefficient with σ % > `sigma_pct_threshold` (default 10 %: the thesis's tables print
+    nothing above 3.9 %) or with a confidence index below `ic_threshold` (default 0: off —
+    the thesis's IC < 0.1 rule is not what its tables show, which keep coefficients with IC
+    down to 0.01, and on synthetic data it removes true terms such as b_Fy_delta_5_2), then
+    applies the behaviour rules (`structure_rules`). Its σ are the white-residual ones of the
+    least squares (conservative for the slip terms: see `two_step`). For M_z, `fy_report`
+    (the F_y identification) supplies the instrument of Ḟ_y and its noise level; without it
+    the M_z relaxation terms are least squares (biased toward 0 by the F_y noise)."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
-    W = cond.regressor(lip)
     names = lip.names
+    X, L, Dp = (np.asarray(a) for a in _parts_program(lip)(cond.samples))
+    fydot = np.asarray(cond.samples["fydot_w"])
+    H = cond.operator
+    W = np.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
     removed, not_ident = {}, {}
     if search:
         fz = cond.inputs["fz"]
@@ -661,38 +967,32 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             removed[st.removed] = st.reason
     else:
         fit = lsq.solve(W, y, names=names, fixed=fixed)
-    # The engine judges identifiability on the full model (a removed column still regroups
-    # with the kept ones), so the kept coefficients of the final structure get their σ from
-    # the reduced model itself: one more fit on the kept columns.
     active = [i for i in range(len(names)) if fit.kept[i] and not fit.fixed[i]]
-    reduced = lsq.solve(W[:, active], y, names=[names[i] for i in active])
-    x_full = np.zeros(len(names))
-    x_full[active] = reduced.x
     for i, n in enumerate(names):
         # dropped for rank (neither kept nor removed by the search): no effect, or a
         # combination of others
         if not fit.kept[i] and not fit.fixed[i]:
             not_ident[n] = fit._status(i) or "not identifiable"
-    pneu_idx = [i for i, n in enumerate(names) if parse_name(n)[1] not in ("Ly", "P2")]
-    pneu_names = [names[i] for i in pneu_idx]
-    b_pneu = x_full[pneu_idx]
-    model = PolynomialModel.create(output, degrees, values=dict(zip(pneu_names, b_pneu,
-                                                                    strict=True)))
-    # Step 2: the Ly columns are (Ḟ_y/ω)·∂(δ′^i F_z^j)/∂δ′, so (∂F̂_pneu/∂δ′)·Ḟ_y/ω = D·b̂.
-    D = np.zeros((W.shape[0], len(pneu_idx)))
-    for k, n in enumerate(pneu_names):
-        _, block, i, j = parse_name(n)
-        if block == "delta":
-            D[:, k] = W[:, names.index(f"b_{output}_Ly_{i - 1}_{j}")]
-    extra = W[:, names.index(f"b_{output}_P2_0_0")] if output == "Mz" else np.zeros(len(y))
-    Wp = W[:, pneu_idx]
-    d = D @ b_pneu + extra
-    step2 = lsq.solve(d[:, None], y - Wp @ b_pneu, names=[f"K_{output}_y^-1"])
-    c = float(step2.x[0])
-    keep = np.array([bool(fit.kept[i]) and not bool(fit.fixed[i]) for i in pneu_idx])
-    sig = _joint_sigma(Wp[:, keep], D[:, keep], extra, b_pneu[keep], c, y)
-    return OutputReport(output, fit, reduced, model, c, sig, float(step2.sigma[0]), step2,
-                        removed, not_ident)
+    act = [names[i] for i in active]
+    is_ly, is_pneu, is_p2 = _masks(act)
+    instrument, sigma_fy = None, 0.0
+    if output != "Fy":
+        if fy_report is not None and fy_report.fydot_hat is not None:
+            instrument, sigma_fy = fy_report.fydot_hat, fy_report.noise_sigma
+        else:
+            instrument = fydot
+    s = X.shape[0]
+    res = two_step(np, X[..., active], L[..., active], Dp[..., active], fydot,
+                   y.reshape(s, -1), H, cond.difference, np.asarray(cond.samples["omega"]),
+                   cond.dt, is_ly=is_ly, is_pneu=is_pneu, is_p2=is_p2, instrument=instrument,
+                   sigma_fy=sigma_fy)
+    reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
+    model = PolynomialModel.create(output, degrees, values={
+        n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k})
+    return OutputReport(output, fit, reduced, model, float(res["compliance"]),
+                        float(res["compliance_sigma"]), float(res["sigma_step2"]),
+                        float(res["noise_sigma"]), removed, not_ident,
+                        res["fydot_hat"] if output == "Fy" else None)
 
 
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,
@@ -706,17 +1006,25 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and `report.stable`."""
     if structure not in STRUCTURES:
         raise InputError(f"structure {structure!r}: one of {', '.join(STRUCTURES)}")
+    unknown = [o for o in outputs if o not in ("Fy", "Mz")]
+    if unknown:
+        raise InputError(f"outputs {unknown}: Fy and/or Mz")
     cond = condition(table, cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate)
     r_m = rolling_radius * 1e-3
-    reports = {o: identify_output(cond, o, STRUCTURES[structure][o], search=search,
-                                  rolling_radius=r_m, sigma_pct_threshold=sigma_pct_threshold,
-                                  ic_threshold=ic_threshold) for o in outputs}
+    reports = {}
+    for o in sorted(outputs, key=lambda o: o != "Fy"):  # F_y first: M_z's instrument
+        reports[o] = identify_output(cond, o, STRUCTURES[structure][o], search=search,
+                                     rolling_radius=r_m, sigma_pct_threshold=sigma_pct_threshold,
+                                     ic_threshold=ic_threshold, fy_report=reports.get("Fy"))
     notes, flags = [], []
     exc = cond.excitation
     if exc["kappa"] < 1e-6:
         notes.append("K_x is not identifiable: kappa' is not excited (free rolling, std "
                      f"{exc['kappa']:.2g} m) and F_x carries only the rolling resistance; the "
                      "longitudinal joint is locked (spec §3.4).")
+    if "Mz" in reports and "Fy" not in reports:
+        notes.append("Mz alone: its relaxation terms are least squares on the noisy F_y "
+                     "derivative (biased toward 0); identify Fy with it for the instrument.")
     for o, r in reports.items():
         if r.not_identifiable:
             notes.append(f"{o}: not identifiable on these data: "
@@ -742,81 +1050,58 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
 # Monte-Carlo of the two-step method (one vmapped program)
 
 
-def _two_step_arrays(W, y, pneu_idx, ly_idx, p2_idx, fixed):
-    """Step 1 (`lsq.solve_arrays`, `fixed` columns at 0), step 2 and the joint σ, pure JAX."""
-    sol = lsq.solve_arrays(W, y, fixed=fixed)
-    b = sol.x[pneu_idx]
-    D = jnp.where(ly_idx[None, :] >= 0, W[:, jnp.maximum(ly_idx, 0)], 0.0)
-    extra = W[:, p2_idx] if p2_idx is not None else jnp.zeros_like(y)
-    Wp = W[:, pneu_idx]
-    d = D @ b + extra
-    r = y - Wp @ b
-    c = d @ r / (d @ d)
-    sig2 = jnp.sqrt(jnp.sum((r - c * d) ** 2) / (y.shape[0] - 1)) / jnp.linalg.norm(d)
-    J = jnp.concatenate([Wp + c * D, d[:, None]], axis=1)
-    joint = lsq.solve_arrays(J, y - Wp @ b - c * d + J @ jnp.append(b, c),
-                             fixed=jnp.append(fixed[pneu_idx], False))
-    return sol.x, sol.sigma, c, sig2, joint.sigma[-1]
-
-
 def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[str, float],
                 seeds: int = 20, cutoff: float = 25.0, rolling_radius: float = 294.0,
                 decimate: int | None = None, order: int = 4, key: int = 0) -> dict:
-    """The two-step identification of `output` repeated on `seeds` noisy copies of a
+    """The two-step identification (`two_step`) of F_y repeated on `seeds` noisy copies of a
     (noise-free) bench table, in one vmapped program: white noise of σ `noise[channel]`
-    (table units) added to FY, MZ, FX, FZ; the structure fixed to the coefficients `keep`
+    (table units) added to FY, FX, FZ; the structure fixed to the coefficients `keep`
     (names; the others held at 0 and not even built, e.g. the result of a structure search or
     the true model).
 
     **Returns:** dict of arrays over seeds: `x` (seeds, p) step-1 coefficients, `sigma`
     (seeds, p) their reported σ, `compliance` (seeds,) K_y⁻¹, `sigma_step2` (the thesis's σ),
-    `sigma_joint` (the report's σ), and `names`.
+    `sigma_joint` (the report's σ), `noise_sigma` (the estimated F_y noise σ), and `names`.
     """
+    if output != "Fy":
+        raise InputError("monte_carlo covers F_y (the M_z instrument comes from the F_y fit)")
     cols, n_seg, m, rate = _check_table(table, cutoff)
-    sos = jnp.asarray(butterworth(cutoff, rate, order))
-    k = decimate if decimate is not None else max(1, int(rate // (2 * cutoff)))
-    trim = max(5, int(2 * rate / cutoff))
-    rows = jnp.arange(trim, m - trim, k)
-    full = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
+    rows, _ = _rows(m, rate, cutoff, decimate, None)
+    H = jnp.asarray(filter_matrix(float(cutoff), float(rate), m, order)[rows])
+    Dm = jnp.asarray(difference_matrix(m, 1.0 / rate))
+    full = regressor_model(output, degrees, ly=True, p2=False)
     unknown = [n for n in keep if n not in full.names]
     if unknown:
         raise InputError(f"keep: {unknown} are not coefficients of the {output} model")
-    # Only the kept columns are built and filtered (the others are held at 0).
+    # Only the kept columns are built (the others are held at 0).
     lip = full.select([n for n in full.names if n in keep])
-    names = lip.names
-    fixed = jnp.zeros(len(names), bool)
-    pneu_idx = jnp.asarray([i for i, n in enumerate(names)
-                            if parse_name(n)[1] not in ("Ly", "P2")])
-    ly_idx = []
-    for i in np.asarray(pneu_idx):
-        _, block, ii, j = parse_name(names[int(i)])
-        ly = f"b_{output}_Ly_{ii - 1}_{j}"
-        ly_idx.append(names.index(ly) if block == "delta" and ly in names else -1)
-    ly_idx = jnp.asarray(ly_idx)
-    p2 = f"b_{output}_P2_0_0"
-    p2_idx = names.index(p2) if p2 in names else None
-    base = {c: jnp.asarray(cols[c].reshape(n_seg, m)) for c in REQUIRED
-            if c not in ("t", "segment")}
-    sig = {c: float(noise.get(c, 0.0)) for c in ("FY", "MZ", "FX", "FZ")}
+    is_ly, is_pneu, is_p2 = _masks(lip.names)
+    parts = _parts_fn(lip)
+    base = {c: jnp.asarray(v) for c, v in cols.items() if c not in ("t", "segment")}
+    sig = {c: float(noise.get(c, 0.0)) for c in ("FY", "FX", "FZ")}
 
+    # The data enter as arguments, not as constants of the program (XLA would fold the
+    # products of constant matrices at compile time, slowly).
     @jax.jit
-    def run(keys):
+    def run(keys, base, H, Dm):
         def one(kk):
-            ks = jax.random.split(kk, 4)
             noisy = dict(base)
-            for s, c in zip(ks, ("FY", "MZ", "FX", "FZ"), strict=True):
+            for s, c in zip(jax.random.split(kk, 3), ("FY", "FX", "FZ"), strict=True):
                 noisy[c] = base[c] + sig[c] * jax.random.normal(s, base[c].shape)
-            samples, fy_f, mz_f = _condition_block(noisy, sos, 1.0 / rate, rolling_radius * 1e-3)
-            W = _filtered_regressor(lip, samples, sos, rows)
-            y = (fy_f if output == "Fy" else mz_f)[:, rows].ravel()
-            return _two_step_arrays(W, y, pneu_idx, ly_idx, p2_idx, fixed)
+            samples = _kinematics(noisy, Dm, rolling_radius * 1e-3)
+            X, L, Dp = parts(samples)
+            res = two_step(jnp, X, L, Dp, samples["fydot_w"], noisy["FY"] @ H.T, H, Dm,
+                           samples["omega"], 1.0 / rate, is_ly=is_ly, is_pneu=is_pneu,
+                           is_p2=is_p2)
+            return (res["x"], res["sigma"], res["compliance"], res["sigma_step2"],
+                    res["compliance_sigma"], res["noise_sigma"])
         return jax.vmap(one)(keys)
 
-    x, sigma, c, s2, sj = run(jax.random.split(jax.random.PRNGKey(key), seeds))
-    return {"names": names, "x": np.asarray(x), "sigma": np.asarray(sigma),
+    x, sigma, c, s2, sj, sn = run(jax.random.split(jax.random.PRNGKey(key), seeds), base, H,
+                                  Dm)
+    return {"names": lip.names, "x": np.asarray(x), "sigma": np.asarray(sigma),
             "compliance": np.asarray(c), "sigma_step2": np.asarray(s2),
-            "sigma_joint": np.asarray(sj)}
-
+            "sigma_joint": np.asarray(sj), "noise_sigma": np.asarray(sn)}
 
 # --------------------------------------------------------------------------------------------
 # Batched structure search (many tyres in one program)
