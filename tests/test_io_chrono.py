@@ -272,17 +272,22 @@ def test_template_structures(models):
 
 def test_tierod_body_and_spring_curve(models):
     """A tie rod with a Mass becomes Chrono's tie-rod body (spherical to the upright, universal
-    to the chassis: its spin is held, 1 DOF overall); 'Spring Curve Data' with a 'Preload' gives
-    a tabulated spring, tension = curve(ℓ − L0) − P (N, mm)."""
+    to the chassis: its spin is held, 1 DOF overall); 'Spring Curve Data' with a 'Preload':
+    tension = curve(ℓ − L0) − P (N, mm), linear between the points (the smooth Akima spline of
+    a tabulated spring as an option)."""
     mech = models(DATA / "DoubleWishbone_tierod_body.json")
     report = diffsusp.validate(mech)
     assert (report.n_coordinates, report.rank, report.dof) == (24, 23, 1)
     assert report.free_modes == ()
-    assert mech.springs.tabulated == (True,)
-    np.testing.assert_allclose(mech.springs.table_x[0], [-200.0, 0.0, 200.0])
-    np.testing.assert_allclose(mech.springs.table_y[0], [-73929.8, -100.0, 73729.8])
+    # Chrono interpolates the curve linearly: a straight curve is a linear spring, no stops.
+    assert mech.springs.tabulated == (False,) and mech.stops.names == ()
     length, tension = diffsusp.spring_states(mech, jnp.zeros(mech.n_coordinates))
     np.testing.assert_allclose(tension, 369.149 * (length - 356.0) - 100.0, rtol=1e-9)
+    smooth = read_chrono(DATA / "DoubleWishbone_tierod_body.json", spring_interpolation="akima",
+                         check=False)
+    assert smooth.springs.tabulated == (True,)
+    np.testing.assert_allclose(smooth.springs.table_x[0], [-200.0, 0.0, 200.0])
+    np.testing.assert_allclose(smooth.springs.table_y[0], [-73929.8, -100.0, 73729.8])
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
@@ -298,12 +303,15 @@ def test_spin_axis_toe_and_camber(side, toe_deg, camber_deg):
 
 
 def test_loaded_radius(models):
-    """The contact patch is `loaded_radius` below the wheel centre (default 330 mm)."""
+    """The contact patch is `loaded_radius` below the wheel centre (default 330 mm), and the
+    corner the importer attaches has the same loaded radius (issue 12: no 300 mm default)."""
     mech = models(CHRONO / "DoubleWishbone.json")
     pos = np.asarray(mech.markers.position)
     centre = pos[mech.markers.index("wheel_centre")]
     patch = pos[mech.markers.index("contact_patch.m")]
     np.testing.assert_allclose(centre - patch, [0.0, 0.0, DEFAULT_LOADED_RADIUS])
+    assert mech.corners[0].loaded_radius == DEFAULT_LOADED_RADIUS
+    assert mech.corners[0].side == "left" and mech.corners[0].frame == "iso"
 
 
 # ----------------------------------------------------------------------------- malformed files
@@ -381,12 +389,14 @@ def test_bad_arguments():
         read_chrono(CHRONO / "missing.json")
 
 
-def test_stops_are_reported(tmp_path):
+def test_a_lone_stop_length_is_reported(tmp_path):
+    """Chrono enables the spring's stops only with both 'Minimum Length' and 'Maximum Length'
+    (`ReadTSDAFunctorJSON`); one alone is ignored, with a warning. Both: see
+    tests/test_chrono_fidelity.py."""
     doc = _doc()
     doc["Spring"]["Minimum Length"] = 0.2
-    doc["Spring"]["Maximum Length"] = 0.4
-    doc["Spring"]["Free Length"] = -1.0  # stop the read before the (compiled) build
-    with pytest.warns(ModelWarning, match="stops"), pytest.raises(ModelFileError):
+    doc["Spindle"]["COM"] = [1.0, 2.0]  # stop the read before the (compiled) build
+    with pytest.warns(ModelWarning, match="only when both"), pytest.raises(ModelFileError):
         read_chrono(_write(tmp_path, doc))
 
 
