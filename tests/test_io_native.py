@@ -453,8 +453,10 @@ BAD_EDITS = [
      "z = [0, 0, 1]", "bushings.bush.z"),
     ("[load_points.centre]", "[load_point.centre]", "unknown key or section 'load_point'",
      "[load_point.centre]", "load_point"),
-    ("diffsusp = 1", "diffsusp = 2", "format version 2 is not supported", "diffsusp = 2",
+    ("diffsusp = 1", "diffsusp = 3", "format version 3 is not supported", "diffsusp = 3",
      "diffsusp"),
+    ("[load_points.centre]", "[[corner]]\nwheel_centre = \"tip\"\n[load_points.centre]",
+     "[[corner]] tables need format version 2", "[[corner]]", "corner"),
     ("at = [-0.3, 0, 0]", "at = [-0.3, 0, 0]\nat = 1", "not valid TOML", "at = 1", None),
     ("[units]", "[units", "not valid TOML", "[units", None),
 ]
@@ -671,3 +673,39 @@ def test_generator_script_writes_every_builtin(tmp_path, monkeypatch):
     writer.main()
     assert sorted(os.listdir(tmp_path)) == sorted(f"{n}.toml" for n in ZOO)
     assert (tmp_path / "crank_slider.toml").read_text() == "# crank_slider\n"
+
+
+# ------------------------------------------------------------------------ corners (format 2)
+
+CORNER = """
+[[corner]]
+wheel_centre = "tip.m"
+contact_point = "tip"
+wheel_centre_load = false
+kingpin = ["tip.m", {part = "arm", offset = [0, 0, 0.1]}]
+frame = "iso"
+loaded_radius = 0.3
+design_load = 4.5
+"""
+
+
+def test_corner_table_in_file_units_and_old_files():
+    """A `[[corner]]` table (format 2) in the file's units (m, kN); a version-1 file states no
+    corner, and K&C says so rather than guessing from the model's name."""
+    from diffsusp import kc
+    from diffsusp.errors import InputError
+    from diffsusp.model.corner import Corner
+
+    text = ISOLATED_BUSHING_SI.replace("diffsusp = 1", "diffsusp = 2") + CORNER
+    mech = model_from_toml(text, path="c.toml", check=False).mechanism
+    assert mech.corners == (Corner(
+        wheel_centre="tip.m", contact_point="tip", wheel_centre_load=None,
+        kingpin=("tip.m", ("arm", (0.0, 0.0, 100.0))), frame="iso", loaded_radius=300.0,
+        design_load=4500.0),)
+    old = model_from_toml(ISOLATED_BUSHING_SI, path="old.toml", check=False).mechanism
+    assert old.corners == ()
+    with pytest.raises(InputError, match="version-1 native file"):
+        kc.default_corner(old)
+    bad = text.replace('wheel_centre = "tip.m"', 'wheel_centre = "hub"')
+    with pytest.raises(ModelFileError, match="'hub' is not in the model"):
+        model_from_toml(bad, path="bad.toml", check=False)
