@@ -61,13 +61,27 @@ Rotational` on the rotations the joint locks and `DOF/Stiffness Rotational` (0 i
 the ones it leaves free: a revolute's z, a universal's x and y, a spherical's three. (Chrono
 reads `DOF/Stiffness Linear` but does not use it for these joints.) Damping is ignored.
 
-**Springs** (Chrono `ReadTSDAFunctorJSON`): `Spring Coefficient` k with `Free Length` L0 and an
-optional `Preload` P: tension k·(ℓ − L0) − P, i.e. a linear spring of free length L0 + P/k; or
-`Spring Curve Data` (older files: `Curve Data`) [[deflection m, force N], ...] with deflection
-ℓ − L0: tension = curve(ℓ − L0) − P. Chrono interpolates that curve linearly; diffsusp's table
-law is an Akima spline through the same points (equal at the points, linear beyond the ends).
-`Minimum Length` / `Maximum Length` bump and rebound stops are not modelled (a `ModelWarning`
-says so).
+**Springs** (Chrono `ReadTSDAFunctorJSON`, `LinearSpringForce`, `NonlinearSpringForce`):
+`Spring Coefficient` k with `Free Length` L0 and an optional `Preload` P: tension k·(ℓ − L0) − P,
+i.e. a linear spring of free length L0 + P/k; or `Spring Curve Data` (older files: `Curve Data`)
+[[deflection m, force N], ...] with deflection ℓ − L0: tension = curve(ℓ − L0) − P, the curve
+interpolated **linearly** as Chrono's `ChFunctionInterp` does. The model has no piecewise-linear
+law, so the curve is written exactly as a linear spring (named `spring`: the first segment's
+rate plus every rate decrease) and one-sided stops on the same two markers at the interior
+knots (`spring_knot_<j>`: a rebound stop of rate Δs where the rate rises by Δs, a bump stop of
+rate |Δs| where it falls; `piecewise_linear_hinges`). Beyond the end points the end segments
+continue (Chrono holds the end value: it does not extrapolate). `spring_interpolation='akima'`
+reads the curve as a tabulated spring instead (the smooth Akima spline through the points,
+diffsusp's tabulated law).
+
+**Stops** (`SpringForce::enable_stops`, `evaluate_stops`): with both `Minimum Length` and
+`Maximum Length`, Chrono adds a bump force bump(min − ℓ) below the minimum and a rebound force
+rebound(ℓ − max) above the maximum, both on its fixed curve `STOP_CURVE` (0 → 60 mm of
+penetration, 100 N/mm stiffening to 11 250 N/mm, linear between points): here bump stops
+`spring_bump_<j>` and rebound stops `spring_rebound_<j>` at min − p_j and max + p_j with the
+rate increases of that curve — exact up to 60 mm of penetration (125 kN), where Chrono holds
+the force and these stops keep stiffening. One length alone is ignored, as in Chrono (with a
+`ModelWarning`). Dampers (`Shock`) carry no static load and are not read.
 
 **Wheel.** Marker `wheel_centre` on the upright at `Spindle/COM`, z = the spin axis pointing
 outboard (Chrono's spindle y axis, turned by `Toe Angle (deg)` and `Camber Angle (deg)` as
@@ -76,7 +90,11 @@ camber top-out), y as close to up as possible, x = y × z (rearward on the left 
 `contact_patch` on the upright `loaded_radius` mm straight below the wheel centre (global −z)
 and load point `wheel_centre` at the wheel-centre marker, both with global components. With
 `wheel_travel`, driver `wheel_travel` prescribes the wheel centre's global z travel (mm). The
-names are those of `diffsusp.models.double_wishbone`.
+names are those of `diffsusp.models.double_wishbone`. The model carries its corner
+(`Mechanism.corners`): ISO frame, the side read, that loaded radius, the steering axis (ball
+joints; strut top to lower ball joint; upper ball joint to the links' virtual pivot), and the
+design load computed as the vertical contact load that holds the file's position (the file
+states no wheel load), so `diffsusp kc FILE.json` needs no corner option.
 """
 
 import json
