@@ -82,7 +82,7 @@ def output_equation(fy: ArrayLike, u: Mapping[str, ArrayLike], fy_model: Polynom
 class Simulation(eqx.Module):
     """The output of `simulate`: `t` [s], `fy` [N], `mz` [N·m], `fy_pneu`, `mz_pneu` (the
     steady-state values), `margin` (∂Fy_pneu/∂δ′ [N/m] at the saved times), `stable` (margin
-    < 0 everywhere), `steps` (accepted solver steps)."""
+    < 0 everywhere), `steps` (accepted solver steps), `ok` (the solver succeeded)."""
 
     t: Array
     fy: Array
@@ -92,6 +92,7 @@ class Simulation(eqx.Module):
     margin: Array
     stable: Array
     steps: Array
+    ok: Array
 
 
 def simulate(fy_model: PolynomialModel, mz_model: PolynomialModel,
@@ -108,40 +109,63 @@ def simulate(fy_model: PolynomialModel, mz_model: PolynomialModel,
 
     The state starts at its steady state F_y(t₀) = Fy_pneu(u(t₀)). With `throw=True` an input
     trajectory where ∂Fy_pneu/∂δ′ ≥ 0 (beyond the grip peak, spec §3.4) raises `ModelError`
-    before integrating; with `throw=False` the result carries `stable = False` (its values are
-    then meaningless). Under `jit`/`vmap`, call with `throw=False`.
+    (and so does a failed solve); with `throw=False` the result carries `stable = False` (its
+    values are then meaningless) and `ok`. Under `jit`/`vmap`, call with `throw=False`.
     """
-    fyp, mzp = fy_model.pneu(), mz_model.pneu()
     t = jnp.asarray(t, dtype=float)
+    if isinstance(t, jax.core.Tracer) or not throw:
+        return _simulate(fy_model, mz_model, inputs, t, k_fy, k_mz, fx, rtol, atol, max_steps)
+    # One compiled program (the inputs are a Python function: one program per call), with
+    # XLA's backend optimisation off (the solver's loop compiles 3× faster, runs once).
+    from .._compile import CPU_OPTIONS
+
+    options = {"xla_backend_optimization_level": 0}
+    if jax.default_backend() == "cpu":
+        options.update(CPU_OPTIONS)
+    # the stability check first (a small program): no integration beyond the grip peak
+    margin = jax.jit(lambda m, tt: m.pneu().derivative(jax.vmap(inputs)(tt), "delta"),
+                     compiler_options=options)(fy_model, t)
+    if bool(jnp.any(margin >= 0)):
+        k = int(jnp.argmax(margin >= 0))
+        u = inputs(t[k])
+        raise ModelError(
+            f"the simulation model is unstable: ∂Fy_pneu/∂δ′ = {float(margin[k]):.4g} N/m ≥ "
+            f"0 at t = {float(t[k]):.4g} s (F_z = {float(u['fz']):.4g} kN, δ′ = "
+            f"{1e3 * float(u['delta']):.4g} mm): the inputs go beyond the grip peak of "
+            "the polynomial. Reduce the slip, or model the belt mass (spec §3.4).")
+    sim = jax.jit(lambda a, b, c, d, e: _simulate(a, b, inputs, c, d, e, fx, rtol, atol,
+                                                  max_steps),
+                  compiler_options=options)(fy_model, mz_model, t, k_fy, k_mz)
+    if not bool(sim.ok):
+        raise ModelError(f"the simulation model's solver failed (max_steps = {max_steps} "
+                         "reached?): loosen rtol/atol or raise max_steps.")
+    return sim
+
+
+def _simulate(fy_model, mz_model, inputs, t, k_fy, k_mz, fx, rtol, atol, max_steps):
+    fyp, mzp = fy_model.pneu(), mz_model.pneu()
     u_all = jax.vmap(inputs)(t)
     margin = fyp.derivative(u_all, "delta")
     stable = jnp.all(margin < 0)
-    if throw and not isinstance(stable, jax.core.Tracer) and not bool(stable):
-        k = int(jnp.argmax(margin >= 0))
-        raise ModelError(
-            f"the simulation model is unstable: ∂Fy_pneu/∂δ′ = {float(margin[k]):.4g} N/m ≥ 0 at "
-            f"t = {float(t[k]):.4g} s (F_z = {float(u_all['fz'][k]):.4g} kN, δ′ = "
-            f"{1e3 * float(u_all['delta'][k]):.4g} mm): the inputs go beyond the grip peak of "
-            "the polynomial. Reduce the slip, or model the belt mass (spec §3.4).")
 
     def vector_field(s, y, args):
         u = _scalar_inputs(inputs(s))
         d = fyp.derivative(u, "delta")[0]
-        # Guard the division so an unstable input gives a finite (flagged) result.
-        d = jnp.where(d < 0, d, -1.0)
-        return u["omega"][0] * k_fy / d * (y - fyp(u)[0])
+        # Beyond the grip peak the state is frozen: a finite, cheap (flagged) result.
+        rate = u["omega"][0] * k_fy / jnp.where(d < 0, d, -1.0) * (y - fyp(u)[0])
+        return jnp.where(d < 0, rate, 0.0)
 
     y0 = fyp(_scalar_inputs(inputs(t[0])))[0]
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(vector_field), diffrax.Tsit5(), t0=t[0], t1=t[-1], dt0=None, y0=y0,
         saveat=diffrax.SaveAt(ts=t), stepsize_controller=diffrax.PIDController(rtol=rtol,
                                                                               atol=atol),
-        max_steps=max_steps, throw=throw)
+        max_steps=max_steps, throw=False)
     fy = sol.ys
     fx_v = jnp.zeros_like(fy) if fx is None else jnp.broadcast_to(fx(u_all), fy.shape)
     mz = output_equation(fy, u_all, fyp, mzp, k_fy, k_mz, fx_v)
     return Simulation(t, fy, mz, fyp(u_all), mzp(u_all), margin, stable,
-                      sol.stats["num_accepted_steps"])
+                      sol.stats["num_accepted_steps"], sol.result == diffrax.RESULTS.successful)
 
 
 def _scalar_inputs(u):
