@@ -147,7 +147,8 @@ def test_extrema_on_annex_g():
 
 
 def test_structure_rules_on_polynomials():
-    from diffsusp import lsq
+    import types
+
     from diffsusp.tyre import bench
 
     names = ("b_Fy_delta_1_1", "b_Fy_delta_1_2", "b_Fy_delta_3_1", "b_Fy_gamma_1_0",
@@ -155,9 +156,12 @@ def test_structure_rules_on_polynomials():
     rule = bench.structure_rules("Fy", (1.5, 6.0), sigma_pct_threshold=None, ic_threshold=0.0)
 
     def fit_of(x):
-        W = RNG.normal(size=(20, len(names)))
-        f = lsq.solve(W, W @ np.asarray(x), names=names)
-        return f
+        """The fields of an exact `lsq.Fit` the rule reads (every coefficient kept, σ = 0;
+        the rules inside `lsq.eliminate` on real fits: test_tyre_bench's structure search)."""
+        x = np.asarray(x, float)
+        k = np.ones(len(x), bool)
+        return types.SimpleNamespace(names=names, x=x, kept=k, fixed=~k, confidence=k * 1.0,
+                                     combination_sigma=0 * x, combination_values=x)
 
     # a camber coefficient that changes sign over the load range: drop its top monomial in γ
     bad = fit_of([-8e4, 1e3, 1e8, -4000.0, 1000.0])

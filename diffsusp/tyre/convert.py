@@ -37,7 +37,7 @@ from ..errors import InputError
 from ..lsq import algebra
 from . import fit as mf_fit
 from . import mf89
-from .poly import PolynomialModel, table6_domains
+from .poly import PolynomialModel, parse_name, table6_domains
 
 __all__ = ["step1", "refine", "to_magic_formula", "fit_slip_polynomial", "slip_data"]
 
@@ -196,12 +196,12 @@ def _slip_only(model: PolynomialModel) -> PolynomialModel:
 
 def fit_slip_polynomial(output: str, fz_kn, delta_p, y, *, degree: int = 5) -> PolynomialModel:
     """LS fit of P_{F,δ′} = Σ_{i=1..degree} Σ_{j=1..3} δ′^i F_z^j b (the round trip's
-    polynomial, spec §8 "sanity tests"); F_z [kN], δ′ [m]."""
-    from .. import lsq
-
-    model = PolynomialModel.create(output, {"delta": degree})
-    lip = model.model
-    W = np.asarray(lip.regressor({"fz": jnp.asarray(fz_kn), "delta": jnp.asarray(delta_p)}))
-    f = lsq.solve(W, np.asarray(y, float), names=lip.names)
-    return PolynomialModel.create(output, {"delta": degree},
-                                  values=dict(zip(lip.names, f.x, strict=True)))
+    polynomial, spec §8 "sanity tests"); F_z [kN], δ′ [m]. Plain least squares (NumPy, the
+    columns scaled to unit norm): a data-reduction step, not a report."""
+    fz, dp = np.asarray(fz_kn, float).ravel(), np.asarray(delta_p, float).ravel()
+    names = PolynomialModel.create(output, {"delta": degree}).names
+    W = np.stack([dp ** parse_name(n)[2] * fz ** parse_name(n)[3] for n in names], axis=1)
+    scale = np.linalg.norm(W, axis=0)
+    x = np.linalg.lstsq(W / scale, np.asarray(y, float).ravel(), rcond=None)[0] / scale
+    return PolynomialModel.create(output, {"delta": degree}, values=dict(zip(names, x,
+                                                                             strict=True)))
