@@ -6,8 +6,9 @@ Flat Trac campaign through the simulation model (slip sines ±1° at 3/4.5/6 Hz,
 small slip steps; 40 and 120 km/h; 200 Hz; 6 N noise); generation is not timed.
 
 Timed pipeline, per data set, all 12 in one compiled program (`lax.map` over the sets):
-zero-phase 25 Hz filtering and
-five-point differences, the deformation inputs, the just-necessary regressor with its
+zero-phase 25 Hz filtering (the scan form of the long records) and
+five-point differences (Ḟ_y from the raw F_y, filtered with the regressor), the deformation
+inputs, the just-necessary regressor with its
 relaxation columns (69 columns) filtered in parallel, thinning, the R-factor, the structure
 search (σ % > 10 % eliminated one at a time from R, `bench.eliminate_r`), step 2 (K_y⁻¹).
 Baseline in the same run: the same pipeline in NumPy/SciPy (`scipy.signal.sosfiltfilt`,
@@ -139,7 +140,7 @@ def main():
         fy_f = scipy.signal.sosfiltfilt(sos_np, c["FY"], axis=-1)
         u = {"fz": c["FZ"] * 1e-3, "delta": -speed * np.sin(steer) / omega,
              "phi": deriv(steer) / omega, "gamma": c["camber"],
-             "fydot_w": deriv(fy_f) / omega}
+             "fydot_w": deriv(c["FY"]) / omega}  # raw F_y: the columns are filtered
         cols_np = []
         for name in names:
             _, block, i, j = poly.parse_name(name)

@@ -8,22 +8,25 @@ PSA], `camber` γ [rad], `speed` V_T [mm/s] (belt), `omega` ω [rad/s] (wheel sp
 `FY` [N], `MZ` [N·mm]. `REQUIRED` lists them.
 
 **Conditioning** (`condition`, spec §3.4, §7 D item 17): every channel low-pass filtered at
-25 Hz with zero phase (Butterworth, 2nd order, run forward and backward, odd padding: SciPy's
-`filtfilt` convention), Ḟ_y by centred differences, the deformation inputs from the bench
-kinematics (small-angle Flat Trac, (3-3…3-8): V_x = V·cos β, V_y = −V·sin β, β̇ = δ̇):
-κ′ = V_x/ω − R_r, δ′ = V_y/ω, φ′ = β̇/ω (2-92…2-95), and the rows thinned to about 2·f_c
-(`decimate`) so that the residual of the regression is close to white and σ is honest.
-Converted to the polynomial's units (kN, m, N, N·m) at this edge.
+25 Hz with zero phase (Butterworth, order 4, run forward and backward, odd padding: SciPy's
+`filtfilt` convention; applied as the matrix `filter_matrix`), Ḟ_y by five-point centred
+differences of F_y inside the relaxation columns, which are filtered with the regressor
+(`Conditioned`), the deformation inputs from the bench kinematics (small-angle Flat Trac,
+(3-3…3-8): V_x = V·cos β, V_y = −V·sin β, β̇ = δ̇): κ′ = V_x/ω − R_r, δ′ = V_y/ω, φ′ = β̇/ω
+(2-92…2-95), and the rows thinned to about 2·f_c (`decimate`). Converted to the polynomial's
+units (kN, m, N, N·m) at this edge.
 
-**Identification** (`identify`): the two-step procedure (3-40…3-46) on F_y and on M_z:
-step 1 the LIP model [W_pneu | W_Ly (| W_P2)] by the guaranteed least squares, with the
-structure search (`lsq.eliminate`: IC < 0.1 or σ % > 100, and the behaviour rules of §7 item 19
-as `check=` rules, `structure_rules`); step 2 K_y⁻¹ from F − F̂_pneu = ((∂F̂_pneu/∂δ′)·Ḟ_y/ω
-(− F_y·F_x)) K_y⁻¹ (3-76, 3-77) with F̂_pneu fixed. The σ of K_y⁻¹ printed by the thesis is
-that of this one-parameter regression; it ignores step 1's uncertainty, so the report gives
-the σ of the linearised joint model F = W_pneu·b + c·D(b) at the two-step estimate instead
-(its Cramér–Rao bound; chosen because the step-2 σ alone understates the spread several times
-over on synthetic data — see tests/test_tyre_bench.py).
+**Identification** (`identify`, `identify_output`): the two-step procedure (3-40…3-46) on F_y
+and on M_z: step 1 the LIP model [W_pneu | W_Ly (| W_P2)] with the structure search by the
+guaranteed least squares (`lsq.eliminate`: σ % > 10 %, and the behaviour rules of §7 item 19
+as `check=` rules, `structure_rules`); the final structure and step 2, K_y⁻¹ from
+F − F̂_pneu = ((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) K_y⁻¹ (3-76, 3-77), by `two_step`:
+instrumental variables (Ḟ_y/ω, taken from the noisy F_y, is an error in the variables, which
+biased the least squares by one σ), and σ from the noise model of the filtered data (the
+white-residual σ was twice the spread of the slip terms), checked by a Monte-Carlo over 40
+seeds (tests/test_tyre_bench.py). The σ of K_y⁻¹ is that of the linearised joint model
+F = W_pneu·b + c·D(b) (the thesis's step-2 σ ignores step 1's uncertainty and understates
+the spread 1.5×).
 
 **Synthetic Flat Trac** (`steering_feel_segments`, `synthetic_flat_trac`): the steering-feel
 sequences of §4.3 A (straight line, small slip steps ±1°, load sine ±500 N at 3 and 6 Hz, slip
