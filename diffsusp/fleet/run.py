@@ -427,8 +427,8 @@ def run(
     show = _progress_printer() if progress is True else (progress or None)
     owned = engine is None
     if engine is None:
-        if workers is None and scheduler is None and client is None:
-            engine = InProcessEngine()
+        if not tasks or (workers is None and scheduler is None and client is None):
+            engine = InProcessEngine()  # (nothing to do: no cluster either)
         else:
             engine = DaskEngine(workers=workers, scheduler=scheduler, client=client,
                                 env=worker_environment())
