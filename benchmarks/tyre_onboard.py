@@ -1,6 +1,7 @@
 """Benchmark of the on-board tyre identification (issue 17): the pipeline over the thesis's
 60 s steering-wheel sine at 1 kHz (ground plane, body twist, tyre inputs of 4 wheels, delay
-estimate, pooled regression), after compilation; and a plain NumPy per-instant baseline of the
+estimate, both half-rate records, pooled instrumental-variable regression), after
+compilation; and a plain NumPy per-instant baseline of the
 body-twist step for the ratio. Run: python benchmarks/tyre_onboard.py"""
 
 import json
@@ -15,7 +16,6 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from diffsusp import lsq  # noqa: E402
 from diffsusp.tyre import onboard as O  # noqa: E402
 from diffsusp.tyre import vehicle as V  # noqa: E402
 
@@ -37,8 +37,10 @@ def main():
         normal, R = O.ground_plane(d["lasers"], d["laser_positions"], d["laser_window_ok"],
                                    kernels[0])
         delay = O.correvit_delay(d, normal, R, kernels, dt=dt)
-        W, y, mask, _ = O.regression(d, opts, half=half, dt=dt, correvit_delay_s=delay)
-        return lsq.solve_arrays(W, y).x, delay
+        sig, ok = O.split_signals(d, opts, half=12, dt=2 * dt, correvit_delay_s=delay)
+        (W_e, y_e), (W_o, y_o) = (O.regressor({k: v[h] for k, v in sig.items()},
+                                              np.arange(4)) for h in (0, 1))
+        return O.iv_solve(W_e, y_e, W_o, y_o, jnp.repeat(ok, 4), 4)[0], delay
 
     t0 = time.process_time()
     jax.block_until_ready(pipeline(data))
@@ -72,4 +74,3 @@ def _skew(a):
 
 if __name__ == "__main__":
     main()
-_ = jnp

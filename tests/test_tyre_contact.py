@@ -116,6 +116,25 @@ def test_tyre_frame_estimators_recover_the_plane_and_camber(frames):
                                                              (0, 2, 1)), atol=1e-14)
 
 
+def test_spec_errors_of_chapter_2(frames):
+    """The source's misprints this module corrects (docstrings of `wobble_rotation`,
+    `tyre_frame`, `tyre_frame_zero_wobble`): (2-8) as printed is not orthonormal; (2-20) as
+    printed, ξ = atan2(s_z, −s_x), returns ξ + π; h is signed (the wheel centre above the
+    ground: h < 0 along z_p here, and the estimators return it with its sign)."""
+    cfg, (T, gen, zw, Rtw, T2) = frames
+    th, ph, xi, h, g = cfg.T
+    c, s = np.cos, np.sin
+    printed = np.array([[[c(p) * c(t), s(p) * c(t), -s(p)], [-s(p), c(p), 0.0],
+                         [c(p) * s(t), s(p) * s(t), c(t)]] for t, p in zip(th, ph, strict=True)])
+    gram = np.einsum("kij,kil->kjl", printed, printed)
+    assert np.all(np.abs(gram - np.eye(3)).max(axis=(1, 2)) > 1e-3)  # (2-8) not a rotation
+    # x_p in R_tw: s = (cos ξ, 0, −sin ξ); (2-20) as printed is off by π, the module's is not
+    sv = np.einsum("kij,kj->ki", np.asarray(Rtw), np.asarray(gen["T_pf_p"])[:, :3, 0])
+    off = (np.arctan2(sv[:, 2], -sv[:, 0]) - xi) % (2 * np.pi)
+    np.testing.assert_allclose(off, np.pi, atol=1e-12)
+    assert np.all(h < 0) and np.all(np.asarray(gen["h"]) < 0) and np.all(np.asarray(zw["h"]) < 0)
+
+
 def test_wrench_transform_and_wheel_inertia():
     """(2-31) as printed = 𝕋ᵀ of ^{pf}T_p (2-36) at zero wobble; the wheel-inertia regressor
     (2-30): a wheel of mass m, spin inertia I at rest under gravity, spinning up at θ̈."""

@@ -1,10 +1,17 @@
 """diffsusp.tyre.onboard on the synthetic vehicle (spec: tyre_contact_model §5.3–5.6, §7 F
 items 24–25; issue 17): Monte-Carlo recovery of the tyre parameters within their reported σ,
-the wrong-sign camber stiffness of a 100 ms Correvit delay and its estimate, bad input."""
+the wrong-sign camber stiffness of a 100 ms Correvit delay and its estimate, bad input.
+
+The noise-free record (6 s of steering-wheel sine at 1 kHz, `vehicle.simulate` +
+`vehicle.channels`) is shipped as tests/data/onboard_sine.npz (float32; written by
+tests/data/make_onboard_record.py, checked against a fresh simulation by notebook 08); the
+noise is drawn here, 20 seeds in one vmapped program."""
 
 import json
+import pathlib
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -13,53 +20,70 @@ from diffsusp.tyre import onboard as O
 from diffsusp.tyre import vehicle as V
 
 SEEDS = 20
-DURATION = 8.0  # s of steering-wheel sine, 0.2 → 6 Hz (the benchmark runs the thesis's 60 s)
+DATA = pathlib.Path(__file__).parent / "data" / "onboard_sine.npz"
+
+
+def load_truth():
+    veh, sens = V.Vehicle(), V.Sensors()
+    with np.load(DATA) as z:
+        truth = {k: jnp.asarray(z[k], float) for k in z.files if k not in ("t0", "rate")}
+        n = z["lasers"].shape[0]
+        truth["time"] = jnp.asarray(float(z["t0"]) + np.arange(n) / float(z["rate"]))
+    truth.update(laser_positions=sens.lasers, correvit_position=sens.correvit,
+                 imu_position=sens.imu, corners=veh.corners, rolling_radius=veh.rolling_radius)
+    return veh, sens, truth
 
 
 @pytest.fixture(scope="module")
 def run():
-    veh, sens = V.Vehicle(), V.Sensors()
-    rec = V.simulate(veh, duration=DURATION)
-    truth = V.channels(veh, sens, rec)
+    veh, sens, truth = load_truth()
     loads = np.asarray(truth["true_fz"]).mean(axis=0) / 1000.0
     loads_kn = (float(loads[:2].mean()), float(loads[2:].mean()))
     keys = jax.random.split(jax.random.key(17), SEEDS)
     clean = O.monte_carlo(truth, sens, keys, delay=0.0, loads_kn=loads_kn)
     late = O.monte_carlo(truth, sens, keys, delay=0.1, loads_kn=loads_kn)
     exact = O.quantities(loads_kn) @ np.asarray(veh.tyre.vector())
-    return veh, sens, rec, truth, clean, late, exact
+    return veh, sens, truth, clean, late, exact
+
+
+def _stats(mc, exact):
+    q = np.asarray(mc["quantities"])
+    s = np.asarray(mc["quantities_sigma"])
+    return (q.mean(axis=0) - exact) / s.mean(axis=0), q.std(axis=0, ddof=1) / s.mean(axis=0), s, q
 
 
 def test_monte_carlo_recovers_the_tyre_within_sigma(run):
-    """Cornering stiffness (front and rear loads), torsion stiffness and relaxation from 20
-    noisy copies of the record: spread / mean reported σ within a factor 1.5 and the mean
-    within 1.5 σ of the truth (the residual bias is the pipeline's windowing, ~1 σ on 8 s)."""
+    """Cornering stiffness (front and rear loads), torsion stiffness, relaxation and camber
+    stiffness from 20 noisy copies of the record (instrumental variables, `iv_solve`): spread /
+    mean reported σ within a factor 1.5 and the mean within 0.5 σ of the truth (2/√20 = 0.45:
+    the Monte-Carlo mean's own 2-SE band)."""
     *_, clean, _, exact = run
-    q = np.asarray(clean["corrected"]["quantities"])
-    s = np.asarray(clean["corrected"]["quantities_sigma"])
-    ratio = q.std(axis=0, ddof=1) / s.mean(axis=0)
-    bias = (q.mean(axis=0) - exact) / s.mean(axis=0)
-    for k, name in enumerate(O.QUANTITIES[:4]):
+    bias, ratio, s, q = _stats(clean["corrected"], exact)
+    for k, name in enumerate(O.QUANTITIES):
         assert 1 / 1.5 < ratio[k] < 1.5, (name, ratio[k])
-        assert abs(bias[k]) < 1.5, (name, bias[k])
+        assert abs(bias[k]) < 0.5, (name, bias[k])
     # the cornering stiffness is the best determined: σ below 1 %
     assert np.all(s[:, :2] / np.abs(q[:, :2]) < 0.01)
-    # with no delay, the estimator finds none
-    assert np.all(np.abs(np.asarray(clean["delay"])) < 0.005)
+    # with no delay, the estimator finds none (within 1 ms)
+    assert np.all(np.abs(np.asarray(clean["delay"])) < 0.001)
+    # the naive pipeline (no shift at all) is as good when there is no delay
+    bias, ratio, *_ = _stats(clean["naive"], exact)
+    assert np.all(np.abs(bias) < 0.5) and np.all((1 / 1.5 < ratio) & (ratio < 1.5))
 
 
 def test_correvit_delay_flips_the_camber_stiffness_and_is_found(run):
     """A 100 ms Correvit delay: the naive pipeline's camber stiffness has the wrong sign (the
     thesis's positive camber stiffness, §5.5–5.6); the estimator finds the delay within 5 ms
-    and, once it is removed, the sign and value come back."""
+    and, once it is removed, every quantity is back within 0.5 σ of the truth."""
     *_, late, exact = run
     k_gamma = exact[4]
     naive = np.asarray(late["naive"]["quantities"])[:, 4]
-    fixed = np.asarray(late["corrected"]["quantities"])[:, 4]
     assert np.all(np.sign(naive) == -np.sign(k_gamma))
     assert np.all(np.abs(np.asarray(late["delay"]) - 0.1) < 0.005)
+    fixed = np.asarray(late["corrected"]["quantities"])[:, 4]
     assert np.all(np.sign(fixed) == np.sign(k_gamma))
-    assert abs(fixed.mean() / k_gamma - 1) < 0.1
+    bias, ratio, *_ = _stats(late["corrected"], exact)
+    assert np.all(np.abs(bias) < 0.5) and np.all((1 / 1.5 < ratio) & (ratio < 1.5)), (bias, ratio)
 
 
 def test_cli_report_dropouts_and_bad_input(run, tmp_path):
@@ -70,11 +94,11 @@ def test_cli_report_dropouts_and_bad_input(run, tmp_path):
 
     from diffsusp.cli import app
 
-    veh, sens, rec, truth, *_ = run
+    veh, sens, truth, *_ = run
     data = {k: np.asarray(v) for k, v in V.add_noise(truth, sens, jax.random.key(3),
                                                       delay=0.1).items()}
     lasers = data["lasers"].copy()
-    lasers[1000:1400, 2] = np.nan  # one laser out for 0.4 s
+    lasers[1000:1400, 2] = np.nan  # one laser out for 0.4 s: 3 lasers still give the plane
     lasers[3000:3100, :] = np.nan  # all out for 0.1 s: those instants are excluded
     data["lasers"] = lasers
     path = tmp_path / "run.npz"
@@ -84,10 +108,13 @@ def test_cli_report_dropouts_and_bad_input(run, tmp_path):
     out = json.loads(res.output)
     assert abs(out["delay_s"] - 0.1) < 0.005
     rep = out["reports"][0]
-    assert rep["camber"] and rep["excluded"] > 0
+    # 0.1 s + a window each side at one row per 0.05 s (3–5 instants, not the 0.4 s outage of
+    # one laser), and the last 0.1 s + a window with no Correvit once its delay is removed
+    assert rep["camber"] and 3 <= rep["excluded"] <= 9, rep["excluded"]
     k = O.NAMES.index("b_gamma_1")
     assert np.sign(rep["fit"]["x"][k]) == np.sign(float(veh.tyre.b_gamma_1))
     assert rep["fit"]["sigma_pct"][O.NAMES.index("b_delta_1")] is not None
+    assert out["reports"][1]["fit"]["x"][k] == 0.0  # camber out: held at 0
     with pytest.raises(InputError, match="missing channel"):
         O.check({k: v for k, v in data.items() if k != "correvit"})
     bad = dict(data, spin=np.where(np.arange(len(lasers))[:, None] == 5, np.nan, data["spin"]))

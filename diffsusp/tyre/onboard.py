@@ -10,16 +10,31 @@ unit), the wheels' travel, steer and spin, and the wheel-carrier wrenches (dynam
 3. per wheel, the carrier's pose and twist, the ground plane in R_pf, the tyre frame (2-23…2-29),
    its twist (2-46), the tyre-frame wrench (2-30) and the deformation inputs δ′, φ′, γ;
 4. offsets removed (all signals but the load), the reduced model (4-16…4-18) pooled over the
-   chosen wheels, solved by `diffsusp.lsq` (σ, σ %, identifiability);
+   chosen wheels, solved by `diffsusp.lsq` (σ, σ %, identifiability) with instrumental
+   variables (below);
 5. the Correvit's delay (8–512 ms in the thesis, unknown there) estimated by kinematic
    consistency — the derivative of the Correvit's lateral velocity against the inertial unit's
    lateral acceleration at the same point — and removed.
 
 Windows: Hamming or Blackman of length T (default 0.05 s, §5.3), used three ways with the same
 weights w: stacking rows (normal equations convolved with w²), smoothing (weighted mean) and
-slopes (weighted least-squares line, for the time derivatives). Rows of the tyre regression are
+time derivatives (the derivative of the smoothing kernel). Rows of the tyre regression are
 taken every `stride` samples (default one window) so that their errors are nearly independent
 and the reported σ is honest.
+
+Errors in variables (not in the thesis). Every column of the tyre regression is measured: δ′
+carries the Correvit's noise (through the body twist), φ′ the gyro's, the relaxation column
+Ḟ_y/ω the dynamometric wheel's. Ordinary least squares then biases the coefficients (≈ 1 σ
+on an 8 s sine with the synthetic car's sensor noise: K_φ and L_R towards 0, K_δ low) — the
+bias of the previous pipeline, which a second smoothing window had only traded against the
+windowing's own error. The fix is an instrumental-variable (IV) estimate that needs no noise
+model: the sensor noise is white, so the even and the odd samples of the record are two
+records of the same motion (1 ms apart) with independent noise. The pipeline runs on both
+(at half the rate, same window T); the regressors of one half are the instruments of the
+other's rows, x = (Zᵀ W)⁻¹ Zᵀ y with W = [W_e; W_o], Z = [W_o; W_e], y = [y_e; y_o], and σ from
+the sandwich σ̂²(ZᵀW)⁻¹ZᵀZ(WᵀZ)⁻¹ with σ̂ of the structural residual y − W x. Sensors whose
+noise is correlated from one sample to the next (an anti-aliasing filter) need instruments
+further apart; the assumption is stated, not checked.
 
 Units SI as `diffsusp.tyre.vehicle` (m, N, s, rad); F_z in kN inside the load polynomials.
 Coefficient names follow the thesis: b_delta_2, b_delta_1, b_delta_0 (K_δ = c_{Fy,δ′,1}(F_z)),
@@ -51,16 +66,17 @@ GRAVITY = 9.81
 @dataclasses.dataclass(frozen=True)
 class Options:
     """Static choices of the pipeline: `window` "hamming" | "blackman", `window_time` T (s)
-    of the body estimates (§5.3), `regression_window_time` (s) of a second window applied to
-    every signal of the tyre regression alike (it lowers the noise of Ḟ_y, whose errors bias
-    the relaxation coefficient towards 0), `stride` samples between regression rows (None:
-    one regression window), noise σ of the sensors for
-    the weights (4-13): `sigma_laser` (m), `sigma_correvit` (m/s), `sigma_gyro` (rad/s),
+    of the body estimates (§5.3), `regression_window_time` (s) of an optional second window
+    applied to every signal of the tyre regression alike (default none: smoothing products of
+    smoothed signals is not smoothing the product, a bias of its own, and the instrumental
+    variables remove the noise bias it was meant to lower), `stride` samples (of each half
+    record) between regression rows (None: one window), noise σ of the sensors for the
+    weights (4-13): `sigma_laser` (m), `sigma_correvit` (m/s), `sigma_gyro` (rad/s),
     `sigma_imu_velocity` (m/s)."""
 
     window: str = "hamming"
     window_time: float = 0.05
-    regression_window_time: float = 0.1
+    regression_window_time: float = 0.0
     stride: int | None = None
     sigma_laser: float = 2e-4
     sigma_correvit: float = 0.02
@@ -81,32 +97,32 @@ def window_weights(kind: str, n: int) -> np.ndarray:
 def _kernels(kind, n, dt):
     """Window weights w² (stacking), the weighted mean (smoothing) and the time derivative of
     the smoothed signal (central difference of the smoothing kernel, 1/s, two samples longer)
-    as convolution kernels. (A weighted least-squares slope would filter the derivative
-    differently from the signal — at 6 Hz enough to bias a relaxation coefficient by 25 %.)"""
+    as convolution kernels, and the plain central difference (1/s, 3 samples). (A weighted
+    least-squares slope would filter the derivative differently from the signal — at 6 Hz
+    enough to bias a relaxation coefficient by 25 %.)"""
     w = window_weights(kind, n)
     w2 = w**2
     smooth = w2 / w2.sum()
     padded = np.concatenate([[0.0, 0.0], smooth, [0.0, 0.0]])
     slope = (padded[:-2] - padded[2:])[: n + 2] / (2.0 * dt)
-    return w2, smooth, slope
+    return w2, smooth, slope, np.array([-1.0, 0.0, 1.0]) / (2.0 * dt)
 
 
 def _conv(x, kernel):
     """Σ_τ kernel(τ)·x(t+τ) along axis 0 (same length; beyond the ends the signal is 0, and the
-    caller flags those instants invalid), for every other axis. A loop over the taps of
-    shifted multiply-adds: it vectorises over channels and batches (a `vmap`ped
-    `jnp.convolve` became a slow convolution op) and compiles once per shape."""
-    k = jnp.asarray(kernel)
-    m = len(kernel)
+    caller flags those instants invalid), for every other axis. By FFT (one rfft/irfft pair of
+    the padded signal): a few XLA operations whatever the kernel's length, so the programs
+    compile fast and vmap (a loop of shifted multiply-adds compiled 5× slower; a `vmap`ped
+    `jnp.convolve` became a slow convolution op)."""
+    k = np.asarray(kernel, float)
+    m, n = len(k), x.shape[0]
+    if m == 1:
+        return x * k[0]
     half = m // 2
-    pad = jnp.concatenate([jnp.zeros((half,) + x.shape[1:], x.dtype), x,
-                           jnp.zeros((half,) + x.shape[1:], x.dtype)])
-    n = x.shape[0]
-
-    def body(j, acc):
-        return acc + k[j] * jax.lax.dynamic_slice_in_dim(pad, j, n, axis=0)
-
-    return jax.lax.fori_loop(0, m, body, jnp.zeros_like(x))
+    nfft = 1 << int(np.ceil(np.log2(n + m - 1)))
+    K = np.fft.rfft(k[::-1], nfft).reshape((-1,) + (1,) * (x.ndim - 1))
+    c = jnp.fft.irfft(jnp.fft.rfft(x, nfft, axis=0) * K, nfft, axis=0)
+    return c[m - 1 - half: m - 1 - half + n]
 
 
 def _skew(a):
@@ -144,12 +160,15 @@ def body_twist(data, normal, R, opts: Options, kernels):
     """Windowed WLS (4-8…4-15) of the body twist (V | ω) at the body frame's origin, body frame,
     from the lasers' vertical velocities, the Correvit (at its ground projection B_5, (4-10,
     4-11)) and the inertial unit (velocity and angular velocity at C_0)."""
-    w2, _, slope = kernels
+    w2, _, _, central = kernels
     C = data["laser_positions"]
     valid = data["laser_valid"]
     heights = jnp.where(valid, data["lasers"], 0.0) * normal[:, None, 2]
-    h_rate = _conv(heights, slope)
-    sig_rate = opts.sigma_laser * math.sqrt(float(np.sum(slope**2)))
+    # vertical velocities by central differences: the window's stacking below smooths them
+    # once, as it does the other sensors (the derivative of the smoothed heights would be
+    # smoothed twice: roll and pitch rates lagging the gyro's)
+    h_rate = _conv(heights, central)
+    sig_rate = opts.sigma_laser * math.sqrt(float(np.sum(central**2)))
     eye = jnp.eye(3)
     # rows S_i·M_{D_i,A} and their measurements, per instant
     Ml = jnp.concatenate([jnp.broadcast_to(eye, (4, 3, 3)), -_skew(C)], axis=-1)  # (4, 3, 6)
@@ -180,9 +199,13 @@ def body_twist(data, normal, R, opts: Options, kernels):
 # Tyre inputs (§1.5, §1.6)
 
 
-def tyre_inputs(data, normal, R, twist, kernels):
-    """Per instant and wheel (n, 4): F_z, F_y (tyre frame), δ′, φ′, γ, ω."""
-    _, smooth, slope = kernels
+def tyre_inputs(data, normal, R, twist, kernels, raw_plane=None):
+    """Per instant and wheel (n, 4): F_z, F_y (tyre frame), δ′, φ′, γ, ω. The tyre-frame
+    angles' rates are the smoothed derivative of the angles computed per instant from the raw
+    channels and the per-instant plane `raw_plane` (normal, R) — not the derivative of the
+    smoothed angles, which would filter them twice while the twist and F_y are filtered once
+    (a bias of ≈ 0.3 σ on a 6 s sine)."""
+    _, smooth, slope, _ = kernels
     # every per-wheel channel smoothed once, as the twist and the plane are by their windows
     steer, travel = _conv(data["steer"], smooth), _conv(data["travel"], smooth)
     steer_rate, travel_rate = _conv(data["steer"], slope), _conv(data["travel"], slope)
@@ -199,7 +222,11 @@ def tyre_inputs(data, normal, R, twist, kernels):
         return Rc, O, n_pf, d, jnp.stack([f["xi_hat"], f["h"], f["gamma"]], axis=-1)
 
     Rc, O, _, _, qp = jax.vmap(frame)(normal, R, twist, steer, travel)
-    qp_rate = _conv(qp, slope)
+    if raw_plane is None:
+        qp_rate = _conv(qp, slope)
+    else:
+        qp_raw = jax.vmap(frame)(*raw_plane, twist, data["steer"], data["travel"])[-1]
+        qp_rate = _conv(qp_raw, slope)
 
     def wheel(tw, Rci, Oi, zdi, bdi, q, qd, wrench, spin):
         v, w = tw[:3], tw[3:]
@@ -226,7 +253,7 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
     """Smoothed signals and Ḟ_y at the regression instants (every `stride` samples away from
     the edges), offsets (record means) removed from all but the load (§5.5 item 1) when
     `remove_offsets`; returns dict of (m, 4) and the row mask (m,)."""
-    _, smooth, slope = kernels
+    _, smooth, slope, _ = kernels
     n = inputs["fy"].shape[0]
     margin = half + 1 + len(second if second is not None else [0]) // 2
     idx = np.arange(margin, n - margin, stride)  # the derivative kernel is 2 longer
@@ -273,8 +300,9 @@ def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float):
     consistency: d/dt v_{B5,y} (body-frame component) must equal [a_{B5} − ω × v_{B5}]_y with
     a_{B5} = f + g + ω̇ × (B5 − C0) + ω × (ω × (B5 − C0)) from the inertial unit (specific force
     f, gravity −9.81·z_r in the body frame, flat road). Cross-correlation of the two over lags
-    0…`max_delay`, peak refined by a parabola (sub-sample); `dt` the sampling step (s)."""
-    _, smooth, slope = kernels
+    0…`max_delay` (and 8 samples below 0), peak refined by a parabola (sub-sample); `dt` the
+    sampling step (s)."""
+    _, smooth, slope, _ = kernels
     w = _conv(data["imu_omega"], smooth)
     wd = _conv(data["imu_omega"], slope)
     f = _conv(data["imu_specific_force"], smooth)
@@ -295,11 +323,14 @@ def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float):
     n = target.shape[0]
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
     xc = jnp.fft.irfft(jnp.fft.rfft(meas, nfft) * jnp.conj(jnp.fft.rfft(target, nfft)), nfft)
-    xc = xc[: lags + 1]
-    k = jnp.clip(jnp.argmax(xc), 1, lags - 1)
+    # lags −8…max (negative ones only so that a peak at 0 is interior to the parabola's fit:
+    # clipped at the edge it came out −0.1 ms late on average)
+    neg = 8
+    xc = jnp.concatenate([xc[-neg:], xc[: lags + 1]])
+    k = jnp.clip(jnp.argmax(xc), 1, lags + neg - 1)
     y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
     frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-    return (k + frac) * dt
+    return (k - neg + frac) * dt
 
 
 def shift_channel(x, time, delay):
@@ -346,7 +377,7 @@ def check(data: dict, opts: Options = Options()) -> dict:
     valid = jnp.isfinite(out["lasers"])
     out["lasers"] = jnp.where(valid, out["lasers"], 0.0)
     out["laser_valid"] = valid
-    w2, _, _ = _kernels(opts.window, 2 * half + 1, 1.0)
+    w2, *_ = _kernels(opts.window, 2 * half + 1, 1.0)
     ok = _conv(valid.astype(float), w2) > 0.5 * w2.max()
     out["laser_window_ok"] = ok & valid
     return out
@@ -371,26 +402,154 @@ def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half:
     normal, R = ground_plane(data["lasers"], data["laser_positions"],
                              data["laser_window_ok"], kernels[0])
     twist = body_twist(data, normal, R, opts, kernels)
-    tyre = tyre_inputs(data, normal, R, twist, kernels)
+    raw = ground_plane(data["lasers"], data["laser_positions"], data["laser_window_ok"],
+                       np.ones(1))
+    tyre = tyre_inputs(data, normal, R, twist, kernels, raw)
     valid = jnp.sum(data["laser_window_ok"], axis=1) >= 3
+    # and the Correvit read `correvit_delay_s` later than the end of the record: none (its
+    # shifted copy holds the last value there)
+    valid = valid & (data["time"] + correvit_delay_s <= data["time"][-1])
     valid = _conv(valid.astype(float), np.ones(2 * half + 1)) > 2 * half + 0.5
     return {"normal": normal, "R": R, "twist": twist, "tyre": tyre, "valid": valid,
             "kernels": kernels, "half": half}
 
 
-def regression(data: dict, opts: Options = Options(), *, half: int, dt: float,
-               correvit_delay_s=0.0, wheels=(0, 1, 2, 3), camber=True, offset=False,
-               remove_offsets=True):
-    """(W, y, row mask, signals) of the pooled reduced tyre model on a checked record."""
+def _signals(data: dict, opts: Options, *, half: int, dt: float, correvit_delay_s=0.0,
+             remove_offsets=True):
+    """Steps 1–4 on one checked record: the regression signals (m, 4) and the row mask (m,)."""
     res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt)
     half2 = max(int(round(opts.regression_window_time / dt / 2)), 0)
     second = _kernels(opts.window, 2 * half2 + 1, dt)[1] if half2 else None
     stride = opts.stride or 2 * max(half, half2) + 1
-    sig, ok = regression_signals(res["tyre"], res["valid"], res["kernels"], stride, half,
-                                 remove_offsets, second)
+    return regression_signals(res["tyre"], res["valid"], res["kernels"], stride, half,
+                              remove_offsets, second)
+
+
+def regression(data: dict, opts: Options = Options(), *, half: int, dt: float,
+               correvit_delay_s=0.0, wheels=(0, 1, 2, 3), camber=True, offset=False,
+               remove_offsets=True):
+    """(W, y, row mask, signals) of the pooled reduced tyre model on one checked record (no
+    instruments: the ordinary least-squares rows)."""
+    sig, ok = _signals(data, opts, half=half, dt=dt, correvit_delay_s=correvit_delay_s,
+                       remove_offsets=remove_offsets)
     W, y = regressor(sig, np.asarray(wheels), camber=camber, offset=offset)
     mask = jnp.repeat(ok, len(wheels))
     return W, y, mask, sig
+
+
+PER_SAMPLE = ("time", "lasers", "correvit", "imu_omega", "imu_velocity", "imu_specific_force",
+              "travel", "steer", "spin", "wrench", "laser_valid")
+
+
+def halves(data: dict) -> dict:
+    """The even and the odd samples of a checked record, stacked on a new leading axis (2, n//2,
+    …) for every per-sample channel (a last odd sample is dropped); the sensor positions are
+    shared. Their noise is independent (white sensor noise): the instruments of each other."""
+    n = data["time"].shape[0] // 2 * 2
+    return {k: (jnp.stack([v[0:n:2], v[1:n:2]]) if k in PER_SAMPLE else v)
+            for k, v in data.items() if k != "laser_window_ok"}
+
+
+def _window_ok(valid, half, kind):
+    """Samples whose window has more than half its weight on valid laser samples."""
+    w2, *_ = _kernels(kind, 2 * half + 1, 1.0)
+    return (_conv(valid.astype(float), w2) > 0.5 * w2.max()) & valid
+
+
+def split_signals(data: dict, opts: Options = Options(), *, half: int, dt: float,
+                  correvit_delay_s=0.0, remove_offsets=True):
+    """The regression signals of both halves of a checked record (`halves`): dict of (2, m, 4)
+    and the row mask (m,) (valid in both halves); `half` and `dt` those of the half-rate
+    record (static)."""
+    h = halves(data)
+
+    def one(d):
+        d = dict(d, laser_window_ok=_window_ok(d["laser_valid"], half, opts.window))
+        return _signals(d, opts, half=half, dt=dt, correvit_delay_s=correvit_delay_s,
+                        remove_offsets=remove_offsets)
+
+    axes = {k: (0 if k in PER_SAMPLE else None) for k in h}
+    sig, ok = jax.vmap(one, in_axes=(axes,))(h)
+    return sig, ok[0] & ok[1]
+
+
+def _cluster_meat(Z, r, n_wheels, xp):
+    """Σ_i g_i g_iᵀ with g_i = Σ z_row r_row over the rows of instant i (both halves, every
+    wheel: they share the body-twist noise), and the number of instants. Rows are ordered
+    (half, instant, wheel)."""
+    p = Z.shape[1]
+    g = (Z * r[:, None]).reshape(2, -1, n_wheels, p).sum(axis=(0, 2))
+    used = xp.any(g != 0, axis=1)
+    return g.T @ g, xp.sum(used)
+
+
+def iv_solve(W_e, y_e, W_o, y_o, mask, n_wheels):
+    """Instrumental-variable least squares on two halves (see the module docstring): x (p,) and
+    its covariance (p, p), a sandwich M⁻¹ (Σ_i g_i g_iᵀ) M⁻ᵀ with M = ZᵀW clustered by instant
+    (the wheels of one instant share the twist's noise, the two halves the model's error),
+    scaled by G/(G−1)·(N−1)/(N−p). Rows (instant, wheel) with `mask` False are left out. Pure
+    JAX (vmappable); columns scaled to unit norm inside."""
+    m = jnp.concatenate([mask, mask]).astype(W_e.dtype)
+    A = jnp.concatenate([W_e, W_o]) * m[:, None]
+    Z = jnp.concatenate([W_o, W_e]) * m[:, None]
+    y = jnp.concatenate([y_e, y_o]) * m
+    s = jnp.linalg.norm(A, axis=0)
+    s = jnp.where(s > 0, s, 1.0)
+    A, Z = A / s, Z / s
+    Minv = jnp.linalg.inv(Z.T @ A)
+    xs = Minv @ (Z.T @ y)
+    r = (y - A @ xs) * m
+    meat, G = _cluster_meat(Z, r, n_wheels, jnp)
+    N, p = jnp.sum(m), A.shape[1]
+    cov = Minv @ meat @ Minv.T * (G / (G - 1) * (N - 1) / (N - p))
+    return xs / s, cov / jnp.outer(s, s)
+
+
+def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=()) -> lsq.Fit:
+    """`iv_solve` with `diffsusp.lsq`'s identifiability report (NumPy inputs, rows already
+    masked, ordered (instant, wheel)): two-stage least squares — each free column of
+    W = [W_e; W_o] projected on the instruments Z = [W_o; W_e] (Ŵ = Z (ZᵀZ)⁻¹ Zᵀ W), then
+    `lsq.solve(Ŵ, y)` gives the IV solution, the identifiability and the regroupings; its
+    covariance (from y − Ŵ x, which holds the regressors' noise too) is replaced by
+    `iv_solve`'s clustered sandwich on the structural residual y − W x, and σ, σ %, the
+    relations' σ and their confidence indices follow from it."""
+    A = np.concatenate([W_e, W_o])
+    Z = np.concatenate([W_o, W_e])
+    y = np.concatenate([y_e, y_o])
+    free = np.array([n not in fixed for n in names])
+    s = np.linalg.norm(A[:, free], axis=0)
+    s = np.where(s > 0, s, 1.0)
+    Zf, Af = Z[:, free] / s, A[:, free] / s
+    coef, *_ = np.linalg.lstsq(Zf, Af, rcond=None)
+    proj = A.copy()
+    proj[:, free] = Zf @ coef * s
+    fit = lsq.solve(proj, y, names=names, fixed=fixed)
+    r = y - A @ fit.x
+    # clustered sandwich on the identifiable, free columns (the others: lsq's zeros)
+    est = free & np.isfinite(fit.sigma)
+    Minv = np.linalg.inv(Zf[:, est[free]].T @ Af[:, est[free]])
+    meat, G = _cluster_meat(Zf[:, est[free]], r, n_wheels, np)
+    N, p = len(y), int(est.sum())
+    cov_s = Minv @ meat @ Minv.T * (G / (G - 1) * (N - 1) / (N - p))
+    cov = np.zeros_like(fit.covariance)
+    se = s[est[free]]
+    cov[np.ix_(est, est)] = cov_s / np.outer(se, se)
+    sigma = np.where(est, np.sqrt(np.abs(np.diagonal(cov))), np.nan)
+    G_ = fit.regrouping
+    comb_sigma = np.where(np.isfinite(fit.combination_sigma),
+                          np.sqrt(np.abs(np.einsum("jk,kl,jl->j", G_, cov, G_))), np.nan)
+    rel_pct = comb_sigma / np.abs(fit.combination_values)
+    valid = np.isfinite(rel_pct) & (rel_pct > 0)
+    best = np.min(rel_pct[valid]) if valid.any() else np.nan
+    off = G_.copy()
+    np.fill_diagonal(off, 0.0)
+    nontrivial = fit.kept & np.any(off != 0, axis=1)
+    res_sigma = float(np.sqrt(r @ r / fit.dof)) if fit.dof > 0 else float("nan")
+    return dataclasses.replace(
+        fit, sigma=sigma, sigma_pct=100 * sigma / np.abs(fit.x), covariance=cov,
+        confidence=np.where(valid, best / np.where(valid, rel_pct, 1.0), np.nan),
+        relation_sigma=comb_sigma[nontrivial], combination_sigma=comb_sigma, residuals=r,
+        residual_norm=float(np.linalg.norm(r)), residual_sigma=res_sigma)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -417,44 +576,64 @@ class Report:
                 "rows": self.rows, "excluded": self.excluded, "fit": self.fit.to_dict()}
 
 
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _delay_program(data, options, half, dt):
+    kernels = _kernels(options.window, 2 * half + 1, dt)
+    normal, R = ground_plane(data["lasers"], data["laser_positions"], data["laser_window_ok"],
+                             kernels[0])
+    return correvit_delay(data, normal, R, kernels, dt=dt)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2, 3, 5))
+def _signals_program(data, options, half, dt, delay, remove_offsets):
+    return split_signals(data, options, half=half, dt=dt, correvit_delay_s=delay,
+                         remove_offsets=remove_offsets)
+
+
 def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, False),
              estimate_delay: bool = True, delay: float | None = None, offset: bool = False,
              options: Options = Options()) -> dict:
     """The on-board pipeline (§5.3, §5.5) on a record (dict of arrays, as
     `diffsusp.tyre.vehicle.measure` returns): per grouping ("all", "front", "rear") and camber
-    choice a `Report`. The Correvit delay is estimated (`estimate_delay`) or given (`delay`, s)
-    and removed before the identification; `delay=0, estimate_delay=False` is the thesis's
-    naive pipeline.
+    choice a `Report`. The Correvit delay is estimated (`estimate_delay`, on the full-rate
+    record) or given (`delay`, s) and removed before the identification; `delay=0,
+    estimate_delay=False` is the thesis's naive pipeline. The tyre inputs come from the two
+    half-rate records (`halves`), the coefficients from `iv_fit`. Two compiled programs
+    (delay, signals) whatever the groupings.
 
     **Returns:** {"delay": s, "reports": [Report, …], "excluded": int}.
     """
-    data = check(data, options)
-    half = _window_length(options, data["time"])
-    dt = _step(data["time"])
-    kernels = _kernels(options.window, 2 * half + 1, dt)
-    if delay is None:
-        if estimate_delay:
-            normal, R = ground_plane(data["lasers"], data["laser_positions"],
-                                     data["laser_window_ok"], kernels[0])
-            delay = float(correvit_delay(data, normal, R, kernels, dt=dt))
-        else:
-            delay = 0.0
-    reports = []
-    excluded = 0
     for grouping in groupings:
         if grouping not in GROUPINGS:
             raise InputError(f"grouping must be one of {list(GROUPINGS)}; got {grouping!r}.")
+    data = check(data, options)
+    if data["time"].shape[0] < 2 * (2 * _window_length(options, data["time"][::2]) + 1):
+        raise InputError(f"window of {options.window_time} s is longer than each half of the "
+                         f"record ({data['time'].shape[0] // 2} samples at half the rate); "
+                         "shorten window_time or give a longer record.")
+    if delay is None:
+        delay = (float(_delay_program(data, options, _window_length(options, data["time"]),
+                                      _step(data["time"])))
+                 if estimate_delay else 0.0)
+    half, dt = _window_length(options, data["time"][::2]), 2 * _step(data["time"])
+    sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay, float), True)
+    sig = {k: np.asarray(v) for k, v in sig.items()}
+    ok = np.asarray(ok)
+    reports = []
+    for grouping in groupings:
+        wheels = np.asarray(GROUPINGS[grouping])
         for cam in camber:
-            W, y, mask, _ = _regression_jit(data, options, half, dt, delay,
-                                            GROUPINGS[grouping], cam, offset)
-            mask = np.asarray(mask)
-            n_wheels = len(GROUPINGS[grouping])
-            excluded = int(np.sum(~mask)) // n_wheels
-            W, y = np.asarray(W)[mask], np.asarray(y)[mask]
+            (W_e, y_e), (W_o, y_o) = (
+                (np.asarray(a) for a in regressor({k: v[h] for k, v in sig.items()}, wheels,
+                                                  camber=cam, offset=offset))
+                for h in (0, 1))
+            rows = np.repeat(ok, len(wheels))
             fixed = () if cam else ("b_gamma_1",)
-            fit = lsq.solve(W, y, names=names(offset), fixed=fixed)
-            reports.append(Report(grouping, cam, delay, fit, int(mask.sum()), excluded))
-    return {"delay": delay, "reports": reports, "excluded": excluded}
+            fit = iv_fit(W_e[rows], y_e[rows], W_o[rows], y_o[rows], names=names(offset),
+                         n_wheels=len(wheels), fixed=fixed)
+            reports.append(Report(grouping, cam, delay, fit, 2 * int(rows.sum()),
+                                  int(np.sum(~ok))))
+    return {"delay": delay, "reports": reports, "excluded": int(np.sum(~ok))}
 
 
 def quantities(loads_kn):
@@ -476,34 +655,42 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`), one
     vmapped program: per key, the Correvit delay estimate and two identifications, "naive"
     (nothing removed: the thesis's pipeline) and "corrected" (the estimated delay removed), each
-    with the coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ.
+    with the coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ
+    (`iv_solve`; without camber its column is left out and x, covariance hold 0 there).
     `delay` (s) delays the Correvit in the noisy copies. No laser dropouts (use `identify`)."""
     time = np.asarray(truth["time"])
     dt, half = _step(time), _window_length(options, time)
+    dt2, half2 = 2 * dt, _window_length(options, time[::2])
+    truth = {k: truth[k] for k in CHANNELS}
     return _monte_carlo(truth, sensors, keys, jnp.asarray(delay, float), options, half, dt,
-                        tuple(wheels), camber, remove_offsets, tuple(loads_kn))
+                        half2, dt2, tuple(wheels), camber, remove_offsets, tuple(loads_kn))
 
 
-@functools.partial(jax.jit, static_argnums=tuple(range(4, 11)))
-def _monte_carlo(truth, sensors, keys, delay, options, half, dt, wheels, camber,
+@functools.partial(jax.jit, static_argnums=tuple(range(4, 13)))
+def _monte_carlo(truth, sensors, keys, delay, options, half, dt, half2, dt2, wheels, camber,
                  remove_offsets, loads_kn):
     C = jnp.asarray(quantities(loads_kn))
-    kernels = _kernels(options.window, 2 * half + 1, dt)
+    cols = np.array([j for j in range(len(NAMES)) if camber or NAMES[j] != "b_gamma_1"])
+    w = np.asarray(wheels)
 
     def fit(d, shift):
-        W, y, _, _ = regression(d, options, half=half, dt=dt, correvit_delay_s=shift,
-                                wheels=wheels, camber=camber, remove_offsets=remove_offsets)
-        if not camber:
-            W = W.at[:, 4].set(0.0)
-        sol = lsq.solve_arrays(W, y)
-        return {"x": sol.x, "covariance": sol.covariance, "quantities": C @ sol.x,
-                "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, sol.covariance, C))}
+        sig, ok = split_signals(d, options, half=half2, dt=dt2, correvit_delay_s=shift,
+                                remove_offsets=remove_offsets)
+        (W_e, y_e), (W_o, y_o) = (regressor(jax.tree.map(lambda a, h=h: a[h], sig), w)
+                                  for h in (0, 1))
+        x, cov = iv_solve(W_e[:, cols], y_e, W_o[:, cols], y_o, jnp.repeat(ok, len(wheels)),
+                          len(wheels))
+        x = jnp.zeros(len(NAMES)).at[cols].set(x)
+        cov = jnp.zeros((len(NAMES), len(NAMES))).at[np.ix_(cols, cols)].set(cov)
+        return {"x": x, "covariance": cov, "quantities": C @ x,
+                "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, cov, C))}
 
     def one(key):
         d = add_noise(truth, sensors, key, delay=delay)
         d = {k: d[k] for k in CHANNELS}
         d["laser_valid"] = jnp.ones(d["lasers"].shape, bool)
         d["laser_window_ok"] = d["laser_valid"]
+        kernels = _kernels(options.window, 2 * half + 1, dt)
         normal, R = ground_plane(d["lasers"], d["laser_positions"], d["laser_window_ok"],
                                  kernels[0])
         est = correvit_delay(d, normal, R, kernels, dt=dt)
@@ -511,23 +698,11 @@ def _monte_carlo(truth, sensors, keys, delay, options, half, dt, wheels, camber,
         return {"delay": est, "naive": jax.tree.map(lambda a: a[0], both),
                 "corrected": jax.tree.map(lambda a: a[1], both)}
 
-    return jax.vmap(one)(keys)
+    return jax.lax.map(one, keys)
 
 
-_regression_cache = {}
-
-
-def _regression_jit(data, options, half, dt, delay, wheels, camber, offset):
-    key = (options, half, dt, wheels, camber, offset)
-    if key not in _regression_cache:
-        _regression_cache[key] = jax.jit(
-            lambda d, s: regression(d, options, half=half, dt=dt, correvit_delay_s=s,
-                                    wheels=wheels, camber=camber, offset=offset))
-    return _regression_cache[key](data, jnp.asarray(delay))
-
-
-__all__ = ["CHANNELS", "GROUPINGS", "NAMES", "QUANTITIES", "Options", "Report",
-           "monte_carlo", "quantities", "body_twist", "check",
-           "correvit_delay", "ground_plane", "identify", "inputs", "names", "regression",
-           "regressor", "shift_channel", "window_weights"]
+__all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "Options", "Report",
+           "body_twist", "check", "correvit_delay", "ground_plane", "halves", "identify",
+           "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
+           "regressor", "shift_channel", "split_signals", "window_weights"]
 _ = WHEELS

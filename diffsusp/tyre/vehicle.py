@@ -394,11 +394,14 @@ def add_noise(truth: dict, sensors: Sensors, key, *, delay=0.0) -> dict:
            "imu_omega": sensors.sigma_gyro, "imu_velocity": sensors.sigma_imu_velocity,
            "imu_specific_force": sensors.sigma_accelerometer, "travel": sensors.sigma_travel,
            "steer": sensors.sigma_steer, "spin": sensors.sigma_spin}
-    keys = jax.random.split(key, len(NOISY) + 1)
-    for k, name in zip(keys[:-1], NOISY, strict=True):
-        out[name] = out[name] + sig[name] * jax.random.normal(k, out[name].shape)
+    # one draw for every channel (one random-bits program to compile, not one per shape)
+    sizes = [math.prod(out[name].shape) for name in NOISY + ("wrench",)]
+    z = jax.random.normal(key, (sum(sizes),))
+    parts = jnp.split(z, np.cumsum(sizes)[:-1])
+    for part, name in zip(parts, NOISY, strict=False):
+        out[name] = out[name] + sig[name] * part.reshape(out[name].shape)
     scale = jnp.concatenate([jnp.full(3, sensors.sigma_force), jnp.full(3, sensors.sigma_moment)])
-    out["wrench"] = truth["wrench"] + scale * jax.random.normal(keys[-1], truth["wrench"].shape)
+    out["wrench"] = truth["wrench"] + scale * parts[-1].reshape(truth["wrench"].shape)
     return out
 
 
@@ -427,4 +430,3 @@ _SIGMAS = ("sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity",
 __all__ = ["NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle", "WHEELS",
            "add_noise", "channels", "corner_poses", "dynamics", "initial_state", "measure",
            "rotation", "simulate", "steering_sine"]
-_ = np
