@@ -164,6 +164,9 @@ def test_identify_structure_search_and_flags(campaign):
     noisy["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(table["FY"]))
     noisy["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(table["FY"]))
     cond = bench.condition(noisy)
+    # the white-noise levels from the content above the cut-off (6 N, 0.6 N·m)
+    assert cond.noise["FY"] == pytest.approx(6.0, rel=0.1)
+    assert cond.noise["MZ"] == pytest.approx(0.6, rel=0.1)
     rep = bench.identify_output(cond, "Fy", DEGREES)
     kept = {n for n, k, f in zip(rep.fit.names, rep.fit.kept, rep.fit.fixed, strict=True)
             if k and not f}

@@ -411,7 +411,8 @@ class Conditioned:
     sections), `rows` (the kept sample indices after trimming the ends and thinning),
     `inputs` (the same inputs at the kept rows, for checks and plots), `fy` [N], `mz` [N·m]
     (filtered, kept rows), `rate` [Hz] after thinning, `segment` per kept row,
-    `excitation` (input → standard deviation), `dt` [s] the sampling step."""
+    `excitation` (input → standard deviation), `dt` [s] the sampling step, `noise` (FY [N],
+    MZ [N·m] → the white-noise σ from their content above the cut-off)."""
 
     samples: dict
     sos: np.ndarray
@@ -425,6 +426,7 @@ class Conditioned:
     operator: np.ndarray
     difference: np.ndarray
     dt: float
+    noise: dict
 
     def regressor(self, model) -> np.ndarray:
         """H(W(u)) at the kept rows, (n, p), for a `lsq.algebra.LinearModel`."""
@@ -556,8 +558,9 @@ def _check_table(table, cutoff):
 
 
 def _rows(m, rate, cutoff, decimate, trim):
-    k = decimate if decimate is not None else max(1, int(rate // (2 * cutoff)))
-    trim = trim if trim is not None else max(5, int(2 * rate / cutoff))
+    # (+1e-6: a rate of 199.999… Hz from the time column still thins by 4 at 25 Hz)
+    k = decimate if decimate is not None else max(1, int(rate / (2 * cutoff) + 1e-6))
+    trim = trim if trim is not None else max(5, int(2 * rate / cutoff + 1e-6))
     rows = np.arange(trim, m - trim, k)
     if len(rows) < 2:
         raise InputError(f"bench table: segments of {m} samples leave nothing after trimming "
@@ -586,9 +589,15 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
     exc = {c: float(np.std(inputs[c])) for c in ("kappa", "delta", "phi", "gamma", "fz",
                                                    "pi_gamma_vx", "pi_gamma_bdot",
                                                    "pi_gamma2_bdot")}
+    # The white-noise level of F_y and M_z from their content above the cut-off (the
+    # residual of the filter), an estimate independent of the model: I − F removes the band.
+    E = np.eye(m) - filter_matrix(float(cutoff), float(rate), m, order)
+    tr = np.sum(E * E)
+    noise = {c: float(np.sqrt(np.sum((cols[c] @ E.T) ** 2) / (n_seg * tr))) * u
+             for c, u in (("FY", 1.0), ("MZ", 1e-3))}
     return Conditioned(samples, butterworth(cutoff, rate, order), rows, inputs,
                        (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3,
-                       rate / k, segment, exc, H, Dm, 1.0 / rate)
+                       rate / k, segment, exc, H, Dm, 1.0 / rate, noise)
 
 # --------------------------------------------------------------------------------------------
 # Structure search rules (spec §3.3 validation criteria, §7 item 19)
@@ -1054,6 +1063,12 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
         if r.not_identifiable:
             notes.append(f"{o}: not identifiable on these data: "
                          + ", ".join(sorted(r.not_identifiable)))
+        hf = cond.noise["FY" if o == "Fy" else "MZ"]
+        if r.noise_sigma > 2.0 * hf:
+            flags.append(f"{o}: the residual's noise level {r.noise_sigma:.3g} is "
+                         f"{r.noise_sigma / hf:.2g}× the white noise above the cut-off "
+                         f"({hf:.3g}): the structure leaves a misfit (the σ are then not "
+                         "honest); try the a-priori structure or a lower sigma% threshold.")
         if r.compliance <= 0:
             flags.append(f"{o}: the identified compliance K_y^-1 = {r.compliance:.4g} m/N is not "
                          "positive: the relaxation is not excited enough (no slip transient).")
