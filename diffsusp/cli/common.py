@@ -60,8 +60,9 @@ def enable_x64():
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    # One CPU device per core, for `DIFFSUSP_DEVICES=all` (when JAX has not started yet). Not
-    # the default: a split batch still deadlocked jaxlib's batched CPU LU on 2 cores.
+    # One CPU device per core (when JAX has not started yet), and a table of cases split over
+    # them (`solve_statics(devices=...)`) unless $DIFFSUSP_DEVICES says otherwise.
+    os.environ.setdefault("DIFFSUSP_DEVICES", "all")
     try:
         jax.config.update("jax_num_cpu_devices", os.cpu_count() or 1)
     except RuntimeError:
