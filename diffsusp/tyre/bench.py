@@ -1012,7 +1012,8 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     instrument, sigma_fy = None, 0.0
     if output != "Fy":
         if fy_report is not None and fy_report.fydot_hat is not None:
-            instrument, sigma_fy = fy_report.fydot_hat, fy_report.noise_sigma
+            # the F_y noise level from above the cut-off: independent of the F_y structure
+            instrument, sigma_fy = fy_report.fydot_hat, cond.noise["FY"]
         else:
             instrument = fydot
     s = X.shape[0]
