@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import gibbs_angular_jacobian, gibbs_to_matrix, projected_angles
-from ..geometry.rotations import _NEG_LEVI_CIVITA
+from ..geometry.rotations import NEG_LEVI_CIVITA
 from ..model.laws import akima_eval
 from ..model.mechanism import Loads, Mechanism
 
@@ -62,7 +62,7 @@ def _dot(a, b):
 
 def skew(v):
     """Cross-product matrix of a 3-vector, `skew(u) @ v = u × v`."""
-    return jnp.sum(jnp.asarray(_NEG_LEVI_CIVITA, v.dtype) * v, axis=-1)
+    return jnp.sum(jnp.asarray(NEG_LEVI_CIVITA, v.dtype) * v, axis=-1)
 
 
 _I1, _I2 = np.array([1, 2, 0]), np.array([2, 0, 1])
