@@ -54,49 +54,30 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0)) ->
     design position q = 0 is an equilibrium of `mech` without its motion drivers: the
     least-squares (F, λ) of the generalised-force rows of the design KKT residual,
     Q0 + F·Q1 + Φ_qᵀλ = 0 (exact for a one-DOF corner; spec: stiffness §1.4, virtual work).
-    One compiled program per model structure; the value is remembered per mechanism object."""
+    The program of `diffsusp.model.validate.design_terms` (the one validation compiled); the
+    value is remembered per mechanism object."""
     hit = _LOADS.get(id(mech))
     if hit is not None and hit[0] is mech and hit[1:3] == (contact_point, tuple(up)):
         return hit[3]
+    from ..model import Loads
+    from ..model.validate import design_terms
     from .rig import remove_drivers
 
     base = remove_drivers(mech, mech.drivers.names)
     k = base.load_points.index(contact_point)
-    q0, q1, a = (np.asarray(v) for v in _design_rows(base, k, np.asarray(up, dtype=float)))
-    sol = np.linalg.lstsq(np.column_stack([q1, a.reshape(q0.size, -1)]), -q0, rcond=None)[0]
+    n, n_l = base.n_coordinates, len(base.load_points.names)
+    zero = np.zeros((n_l, 3))
+    unit = zero.copy()
+    unit[k] = np.asarray(up, dtype=float)
+    r0 = design_terms(base, Loads(force=zero, moment=zero, driver=np.zeros(0)))[1][:n]
+    _, r1, jac = design_terms(base, Loads(force=unit, moment=zero, driver=np.zeros(0)))
+    a = jac[:n, n:]  # Φ_qᵀ: the residual is linear in the multipliers
+    sol = np.linalg.lstsq(np.column_stack([r1[:n] - r0, a]), -r0, rcond=None)[0]
     value = float(sol[0])
     if len(_LOADS) > 64:
         _LOADS.clear()
     _LOADS[id(mech)] = (mech, contact_point, tuple(up), value)
     return value
-
-
-def _design_rows(mech, k, up):
-    import equinox as eqx
-
-    return eqx.filter_jit(_design_rows_traced)(mech, k, up)
-
-
-def _design_rows_traced(mech, k, up):
-    """(Q0, Q1, Φ_qᵀ) at the design position: generalised forces without load, of a unit load
-    along `up` at load point k, and the multipliers' columns."""
-    import jax
-    import jax.numpy as jnp
-
-    from ..model import Loads
-    from ..statics import residual, to_internal
-
-    n, m = mech.topology.n, mech.n_multipliers
-    n_l = len(mech.load_points.names)
-    y0 = jnp.concatenate([to_internal(mech, jnp.zeros(mech.n_coordinates)), jnp.zeros(m)])
-
-    def rows(f, lam):
-        force = jnp.zeros((n_l, 3)).at[k].set(f * up)
-        loads = Loads(force=force, moment=jnp.zeros((n_l, 3)), driver=jnp.zeros(0))
-        return residual(mech, loads, y0.at[n:].set(lam))[:n]
-
-    q0 = rows(0.0, jnp.zeros(m))
-    return q0, rows(1.0, jnp.zeros(m)) - q0, jax.jacfwd(lambda lam: rows(0.0, lam))(jnp.zeros(m))
 
 
 __all__ = ["FRAMES", "Corner", "PointRef", "ResolvedCorner", "corners_of", "default_corner",

@@ -56,22 +56,31 @@ def _row_names(mech: Mechanism) -> list[str]:
 
 
 @filter_jit
-def _at_design(mech: Mechanism):
+def _at_design(mech: Mechanism, loads):
     from ..statics.kernel import assemble, constraint_values, to_internal
 
-    loads = mech.loads()
     q0 = to_internal(mech, jnp.zeros(mech.n_coordinates))
     phi = constraint_values(mech, loads, q0)
-    _, jac = assemble(mech, loads, q0, jnp.zeros(mech.topology.m))
-    return phi, jac
+    r, jac = assemble(mech, loads, q0, jnp.zeros(mech.topology.m))
+    return phi, r, jac
+
+
+def design_terms(mech: Mechanism, loads=None):
+    """At the design position q = 0 with every constraint row kept and zero multipliers, under
+    `loads` (one case; default none): constraint values Φ, the KKT residual r (generalised
+    forces, then the rows) and its Jacobian (numpy). One compiled program per model structure,
+    whatever the model's name or corners (validation and `diffsusp.kc.corner.equilibrium_load`
+    share it)."""
+    all_rows = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows)), name="",
+                                   corners=())
+    phi, r, jac = _at_design(all_rows, all_rows.loads() if loads is None else loads)
+    return np.asarray(phi), np.asarray(r), np.asarray(jac)
 
 
 def _design_matrices(mech: Mechanism):
     """Constraint values, Φ_q (all rows) and tangent stiffness at q = 0 with no load."""
-    all_rows = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows)))
-    lay = all_rows.topology
-    phi, jac = _at_design(all_rows)
-    phi, jac = np.asarray(phi), np.asarray(jac)
+    lay = dataclasses.replace(mech, independent_rows=tuple(range(mech.n_rows))).topology
+    phi, _, jac = design_terms(mech)
     n = mech.n_coordinates
     return phi, jac[n:, :n], -jac[:n, :n], lay
 
