@@ -66,8 +66,9 @@ def parse_range(text, what: str) -> np.ndarray:
 
 
 def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None):
-    """The model's registered corner with some of its settings replaced (None: the model's
-    own corner, unchanged). `kingpin`: two marker names, a tuple or the text 'upper,lower'."""
+    """The model's own corner (`Mechanism.corners`) with some of its settings replaced (None:
+    that corner, unchanged; a model without one starts from `Corner()`). `kingpin`: two marker
+    names, a tuple or the text 'upper,lower'."""
     if frame is None and loaded_radius is None and kingpin is None and side is None:
         return None  # the model's registered corner
     try:
@@ -91,8 +92,7 @@ def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None
 
 def mirrored_corner(corner: Corner) -> Corner:
     """The same corner on the other side (for the mirror image of a half axle)."""
-    side = {"left": "right", "right": "left"}.get(corner.side, corner.side)
-    return dataclasses.replace(corner, side=side)
+    return corner.mirrored()
 
 
 def default_fz_range(mech, corner=None) -> str:
