@@ -252,7 +252,7 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
                        second=None):
     """Smoothed signals and Ḟ_y at the regression instants (every `stride` samples away from
     the edges), offsets (record means) removed from all but the load (§5.5 item 1) when
-    `remove_offsets`; returns dict of (m, 4) and the row mask (m,)."""
+    `remove_offsets` (a bool, or a traced 0/1); returns dict of (m, 4) and the row mask (m,)."""
     _, smooth, slope, _ = kernels
     n = inputs["fy"].shape[0]
     margin = half + 1 + len(second if second is not None else [0]) // 2
@@ -268,7 +268,7 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
     weight = ok.astype(float)[:, None]
     for k in ("fy", "delta_p", "phi_p", "gamma", "fy_rate"):
         mean = jnp.sum(s[k] * weight, axis=0) / jnp.maximum(jnp.sum(weight), 1.0)
-        s[k] = (s[k] - (mean if remove_offsets else 0.0)) * weight
+        s[k] = (s[k] - mean * jnp.asarray(remove_offsets, mean.dtype)) * weight
     s["fz"] = s["fz"] * weight
     return s, ok
 
@@ -584,7 +584,7 @@ def _delay_program(data, options, half, dt):
     return correvit_delay(data, normal, R, kernels, dt=dt)
 
 
-@functools.partial(jax.jit, static_argnums=(1, 2, 3, 5))
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _signals_program(data, options, half, dt, delay, remove_offsets):
     return split_signals(data, options, half=half, dt=dt, correvit_delay_s=delay,
                          remove_offsets=remove_offsets)
@@ -616,7 +616,8 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
                                       _step(data["time"])))
                  if estimate_delay else 0.0)
     half, dt = _window_length(options, data["time"][::2]), 2 * _step(data["time"])
-    sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay, float), True)
+    sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay, float),
+                               jnp.asarray(1.0))
     sig = {k: np.asarray(v) for k, v in sig.items()}
     ok = np.asarray(ok)
     reports = []
@@ -652,53 +653,50 @@ QUANTITIES = ("K_delta_front", "K_delta_rear", "K_phi", "L_R", "K_gamma")
 
 def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Options(),
                 wheels=(0, 1, 2, 3), camber=True, remove_offsets=False, loads_kn=(4.0, 3.3)):
-    """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`), one
-    vmapped program: per key, the Correvit delay estimate and two identifications, "naive"
-    (nothing removed: the thesis's pipeline) and "corrected" (the estimated delay removed), each
-    with the coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ
-    (`iv_solve`; without camber its column is left out and x, covariance hold 0 there).
-    `delay` (s) delays the Correvit in the noisy copies. No laser dropouts (use `identify`)."""
+    """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`): per
+    key, the Correvit delay estimate and two identifications, "naive" (nothing removed: the
+    thesis's pipeline) and "corrected" (the estimated delay removed), each with the
+    coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ (`iv_solve`;
+    without camber its column is left out and x, covariance hold 0 there). `delay` (s) delays
+    the Correvit in the noisy copies. No laser dropouts (use `identify`). Each copy goes
+    through `check` and the compiled programs of `identify` (delay, signals), so a Monte-Carlo
+    and an identification of records of one length compile them once.
+
+    **Returns:** dict of arrays with a leading axis over `keys`."""
     time = np.asarray(truth["time"])
     dt, half = _step(time), _window_length(options, time)
     dt2, half2 = 2 * dt, _window_length(options, time[::2])
     truth = {k: truth[k] for k in CHANNELS}
-    return _monte_carlo(truth, sensors, keys, jnp.asarray(delay, float), options, half, dt,
-                        half2, dt2, tuple(wheels), camber, remove_offsets, tuple(loads_kn))
+    ro = jnp.asarray(1.0 if remove_offsets else 0.0)
+    out = []
+    for key in keys:
+        d = check(_noisy(truth, sensors, key, jnp.asarray(delay, float)), options)
+        est = _delay_program(d, options, half, dt)
+        fits = [_iv_program(*_signals_program(d, options, half2, dt2, shift, ro),
+                            tuple(wheels), camber, tuple(loads_kn))
+                for shift in (jnp.zeros_like(est), est)]
+        out.append({"delay": est, "naive": fits[0], "corrected": fits[1]})
+    return jax.tree.map(lambda *a: np.stack([np.asarray(x) for x in a]), *out)
 
 
-@functools.partial(jax.jit, static_argnums=tuple(range(4, 13)))
-def _monte_carlo(truth, sensors, keys, delay, options, half, dt, half2, dt2, wheels, camber,
-                 remove_offsets, loads_kn):
+@jax.jit
+def _noisy(truth, sensors, key, delay):
+    return add_noise(truth, sensors, key, delay=delay)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _iv_program(sig, ok, wheels, camber, loads_kn):
     C = jnp.asarray(quantities(loads_kn))
     cols = np.array([j for j in range(len(NAMES)) if camber or NAMES[j] != "b_gamma_1"])
     w = np.asarray(wheels)
-
-    def fit(d, shift):
-        sig, ok = split_signals(d, options, half=half2, dt=dt2, correvit_delay_s=shift,
-                                remove_offsets=remove_offsets)
-        (W_e, y_e), (W_o, y_o) = (regressor(jax.tree.map(lambda a, h=h: a[h], sig), w)
-                                  for h in (0, 1))
-        x, cov = iv_solve(W_e[:, cols], y_e, W_o[:, cols], y_o, jnp.repeat(ok, len(wheels)),
-                          len(wheels))
-        x = jnp.zeros(len(NAMES)).at[cols].set(x)
-        cov = jnp.zeros((len(NAMES), len(NAMES))).at[np.ix_(cols, cols)].set(cov)
-        return {"x": x, "covariance": cov, "quantities": C @ x,
-                "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, cov, C))}
-
-    def one(key):
-        d = add_noise(truth, sensors, key, delay=delay)
-        d = {k: d[k] for k in CHANNELS}
-        d["laser_valid"] = jnp.ones(d["lasers"].shape, bool)
-        d["laser_window_ok"] = d["laser_valid"]
-        kernels = _kernels(options.window, 2 * half + 1, dt)
-        normal, R = ground_plane(d["lasers"], d["laser_positions"], d["laser_window_ok"],
-                                 kernels[0])
-        est = correvit_delay(d, normal, R, kernels, dt=dt)
-        both = jax.vmap(lambda shift: fit(d, shift))(jnp.stack([0.0 * est, est]))
-        return {"delay": est, "naive": jax.tree.map(lambda a: a[0], both),
-                "corrected": jax.tree.map(lambda a: a[1], both)}
-
-    return jax.lax.map(one, keys)
+    (W_e, y_e), (W_o, y_o) = (regressor(jax.tree.map(lambda a, h=h: a[h], sig), w)
+                              for h in (0, 1))
+    x, cov = iv_solve(W_e[:, cols], y_e, W_o[:, cols], y_o, jnp.repeat(ok, len(wheels)),
+                      len(wheels))
+    x = jnp.zeros(len(NAMES)).at[cols].set(x)
+    cov = jnp.zeros((len(NAMES), len(NAMES))).at[np.ix_(cols, cols)].set(cov)
+    return {"x": x, "covariance": cov, "quantities": C @ x,
+            "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, cov, C))}
 
 
 __all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "Options", "Report",
