@@ -17,22 +17,38 @@
 # lateral model (4-16…4-18) pooled over the four wheels. The Correvit is 100 ms late: the
 # naive pipeline gets the camber stiffness's sign wrong (as the thesis did); the delay,
 # estimated from kinematic consistency with the inertial unit, is removed and the sign comes
-# back. A short record (6 s) keeps the notebook cheap; `benchmarks/tyre_onboard.py` runs 60 s.
-# Units SI (m, N, s, rad); F_z in kN in the load polynomials.
+# back. The coefficients come from instrumental variables (the even samples' regressors are
+# the instruments of the odd samples' rows and vice versa): every regressor is measured, and
+# ordinary least squares would be biased by about one σ. A short record (6 s) keeps the
+# notebook cheap; `benchmarks/tyre_onboard.py` runs 60 s. Units SI (m, N, s, rad); F_z in kN in
+# the load polynomials.
 
 # %%
 import jax
 
 jax.config.update("jax_enable_x64", True)
+import pathlib
+
 import matplotlib.pyplot as plt
 import numpy as np
 
+import diffsusp
 from diffsusp.tyre import onboard, vehicle
 
 car, sensors = vehicle.Vehicle(), vehicle.Sensors()
 record = vehicle.simulate(car, duration=6.0)
 data = vehicle.measure(car, sensors, record, jax.random.key(0), delay=0.1)
 print("true:", dict(zip(vehicle.TYRE_NAMES, np.asarray(car.tyre.vector()), strict=True)))
+
+# the tests use this record without simulating it (tests/data/onboard_sine.npz, float32):
+# it must still be what the simulation gives
+shipped = pathlib.Path(diffsusp.__file__).parents[1] / "tests" / "data" / "onboard_sine.npz"
+if shipped.exists():
+    clean = vehicle.channels(car, sensors, record)
+    with np.load(shipped) as z:
+        for k in ("lasers", "correvit", "imu_omega", "wrench", "spin", "true_fz"):
+            ref = np.asarray(clean[k])
+            assert np.allclose(z[k], ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max()), k
 
 # %% [markdown]
 # ## Naive pipeline (no delay removed) and with the estimated delay

@@ -66,7 +66,8 @@ def register(tyre_app: typer.Typer) -> None:
             return
         con = console(markup=False)
         con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} ms; "
-                  f"instants excluded (laser dropouts): {out['excluded']}")
+                  f"instants excluded (laser dropouts, end of the delayed Correvit): "
+                  f"{out['excluded']}")
         cols = [f"{r.grouping}{'' if r.camber else ', γ = 0'}" for r in out["reports"]]
         width = max(len(c) for c in cols) + 2
         con.print("parameter".ljust(14) + "".join(c.rjust(max(width, 22)) for c in cols))

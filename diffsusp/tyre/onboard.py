@@ -556,7 +556,8 @@ def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=()) -> lsq.Fit:
 class Report:
     """One grouping's identification (Tables 32/33 layout): the `lsq.Fit`, the grouping, whether
     camber was in the model, the Correvit delay removed (s), the regression rows used and the
-    instants excluded (laser dropouts)."""
+    regression instants excluded (fewer than 3 lasers in a window; the last `delay` s plus a
+    window, where the Correvit's shifted copy has no value)."""
 
     grouping: str
     camber: bool
@@ -568,7 +569,8 @@ class Report:
     def table(self) -> str:
         head = (f"{self.grouping} wheels, camber {'in' if self.camber else 'out'}, Correvit "
                 f"delay removed {1000 * self.delay:.1f} ms, {self.rows} rows, "
-                f"{self.excluded} instants excluded (laser dropouts)")
+                f"{self.excluded} instants excluded (laser dropouts; the end of the record "
+                "where the delayed Correvit has no value)")
         return head + "\n" + self.fit.table()
 
     def to_dict(self) -> dict:
