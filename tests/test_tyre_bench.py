@@ -185,6 +185,9 @@ def test_identify_structure_search_and_flags(campaign):
     # K_y within 5 % (measured 1.7–3 % over three noise draws; the just-necessary degree 5
     # gets 0.05 %, notebook 07)
     assert rep.stiffness == pytest.approx(K_FY, rel=0.05)
+    # the structure as given (no search): κ′ is a zero column here, a clear error
+    with pytest.raises(InputError, match="not identifiable on these data"):
+        bench.identify_output(cond, "Fy", DEGREES, search=False)
     # bad input: each a clear error naming the fix
     with pytest.raises(InputError, match="missing channel.*FY"):
         bench.condition({k: v for k, v in table.items() if k != "FY"})

@@ -700,18 +700,18 @@ class Coefficients:
 
 @dataclasses.dataclass
 class OutputReport:
-    """One output's identification: `fit` (step 1 by the guaranteed least squares with the
-    structure search, the `lsq.Fit` and its log: the structure), `reduced` (the final
-    structure's coefficients by the instrumental-variable estimate, with their σ from the
-    noise model, see `two_step`), `model` (the identified F_pneu), `compliance` K_y⁻¹ [m/N]
-    and `compliance_sigma` (joint linearisation), `compliance_sigma_step2` (the thesis's σ of
-    the step-2 regression, white residual), `stiffness` K_y [N/m], `noise_sigma` (the white
-    noise σ of the output channel estimated from the residual, N or N·m), `removed`
-    (name → reason), `not_identifiable` (name → why), `fydot_hat` (the instrument's Ḟ_y/ω,
-    (segments, samples), F_y only)."""
+    """One output's identification: `fit` (step 1 by the guaranteed least squares with the structure
+    search, the `lsq.Fit` and its log: the structure; None without the search), `reduced` (the
+    final structure's coefficients by the instrumental-variable estimate, with their σ from the
+    noise model, see `two_step`), `model` (the identified F_pneu), `compliance` K_y⁻¹ [m/N] and
+    `compliance_sigma` (joint linearisation), `compliance_sigma_step2` (the thesis's σ of the
+    step-2 regression, white residual), `stiffness` K_y [N/m], `noise_sigma` (the white noise σ
+    of the output channel estimated from the residual, N or N·m), `removed` (name → reason),
+    `not_identifiable` (name → why), `fydot_hat` (the instrument's Ḟ_y/ω, (segments, samples),
+    F_y only)."""
 
     output: str
-    fit: lsq.Fit
+    fit: lsq.Fit | None
     reduced: Coefficients
     model: PolynomialModel
     compliance: float
@@ -999,14 +999,29 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                                  ic_threshold=ic_threshold, check=check, fixed=fixed)
         for st in log:
             removed[st.removed] = st.reason
+        active = [i for i in range(len(names)) if fit.kept[i] and not fit.fixed[i]]
+        for i, n in enumerate(names):
+            # dropped for rank (neither kept nor removed by the search): no effect, or a
+            # combination of others
+            if not fit.kept[i] and not fit.fixed[i]:
+                not_ident[n] = fit._status(i) or "not identifiable"
     else:
-        fit = lsq.solve(W, y, names=names, fixed=fixed)
-    active = [i for i in range(len(names)) if fit.kept[i] and not fit.fixed[i]]
-    for i, n in enumerate(names):
-        # dropped for rank (neither kept nor removed by the search): no effect, or a
-        # combination of others
-        if not fit.kept[i] and not fit.fixed[i]:
-            not_ident[n] = fit._status(i) or "not identifiable"
+        # the given structure as it is (no guaranteed-least-squares report: `fit` is None);
+        # it must be identifiable on the data
+        held = set(fixed or ())
+        unknown = sorted(held - set(names))
+        if unknown:
+            raise InputError(f"fixed: {unknown} are not coefficients of the {output} model")
+        active = [i for i, n in enumerate(names) if n not in held]
+        Wa = W[:, active]
+        sv = np.linalg.svd(Wa / np.maximum(np.linalg.norm(Wa, axis=0), 1e-300),
+                           compute_uv=False)
+        if sv[-1] < 1e-9 * sv[0]:
+            raise InputError(f"the {output} structure is not identifiable on these data "
+                             f"(condition number {sv[0] / max(sv[-1], 1e-300):.3g}): some "
+                             "columns are combinations of others; run the structure search "
+                             "(search=True) or hold more coefficients fixed.")
+        fit = None
     act = [names[i] for i in active]
     is_ly, is_pneu, is_p2 = _masks(act)
     instrument, sigma_fy = None, 0.0
@@ -1036,9 +1051,10 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
              ic_threshold: float = 0.0) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
-    (Table 5); `search`: run the structure search (else one least-squares fit of the whole
-    structure). Bad input raises `InputError`; an identified model that is unstable on the
-    data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and `report.stable`."""
+    (Table 5); `search`: run the structure search (else the whole structure estimated as it
+    is, `identify_output`). Bad input raises `InputError`; an identified model that is
+    unstable on the data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and
+    `report.stable`."""
     if structure not in STRUCTURES:
         raise InputError(f"structure {structure!r}: one of {', '.join(STRUCTURES)}")
     unknown = [o for o in outputs if o not in ("Fy", "Mz")]
