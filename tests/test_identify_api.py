@@ -74,7 +74,15 @@ def test_three_methods_one_measurement_one_selection_one_report_api(case):
         assert [r["parameter"] for r in rows] == list(report.names)
         summary = json.loads(report.to_json())
         assert summary["method"] == method and summary["parameters"] == rows
-        assert set(summary) == {"method", "parameters", "combinations", "residual_rms"}
+        assert set(summary) == {"method", "parameters", "combinations", "residual_rms",
+                                "consistency"}
+        # Issue 12: every report says whether the identified model reproduces the data
+        # (noise-free here: the exact methods do; the iterative loop stops at a 1 % change).
+        check = summary["consistency"]
+        assert check["dof"] > 0 and set(check["case_rms"]) == set(data.cases), method
+        if method != "iterative":
+            assert check["consistent"] and report.is_identified.any(), method
+        assert [r["identified"] for r in rows] == report.is_identified.tolist()
         assert report.residuals and all(
             r.raw.shape == r.whitened.shape for r in report.residuals.values())
         # Noise-free data: the model reproduces the measurements (the iterative method: in

@@ -25,7 +25,7 @@ from ..measure.data import (
     Poses,
     from_measurements,
 )
-from .direct import DirectReport, DirectSystem, direct, direct_system
+from .direct import DirectReport, DirectSystem, direct, direct_batch, direct_system
 from .geometric import (
     CorrectionReport,
     GeometricJoint,
@@ -57,7 +57,7 @@ __all__ = [
     "locate_joints", "offset_equivalent",
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
-    "SensitivityReport", "design_experiment", "direct", "direct_system", "iterative",
-    "from_measurements", "least_squares", "least_squares_batch", "predict", "sensitivity",
-    "whitened_residuals",
+    "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
+    "iterative", "from_measurements", "least_squares", "least_squares_batch", "predict",
+    "sensitivity", "whitened_residuals",
 ]

@@ -80,9 +80,16 @@ from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
 from .params import Params, selected_entries
-from .report import IdentificationReport, MeasurementResiduals
+from .report import (
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    check_consistency,
+    check_data,
+)
 
-__all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_system"]
+__all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
+           "direct_system"]
 
 DEG = math.pi / 180.0
 AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
@@ -791,13 +798,27 @@ class DirectReport(IdentificationReport):
     weighted: bool = False
     equation_residuals: np.ndarray | None = None
     whitened_equation_residuals: np.ndarray | None = None
+    consistency: Consistency | None = None
+    polished: object = None
+    linear_values: np.ndarray | None = None
 
     family: ClassVar[str] = "direct"
+
+    @property
+    def determined(self) -> np.ndarray:
+        """Identifiable with σ% ≤ `max_sigma_pct` (`identified` before the consistency
+        check)."""
+        return np.asarray(self.identified, dtype=bool)
 
     # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
     @property
     def _to_model(self) -> np.ndarray:
         return np.array([1.0 / DEG if u == "N·mm/deg" else 1.0 for u in self.units])
+
+    @property
+    def parameters_to_model(self) -> np.ndarray:
+        """Per unknown, the factor from its table unit to the model's (π/180 → 180/π)."""
+        return self._to_model
 
     @property
     def estimates(self) -> np.ndarray:
@@ -841,7 +862,7 @@ class DirectReport(IdentificationReport):
         for i, name in enumerate(self.names):
             out.append(dict(parameter=name, value=float(self.values[i]),
                             sigma=_nan_none(self.sigma[i]), sigma_pct=_nan_none(self.sigma_pct[i]),
-                            unit=self.units[i], identified=bool(self.identified[i]),
+                            unit=self.units[i], identified=bool(self.is_identified[i]),
                             prior=float(self.prior[i]), status=self.status[i]))
         for name, (v, s, unit) in self.derived.items():
             out.append(dict(parameter=name, value=_nan_none(v), sigma=_nan_none(s),
@@ -858,6 +879,8 @@ class DirectReport(IdentificationReport):
             "cases": [{"case": c, "residual": float(r), "scale": float(s)} for c, r, s in
                       zip(self.cases, self.case_residuals, self.case_scale, strict=True)],
             "notes": list(self.notes),
+            "consistency": None if self.consistency is None else self.consistency.summary(),
+            "polished": self.polished is not None,
         }
 
     def table(self) -> str:
@@ -890,6 +913,8 @@ class DirectReport(IdentificationReport):
         lines.append("  " + ", ".join(
             f"{c}: {r:.3g} ({r / s:.2g})" if s > 0 else f"{c}: {r:.3g}"
             for c, r, s in zip(self.cases, self.case_residuals, self.case_scale, strict=True)))
+        if self.consistency is not None:
+            lines.append(f"model vs data: {self.consistency.verdict}")
         for note in self.notes:
             lines.append(f"note: {note}")
         return "\n".join(lines)
@@ -1160,6 +1185,8 @@ def direct(
     threshold: float | None = None,
     prior_sigma: float | Mapping[str, float] = 0.5,
     max_sigma_pct: float = MAX_SIGMA_PCT,
+    polish: bool | str = "auto",
+    check: bool = True,
 ) -> tuple[Mechanism, DirectReport]:
     """Identify bushing and spring stiffnesses from measured equilibria by the direct (linear)
     method of the thesis's Chapter 4 (spec stiffness §1.8–1.14; see the module docstring).
@@ -1202,6 +1229,24 @@ def direct(
     - `threshold`: relative identifiability threshold of `lsq` on unit-norm columns (default
       `DEFAULT_THRESHOLD` = 1e-5; also the singular-value cut of "tsvd").
     - `max_sigma_pct`: identifiable unknowns with a larger σ% are reported as not determined.
+    - `polish`: errors in variables (issue 12). The rows Lᵀ·D and L are built from the
+      *measured* poses, so with noisy landmarks the regressors are noisy and the linear
+      estimate is biased (A.Krz of the pseudo-McPherson by ≈ 3 of its own σ at 0.05 mm), a bias
+      its σ does not show. "auto" (default): when the linear estimate does not reproduce the
+      measurements to noise-free accuracy (consistency χ²/dof > `POLISH_CHI2`), the determined
+      stiffnesses are polished by least squares through the equilibrium
+      (`identify.least_squares` on the same landmarks or poses, started at the linear
+      estimate, the other unknowns held at their values): an estimator that compares the
+      model's own equilibria with the data, so its errors are those of the measurements only,
+      and its σ (from the whitened Jacobian) is the spread the estimate really has. The report
+      keeps the linear values in `linear_values` and the fit in `polished`. True: always;
+      False: the thesis's linear estimate alone (its σ ignores the errors in variables; the
+      consistency verdict still says whether the model reproduces the data). Only bushing
+      stiffnesses per axis and spring rates are polished (offsets, K·L0 and axisymmetric pairs
+      keep their linear values, with a note).
+    - `check`: re-solve the identified model at the measured cases and compare with the
+      measurements in units of their σ (`report.consistency`; a determined value of an
+      inconsistent model is not reported as identified).
 
     **Returns:** `(mech', report)`: the model with the identified values (N/mm, N·mm/rad inside;
     unknowns the data do not determine keep the model's values, except with "tikhonov" whose
@@ -1277,7 +1322,163 @@ def direct(
         weighted=system.weighted, equation_residuals=residual.reshape(n_cases, -1),
         whitened_equation_residuals=whitened,
     )
-    return _apply(mech, params, values, write), report
+    fitted = _apply(mech, params, values, write)
+    if polish not in (True, False, "auto"):
+        raise InputError(f"polish must be True, False or 'auto'; got {polish!r}.")
+    if not (check or polish):
+        return fitted, report
+    data = check_data(mech, measurements)
+    consistency = check_consistency(fitted, data, int(np.sum(write)), cases=raw.cases)
+    report = dataclasses.replace(report, consistency=consistency)
+    noisy = consistency.chi2 > POLISH_CHI2 * consistency.dof
+    if polish is True or (polish == "auto" and noisy):
+        fitted, report = _polish(fitted, report, params, data, max_sigma_pct, mech)
+    return fitted, report
+
+
+POLISH_CHI2 = 1e-6
+"""`direct(polish="auto")` polishes when χ²/dof of the linear estimate exceeds this: a residual
+RMS above 10⁻³ σ, i.e. data that are not noise-free (noise-free data are reproduced to
+rounding, and the linear estimate is then exact)."""
+
+
+def _polish_params(mech: Mechanism, params: tuple[Parameter, ...]):
+    """The `Params` of the polish (every bushing stiffness per axis and spring rate among the
+    unknowns, log-scaled, started at `mech`'s values) and, per unknown, its index there (or
+    None)."""
+    b, s = mech.bushings, mech.springs
+    kt = np.zeros((len(b.names), 3), bool)
+    kr = np.zeros_like(kt)
+    ks = np.zeros(len(s.names), bool)
+    lsq_name = {}
+    for i, p in enumerate(params):
+        if p.kind == "stiffness" and len(p.axes) == 1:
+            a = p.axes[0]
+            (kt if a < 3 else kr)[p.element, a % 3] = True
+            lsq_name[i] = f"{b.names[p.element]}.{STIFFNESS_NAMES[a]}"
+        elif p.kind == "spring_k":
+            ks[p.element] = True
+            lsq_name[i] = f"{s.names[p.element]}.k"
+    if not lsq_name:
+        return None, {}
+    leaves, masks = [], []
+    for name, mask in (("k_trans", kt), ("k_rot", kr)):
+        if mask.any():
+            leaves.append(lambda m, name=name: getattr(m.bushings, name))
+            masks.append(mask)
+    if ks.any():
+        leaves.append(lambda m: m.springs.k)
+        masks.append(ks)
+    lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
+    return lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()}
+
+
+def _polish_start(lsq_params, index, report: DirectReport) -> np.ndarray:
+    """Start of the polish: the linear estimate where it determined a positive value, the
+    model's value elsewhere."""
+    start = np.array(lsq_params.start)
+    for i, j in index.items():
+        v = report.values[i] * report.parameters_to_model[i]
+        if report.identified[i] and v > 0:
+            start[j] = v
+    return start
+
+
+def _merge_polish(report: DirectReport, index, fit, max_sigma_pct: float) -> DirectReport:
+    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
+    values, sigma = report.values.copy(), report.sigma.copy()
+    sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
+    status = list(report.status)
+    conv = report.parameters_to_model
+    for i, j in index.items():
+        values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
+        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
+        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
+        identified[i] = ok
+        status[i] = ("identified (polished through the equilibrium)" if ok else
+                     f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
+    left = [report.names[i] for i in np.flatnonzero(report.identified) if i not in index]
+    notes = list(report.notes)
+    notes.append(f"errors in variables: {len(index)} stiffness(es) polished by least squares "
+                 f"through the equilibrium from the linear estimate ({fit.message}, "
+                 f"{fit.steps} steps)")
+    if left:
+        notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
+                     "stiffnesses per axis and spring rates): their σ ignores the errors in "
+                     "the regressors")
+    consistency = dataclasses.replace(
+        fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
+    return dataclasses.replace(
+        report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
+        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
+        consistency=consistency)
+
+
+def _polish(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
+            max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
+    """Least squares through the equilibrium from the linear estimate (see `direct`,
+    `polish`): every bushing stiffness per axis and spring rate among the unknowns, the weak
+    default prior centred on the model's values."""
+    from .least_squares import least_squares_batch
+
+    lsq_params, index = _polish_params(mech, params)
+    if lsq_params is None:
+        return fitted, report
+    start = _polish_start(lsq_params, index, report)
+    batch = least_squares_batch(mech, _as_batch(data, 1), lsq_params, start=start[None])
+    fit = batch.reports[0]
+    report = _merge_polish(report, index, fit, max_sigma_pct)
+    return lsq_params.apply(fitted, jnp.asarray(fit.estimate)), report
+
+
+def _as_batch(data, n: int, items=None):
+    """Measurements (one data set each) stacked along a leading data-set axis: `data` repeated
+    `n` times, or the measured values of `items` (lists of measurements like `data`)."""
+    out = []
+    for k, m in enumerate(data):
+        fields = m._values
+        if items is None:
+            values = tuple(jnp.broadcast_to(getattr(m, f), (n, *getattr(m, f).shape))
+                           for f in fields)
+        else:
+            values = tuple(jnp.stack([getattr(it[k], f) for it in items]) for f in fields)
+        out.append(eqx.tree_at(lambda mm, fields=fields: tuple(getattr(mm, f) for f in fields),
+                               m, values))
+    return tuple(out)
+
+
+def direct_batch(
+    mech: Mechanism,
+    measurements: Sequence[Measurements],
+    params: Params | Callable[[Mechanism], object] | None = None,
+    *,
+    polish: bool = True,
+    max_sigma_pct: float = MAX_SIGMA_PCT,
+    **options,
+) -> tuple[DirectReport, ...]:
+    """`direct` on many measurement sets of one layout under one load table (e.g. a
+    Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
+    shared), then the polish of every set at once (`least_squares_batch`, one vmapped program
+    per LM step). `options` go to `direct`. **Returns:** one `DirectReport` per set (with
+    `polished`; the identified mechanisms are `Params.apply` of their values)."""
+    from .least_squares import least_squares_batch
+
+    linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
+              for m in measurements]
+    if not polish:
+        return tuple(linear)
+    ctx_params = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
+                                                    or _default_where),
+                             options.get("elements"), options.get("axisymmetric", ()))
+    lsq_params, index = _polish_params(mech, ctx_params)
+    if lsq_params is None:
+        return tuple(linear)
+    data = [check_data(mech, m) for m in measurements]
+    starts = np.stack([_polish_start(lsq_params, index, r) for r in linear])
+    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), lsq_params,
+                                start=starts)
+    return tuple(_merge_polish(r, index, fit, max_sigma_pct)
+                 for r, fit in zip(linear, batch.reports, strict=True))
 
 
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,

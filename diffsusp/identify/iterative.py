@@ -30,12 +30,18 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import InputError
-from ..measure.data import Measurement, as_deformations
+from ..measure.data import Deformations, Measurement, as_deformations
 from ..measure.measurements import Measurements
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, bushing_states, solve_statics
 from .params import Params, selected_entries
-from .report import IdentificationReport, MeasurementResiduals
+from .report import (
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    check_consistency,
+    check_data,
+)
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
@@ -90,8 +96,33 @@ class IterativeReport(IdentificationReport):
     slope_sigma: np.ndarray | None = None
     selected: np.ndarray | None = None
     weight: np.ndarray | None = None
+    consistency: Consistency | None = None
+    polished: object = None
+    _mech: Mechanism | None = dataclasses.field(default=None, repr=False, compare=False)
+    _data: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
 
     family: ClassVar[str] = "iterative"
+
+    def polish(self, **options) -> tuple[Mechanism, "object"]:
+        """Least squares through the equilibrium (`identify.least_squares`) from this loop's
+        stiffnesses, on the same measurements (landmarks or poses when the loop was given
+        them, else the deformations), over the selected directions: what to do when the
+        consistency verdict says the loop's fixed point does not reproduce the data (spec
+        stiffness §2.7: the loop's fixed point need not be the truth). `options` go to
+        `least_squares`. **Returns:** `(mech', FitReport)`."""
+        from .least_squares import least_squares
+
+        if self._mech is None or self._data is None:
+            raise InputError("this report does not carry its model and data; call "
+                             "identify.iterative(..., polish=True) instead.")
+        sel = self._selected
+        index = np.array([self._mech.bushings.index(n) for n in self.bushings], dtype=int)
+        kt = np.zeros((len(self._mech.bushings.names), 3), bool)
+        kr = np.zeros_like(kt)
+        kt[index], kr[index] = sel[:, :3], sel[:, 3:]
+        params = Params.leaves(self._mech, lambda m: (m.bushings.k_trans, m.bushings.k_rot),
+                               (kt, kr))
+        return least_squares(self._mech, self._data, params, **options)
 
     # The base API (identify.report): one parameter per selected direction, model units.
     @property
@@ -157,6 +188,12 @@ class IterativeReport(IdentificationReport):
         state = "converged" if self.converged else "NOT converged"
         lines.append(f"{state} after {self.iterations} iterations; * not identified (start value "
                      "kept), = equalised with the other radial direction (axisymmetric).")
+        if self.consistency is not None:
+            lines.append(f"model vs data: {self.consistency.verdict}")
+            if not self.consistency.consistent:
+                lines.append("the loop's fixed point need not be the truth (spec stiffness "
+                             "§2.7): polish it by least squares through the equilibrium "
+                             "(report.polish(), or iterative(..., polish=True)).")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -166,6 +203,7 @@ class IterativeReport(IdentificationReport):
             "identified": self.identified.tolist(), "equalised": self.equalised.tolist(),
             "r": self.r.tolist(), "offset": self.offset.tolist(),
             "iterations": self.iterations, "converged": self.converged,
+            "consistency": None if self.consistency is None else self.consistency.summary(),
         }
 
 
@@ -251,6 +289,9 @@ def iterative(
     eps: float = 0.01,
     max_iterations: int = 100,
     callback: Callable[[int, IterationRecord], None] | None = None,
+    check: bool = True,
+    polish: bool = False,
+    sigma: tuple[float, float] | None = None,
 ) -> tuple[Mechanism, IterativeReport]:
     """Identify bushing stiffnesses by the correlation loop of spec stiffness §2.
 
@@ -275,6 +316,17 @@ def iterative(
       (spec §2.8, §2.10: "bushings whose deformation is below the measurement capability cannot
       be identified"). Default: no such gate (exact synthetic data correlate at any amplitude).
     - `max_iterations`: bound on the loop; `callback(i, record)` is called after each pass.
+    - `check` (issue 12): re-solve the identified model at the measured cases and compare with
+      the measurements in units of their noise (`report.consistency`: landmarks or poses when
+      given them, else the deformations). The loop's fixed point matches the deformations only
+      up to the offsets E0 and need not be the truth (spec stiffness §2.7): when the model does
+      not reproduce the data, the report says so with its χ², and no direction counts as
+      identified (`is_identified`, `rows()`), whatever the correlation gate said.
+    - `polish`: then polish the loop's result by least squares through the equilibrium
+      (`report.polish()`); the returned mechanism is the polished one and `report.polished`
+      its `FitReport` (the loop's own values stay in `report.stiffness`).
+    - `sigma`: (mm, rad) noise of deformations given as plain arrays, for the check (default
+      the measuring arm's 0.05 mm and 0.05 mm over the model's length scale).
 
     **Returns:** the identified mechanism and an `IterativeReport`.
     """
@@ -341,12 +393,27 @@ def iterative(
     final = _with_stiffness(mech, index, k)
     sol = solve_statics(final, loads, q0=q, throw=False)
     model = np.asarray(_states(final, sol.q, tuple(int(i) for i in index))[0])
+    consistency, check_items = None, None
+    if check or polish:
+        if isinstance(data, Loads):
+            from ..measure.noise import ARM_SIGMA
+
+            s_t, s_r = sigma if sigma is not None else (ARM_SIGMA,
+                                                       ARM_SIGMA / mech.length_scale)
+            check_items = (Deformations(loads, names, delta, (s_t,) * 3 + (s_r,) * 3),)
+        else:
+            check_items = check_data(mech, data)
+        consistency = check_consistency(final, check_items, int(np.sum(ever & chosen)))
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
         converged=converged, history=tuple(history), slope_sigma=slope_sigma,
-        selected=chosen, weight=weight,
+        selected=chosen, weight=weight, consistency=consistency, _mech=final,
+        _data=check_items,
     )
+    if polish:
+        polished_mech, fit = report.polish()
+        return polished_mech, dataclasses.replace(report, polished=fit)
     return final, report
 
 

@@ -58,7 +58,12 @@ from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, solve_statics
 from .params import Params
-from .report import IdentificationReport, MeasurementResiduals
+from .report import (
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    consistency_from_residuals,
+)
 
 LOSSES = {"linear": 0, "huber": 1, "cauchy": 2}
 """Loss names → codes (a runtime value: every loss shares one compiled program)."""
@@ -145,7 +150,7 @@ def _equilibria_impl(mech, loads, q0, tangents, max_steps: int):
     return q[0], status[0].astype(int), dq
 
 
-def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents):
+def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents, prior_scale=1.0):
     ok = status == Status.CONVERGED
 
     def rows(m, qq):
@@ -161,9 +166,10 @@ def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents):
     z, jz, raw = jax.vmap(lambda t, d: jax.jvp(rows, (mech, q), (t, d), has_aux=True))(
         tangents, dq)
     p = len(problem.params)
-    z_prior = (u - problem.prior_u) * problem.prior_w
+    w = problem.prior_w * prior_scale
+    z_prior = (u - problem.prior_u) * w
     residual = jnp.concatenate([z[0], z_prior])
-    jacobian = jnp.concatenate([jz[:p].T, jnp.diag(problem.prior_w)])
+    jacobian = jnp.concatenate([jz[:p].T, jnp.diag(w)])
     return residual, jacobian, raw[0]
 
 
@@ -206,7 +212,7 @@ def _lm_init_impl(u, n_rows: int, rtol: float, atol: float):
 
 
 def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: float,
-                  ftol: float):
+                  ftol: float, gtol: float):
     """One LM step, given the residual and Jacobian at the state's trial point `y_eval`."""
     solver = _LevenbergMarquardt(rtol, atol)
     static = eqx.filter(_lm_state(solver, u, residual.size), eqx.is_array, inverse=True)
@@ -220,21 +226,29 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
                                   state.search_state.step_size))
     args = (residual, jacobian, state.y_eval)
     new_u, new_state, _ = solver.step(_model, u, args, {}, state, _TAGS)
-    terminate, result = solver.terminate(_model, new_u, args, {}, new_state, _TAGS)
+    _, result = solver.terminate(_model, new_u, args, {}, new_state, _TAGS)
     accepted = new_state.num_accepted_steps > state.num_accepted_steps
-    # Also stop once an accepted step lowers the loss by less than ftol relatively (scipy's
-    # ftol): with noisy data, Gauss–Newton creeps linearly along weakly determined directions
-    # long after the loss has settled to many digits.
-    loss_before = jnp.sum(state.f_info.residual ** 2)
+    # The stop does not look at the step in u (optimistix's Cauchy test): along a direction
+    # the data barely see, steps stay large long after the fit has settled, and a parameter
+    # there may wander (issue 12). It asks what the data can still give: at an accepted point,
+    # the decrease of Σr² a full Gauss–Newton step would bring, ‖Qᵀr‖² (QR of the Jacobian,
+    # prior rows included), below gtol + ftol·Σr² (in χ² units: far below a change anyone
+    # could see in the data).
+    basis, _ = jnp.linalg.qr(jacobian)
     loss_after = jnp.sum(residual ** 2)
-    settled = accepted & ~state.first_step & (loss_before - loss_after <= ftol * loss_after)
-    terminate = terminate | settled
+    predicted = jnp.sum((basis.T @ residual) ** 2)
+    # (A small decrease of the loss over an accepted step is no test: a heavily damped step
+    # is small wherever it is taken.)
+    flat = accepted & (predicted <= gtol + ftol * loss_after)
+    terminate = flat
+    reason = jnp.where(flat, 1, 0)
     new_dyn = eqx.filter(new_state, eqx.is_array)
     new_u, new_dyn = jax.tree.map(lambda n, o: jnp.where(active, n, o), (new_u, new_dyn),
                                   (u, dyn_state))
     record = dict(accepted=active & accepted,
                   step_size=new_state.search_state.step_size, terminate=terminate,
-                  failed=result != optx.RESULTS.successful)
+                  failed=result != optx.RESULTS.successful, reason=reason,
+                  predicted=predicted)
     return new_u, new_dyn, record
 
 
@@ -247,15 +261,16 @@ _equilibria_batch = eqx.filter_jit(
         lambda m, q, t: _equilibria_impl(m, loads, q, t, max_steps))(mech, q0, tangents))
 _rows = eqx.filter_jit(_rows_impl)
 _rows_batch = eqx.filter_jit(
-    lambda problem, values, u, mech, q, status, dq, tangents: jax.vmap(
+    lambda problem, values, u, mech, q, status, dq, tangents, scale: jax.vmap(
         lambda v, *a: _rows_impl(_with_values(problem, v), *a))(
-            values, u, mech, q, status, dq, tangents))
+            values, u, mech, q, status, dq, tangents, scale))
 _predict = eqx.filter_jit(_predict_impl)
 _lm_init = eqx.filter_jit(
     lambda u, n_rows, rtol, atol: jax.vmap(lambda v: _lm_init_impl(v, n_rows, rtol, atol))(u))
 _lm_step = eqx.filter_jit(
-    lambda u, dyn, residual, jacobian, active, rtol, atol, ftol: jax.vmap(
-        lambda *a: _lm_step_impl(*a, rtol, atol, ftol))(u, dyn, residual, jacobian, active))
+    lambda u, dyn, residual, jacobian, active, rtol, atol, ftol, gtol: jax.vmap(
+        lambda *a: _lm_step_impl(*a, rtol, atol, ftol, gtol))(u, dyn, residual, jacobian,
+                                                              active))
 
 
 @eqx.filter_jit
@@ -279,18 +294,21 @@ def _with_values(problem: _Problem, values) -> _Problem:
     return dataclasses.replace(problem, data=data)
 
 
-def _evaluate(problem: _Problem, values, u, q0, batched: bool):
-    """Residuals, Jacobian (internal coordinates), raw residuals, q and status at u."""
+def _evaluate(problem: _Problem, values, u, q0, batched: bool, prior_scale=None):
+    """Residuals, Jacobian (internal coordinates), raw residuals, q and status at u; the prior
+    rows weighted by `prior_scale` (per data set when batched; default 1)."""
     n = problem.n_tangents
     if batched:
+        scale = jnp.ones(u.shape[0]) if prior_scale is None else jnp.asarray(prior_scale)
         mech, tangents = _setup_batch(problem, u, n)
         q, status, dq = _equilibria_batch(mech, problem.loads, q0, tangents,
                                           problem.inner_max_steps)
-        z, jac, raw = _rows_batch(problem, values, u, mech, q, status, dq, tangents)
+        z, jac, raw = _rows_batch(problem, values, u, mech, q, status, dq, tangents, scale)
     else:
+        scale = jnp.asarray(1.0 if prior_scale is None else prior_scale, dtype=float)
         mech, tangents = _setup(problem, u, n)
         q, status, dq = _equilibria(mech, problem.loads, q0, tangents, problem.inner_max_steps)
-        z, jac, raw = _rows(problem, u, mech, q, status, dq, tangents)
+        z, jac, raw = _rows(problem, u, mech, q, status, dq, tangents, scale)
     return z, jac, raw, q, status
 
 
@@ -354,6 +372,15 @@ def _prior(params: Params, prior, prior_sigma):
     """(u_prior, w) with prior rows (u − u_prior)·w: w = dθ/du at the prior / σ (physical σ;
     for a log-scaled parameter that is a relative σ/θ_prior on log θ). No prior: w = 0."""
     p = len(params)
+    if isinstance(prior, str):
+        if prior != "weak":
+            raise InputError(f"prior must be 'weak' (the default), None, a Mechanism, a (p,) "
+                             f"array or a mapping name → value; got {prior!r}.")
+        if prior_sigma is not None:  # the start values, with the caller's σ
+            return _prior(params, np.asarray(params.start), prior_sigma)
+        start = np.asarray(params.start)
+        sigma = np.where(params.log_scaled, DEFAULT_LOG_PRIOR_SIGMA * np.abs(start), np.inf)
+        return _prior(params, start, sigma)
     if prior is None:
         if prior_sigma is not None:
             raise InputError("prior_sigma given without a prior; pass prior= (a Mechanism, a "
@@ -364,6 +391,8 @@ def _prior(params: Params, prior, prior_sigma):
                          "scalar or a mapping name → σ).")
     if isinstance(prior, Mechanism):
         theta = np.asarray(params.values(prior))
+    elif isinstance(prior, np.ndarray) and prior.shape == (p,):
+        theta = prior
     else:
         theta = _per_param(prior, params, "prior")
         theta = np.where(np.isnan(theta), np.asarray(params.start), theta)
@@ -374,6 +403,10 @@ def _prior(params: Params, prior, prior_sigma):
     u = checked.to_internal(checked.start)
     w = jnp.abs(checked.derivative(u)) / jnp.asarray(sigma)
     return u, jnp.where(jnp.isfinite(w), w, 0.0)
+
+
+def _is_weak(prior, prior_sigma) -> bool:
+    return isinstance(prior, str) and prior == "weak" and prior_sigma is None
 
 
 def _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps):
@@ -465,8 +498,20 @@ class FitReport(IdentificationReport):
     message: str
     loss_name: str
     units: tuple[str, ...] = ()
+    consistency: Consistency | None = None
+    stop_reason: str = ""
+    max_sigma_pct: float = 10.0
 
     family: ClassVar[str] = "least_squares"
+
+    @property
+    def determined(self) -> np.ndarray:
+        """`identifiable`, and for a log-scaled parameter (stiffness) σ% ≤ `max_sigma_pct`
+        (the direct method's bar): beyond it the linearised σ no longer describes the spread
+        of the estimate (it is not Gaussian in θ), so the value is not reported identified."""
+        pct = np.asarray(self.sigma_percent, dtype=float)
+        return np.asarray(self.identifiable, bool) & ~(np.isfinite(pct) &
+                                                        (pct > self.max_sigma_pct))
 
     # The base API (identify.report): model units already.
     @property
@@ -596,6 +641,18 @@ def _report(params: Params, problem: _Problem, u, last, history, converged, step
         n_res += int(np.count_nonzero(weight))
         offset += size
     rank = int(np.sum(s > floor))
+    whites = [r.whitened for r in residuals.values()]
+    counts = [int(np.count_nonzero(np.asarray(m.weight))) for m in problem.data]
+    lengths = {w.shape[0] for w in whites}
+    if len(lengths) == 1:
+        n_cases = lengths.pop()
+        labels = tuple(str(c + 1) for c in range(n_cases))
+    else:
+        whites, labels = [np.concatenate([w.reshape(-1) for w in whites])[None]], ("all",)
+        counts = [sum(counts)]
+    consistency = consistency_from_residuals(
+        whites, counts, rank, labels, measurements=tuple(residuals),
+        note="at the fit's own equilibria")
     return FitReport(
         names=names, estimate=theta, start=np.asarray(params.start), sigma=sigma,
         sigma_percent=sigma_pct, covariance=cov, correlation=corr, identifiable=identifiable,
@@ -603,7 +660,7 @@ def _report(params: Params, problem: _Problem, u, last, history, converged, step
         loss=float(0.5 * np.sum(z ** 2)), chi2=chi2, n_residuals=n_res, dof=n_res - rank,
         converged=converged, steps=steps, accepted_steps=accepted_steps,
         history=tuple(history), message=message, loss_name=loss_name,
-        units=params.units(problem.mech))
+        units=params.units(problem.mech), consistency=consistency, stop_reason=message)
 
 
 # ----------------------------------------------------------------------------- driver
@@ -615,31 +672,39 @@ def _select(mask, new, old):
         lambda n, o: jnp.where(jnp.reshape(mask, (-1,) + (1,) * (n.ndim - 1)), n, o), new, old)
 
 
-def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol, callback):
+def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol, gtol,
+         callback, prior_scale=None, step0=0, q_start=None, active0=None):
     """Step the LM of every data set until each terminates. Returns the final u `(sets, p)`,
     the last accepted (residual, Jacobian, raw residual) per set, histories, and per set
     (converged, steps, accepted steps, message)."""
     n_sets, p = u0.shape
+    if prior_scale is None:
+        prior_scale = np.ones(n_sets)
     n_rows = sum(int(np.prod(m.weight.shape)) for m in problem.data) + p
-    q0 = jnp.zeros((n_sets, problem.loads.n_cases, problem.mech.n_coordinates))
+    q0 = (jnp.zeros((n_sets, problem.loads.n_cases, problem.mech.n_coordinates))
+          if q_start is None else q_start)
     dyn = _lm_init(u0, n_rows, rtol, atol)
     u, last = u0, None
-    active = np.ones(n_sets, bool)
+    active = np.ones(n_sets, bool) if active0 is None else np.array(active0, bool)
     histories = [[] for _ in range(n_sets)]
     steps = np.zeros(n_sets, int)
     accepted_steps = np.zeros(n_sets, int)
     converged = np.zeros(n_sets, bool)
     failed = np.zeros(n_sets, bool)
+    reasons = np.zeros(n_sets, int)
+    rejected = np.zeros(n_sets, int)
+    last_predicted = np.full(n_sets, np.inf)
     for k in range(max_steps + 1):
         trial_u = dyn.y_eval
         if batched:
-            z, jac, raw, q, status = _evaluate(problem, values, trial_u, q0, True)
+            z, jac, raw, q, status = _evaluate(problem, values, trial_u, q0, True,
+                                               prior_scale)
         else:
-            out = _evaluate(problem, values, trial_u[0], q0[0], False)
+            out = _evaluate(problem, values, trial_u[0], q0[0], False, prior_scale[0])
             z, jac, raw, q, status = (a[None] for a in out)
         if k == 0:
             status_np = np.asarray(status)
-            bad = np.flatnonzero(np.any(status_np != Status.CONVERGED, axis=1))
+            bad = np.flatnonzero(np.any(status_np != Status.CONVERGED, axis=1) & active)
             if bad.size:
                 cases = np.flatnonzero(status_np[bad[0]] != Status.CONVERGED)
                 raise InputError(
@@ -647,7 +712,7 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
                     f"{cases.tolist()} (numbered across the measurements' load tables"
                     f"{'' if n_sets == 1 else f', data set {int(bad[0])}'}); start from "
                     "values closer to plausible ones or drop those cases.")
-        u, dyn, rec = _lm_step(u, dyn, z, jac, jnp.asarray(active), rtol, atol, ftol)
+        u, dyn, rec = _lm_step(u, dyn, z, jac, jnp.asarray(active), rtol, atol, ftol, gtol)
         last, q0, trial, estimate, trial_loss, failed_cases = (
             _bookkeep(problem.params, rec["accepted"], trial_u, u, (z, jac, raw), last, q,
                       status, q0))
@@ -658,23 +723,87 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
             steps[b] = k
             accepted_steps[b] += int(accepted[b] and k > 0)
             histories[b].append(StepRecord(
-                step=k, trial=trial[b], trial_loss=float(trial_loss[b]),
+                step=step0 + k, trial=trial[b], trial_loss=float(trial_loss[b]),
                 failed_cases=int(failed_cases[b]), accepted=bool(accepted[b]),
                 estimate=estimate[b], step_size=float(step_size[b])))
         if callback is not None:
             callback(k, histories[0][-1] if n_sets == 1 else
                      dict(active=active.copy(), trial_loss=trial_loss, accepted=accepted))
         terminate, bad_solve = np.asarray(rec["terminate"]), np.asarray(rec["failed"])
+        reason = np.asarray(rec["reason"])
+        predicted = np.asarray(rec["predicted"])
+        last_predicted = np.where(accepted, predicted, last_predicted)
+        rejected = np.where(accepted, 0, rejected + 1)
+        # Every trial rejected for a while at a point where a full step would gain nothing
+        # visible: the loss is at the precision of the equilibria (noise-free data).
+        stalled = active & (rejected >= MAX_REJECTED) & (last_predicted <= STALL_CHI2)
+        reason = np.where(stalled & ~terminate, 3, reason)
+        terminate = terminate | stalled
+        for b in np.flatnonzero(active & terminate & ~bad_solve):
+            reasons[b] = int(reason[b])
         converged |= active & terminate & ~bad_solve
         failed |= active & bad_solve
         active &= ~(terminate | bad_solve)
         if not active.any():
             break
     messages = [
-        "converged" if converged[b] else
-        ("the LM linear solve failed" if failed[b] else f"max_steps={max_steps} reached")
-        for b in range(n_sets)]
-    return u, last, histories, converged, steps, accepted_steps, messages
+        STOP_REASONS[reasons[b]].format(gtol=gtol, ftol=ftol) if converged[b] else
+        ("failed: the LM linear solve failed" if failed[b] else
+         f"not converged: max_steps={max_steps} reached") for b in range(n_sets)]
+    return u, last, histories, converged, steps, accepted_steps, messages, q0
+
+
+STOP_REASONS = {
+    1: "converged: a full Gauss–Newton step would lower χ² by less than {gtol:g} + {ftol:g}·χ²",
+    3: "converged: the loss is at the precision of the equilibria (every trial rejected while "
+       "a full step would lower χ² by less than 1e-6)",
+    0: "converged",
+}
+"""The stop reasons of a converged fit (`FitReport.message`)."""
+
+MAX_REJECTED = 12
+STALL_CHI2 = 1e-6
+"""A fit whose last `MAX_REJECTED` trials were all rejected, at a point where a full
+Gauss–Newton step would lower χ² by less than `STALL_CHI2`, has converged: the loss cannot be
+lowered at the precision of the equilibria (noise-free data reach it)."""
+
+DEFAULT_LOG_PRIOR_SIGMA = 3.0
+"""σ of the default weak prior on log stiffness (log-scaled parameters), centred on the start:
+a factor e³ ≈ 20 at one σ (see `least_squares`, `prior`)."""
+
+ADAPTIVE_PRIOR_ROUNDS = 4
+"""Refits of the default prior at the noise level the residuals show (see `least_squares`)."""
+
+
+def _run_adaptive(problem: _Problem, values, u0, *, adaptive: bool, max_steps, **kw):
+    """`_run`, then, for the data sets whose whitened data residual is below the stated noise
+    (RMS ŝ < 1: nearly noise-free data), refit with the prior rows scaled by ŝ, up to
+    `ADAPTIVE_PRIOR_ROUNDS` times (see `least_squares`, `prior`)."""
+    *out, q_last = _run(problem, values, u0, max_steps=max_steps, **kw)
+    if not adaptive:
+        return tuple(out)
+    u, last, hist, conv, steps, acc, msg = out
+    n_sets, p = u.shape
+    n_data = [int(np.count_nonzero(np.asarray(m.weight))) for m in problem.data]
+    dof = max(sum(n_data) - p, 1)
+    scale = np.ones(n_sets)
+    for _ in range(ADAPTIVE_PRIOR_ROUNDS):
+        z = np.asarray(last[0])[:, :-p] if p else np.asarray(last[0])
+        rms = np.sqrt(np.sum(z ** 2, axis=1) / dof)
+        again = conv & (rms < 0.1 * scale) & (rms > 1e-6) & (steps < max_steps)
+        if not again.any():
+            break
+        scale = np.where(again, np.maximum(rms, 1e-12), scale)
+        u2, last2, hist2, conv2, steps2, acc2, msg2, q_last = _run(
+            problem, values, u, max_steps=max_steps, prior_scale=scale,
+            step0=int(steps.max()) + 1, q_start=q_last, active0=again, **kw)
+        for b in np.flatnonzero(again):
+            u = u.at[b].set(u2[b])
+            last = tuple(a.at[b].set(a2[b]) for a, a2 in zip(last, last2, strict=True))
+            hist[b] = hist[b] + hist2[b]
+            conv[b], steps[b], acc[b] = conv2[b], steps[b] + 1 + steps2[b], acc[b] + acc2[b]
+            msg[b] = msg2[b]
+    return u, last, hist, conv, steps, acc, msg
 
 
 def least_squares(
@@ -685,14 +814,16 @@ def least_squares(
     where: Params | Callable[[Mechanism], object] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
-    prior: Mechanism | Float[Array, " p"] | Mapping[str, float] | None = None,
+    prior: Mechanism | Float[Array, " p"] | Mapping[str, float] | str | None = "weak",
     prior_sigma: float | Float[Array, " p"] | Mapping[str, float] | None = None,
     max_steps: int = 100,
     rtol: float = 1e-6,
     atol: float = 1e-6,
-    ftol: float = 1e-8,
+    ftol: float = 1e-10,
+    gtol: float = 1e-16,
     inner_max_steps: int = 50,
     identifiable_sigma: float = 1.0,
+    max_sigma_pct: float = 10.0,
     callback: Callable[[int, StepRecord], None] | None = None,
 ) -> tuple[Mechanism, FitReport]:
     """Identify parameters of `mech` by nonlinear least squares through the equilibrium.
@@ -710,14 +841,33 @@ def least_squares(
     - `prior`, `prior_sigma`: Tikhonov prior θ_prior (a Mechanism, a `(p,)` array or a mapping
       name → value; missing names: the start) with σ in physical units (scalar, `(p,)`, or a
       mapping; inf = none). For a log-scaled parameter it acts on log θ with relative σ/θ_prior.
-    - `max_steps`: LM steps; `rtol`, `atol`: LM stop on the step in internal coordinates and
-      the change of the residuals (optimistix Cauchy criterion); `ftol`: also stop when an
-      accepted step lowers the loss by less than this, relatively.
+      Default `"weak"` (issue 12: a parameter the data cannot see must not wander by orders of
+      magnitude): every log-scaled parameter (stiffness) gets a prior at its start value with
+      σ = `DEFAULT_LOG_PRIOR_SIGMA` = 3 on log θ (a factor e³ ≈ 20); positions get none. Chosen
+      over steps restricted to the identifiable subspace because it is one objective (the LM's
+      acceptance and the covariance stay those of a least-squares problem), it holds directions
+      the data see a little as firmly as those they do not see at all, and the reported σ is the
+      posterior one. Its price is a pull towards the start of the parameters the data determine
+      (a shrinkage σ_data²/9 of their distance from the start, on log θ), which would spoil
+      noise-free data: so when the data residual is below the stated noise (RMS ŝ < 0.1), the
+      prior is expressed at the noise level the residuals show — the fit is repeated with the
+      prior rows scaled by ŝ (`ADAPTIVE_PRIOR_ROUNDS` at most; noise-free data: the pull falls
+      as ŝ² each round, to rounding). `prior=None`: no prior (the pre-issue-12 behaviour);
+      `prior_sigma` alone: a prior at the start values with that σ (not rescaled).
+    - `max_steps`: LM steps. The stop does not depend on directions the data cannot see: it
+      converges when, at an accepted point, a full Gauss–Newton step would lower χ² (prior
+      rows included) by less than `gtol` + `ftol`·χ² (`gtol` absolute, in χ² units), or when
+      every trial is rejected at a point where such a step would gain less than `STALL_CHI2`
+      (the precision of the equilibria); `report.message` says which. `rtol`, `atol`: kept
+      for compatibility (optimistix's solver arguments); the stop no longer uses the size of
+      the step in u.
     - `inner_max_steps`: Newton iterations of each equilibrium (a case that needs more fails,
       and the step that led there is rejected).
     - `identifiable_sigma`: a parameter (or combination) whose σ from the data alone exceeds
       this, in internal units (relative for log-scaled parameters, mm for positions), is
       reported as not identifiable.
+    - `max_sigma_pct`: a log-scaled parameter with a larger σ% is not reported identified
+      (`is_identified`, `rows()`), however identifiable (default 10 %, as `direct`).
     - `callback(step, record)`: called after every LM step with its `StepRecord`.
 
     **Returns:** `(mech', report)`: the mechanism at the estimate and a `FitReport`.
@@ -728,11 +878,12 @@ def least_squares(
     params = _as_params(mech, params, where)
     problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
     u0 = params.to_internal(params.start)[None]
-    u, last, hist, conv, steps, acc, msg = _run(problem, None, u0, batched=False,
-                                                max_steps=max_steps, rtol=rtol, atol=atol,
-                                                ftol=ftol, callback=callback)
+    u, last, hist, conv, steps, acc, msg = _run_adaptive(
+        problem, None, u0, adaptive=_is_weak(prior, prior_sigma), batched=False,
+        max_steps=max_steps, rtol=rtol, atol=atol, ftol=ftol, gtol=gtol, callback=callback)
     report = _report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
                      int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma)
+    report = dataclasses.replace(report, max_sigma_pct=float(max_sigma_pct))
     return params.apply(mech, jnp.asarray(report.estimate)), report
 
 
@@ -758,14 +909,16 @@ def least_squares_batch(
     start: Float[Array, "sets p"] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
-    prior=None,
+    prior="weak",
     prior_sigma=None,
     max_steps: int = 100,
     rtol: float = 1e-6,
     atol: float = 1e-6,
-    ftol: float = 1e-8,
+    ftol: float = 1e-10,
+    gtol: float = 1e-16,
     inner_max_steps: int = 50,
     identifiable_sigma: float = 1.0,
+    max_sigma_pct: float = 10.0,
     callback: Callable[[int, dict], None] | None = None,
 ) -> BatchFitReport:
     """Identify the same parameters from many data sets at once (e.g. 100 axles of one design,
@@ -797,15 +950,16 @@ def least_squares_batch(
             params.with_start(row)
         u0 = jax.vmap(params.to_internal)(jnp.asarray(start))
     values = _values_of(data)
-    u, last, hist, conv, steps, acc, msg = _run(problem, values, u0, batched=True,
-                                                max_steps=max_steps, rtol=rtol, atol=atol,
-                                                ftol=ftol, callback=callback)
+    u, last, hist, conv, steps, acc, msg = _run_adaptive(
+        problem, values, u0, adaptive=_is_weak(prior, prior_sigma), batched=True,
+        max_steps=max_steps, rtol=rtol, atol=atol, ftol=ftol, gtol=gtol, callback=callback)
     reports = []
     for b in range(n_sets):
         one_problem = _with_values(problem, jax.tree.map(lambda a, b=b: a[b], values))
-        reports.append(_report(params, one_problem, u[b], [a[b] for a in last], hist[b],
-                               bool(conv[b]), int(steps[b]), int(acc[b]), msg[b], loss,
-                               identifiable_sigma))
+        reports.append(dataclasses.replace(
+            _report(params, one_problem, u[b], [a[b] for a in last], hist[b], bool(conv[b]),
+                    int(steps[b]), int(acc[b]), msg[b], loss, identifiable_sigma),
+            max_sigma_pct=float(max_sigma_pct)))
     return BatchFitReport(
         names=params.names, estimates=np.stack([r.estimate for r in reports]),
         sigma=np.stack([r.sigma for r in reports]), converged=conv.copy(), steps=steps.copy(),

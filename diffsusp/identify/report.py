@@ -12,16 +12,39 @@ Each report keeps its own fields (e.g. `DirectReport.values` in the thesis's tab
 - `combinations`: texts of the combinations of several parameters the method names (direct:
   the combinations the data determine; least squares: the directions the data cannot see);
 - `residuals`: measurement name → `MeasurementResiduals` (raw, whitened);
+- `consistency`: a `Consistency` — the identified model re-solved at the measured load cases
+  and compared with the measurements in units of their noise (χ², χ²/dof, per-case RMS, a
+  verdict);
 
-and, from those, `rows()`, `to_frame()`, `to_json()` and `plot()`.
+and, from those, `is_identified` (a parameter is *identified* only when the data determine it
+AND the identified model reproduces the data: issue 12), `verdicts`, `rows()`, `to_frame()`,
+`to_json()` and `plot()`.
+
+**Why a consistency verdict.** A determined parameter (small σ, full rank) of a model that does
+not reproduce the measurements is not a result: the iterative correlation loop can stop at a
+fixed point that is not the truth (spec stiffness §2.7: its fixed point only matches the
+deformations up to the offsets E0), and a linear estimate built from noisy poses can be biased.
+The check does not trust the method's own equations: it solves the equilibrium of the identified
+model at every measured load case (`solve_statics`) and evaluates the measurement models
+(landmarks, poses, deformations) against the data, whitened by their σ. With Gaussian noise of
+the stated σ and a correct model, χ² follows a χ² law with `dof` = residuals − determined
+parameters; the model is declared inconsistent when χ² exceeds that law's upper
+`CONSISTENCY_ALPHA` quantile (Wilson–Hilferty approximation, no scipy), or when a case has no
+equilibrium.
 """
 
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from typing import ClassVar
 
+import equinox as eqx
 import numpy as np
+
+CONSISTENCY_ALPHA = 1e-3
+"""Significance of the consistency test: a correct model with the stated noise is called
+inconsistent with this probability."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -31,6 +54,174 @@ class MeasurementResiduals:
 
     raw: np.ndarray
     whitened: np.ndarray
+
+
+def chi2_quantile(dof: int, alpha: float = CONSISTENCY_ALPHA) -> float:
+    """Upper `alpha` quantile of the χ² law with `dof` degrees of freedom (Wilson–Hilferty:
+    (χ²/k)^(1/3) is nearly normal with mean 1 − 2/(9k) and variance 2/(9k); within 1 % of the
+    exact quantile for k ≥ 3 at α = 1e-3)."""
+    k = max(int(dof), 1)
+    z = _normal_quantile(1.0 - alpha)
+    c = 2.0 / (9.0 * k)
+    return k * (1.0 - c + z * math.sqrt(c)) ** 3
+
+
+def _normal_quantile(p: float) -> float:
+    """Φ⁻¹(p) by bisection on erf (double precision, no scipy)."""
+    lo, hi = -40.0, 40.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@dataclasses.dataclass(frozen=True)
+class Consistency:
+    """Does the identified model reproduce the measurements? (see the module docstring)
+
+    **Fields:** `chi2` Σ (mask·(model − measured)/σ)² over every measured entry at the
+    identified model's own equilibria; `n_residuals` (unmasked entries), `n_parameters` (the
+    determined parameters), `dof` = n_residuals − n_parameters (at least 1); `critical` the
+    χ² above which the model is inconsistent (upper `alpha` quantile); `case_rms` `(cases,)`
+    RMS whitened residual of each load case (in σ; inf where the case has no equilibrium);
+    `cases` labels; `failed_cases` (no equilibrium); `consistent`; `measurements` the names of
+    the measurements compared; `note` how the check was made.
+    """
+
+    chi2: float
+    n_residuals: int
+    n_parameters: int
+    dof: int
+    critical: float
+    case_rms: np.ndarray
+    cases: tuple[str, ...]
+    failed_cases: tuple[str, ...]
+    consistent: bool
+    measurements: tuple[str, ...] = ()
+    alpha: float = CONSISTENCY_ALPHA
+    note: str = ""
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return self.chi2 / self.dof
+
+    @property
+    def verdict(self) -> str:
+        """One sentence: consistent or not, with χ²/dof and the worst case."""
+        limit = self.critical / self.dof
+        if self.failed_cases:
+            return (f"INCONSISTENT: the identified model has no equilibrium in case(s) "
+                    f"{', '.join(self.failed_cases)}")
+        worst = int(np.argmax(self.case_rms)) if self.case_rms.size else None
+        where = (f"; worst case {self.cases[worst]}: RMS {self.case_rms[worst]:.3g}σ"
+                 if worst is not None else "")
+        if self.consistent:
+            return (f"consistent with the data: χ²/dof = {self.chi2_per_dof:.3g} "
+                    f"(≤ {limit:.3g}, {self.dof} dof){where}")
+        return (f"INCONSISTENT with the data: χ²/dof = {self.chi2_per_dof:.4g} > {limit:.3g} "
+                f"({self.dof} dof){where}; the identified model does not reproduce the "
+                "measurements, so no value is reported as identified")
+
+    def summary(self) -> dict:
+        return {"chi2": _number(self.chi2), "dof": self.dof,
+                "chi2_per_dof": _number(self.chi2_per_dof),
+                "critical_chi2": _number(self.critical), "alpha": self.alpha,
+                "consistent": bool(self.consistent),
+                "case_rms": {c: _number(r) for c, r in zip(self.cases, self.case_rms,
+                                                           strict=True)},
+                "failed_cases": list(self.failed_cases), "verdict": self.verdict}
+
+
+def consistency_from_residuals(whitened: Sequence[np.ndarray], counts: Sequence[int],
+                               n_parameters: int, cases: Sequence[str],
+                               failed: np.ndarray | None = None,
+                               measurements: Sequence[str] = (), note: str = "",
+                               alpha: float = CONSISTENCY_ALPHA) -> Consistency:
+    """A `Consistency` from whitened residuals (one array per measurement, leading case axis;
+    masked entries 0), the number of unmasked entries of each, and the number of determined
+    parameters. `failed` `(cases,)`: cases without equilibrium (their residuals ignored)."""
+    n_cases = len(cases)
+    failed = np.zeros(n_cases, bool) if failed is None else np.asarray(failed, bool)
+    sq = np.zeros(n_cases)
+    count = np.zeros(n_cases)
+    for white, n in zip(whitened, counts, strict=True):
+        white = np.asarray(white, float).reshape(n_cases, -1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            sq += np.sum(np.where(np.isfinite(white), white, np.inf) ** 2, axis=1)
+        count += n / n_cases
+    n_res = int(sum(counts))
+    dof = max(n_res - int(n_parameters), 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rms = np.where(failed, np.inf, np.sqrt(sq / np.maximum(count, 1)))
+    chi2 = float(np.inf if failed.any() else np.sum(sq))
+    critical = chi2_quantile(dof, alpha)
+    return Consistency(chi2=chi2, n_residuals=n_res, n_parameters=int(n_parameters), dof=dof,
+                       critical=critical, case_rms=rms, cases=tuple(cases),
+                       failed_cases=tuple(c for c, f in zip(cases, failed, strict=True) if f),
+                       consistent=bool(np.isfinite(chi2) and chi2 <= critical),
+                       measurements=tuple(measurements), alpha=alpha, note=note)
+
+
+def check_data(mech, data, sigma_rotation: float | None = None):
+    """The measurements a consistency check compares with: `data` as least-squares
+    measurements (`measure.data.as_fit_data`), with a pose table without landmarks given a
+    rotation σ (`sigma_rotation`, default its translation σ over the model's length scale)."""
+    from ..measure.data import as_fit_data, from_measurements
+    from ..measure.measurements import Measurements
+
+    items = (data,) if not isinstance(data, list | tuple) else tuple(data)
+    out = []
+    for m in items:
+        if isinstance(m, Measurements) and m.landmarks is None and m.sigma_rotation is None:
+            rot = sigma_rotation if sigma_rotation is not None else m.sigma / mech.length_scale
+            m = from_measurements(m, m.sigma, rot)
+        out.append(m)
+    return as_fit_data(tuple(out))
+
+
+def check_consistency(mech, data, n_parameters: int, *, cases: Sequence[str] | None = None,
+                      note: str = "", alpha: float = CONSISTENCY_ALPHA) -> Consistency:
+    """Solve the equilibria of `mech` at every load case of `data` (`solve_statics`, no
+    failure raised) and compare its predictions with the measured values in units of their σ
+    (see `Consistency`). `data`: measurements as `check_data` returns them (one data set);
+    `n_parameters`: how many parameters were determined from them (for the degrees of
+    freedom)."""
+    import jax.numpy as jnp
+
+    from ..statics import Status, solve_statics
+
+    whitened, counts, failed, names = [], [], None, []
+    solved = {}
+    for meas in data:
+        key = id(meas.loads)
+        if key not in solved:
+            sol = solve_statics(mech, meas.loads, throw=False)
+            solved[key] = (sol.q, np.asarray(sol.status) != Status.CONVERGED)
+        q, bad = solved[key]
+        q = jnp.where(jnp.asarray(bad)[:, None], 0.0, q)
+        white = np.asarray(_whitened(meas, mech, q))
+        white = np.where(bad.reshape((-1,) + (1,) * (white.ndim - 1)), 0.0, white)
+        whitened.append(white)
+        counts.append(int(np.count_nonzero(np.asarray(meas.weight))))
+        failed = bad if failed is None else failed | bad  # tables of one length only
+        names.append(meas.name)
+    n_cases = whitened[0].shape[0]
+    if any(w.shape[0] != n_cases for w in whitened):  # several load tables: per measurement
+        whitened = [w.reshape(1, -1) for w in whitened]
+        failed = np.array([bool(np.any(solved[id(m.loads)][1])) for m in data][:1])
+        cases = ("all",)
+    cases = tuple(cases) if cases is not None and len(cases) == n_cases else tuple(
+        str(c + 1) for c in range(whitened[0].shape[0]))
+    return consistency_from_residuals(whitened, counts, n_parameters, cases, failed,
+                                      names, note, alpha)
+
+
+@eqx.filter_jit
+def _whitened(meas, mech, q):
+    return meas.residual(mech, q) * meas.weight
 
 
 def _number(v):
@@ -45,23 +236,58 @@ class IdentificationReport:
     family: ClassVar[str] = "identification"
     """The method's name: 'direct', 'iterative', 'least_squares'."""
 
+    consistency: Consistency | None = None
+    """The identified model against the data (None: not checked)."""
+
+    @property
+    def determined(self) -> np.ndarray:
+        """Which parameters the data determine, by the method's own criterion (default
+        `identifiable`; `direct` also asks σ% ≤ its `max_sigma_pct`)."""
+        return np.asarray(self.identifiable, dtype=bool)
+
+    @property
+    def consistent(self) -> bool | None:
+        """The identified model reproduces the data (None: not checked)."""
+        return None if self.consistency is None else bool(self.consistency.consistent)
+
+    @property
+    def is_identified(self) -> np.ndarray:
+        """`(p,)`: determined by the data AND the identified model consistent with them: the
+        only values a report calls *identified* (an unchecked model counts as consistent)."""
+        return self.determined & (self.consistent is not False)
+
+    @property
+    def verdicts(self) -> tuple[str, ...]:
+        """Per parameter: 'identified', 'not determined by the data' or 'determined, but the
+        model is inconsistent with the data'."""
+        det = self.determined
+        return tuple("identified" if ok and self.consistent is not False else
+                     "determined, but the model is inconsistent with the data" if ok else
+                     "not determined by the data" for ok in det)
+
     def rows(self) -> list[dict]:
         """One dict per parameter: parameter, estimate, sigma, sigma_pct, unit, identifiable
-        (model units; None where there is no number)."""
+        (the data determine it), identified (and the model is consistent), verdict (model
+        units; None where there is no number)."""
+        ident, verdicts = self.is_identified, self.verdicts
         return [dict(parameter=name, estimate=_number(self.estimates[i]),
                      sigma=_number(self.sigmas[i]), sigma_pct=_number(self.sigma_pct[i]),
-                     unit=self.estimate_units[i], identifiable=bool(self.identifiable[i]))
+                     unit=self.estimate_units[i], identifiable=bool(self.identifiable[i]),
+                     identified=bool(ident[i]), verdict=verdicts[i])
                 for i, name in enumerate(self.names)]
 
     def summary(self) -> dict:
         """The common part of every report as plain data: method, parameters (`rows()`),
-        combinations, and per measurement the RMS of its whitened residuals."""
+        combinations, per measurement the RMS of its whitened residuals, and the consistency
+        of the identified model with the data (None when not checked)."""
         rms = {}
         for name, res in self.residuals.items():
             white = np.asarray(res.whitened, dtype=float)
             rms[name] = _number(np.sqrt(np.mean(white ** 2))) if white.size else None
         return {"method": self.family, "parameters": self.rows(),
-                "combinations": list(self.combinations), "residual_rms": rms}
+                "combinations": list(self.combinations), "residual_rms": rms,
+                "consistency": None if self.consistency is None else
+                self.consistency.summary()}
 
     def to_json(self, **kwargs) -> str:
         """`summary()` as JSON (NaN and inf written as null); `kwargs` go to `json.dumps`."""
@@ -102,4 +328,5 @@ class IdentificationReport:
         return fig
 
 
-__all__ = ["IdentificationReport", "MeasurementResiduals"]
+__all__ = ["CONSISTENCY_ALPHA", "Consistency", "IdentificationReport", "MeasurementResiduals",
+           "check_consistency", "check_data", "chi2_quantile", "consistency_from_residuals"]
