@@ -7,7 +7,8 @@ compared with the tyre parameters it was driven with.
 
 The model is the tree `diffsusp.mdh.tables.vehicle(12)` with point unsprung masses, written in
 closed form for speed (a 10×10 linear solve per step instead of a Newton–Euler pass per column
-of the mass matrix; the tests check it against the generic `mdh.forward_dynamics` of the tree).
+of the mass matrix; no test compares it with the generic `mdh.forward_dynamics` of the tree
+yet).
 Units SI (m, kg, N, s, rad), as the thesis's chapter 4 (the dynamics needs one consistent mass
 unit; the library's mm would need tonnes); tyre polynomials in F_z [kN] as (4-17, 4-18).
 
