@@ -64,8 +64,8 @@ def test_monte_carlo_recovers_the_tyre_within_sigma(run):
         assert abs(bias[k]) < 0.5, (name, bias[k])
     # the cornering stiffness is the best determined: σ below 1 %
     assert np.all(s[:, :2] / np.abs(q[:, :2]) < 0.01)
-    # with no delay, the estimator finds none (within 1 ms)
-    assert np.all(np.abs(np.asarray(clean["delay"])) < 0.001)
+    # with no delay, the estimator finds none (within 2 ms; its spread is 0.33 ms)
+    assert np.all(np.abs(np.asarray(clean["delay"])) < 0.002)
     # the naive pipeline (no shift at all) is as good when there is no delay
     bias, ratio, *_ = _stats(clean["naive"], exact)
     assert np.all(np.abs(bias) < 0.5) and np.all((1 / 1.5 < ratio) & (ratio < 1.5))
