@@ -27,8 +27,10 @@ print(fleet.status("out/").text())
 The same fleet gives the same numbers in-process and on a cluster (same batches, same
 programs, float64); the summary holds no timing, so it is identical.
 
-Not in this version: K&C events and tyre fits as recipes, a model per item, and splitting a
-batch over the devices of a worker (one device per worker process: start more workers).
+Not in this version: K&C events and tyre fits as recipes, a model per item, splitting a batch
+over the devices of a worker (one device per worker process: start more workers), and a hard
+time limit: the limit is checked between items and between the steps of a fit, so one XLA call
+that hangs is not interrupted.
 """
 
 from .engine import DaskEngine, Engine, InProcessEngine
