@@ -1085,7 +1085,7 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
             flags.append(f"{o}: the residual's noise level {r.noise_sigma:.3g} is "
                          f"{r.noise_sigma / hf:.2g}× the white noise above the cut-off "
                          f"({hf:.3g}): the structure leaves a misfit (the σ are then not "
-                         "honest); try the a-priori structure or a lower sigma% threshold.")
+                         "honest): the search removed terms the data need.")
         if r.compliance <= 0:
             flags.append(f"{o}: the identified compliance K_y^-1 = {r.compliance:.4g} m/N is not "
                          "positive: the relaxation is not excited enough (no slip transient).")
