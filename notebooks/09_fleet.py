@@ -23,7 +23,7 @@
 # says the reported σ is optimistic: the landmark noise also enters the regressors (errors in
 # variables), which the linear method's σ does not count.
 #
-# **Size.** The test suite executes this notebook, so it runs 60 draws on a local cluster of
+# **Size.** The test suite executes this notebook, so it runs 40 draws on a local cluster of
 # one worker thread (a worker shares this kernel's compiled programs). Set `N_DRAWS = 1000` and
 # `WORKERS = 2` (processes) for the full study; `benchmarks/fleet.py` measures 1 000
 # least-squares fits in-process and on two worker processes.
@@ -44,7 +44,7 @@ import numpy as np
 from diffsusp import fleet, identify, measure
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases
 
-N_DRAWS = 60
+N_DRAWS = 40
 WORKERS = None  # None: one worker thread in this kernel; 2: two worker processes
 
 # %% [markdown]
@@ -102,7 +102,7 @@ print(f"re-run: {again.skipped} of {again.total} already done, {again.batches} b
 #
 # For the unknowns the data determine, the standard deviation of the estimates over the draws
 # (the Monte-Carlo truth) against the root-mean-square of the σ each report gives. Agreement
-# within the Monte-Carlo's own uncertainty (≈ 1/√(2N) relative: 9 % for 60 draws, 2 % for
+# within the Monte-Carlo's own uncertainty (≈ 1/√(2N) relative: 11 % for 40 draws, 2 % for
 # 1 000) says the reported σ can be trusted for one data set.
 
 # %%
