@@ -1422,8 +1422,8 @@ def _polish(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ..
     from .least_squares import least_squares_batch
 
     lsq_params, index = _polish_params(mech, params)
-    if lsq_params is None:
-        return fitted, report
+    if lsq_params is None or not report.identified[list(index)].any():
+        return fitted, report  # nothing determined to polish (e.g. all came out negative)
     start = _polish_start(lsq_params, index, report)
     batch = least_squares_batch(mech, _as_batch(data, 1), lsq_params, start=start[None])
     fit = batch.reports[0]

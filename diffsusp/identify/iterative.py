@@ -98,6 +98,7 @@ class IterativeReport(IdentificationReport):
     weight: np.ndarray | None = None
     consistency: Consistency | None = None
     polished: object = None
+    sigma_data: np.ndarray | None = None
     _mech: Mechanism | None = dataclasses.field(default=None, repr=False, compare=False)
     _data: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
 
@@ -141,9 +142,25 @@ class IterativeReport(IdentificationReport):
 
     @property
     def sigmas(self) -> np.ndarray:
+        """The σ the measurements give each selected stiffness at the loop's values (the
+        linearised σ of a least-squares fit of the same data, `sigma_data`), when checked;
+        else the regression slope's standard error (which ignores how the deformations were
+        measured: it is 0 on noise-free data, however little they determine the value)."""
+        if self.sigma_data is not None:
+            return self.sigma_data
         if self.slope_sigma is None:
             return np.full(len(self.names), np.nan)
         return self.slope_sigma[self._selected]
+
+    @property
+    def determined(self) -> np.ndarray:
+        """The gate passed and, when checked, σ% ≤ `MAX_SIGMA_PCT` by the measurements' σ."""
+        ok = np.asarray(self.identifiable, bool)
+        if self.sigma_data is None:
+            return ok
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pct = 100.0 * self.sigma_data / np.abs(self.estimates)
+        return ok & (pct <= MAX_SIGMA_PCT)
 
     @property
     def sigma_pct(self) -> np.ndarray:
@@ -393,7 +410,7 @@ def iterative(
     final = _with_stiffness(mech, index, k)
     sol = solve_statics(final, loads, q0=q, throw=False)
     model = np.asarray(_states(final, sol.q, tuple(int(i) for i in index))[0])
-    consistency, check_items = None, None
+    consistency, check_items, sigma_data = None, None, None
     if check or polish:
         if isinstance(data, Loads):
             from ..measure.noise import ARM_SIGMA
@@ -404,17 +421,59 @@ def iterative(
         else:
             check_items = check_data(mech, data)
         consistency = check_consistency(final, check_items, int(np.sum(ever & chosen)))
+        sigma_data, consistency = _least_squares_gap(mech, final, names, chosen, check_items,
+                                                     consistency)
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
         converged=converged, history=tuple(history), slope_sigma=slope_sigma,
         selected=chosen, weight=weight, consistency=consistency, _mech=final,
-        _data=check_items,
+        _data=check_items, sigma_data=sigma_data if check or polish else None,
     )
     if polish:
         polished_mech, fit = report.polish()
         return polished_mech, dataclasses.replace(report, polished=fit)
     return final, report
+
+
+MAX_SIGMA_PCT = 10.0
+"""A stiffness whose σ by the measurements exceeds this (%) is not reported identified (as
+`direct` and `least_squares`)."""
+
+
+def _least_squares_gap(mech, final, names, chosen, items, consistency):
+    """σ of the selected stiffnesses from the measurements (whitened Jacobian through the
+    equilibrium at the loop's values) and Δχ² = ‖QᵀR‖²: how much a least-squares fit of the
+    same data would still lower χ² from here. The loop does not minimise χ², so a value within
+    the noise's χ² band can still be far from what the data say; Δχ² above the χ² quantile of
+    p dof marks it inconsistent (see `report.Consistency.gap`)."""
+    from .least_squares import whitened_residuals
+    from .report import chi2_quantile
+
+    index = np.array([mech.bushings.index(n) for n in names], dtype=int)
+    kt = np.zeros((len(mech.bushings.names), 3), bool)
+    kr = np.zeros_like(kt)
+    kt[index], kr[index] = chosen[:, :3], chosen[:, 3:]
+    params = Params.leaves(final, lambda m: (m.bushings.k_trans, m.bushings.k_rot), (kt, kr))
+    # Order as the report names them: bushing by bushing, axis by axis.
+    order = [params.names.index(f"{n}.{a}") for i, n in enumerate(names)
+             for j, a in enumerate(AXES) if chosen[i, j]]
+    if consistency.failed_cases:
+        return np.full(len(order), np.inf), consistency
+    z, jac = (np.asarray(a, float) for a in whitened_residuals(final, items, params,
+                                                               params.start))
+    jac = jac[:, order]
+    u, s, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = s > s[0] * 1e-12 if s.size and s[0] > 0 else np.zeros(s.size, bool)
+    gap = float(np.sum((u[:, keep].T @ z) ** 2))
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
+    sigma = np.sqrt((vt.T ** 2) @ inv)
+    sigma[((vt.T ** 2) @ (~keep).astype(float)) > 1e-12] = np.inf
+    critical = chi2_quantile(len(order), consistency.alpha)
+    consistency = dataclasses.replace(
+        consistency, gap=gap, gap_critical=critical,
+        consistent=bool(consistency.consistent and gap <= critical))
+    return sigma, consistency
 
 
 def _slope_sigma(delta: np.ndarray, force: np.ndarray, slope: np.ndarray) -> np.ndarray:

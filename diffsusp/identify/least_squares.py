@@ -29,9 +29,12 @@ model about the trial point (its value and Jacobian there are all a Gauss–Newt
 the function). Losses, priors and data values are runtime arrays: they never recompile.
 `least_squares_batch` vmaps the same four calls over many data sets.
 
-Stopping: optimistix's Cauchy criterion (`rtol`, `atol` on the step and on the residuals), or an
-accepted step that lowers the loss by less than `ftol` relatively. The first damping is
-λ0 = 10⁻³·max diag(JᵀJ) (optimistix starts at λ = 1, negligible for whitened residuals).
+Stopping (issue 12): at an accepted point, when a full Gauss–Newton step would lower χ² (prior
+rows included) by less than `gtol` + `ftol`·χ² — a test on what the data can still give, not on
+the size of the step, which stays large along directions the data barely see. A weak default
+prior on log stiffness keeps those directions where they started (see `least_squares`). The
+first damping is λ0 = 10⁻³·max diag(JᵀJ) (optimistix starts at λ = 1, negligible for whitened
+residuals). `FitReport.message` gives the stop reason.
 
 Inner non-convergence: every residual of a load case whose equilibrium fails at a trial point
 is set to 1e8 (finite), so the trust region rejects the step and shrinks; the history records
@@ -748,8 +751,8 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
             break
     messages = [
         STOP_REASONS[reasons[b]].format(gtol=gtol, ftol=ftol) if converged[b] else
-        ("failed: the LM linear solve failed" if failed[b] else
-         f"not converged: max_steps={max_steps} reached") for b in range(n_sets)]
+        ("the LM linear solve failed" if failed[b] else
+         f"max_steps={max_steps} reached") for b in range(n_sets)]
     return u, last, histories, converged, steps, accepted_steps, messages, q0
 
 
@@ -790,7 +793,7 @@ def _run_adaptive(problem: _Problem, values, u0, *, adaptive: bool, max_steps, *
     for _ in range(ADAPTIVE_PRIOR_ROUNDS):
         z = np.asarray(last[0])[:, :-p] if p else np.asarray(last[0])
         rms = np.sqrt(np.sum(z ** 2, axis=1) / dof)
-        again = conv & (rms < 0.1 * scale) & (rms > 1e-6) & (steps < max_steps)
+        again = conv & (rms < 0.1 * scale) & (rms > 1e-9) & (steps < max_steps)
         if not again.any():
             break
         scale = np.where(again, np.maximum(rms, 1e-12), scale)

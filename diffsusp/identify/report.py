@@ -103,6 +103,12 @@ class Consistency:
     measurements: tuple[str, ...] = ()
     alpha: float = CONSISTENCY_ALPHA
     note: str = ""
+    gap: float | None = None
+    gap_critical: float | None = None
+    """For an estimate that does not minimise χ² (the iterative loop): Δχ², how much a full
+    Gauss–Newton step of the same data would still lower χ² (≈ χ² − its least-squares
+    minimum), and the bound above which the estimate is not a least-squares one (upper
+    `alpha` quantile of χ² with as many dof as parameters)."""
 
     @property
     def chi2_per_dof(self) -> float:
@@ -115,6 +121,11 @@ class Consistency:
         if self.failed_cases:
             return (f"INCONSISTENT: the identified model has no equilibrium in case(s) "
                     f"{', '.join(self.failed_cases)}")
+        if self.gap is not None and not self.gap <= self.gap_critical:
+            return (f"INCONSISTENT with the data: χ²/dof = {self.chi2_per_dof:.4g}, but the "
+                    f"least-squares optimum of the same data is Δχ² = {self.gap:.4g} lower "
+                    f"(> {self.gap_critical:.3g}): these values are not what the data say, so "
+                    "none is reported as identified")
         worst = int(np.argmax(self.case_rms)) if self.case_rms.size else None
         where = (f"; worst case {self.cases[worst]}: RMS {self.case_rms[worst]:.3g}σ"
                  if worst is not None else "")
@@ -132,7 +143,8 @@ class Consistency:
                 "consistent": bool(self.consistent),
                 "case_rms": {c: _number(r) for c, r in zip(self.cases, self.case_rms,
                                                            strict=True)},
-                "failed_cases": list(self.failed_cases), "verdict": self.verdict}
+                "failed_cases": list(self.failed_cases), "gap_chi2": None if self.gap is None
+                else _number(self.gap), "verdict": self.verdict}
 
 
 def consistency_from_residuals(whitened: Sequence[np.ndarray], counts: Sequence[int],
