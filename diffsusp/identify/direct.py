@@ -1452,7 +1452,7 @@ def direct_batch(
     measurements: Sequence[Measurements],
     params: Params | Callable[[Mechanism], object] | None = None,
     *,
-    polish: bool = True,
+    polish: bool | str = "auto",
     max_sigma_pct: float = MAX_SIGMA_PCT,
     **options,
 ) -> tuple[DirectReport, ...]:
@@ -1477,8 +1477,13 @@ def direct_batch(
     starts = np.stack([_polish_start(lsq_params, index, r) for r in linear])
     batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), lsq_params,
                                 start=starts)
-    return tuple(_merge_polish(r, index, fit, max_sigma_pct)
-                 for r, fit in zip(linear, batch.reports, strict=True))
+    # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
+    # noise-free accuracy, or determined nothing, keep it (the batch runs them all).
+    return tuple(
+        _merge_polish(r, index, fit, max_sigma_pct)
+        if polish is True or (r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof
+                              and r.identified[list(index)].any()) else r
+        for r, fit in zip(linear, batch.reports, strict=True))
 
 
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,
