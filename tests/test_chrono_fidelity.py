@@ -78,12 +78,15 @@ def test_spring_and_stops_are_chronos_laws(mech, doc):
     (deflection ±200 mm) and 60 mm into each stop. (The smooth option, the Akima law of a
     tabulated spring: tests/test_io_chrono.py::test_tierod_body_and_spring_curve.)"""
     length = np.linspace(182.0, 410.0, 2281)  # the table's range; into the rebound stops
-    np.testing.assert_allclose(model_tension(mech, length), chrono_tension(length, doc),
-                               rtol=1e-12, atol=1e-7)
+    np.testing.assert_allclose(
+        model_tension(mech, length), chrono_tension(length, doc), rtol=1e-12, atol=1e-7
+    )
     bump = np.linspace(90.0, 150.0, 601)  # the bump stops (Chrono: beyond the table, held)
     mask = np.array(["bump_" in n for n in mech.stops.names])
-    got = sum(-float(mech.stops.k[e]) * np.maximum(float(mech.stops.length[e]) - bump, 0.0)
-              for e in np.flatnonzero(mask))
+    got = sum(
+        -float(mech.stops.k[e]) * np.maximum(float(mech.stops.length[e]) - bump, 0.0)
+        for e in np.flatnonzero(mask)
+    )
     stop_x, stop_y = (np.asarray(v) for v in zip(*STOP_CURVE, strict=True))
     np.testing.assert_allclose(-got, np.interp(150.0 - bump, stop_x, stop_y), atol=1e-7)
     with pytest.raises(ValueError, match="spring_interpolation"):
@@ -113,8 +116,11 @@ def oracle_path(doc, heights):
         length.append(np.linalg.norm(pos[a] - pos[b]))
         patch.append(pos[cp][2])
         centre.append(pos[k])
-    return (CubicSpline(heights, length), CubicSpline(heights, patch),
-            CubicSpline(heights, np.array(centre)))
+    return (
+        CubicSpline(heights, length),
+        CubicSpline(heights, patch),
+        CubicSpline(heights, np.array(centre)),
+    )
 
 
 def test_vertical_sweep_matches_chrono_oracle(doc, event):
@@ -135,8 +141,9 @@ def test_vertical_sweep_matches_chrono_oracle(doc, event):
     def load(h):  # virtual work: F·dz_cp = T·dℓ
         return chrono_tension(length(h), doc) * length(h, 1) / patch(h, 1)
 
-    h_star = np.array([brentq(lambda h, f=f: load(h) - f, heights[0], heights[-1], xtol=1e-12)
-                       for f in FZ])
+    h_star = np.array(
+        [brentq(lambda h, f=f: load(h) - f, heights[0], heights[-1], xtol=1e-12) for f in FZ]
+    )
     error = np.abs(centre - wheel(h_star))
     print(f"max wheel-centre deviation from the oracle: {error.max():.2e} mm")
     np.testing.assert_allclose(centre, wheel(h_star), rtol=0, atol=1e-4)
@@ -149,7 +156,11 @@ def test_corner_travels_with_the_model(mech, tmp_path):
     right side (read on that side for a Chrono file, mirrored otherwise)."""
     corner = default_corner(mech)
     assert (corner.frame, corner.side, corner.loaded_radius, corner.design_load) == (
-        "iso", "left", 330.0, None)
+        "iso",
+        "left",
+        330.0,
+        None,
+    )
     assert corner.kingpin == ("uca_upright", "lca_upright")
     path = tmp_path / "hmmwv.toml"
     save_model(mech, path)
@@ -184,9 +195,14 @@ def test_kc_and_sensitivity_run_on_the_file_without_corner_flags(event):
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["status"] == [0] * FZ.size
-    np.testing.assert_allclose(data["metrics"]["toe"]["values"],
-                               kc.display("toe", event.metrics["toe"]), rtol=1e-9, atol=1e-12)
-    result = runner.invoke(app, ["sensitivity", str(HMMWV), *sweep, "--no-derivatives",
-                                 "--metric", "toe", "--json"])
+    np.testing.assert_allclose(
+        data["metrics"]["toe"]["values"],
+        kc.display("toe", event.metrics["toe"]),
+        rtol=1e-9,
+        atol=1e-12,
+    )
+    result = runner.invoke(
+        app, ["sensitivity", str(HMMWV), *sweep, "--no-derivatives", "--metric", "toe", "--json"]
+    )
     assert result.exit_code == 0, result.output
     assert "toe" in json.dumps(json.loads(result.stdout))

@@ -82,8 +82,9 @@ class Corner:
                 f"Corner.loaded_radius must be a positive length in mm; got {self.loaded_radius}."
             )
         if self.design_load is not None and not np.isfinite(self.design_load):
-            raise InputError(f"Corner.design_load must be a finite force in N or None; got "
-                             f"{self.design_load}.")
+            raise InputError(
+                f"Corner.design_load must be a finite force in N or None; got {self.design_load}."
+            )
 
     def with_prefix(self, prefix: str) -> "Corner":
         """The same corner in a combined axle whose names carry `prefix` (e.g. 'left/')."""
@@ -110,9 +111,11 @@ class Corner:
         from ..errors import ModelError
 
         p = self.prefix
-        wanted = [("wheel_centre", self.wheel_centre, mech.markers.names),
-                  ("contact_point", self.contact_point, mech.load_points.names),
-                  ("wheel_centre_load", self.wheel_centre_load, mech.load_points.names)]
+        wanted = [
+            ("wheel_centre", self.wheel_centre, mech.markers.names),
+            ("contact_point", self.contact_point, mech.load_points.names),
+            ("wheel_centre_load", self.wheel_centre_load, mech.load_points.names),
+        ]
         for k, ref in enumerate(self.kingpin or ()):
             if isinstance(ref, str):
                 wanted.append((f"kingpin[{k}]", ref, mech.markers.names))
@@ -120,8 +123,10 @@ class Corner:
                 wanted.append((f"kingpin[{k}]", ref[0], ("ground", *mech.parts)))
         for what, name, known in wanted:
             if name is not None and p + name not in known:
-                raise ModelError(f"corner {what}: '{p + name}' is not in the model (known: "
-                                 f"{', '.join(known) or 'none'}).")
+                raise ModelError(
+                    f"corner {what}: '{p + name}' is not in the model (known: "
+                    f"{', '.join(known) or 'none'})."
+                )
 
     def resolve(self, mech) -> "ResolvedCorner":
         """Indices and axes of this corner in `mech` (raises `InputError` on unknown names).
@@ -179,15 +184,22 @@ class Corner:
         # sense of the aligning torque is the axis that lowers toe.
         toe_out = -float(np.cross(up, outboard) @ forward) * up
         return ResolvedCorner(
-            prefix=p, wheel_centre=wc, contact_point=load_point(self.contact_point,
-                                                                "contact_point"),
+            prefix=p,
+            wheel_centre=wc,
+            contact_point=load_point(self.contact_point, "contact_point"),
             wheel_centre_load=load_point(self.wheel_centre_load, "wheel_centre_load"),
-            kingpin=kingpin, side=side, sigma=sigma,
-            outboard=tuple(outboard.tolist()), forward=tuple(forward.tolist()),
-            rearward=tuple(rear.tolist()), up=tuple(up.tolist()), toe_out=tuple(toe_out.tolist()),
+            kingpin=kingpin,
+            side=side,
+            sigma=sigma,
+            outboard=tuple(outboard.tolist()),
+            forward=tuple(forward.tolist()),
+            rearward=tuple(rear.tolist()),
+            up=tuple(up.tolist()),
+            toe_out=tuple(toe_out.tolist()),
             loaded_radius=float(self.loaded_radius),
-            design_load=float(self.design_load) if self.design_load is not None else
-            _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist())),
+            design_load=float(self.design_load)
+            if self.design_load is not None
+            else _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist())),
         )
 
 
@@ -216,11 +228,11 @@ class ResolvedCorner(NamedTuple):
         `longitudinal` rearward (a braking force), `aligning` torque about the vertical in the
         toe-out sense.
         """
-        up, o, r, a = (np.asarray(v) for v in (self.up, self.outboard, self.rearward,
-                                               self.toe_out))
+        up, o, r, a = (np.asarray(v) for v in (self.up, self.outboard, self.rearward, self.toe_out))
         vertical, lateral, longitudinal, aligning = (
-            np.asarray(v, dtype=float)[..., None] for v in (vertical, lateral, longitudinal,
-                                                            aligning))
+            np.asarray(v, dtype=float)[..., None]
+            for v in (vertical, lateral, longitudinal, aligning)
+        )
         force = vertical * up - lateral * o + longitudinal * r
         return force, aligning * a
 
@@ -253,5 +265,11 @@ def common_perpendicular_midpoint(a0, a1, b0, b1) -> np.ndarray:
     return 0.5 * (a0 + s * u + b0 + t * v)
 
 
-__all__ = ["FRAMES", "Corner", "PointRef", "ResolvedCorner", "common_perpendicular_midpoint",
-           "design_offset"]
+__all__ = [
+    "FRAMES",
+    "Corner",
+    "PointRef",
+    "ResolvedCorner",
+    "common_perpendicular_midpoint",
+    "design_offset",
+]
