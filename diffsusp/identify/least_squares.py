@@ -730,7 +730,7 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
                 failed_cases=int(failed_cases[b]), accepted=bool(accepted[b]),
                 estimate=estimate[b], step_size=float(step_size[b])))
         if callback is not None:
-            callback(k, histories[0][-1] if n_sets == 1 else
+            callback(step0 + k, histories[0][-1] if n_sets == 1 else
                      dict(active=active.copy(), trial_loss=trial_loss, accepted=accepted))
         terminate, bad_solve = np.asarray(rec["terminate"]), np.asarray(rec["failed"])
         reason = np.asarray(rec["reason"])
