@@ -99,7 +99,7 @@ for e, name in enumerate(mech.bushings.names):
 
 # %%
 noisy = measure.add_noise(exact, measure.GaussianNoise(landmarks=0.05), jax.random.PRNGKey(7))
-_, thesis = identify.direct(mech, noisy, weighting="none")
+_, thesis = identify.direct(mech, noisy, weighting="none", polish=False)
 print(thesis.table())
 
 # %% [markdown]
@@ -117,7 +117,7 @@ print(thesis.table())
 # B, the spring) plus what the strut, measured here, adds (bushing F's translations).
 
 # %%
-fitted, report = identify.direct(mech, noisy, hold="model", eliminate=True)
+fitted, report = identify.direct(mech, noisy, hold="model", eliminate=True, polish=False)
 print(report.table())
 
 # %%
@@ -135,7 +135,7 @@ index = [report.names.index(n) for n in names]
 values, sigmas = [], []
 for seed in range(8):
     sample = measure.add_noise(exact, measure.GaussianNoise(), jax.random.PRNGKey(100 + seed))
-    _, r = identify.direct(mech, sample, hold="model", eliminate=True)
+    _, r = identify.direct(mech, sample, hold="model", eliminate=True, polish=False)
     values.append(r.values[index])
     sigmas.append(r.sigma[index])
 values, sigmas = np.array(values), np.array(sigmas)
@@ -175,6 +175,6 @@ with tempfile.TemporaryDirectory() as tmp:
     print(path.read_text().splitlines()[0])
     print(path.read_text().splitlines()[1])
     back = measure.read_measurements(path, mech)
-    _, again = identify.direct(mech, back, hold="model", eliminate=True)
+    _, again = identify.direct(mech, back, hold="model", eliminate=True, polish=False)
     print("same identification from the file:",
           np.allclose(again.values, report.values, rtol=1e-9))

@@ -9,12 +9,14 @@ import pytest
 from diffsusp._compile import set_xla_flags  # noqa: E402
 
 # The CLI's compiler flags for every program of the tests and the notebook kernels (they
-# inherit XLA_FLAGS), set before JAX starts its backend. The tests also compile without XLA's
-# backend (LLVM) optimisation: compiling is the suite's cost, and its programs run once or
-# twice (pseudo-McPherson 13-case solve: 28 → 17 s of CPU to compile, 0.03 → 0.1 s to run).
-os.environ["XLA_FLAGS"] = " ".join([os.environ.get("XLA_FLAGS", ""),
-                                    "--xla_backend_optimization_level=0",
-                                    "--xla_llvm_disable_expensive_passes=true"]).strip()
+# inherit XLA_FLAGS), set before JAX starts its backend. DIFFSUSP_TEST_O0=1 compiles without
+# XLA's backend (LLVM) optimisation (pseudo-McPherson 13-case solve: 28 → 17 s of CPU to
+# compile, 0.03 → 0.1 s to run; test_kc 169 → 116 s), but changes last bits: the shipped model
+# files (test_io_native) and two 1e-15 comparisons then fail, so it is not the default yet.
+if os.environ.get("DIFFSUSP_TEST_O0") == "1":
+    os.environ["XLA_FLAGS"] = " ".join([os.environ.get("XLA_FLAGS", ""),
+                                        "--xla_backend_optimization_level=0",
+                                        "--xla_llvm_disable_expensive_passes=true"]).strip()
 set_xla_flags(os.environ)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_num_cpu_devices", 2)  # as the CLI does: `solve_statics(devices=2)` works
