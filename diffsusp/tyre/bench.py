@@ -469,12 +469,18 @@ def _kinematics(cols, Dm, rolling_radius):
     vx, vy = speed * xp.cos(steer), -speed * xp.sin(steer)
     bdot = steer @ Dm.T
     g = cols["camber"]
+    fz = cols["FZ"] * 1e-3
+    # F_x as its load polynomial F̂x_pneu(F_z) (3-48), fitted to the measured F_x: the
+    # coupling column −F_y·F_x of M_z (3-69) built from the raw F_x is an error in the
+    # variables (3 N of F_x noise times F_y: a 0.75 σ bias of M_z's coefficients)
+    V = xp.stack([xp.ones_like(fz), fz, fz**2, fz**3], axis=-1).reshape(-1, 4)
+    coef = xp.linalg.lstsq(V, cols["FX"].reshape(-1), rcond=None)[0]
     return {
-        "fz": cols["FZ"] * 1e-3, "kappa": vx / omega - rolling_radius, "delta": vy / omega,
+        "fz": fz, "kappa": vx / omega - rolling_radius, "delta": vy / omega,
         "phi": bdot / omega, "gamma": g, "pi_gamma_vx": g * vx / omega,
         "pi_gamma_bdot": g * bdot / omega, "pi_gamma2_bdot": g * g * bdot / omega,
-        "fydot_w": (cols["FY"] @ Dm.T) / omega, "fy": cols["FY"], "fx": cols["FX"],
-        "omega": omega}
+        "fydot_w": (cols["FY"] @ Dm.T) / omega, "fy": cols["FY"],
+        "fx": (V @ coef).reshape(fz.shape), "omega": omega}
 
 
 @jax.jit
@@ -622,11 +628,8 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
     significance tests): while a kept coefficient still fails IC ≥ `ic_threshold` or
     σ % ≤ `sigma_pct_threshold`, the rule returns None and lets the elimination remove it.
     """
-    lo, hi = fz_range
-    loads = loads or tuple(np.linspace(lo, hi, 4))
-    dom = table6_domains(rolling_radius)[output]
-    x_lo = min(v[0] for v in dom.values())
-    x_hi = max(v[1] for v in dom.values())
+    violation = _behaviour(output, fz_range, rolling_radius=rolling_radius, loads=loads,
+                           well_excited_load=well_excited_load)
 
     def rule(fit: lsq.Fit) -> str | None:
         free = fit.kept & ~fit.fixed
@@ -637,47 +640,73 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
             pending |= free & (np.nan_to_num(rel) > sigma_pct_threshold)
         if np.any(pending):
             return None
-        active = {n: x for n, x, k, f in zip(fit.names, fit.x, fit.kept, fit.fixed, strict=True)
-                  if k and not f and x != 0}
-        pneu = {n: x for n, x in active.items() if parse_name(n)[1] not in ("Ly", "P2")}
+        found = violation({n: x for n, x, k, f in zip(fit.names, fit.x, fit.kept, fit.fixed,
+                                                       strict=True) if k and not f and x != 0})
+        return None if found is None else found[0]
+
+    return rule
+
+
+def _behaviour(output, fz_range, *, rolling_radius=0.294, loads=None, well_excited_load=True):
+    """The behaviour rules of `structure_rules` as a function of the active coefficients
+    (name → value): returns None, or (the coefficient the rule drops, the coefficients that
+    can fix the same fault (its load polynomial c_{F,X,i} for rule 1, the cornering stiffness's
+    for rule 2, the δ′ block's top-degree terms for rule 3), the rule's key). `excused`: keys
+    of faults the data support (every removal significant), skipped."""
+    lo, hi = fz_range
+    loads = loads or tuple(np.linspace(lo, hi, 4))
+    dom = table6_domains(rolling_radius)[output]
+    x_lo = min(v[0] for v in dom.values())
+    x_hi = max(v[1] for v in dom.values())
+
+    def find(active: Mapping[str, float], excused=frozenset()):
+        pneu = {n: x for n, x in active.items() if parse_name(n)[1] not in ("Ly", "P2")
+                and x != 0}
         by_block: dict[tuple[str, int], dict[int, float]] = {}
         for n, x in pneu.items():
             _, block, i, j = parse_name(n)
             by_block.setdefault((block, i), {})[j] = x
+
+        def name(block, i, j):
+            return f"b_{output}_{block}_{i}_{j}"
+
         # 1. load polynomials keep their sign on [lo, hi] (and vanish only at F_z = 0)
         fz = np.linspace(lo, hi, 41)
-        for (block, _i), cj in sorted(by_block.items()):
+        for (block, i), cj in sorted(by_block.items()):
             c = sum(v * fz**j for j, v in cj.items())
-            if np.min(c) < 0 < np.max(c):
-                top = [(ii, j) for (b, ii), cc in by_block.items() if b == block
-                       for j in cc]
+            if np.min(c) < 0 < np.max(c) and ("sign", block, i) not in excused:
+                top = [(ii, j) for (b, ii), cc in by_block.items() if b == block for j in cc]
                 if well_excited_load:
                     ii, j = max(top)
                 else:
                     j, ii = max((j, ii) for ii, j in top)
-                return f"b_{output}_{block}_{ii}_{j}"
+                group = {name(block, i, jj) for jj in cj} | {name(block, ii, j)}
+                return name(block, ii, j), group, ("sign", block, i)
         # 2. concave cornering stiffness (F_y)
-        if output == "Fy" and ("delta", 1) in by_block:
+        if output == "Fy" and ("delta", 1) in by_block and ("concave",) not in excused:
             cj = by_block[("delta", 1)]
             d2 = sum(v * j * (j - 1) * fz ** max(j - 2, 0) for j, v in cj.items())
             # PSA sign: the stiffness is negative; concave in magnitude means |c| concave.
             if np.max(-d2) > 0 and max(cj) >= 2:
-                return f"b_{output}_delta_1_{max(cj)}"
+                return (name("delta", 1, max(cj)), {name("delta", 1, j) for j in cj if j >= 2},
+                        ("concave",))
         # 3. extremum counts in the useful domain
-        if any(b == "delta" for b, _ in by_block):
-            model = PolynomialModel.create(output, {"delta": max(i for b, i in by_block
-                                                                 if b == "delta")},
+        if any(b == "delta" for b, _ in by_block) and ("extrema",) not in excused:
+            top_i = max(i for b, i in by_block if b == "delta")
+            model = PolynomialModel.create(output, {"delta": top_i},
                                            values={n: x for n, x in pneu.items()
                                                    if parse_name(n)[1] == "delta"})
             for f in loads:
                 ex = model.extrema(float(f), "delta", x_lo, x_hi)
-                if (sum(k == "max" for _, _, k in ex) > 1 or sum(k == "min" for _, _, k in ex) > 1):
+                if (sum(k == "max" for _, _, k in ex) > 1
+                        or sum(k == "min" for _, _, k in ex) > 1):
                     i, j = max((i, j) for (b, i), cc in by_block.items() if b == "delta"
                                for j in cc)
-                    return f"b_{output}_delta_{i}_{j}"
+                    return (name("delta", i, j), {name("delta", i, jj) for jj in
+                                                  by_block[("delta", i)]}, ("extrema",))
         return None
 
-    return rule
+    return find
 
 
 # --------------------------------------------------------------------------------------------
@@ -708,7 +737,8 @@ class OutputReport:
     step-2 regression, white residual), `stiffness` K_y [N/m], `noise_sigma` (the white noise σ
     of the output channel estimated from the residual, N or N·m), `removed` (name → reason),
     `not_identifiable` (name → why), `fydot_hat` (the instrument's Ḟ_y/ω, (segments, samples),
-    F_y only)."""
+    F_y only), `excused` (behaviour faults the search left because every removal that mends
+    them is significant: ("sign", block, i), ("concave",), ("extrema",))."""
 
     output: str
     fit: lsq.Fit | None
@@ -721,6 +751,7 @@ class OutputReport:
     removed: dict
     not_identifiable: dict
     fydot_hat: np.ndarray | None = None
+    excused: list = dataclasses.field(default_factory=list)
 
     @property
     def stiffness(self) -> float:
@@ -811,26 +842,36 @@ def _sandwich(xp, Q, M, Ws, e, sources, s, r):
     variance (v_k None) is estimated from the residual e: E[eᵀe] = Σ_k v_k·‖(I − P)A_k‖²_F
     with P = W·M·Qᵀ. Returns (σ, estimated variance)."""
     Qs, Wss = Q.reshape(s, r, -1), Ws.reshape(s, r, -1)
+    p = Q.shape[-1]
+    need_t = any(var is None for _, var in sources)
     WtW = Ws.T @ Ws
+
+    def gram(B, C):  # Σ_s B_s·C_sᵀ of (s, p, m) stacks, as one matrix product
+        return xp.swapaxes(B, 0, 1).reshape(p, -1) @ xp.swapaxes(C, 0, 1).reshape(p, -1).T
+
     terms = []
     for A, var in sources:
-        spec = "srp,rm->spm" if A.ndim == 2 else "srp,srm->spm"
-        Bq = xp.einsum(spec, Qs, A)
-        Bw = xp.einsum(spec, Wss, A)
-        tr = xp.sum(A * A) * (s if A.ndim == 2 else 1)
-        Gq = xp.einsum("spm,sqm->pq", Bq, Bq)
-        T = (tr - 2.0 * xp.trace(M @ xp.einsum("spm,sqm->pq", Bq, Bw))
-             + xp.trace(M.T @ WtW @ M @ Gq))
+        Bq = xp.swapaxes(Qs, 1, 2) @ A  # (s, p, m) (batched matrix products: BLAS)
+        Gq = gram(Bq, Bq)
+        T = None
+        if need_t:
+            Bw = xp.swapaxes(Wss, 1, 2) @ A
+            tr = xp.sum(A * A) * (s if A.ndim == 2 else 1)
+            T = (tr - 2.0 * xp.trace(M @ gram(Bq, Bw)) + xp.trace(M.T @ WtW @ M @ Gq))
         terms.append((Gq, T, var))
-    known = sum(var * T for _, T, var in terms if var is not None)
-    (T_u,) = [T for _, T, var in terms if var is None]
-    var_u = xp.maximum((e @ e - known) / T_u, 0.0)
+    unknown = [T for _, T, var in terms if var is None]
+    if unknown:
+        known = sum(var * T for _, T, var in terms if var is not None)
+        var_u = xp.maximum((e @ e - known) / unknown[0], 0.0)
+    else:  # every variance given (the structure search: the noise level of the data)
+        var_u = sources[0][1]
     cov = sum((var_u if var is None else var) * Gq for Gq, _, var in terms)
     return xp.sqrt(xp.abs(xp.diag(M @ cov @ M.T))), var_u
 
 
 def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
-             instrument=None, sigma_fy=0.0, passes: int = 2) -> dict:
+             instrument=None, sigma_fy=0.0, passes: int = 2, noise_var=None,
+             step2: bool = True) -> dict:
     """The two-step identification (3-40…3-46, 3-76, 3-77) of one output on conditioned
     segments, with NumPy (`xp = np`) or traced (`xp = jax.numpy`, vmappable) arrays.
 
@@ -857,7 +898,9 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     slip regressors have little content). The white-residual σ of the least squares was twice
     the spread of the slip and offset coefficients. The σ here is the sandwich of that
     noise model, its variance estimated from the residual with the filter's and the
-    difference's correlations accounted for (`_sandwich`).
+    difference's correlations accounted for (`_sandwich`), or `noise_var` (the output's white
+    noise variance per sample, known: the structure search gives the level of the data, which
+    does not depend on the structure). `step2=False`: step 1 only (x, σ).
 
     **Step 2** K_y⁻¹ = c from F − F̂_pneu = c·((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) (3-76, 3-77),
     instrumented likewise; its σ is that of the linearised joint model F = W_pneu·b + c·d(b)
@@ -871,13 +914,13 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     ly, pn, p2 = (np.flatnonzero(np.asarray(k)) for k in (is_ly, is_pneu, is_p2))
 
     def filt(V):
-        return xp.einsum("rm,smk->srk", H, V).reshape(n, -1)
+        return (H @ V).reshape(n, -1)
 
     def filt1(v):
-        return xp.einsum("rm,sm->sr", H, v).reshape(n)
+        return (v @ H.T).reshape(n)
 
     def lag(g):  # H·diag(g/ω)·D per segment: the noise of Ḟ_y/ω·g in a filtered column
-        return xp.einsum("rm,sm,mk->srk", H, g / omega, Dm)
+        return (H[None] * (g / omega)[:, None, :]) @ Dm
 
     def scale(A):
         sc = xp.sqrt(xp.sum(A * A, axis=0))
@@ -903,10 +946,10 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     if own:  # least squares (the measured Ḟ_y as its own instrument), then `passes` IV
         fh = fydot
         if xp is np:
-            for _ in range(max(passes, 1)):
+            for _ in range(passes):
                 fh = refine(fh)
-        else:
-            fh = jax.lax.fori_loop(0, max(passes, 1), lambda _, f: refine(f), fydot)
+        elif passes:
+            fh = jax.lax.fori_loop(0, passes, lambda _, f: refine(f), fydot)
     else:
         fh = instrument
     bs, Q, M = _iv(xp, Ws, instrumented(fh), yv)
@@ -914,10 +957,12 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
 
     def sources(g):
         if own:
-            return [(H[None] - lag(g), None)]
-        return [(H, None), (-lag(g), sigma_fy**2)]
+            return [(H[None] - lag(g), noise_var)]
+        return [(H, noise_var), (-lag(g), sigma_fy**2)]
 
     sig, var = _sandwich(xp, Q, M, Ws, yv - Ws @ bs, sources(gain(b)), s, r)
+    if not step2:
+        return {"x": b, "sigma": sig / sc, "noise_sigma": xp.sqrt(var), "fydot_hat": fh}
     # step 2 and the joint σ of c
     bp = b[pn]
     gd = xp.einsum("smk,k->sm", Dp[..., pn], bp)
@@ -967,21 +1012,41 @@ def _parts_program(model):
 
 def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = True,
                     rules: bool = True, sigma_pct_threshold: float | None = 10.0,
-                    ic_threshold: float = 0.0, fixed=None, rolling_radius: float = 0.294,
+                    significance: float = 1e-3, ic_threshold: float = 0.0, fixed=None,
+                    rolling_radius: float = 0.294,
                     fy_report: "OutputReport | None" = None) -> OutputReport:
     """Two-step identification of one output ("Fy" or "Mz") on conditioned data (spec §3.3):
     step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77);
-    the final structure estimated by `two_step` (instrumental variables, noise-model σ).
+    every structure estimated by `two_step` (instrumental variables, noise-model σ).
 
-    The search (the guaranteed least squares, `lsq.eliminate`) removes, one at a time, the
-    coefficient with σ % > `sigma_pct_threshold` (default 10 %: the thesis's tables print
-    nothing above 3.9 %) or with a confidence index below `ic_threshold` (default 0: off —
-    the thesis's IC < 0.1 rule is not what its tables show, which keep coefficients with IC
-    down to 0.01, and on synthetic data it removes true terms such as b_Fy_delta_5_2), then
-    applies the behaviour rules (`structure_rules`). Its σ are the white-residual ones of the
-    least squares (conservative for the slip terms: see `two_step`). For M_z, `fy_report`
-    (the F_y identification) supplies the instrument of Ḟ_y and its noise level; without it
-    the M_z relaxation terms are least squares (biased toward 0 by the F_y noise)."""
+    **The structure search** (spec §3.3, §3.4, §7 items 18–19; `_structure_search`) removes
+    one coefficient at a time, refitting each time:
+
+    1. the coefficient with the largest σ % above `sigma_pct_threshold` (default 10 %: the
+       thesis's tables print nothing above 3.9 %; IC < `ic_threshold` too, default 0: off —
+       the thesis's IC < 0.1 rule is not what its tables show, which keep coefficients with
+       IC down to 0.01). The σ are those of `two_step` (the sandwich of the filtered noise
+       model), not the white-residual σ of the least squares, which are twice the spread of
+       the slip terms and made the search remove terms the data determine;
+    2. once every kept coefficient passes, the behaviour rules (`structure_rules`: load
+       polynomials keep their sign, concave stiffness, extremum counts);
+    3. **a removal must not raise the residual beyond the noise**: the residual increase of
+       removing coefficient i (for the least squares ΔRSS = x_i²/[(WᵀW)⁻¹]_ii) is compared with
+       the increase the noise alone would cause, under the same filtered noise model: an
+       F-test of one degree of freedom, whose statistic with the noise's correlations
+       accounted for is (x_i/σ_i)² (σ_i the sandwich σ), against the χ²₁ quantile of
+       `significance` (default 10⁻³: 10.8, |x|/σ = 3.3). A significant coefficient is kept,
+       whatever its σ %. A behaviour rule whose preferred removal is significant removes the
+       least significant coefficient that can mend the same fault (the other monomials of the
+       offending load polynomial), or, if every one is significant, is not applied: the
+       report's `excused` says which fault the data support. On the synthetic campaign the
+       load-sign rule drops b_Fy_delta_5_3 of an aliased c_{Fy,δ′,5}(F_z) (three load levels,
+       δ′ constant on the load sines), and the white σ % then removed b_Fy_delta_5_2 (the true
+       term) and b_Fy_Ly_4_2 at σ % ≈ 10.1 %: K_y 10 % off, the residual 8× the noise.
+
+    For M_z, `fy_report` (the F_y identification) supplies the instrument of Ḟ_y and its noise
+    level; without it the M_z relaxation terms are least squares (biased toward 0 by the F_y
+    noise)."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
     names = lip.names
@@ -989,17 +1054,41 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     fydot = np.asarray(cond.samples["fydot_w"])
     H = cond.operator
     W = np.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
-    removed, not_ident = {}, {}
+    instrument, sigma_fy = None, 0.0
+    if output != "Fy":
+        if fy_report is not None and fy_report.fydot_hat is not None:
+            # the F_y noise level from above the cut-off: independent of the F_y structure
+            instrument, sigma_fy = fy_report.fydot_hat, cond.noise["FY"]
+        else:
+            instrument = fydot
+    s = X.shape[0]
+    omega = np.asarray(cond.samples["omega"])
+
+    def estimate(active):
+        is_ly, is_pneu, is_p2 = _masks([names[i] for i in active])
+        return two_step(np, X[..., active], L[..., active], Dp[..., active], fydot,
+                        y.reshape(s, -1), H, cond.difference, omega, cond.dt, is_ly=is_ly,
+                        is_pneu=is_pneu, is_p2=is_p2, instrument=instrument,
+                        sigma_fy=sigma_fy)
+
+    removed, not_ident, excused = {}, {}, []
     if search:
         fz = cond.inputs["fz"]
-        check = structure_rules(output, (float(fz.min()), float(fz.max())),
-                                rolling_radius=rolling_radius, ic_threshold=ic_threshold,
-                                sigma_pct_threshold=sigma_pct_threshold) if rules else None
-        fit, log = lsq.eliminate(W, y, names=names, sigma_pct_threshold=sigma_pct_threshold,
-                                 ic_threshold=ic_threshold, check=check, fixed=fixed)
-        for st in log:
-            removed[st.removed] = st.reason
-        active = [i for i in range(len(names)) if fit.kept[i] and not fit.fixed[i]]
+        behaviour = _behaviour(output, (float(fz.min()), float(fz.max())),
+                               rolling_radius=rolling_radius) if rules else None
+        # The search judges the least squares with their noise-model σ at the noise level of
+        # the data (above the cut-off: independent of the structure): the instrumental-
+        # variable refinement and the residual's noise estimate need a sound structure (with
+        # the collinear columns of the full model the predicted Ḟ_y is meaningless and the
+        # residual is overfitted).
+        var = cond.noise["FY" if output == "Fy" else "MZ"] ** 2
+        gram = _NoiseGram(W, L, _masks(names)[0], H, cond.difference, omega, var,
+                          None if output == "Fy" else cond.noise["FY"] ** 2)
+        fit, active, removed, excused = _structure_search(
+            W, y, names, gram, behaviour=behaviour, fixed=fixed,
+            sigma_pct_threshold=sigma_pct_threshold, ic_threshold=ic_threshold,
+            significance=significance)
+        res = estimate(active)
         for i, n in enumerate(names):
             # dropped for rank (neither kept nor removed by the search): no effect, or a
             # combination of others
@@ -1022,33 +1111,150 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                              "columns are combinations of others; run the structure search "
                              "(search=True) or hold more coefficients fixed.")
         fit = None
+        res = estimate(active)
     act = [names[i] for i in active]
-    is_ly, is_pneu, is_p2 = _masks(act)
-    instrument, sigma_fy = None, 0.0
-    if output != "Fy":
-        if fy_report is not None and fy_report.fydot_hat is not None:
-            # the F_y noise level from above the cut-off: independent of the F_y structure
-            instrument, sigma_fy = fy_report.fydot_hat, cond.noise["FY"]
-        else:
-            instrument = fydot
-    s = X.shape[0]
-    res = two_step(np, X[..., active], L[..., active], Dp[..., active], fydot,
-                   y.reshape(s, -1), H, cond.difference, np.asarray(cond.samples["omega"]),
-                   cond.dt, is_ly=is_ly, is_pneu=is_pneu, is_p2=is_p2, instrument=instrument,
-                   sigma_fy=sigma_fy)
+    is_pneu = _masks(act)[1]
     reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
     model = PolynomialModel.create(output, degrees, values={
         n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k})
     return OutputReport(output, fit, reduced, model, float(res["compliance"]),
                         float(res["compliance_sigma"]), float(res["sigma_step2"]),
                         float(res["noise_sigma"]), removed, not_ident,
-                        res["fydot_hat"] if output == "Fy" else None)
+                        res["fydot_hat"] if output == "Fy" else None, excused)
+
+
+def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_threshold,
+                      ic_threshold, significance):
+    """The structure search of `identify_output`. The guaranteed least squares (`lsq`, one
+    R-factor of [W, −y]) decide what the data can determine (identifiability, base-parameter
+    relations, the residual of each structure); the decisions to remove use the least-squares
+    estimate of the kept columns and its sandwich σ under the noise model of the filtered data,
+    cov b_A = G_A⁻¹·S_AA·G_A⁻¹ (G = WᵀW from R, S = Wᵀ·Σ·W = `noise_gram(b)` for the
+    coefficients b: the relaxation gain in Σ; recomputed when the gain moves by > 5 %), the
+    noise level fixed by the data (above the cut-off), so one step costs a few p×p products.
+    Returns (the final `lsq.Fit` with its log, the active indices, removed (name → reason),
+    excused (the behaviour faults the data support))."""
+    import scipy.linalg
+    import scipy.stats
+
+    crit = float(scipy.stats.chi2.isf(significance, 1))
+    prob = lsq.problem(W, y, names=names)
+    p = len(names)
+    R = np.asarray(prob.R)
+    sc = np.linalg.norm(W, axis=0)
+    sc = np.where(sc > 0, sc, 1.0)
+    Rw, z = R[:p, :p] / sc, -R[:p, p]  # RwᵀRw = (W/sc)ᵀ(W/sc), z = Qᵀy
+    fixed_m = np.zeros(p, bool)
+    if fixed is not None:
+        unknown = sorted(set(fixed) - set(names))
+        if unknown:
+            raise InputError(f"fixed: {unknown} are not coefficients of the model")
+        fixed_m[[names.index(n) for n in fixed]] = True
+
+    def least_squares(active):
+        q, r = np.linalg.qr(Rw[:, active])
+        bs = scipy.linalg.solve_triangular(r, q.T @ z)
+        return bs, r
+
+    fit = prob.fit(fixed=fixed_m)
+    S, g_ref = None, None
+    log, removed, excused = [], {}, set()
+    it = 0
+    while True:  # ends: every step fixes one more coefficient
+        it += 1
+        active = [i for i in range(p) if fit.kept[i] and not fit.fixed[i]]
+        if not active:
+            raise InputError("the structure search removed every coefficient: the data do "
+                             "not determine this output (no excitation?)")
+        bs, r = least_squares(active)
+        b = np.zeros(p)
+        b[active] = bs / sc[active]
+        g = noise_gram.gain(b)
+        if S is None or np.linalg.norm(g - g_ref) > 0.05 * np.linalg.norm(g_ref):
+            S, g_ref = noise_gram(b) / np.outer(sc, sc), g
+        Ri = scipy.linalg.solve_triangular(r, np.eye(len(active)))  # G_A⁻¹ = Ri·Riᵀ
+        Gi = Ri @ Ri.T
+        cov = Gi @ S[np.ix_(active, active)] @ Gi  # of the scaled coefficients
+        sig = np.sqrt(np.abs(np.diag(cov))) / sc[active]
+        x = b[active]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pct = np.nan_to_num(100.0 * sig / np.abs(x), nan=np.inf, posinf=np.inf)
+            stat = np.nan_to_num((x / sig) ** 2, nan=0.0)
+        ic = np.where(np.isnan(fit.confidence), np.inf, fit.confidence)[active]
+        weak = ic < ic_threshold
+        if sigma_pct_threshold is not None:
+            weak |= pct > sigma_pct_threshold
+        removable = weak & (stat < crit)
+        candidate = None
+        if np.any(removable):
+            k = int(np.argmax(np.where(removable, pct, -np.inf)))
+            candidate = names[active[k]]
+            reason = (f"sigma% {pct[k]:.3g} > {sigma_pct_threshold:g} (noise model), "
+                      f"F {stat[k]:.3g} < {crit:.3g}")
+        elif behaviour is not None:
+            values = {names[i]: v for i, v in zip(active, x, strict=True)}
+            f_of = {names[i]: stat[k] for k, i in enumerate(active)}
+            while candidate is None:
+                found = behaviour(values, frozenset(excused))
+                if found is None:
+                    break
+                first, group, key = found
+                options = [first] + sorted((n for n in group if n in f_of and n != first),
+                                           key=lambda n: f_of[n])
+                ok = [n for n in options if n in f_of and f_of[n] < crit]
+                if ok:
+                    candidate = ok[0]
+                    reason = f"behaviour: {key[0]} rule, F {f_of[candidate]:.3g} < {crit:.3g}"
+                else:
+                    excused.add(key)
+        if candidate is None:
+            break
+        i = names.index(candidate)
+        fixed_m = fixed_m.copy()
+        fixed_m[i] = True
+        new = prob.fit(fixed=fixed_m)
+        log.append(lsq.Step(
+            iteration=it, removed=candidate, reason=reason,
+            confidence=float(fit.confidence[i]), sigma_pct=float(pct[active.index(i)]),
+            residual_before=fit.residual_norm, residual_after=new.residual_norm,
+            relations=tuple(f"{t} = {v:.6g}" for t, v in zip(
+                new.relations, new.relation_values, strict=True))))
+        removed[candidate] = reason
+        fit = new
+    fit = dataclasses.replace(fit, log=tuple(log))
+    return fit, active, removed, sorted(excused)
+
+
+class _NoiseGram:
+    """S = Wᵀ·Σ·W (all columns) of the filtered noise model of `two_step` for coefficients b:
+    ε = H·(I − diag(g/ω)·D)·e_F (F_y), or H·e_M − H·diag(g/ω)·D·e_Fy (M_z), g the relaxation
+    gain Σ_k L_k·b_k, e white of the variances `var` (output) and `var_fy`."""
+
+    def __init__(self, W, L, is_ly, H, Dm, omega, var, var_fy=None):
+        s, r = omega.shape[0], H.shape[0]
+        self.L, self.is_ly, self.omega, self.Dm = L, is_ly, omega, Dm
+        self.C = np.swapaxes(W.reshape(s, r, -1), 1, 2) @ H  # W_sᵀ·H, (s, p, m)
+        self.var, self.var_fy = var, var_fy
+
+    def gain(self, b):
+        return self.L[..., self.is_ly] @ b[self.is_ly]
+
+    def __call__(self, b):
+        C = self.C
+        Bl = (C * (self.gain(b) / self.omega)[:, None, :]) @ self.Dm
+
+        def gram(B):
+            B = np.swapaxes(B, 0, 1).reshape(B.shape[1], -1)
+            return B @ B.T
+        if self.var_fy is None:
+            return self.var * gram(C - Bl)
+        return self.var * gram(C) + self.var_fy * gram(Bl)
 
 
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,
              rolling_radius: float = 294.0, decimate: int | None = None, search: bool = True,
              outputs=("Fy", "Mz"), sigma_pct_threshold: float | None = 10.0,
-             ic_threshold: float = 0.0) -> BenchReport:
+             significance: float = 1e-3, ic_threshold: float = 0.0) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else the whole structure estimated as it
@@ -1066,7 +1272,8 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     for o in sorted(outputs, key=lambda o: o != "Fy"):  # F_y first: M_z's instrument
         reports[o] = identify_output(cond, o, STRUCTURES[structure][o], search=search,
                                      rolling_radius=r_m, sigma_pct_threshold=sigma_pct_threshold,
-                                     ic_threshold=ic_threshold, fy_report=reports.get("Fy"))
+                                     significance=significance, ic_threshold=ic_threshold,
+                                     fy_report=reports.get("Fy"))
     notes, flags = [], []
     exc = cond.excitation
     if exc["kappa"] < 1e-6:
@@ -1077,6 +1284,11 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
         notes.append("Mz alone: its relaxation terms are least squares on the noisy F_y "
                      "derivative (biased toward 0); identify Fy with it for the instrument.")
     for o, r in reports.items():
+        for key in r.excused:
+            notes.append(f"{o}: behaviour rule {key[0]!r} "
+                         f"{'(' + ' '.join(map(str, key[1:])) + ') ' if len(key) > 1 else ''}"
+                         "not applied: every removal that would mend it raises the residual "
+                         "beyond the noise (the data support it).")
         if r.not_identifiable:
             notes.append(f"{o}: not identifiable on these data: "
                          + ", ".join(sorted(r.not_identifiable)))
@@ -1109,56 +1321,94 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
 
 def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[str, float],
                 seeds: int = 20, cutoff: float = 25.0, rolling_radius: float = 294.0,
-                decimate: int | None = None, order: int = 4, key: int = 0) -> dict:
-    """The two-step identification (`two_step`) of F_y repeated on `seeds` noisy copies of a
+                decimate: int | None = None, order: int = 4, key: int = 0,
+                fy_keep=None, fy_degrees=None) -> dict:
+    """The two-step identification (`two_step`) repeated on `seeds` noisy copies of a
     (noise-free) bench table, in one vmapped program: white noise of σ `noise[channel]`
-    (table units) added to FY, FX, FZ; the structure fixed to the coefficients `keep`
-    (names; the others held at 0 and not even built, e.g. the result of a structure search or
-    the true model).
+    (table units) added to FY, FX, FZ (and MZ); the structure fixed to the coefficients
+    `keep` (names; the others held at 0 and not even built, e.g. the result of a structure
+    search or the true model).
+
+    `output` "Fy": F_y alone. "Mz": per seed, F_y first (structure `fy_keep` in `fy_degrees`,
+    default `degrees`), then M_z with F_y's instrument (its predicted Ḟ_y/ω) and F_y's noise
+    level estimated from above the cut-off, as `identify` does; the F_y results come back
+    too (`fy`), from the same program.
 
     **Returns:** dict of arrays over seeds: `x` (seeds, p) step-1 coefficients, `sigma`
     (seeds, p) their reported σ, `compliance` (seeds,) K_y⁻¹, `sigma_step2` (the thesis's σ),
-    `sigma_joint` (the report's σ), `noise_sigma` (the estimated F_y noise σ), and `names`.
+    `sigma_joint` (the report's σ), `noise_sigma` (the estimated noise σ of the output), and
+    `names`; for "Mz", `fy` the same dict for F_y and `noise_fy` the F_y noise estimate.
     """
-    if output != "Fy":
-        raise InputError("monte_carlo covers F_y (the M_z instrument comes from the F_y fit)")
+    if output not in ("Fy", "Mz"):
+        raise InputError(f"output {output!r}: Fy or Mz")
+    if output == "Mz" and fy_keep is None:
+        raise InputError("monte_carlo of Mz needs fy_keep (the F_y structure that gives M_z "
+                         "its instrument)")
     cols, n_seg, m, rate = _check_table(table, cutoff)
     rows, _ = _rows(m, rate, cutoff, decimate, None)
-    H = jnp.asarray(filter_matrix(float(cutoff), float(rate), m, order)[rows])
+    F = filter_matrix(float(cutoff), float(rate), m, order)
+    H = jnp.asarray(F[rows])
+    E = jnp.asarray(np.eye(m) - F)
     Dm = jnp.asarray(difference_matrix(m, 1.0 / rate))
-    full = regressor_model(output, degrees, ly=True, p2=False)
-    unknown = [n for n in keep if n not in full.names]
-    if unknown:
-        raise InputError(f"keep: {unknown} are not coefficients of the {output} model")
-    # Only the kept columns are built (the others are held at 0).
-    lip = full.select([n for n in full.names if n in keep])
-    is_ly, is_pneu, is_p2 = _masks(lip.names)
-    parts = _parts_fn(lip)
+
+    def structure(out, deg, names_kept):
+        full = regressor_model(out, deg, ly=True, p2=(out == "Mz"))
+        unknown = [n for n in names_kept if n not in full.names]
+        if unknown:
+            raise InputError(f"keep: {unknown} are not coefficients of the {out} model")
+        # Only the kept columns are built (the others are held at 0).
+        lip = full.select([n for n in full.names if n in names_kept])
+        return lip, _masks(lip.names), _parts_fn(lip)
+
+    fy_struct = structure("Fy", fy_degrees or degrees, keep if output == "Fy" else fy_keep)
+    mz_struct = structure("Mz", degrees, keep) if output == "Mz" else None
     base = {c: jnp.asarray(v) for c, v in cols.items() if c not in ("t", "segment")}
-    sig = {c: float(noise.get(c, 0.0)) for c in ("FY", "FX", "FZ")}
+    channels = ("FY", "FX", "FZ") + (("MZ",) if output == "Mz" else ())
+    sig = {c: float(noise.get(c, 0.0)) for c in channels}
+    dt = 1.0 / rate
+
+    def fit(struct, samples, y, **kw):
+        _, (is_ly, is_pneu, is_p2), parts = struct
+        X, L, Dp = parts(samples)
+        return two_step(jnp, X, L, Dp, samples["fydot_w"], y @ H.T, H, Dm, samples["omega"],
+                        dt, is_ly=is_ly, is_pneu=is_pneu, is_p2=is_p2, **kw)
+
+    def summary(res):
+        return (res["x"], res["sigma"], res["compliance"], res["sigma_step2"],
+                res["compliance_sigma"], res["noise_sigma"])
 
     # The data enter as arguments, not as constants of the program (XLA would fold the
     # products of constant matrices at compile time, slowly).
     @_quick_jit
-    def run(keys, base, H, Dm):
+    def run(keys, base, H, E, Dm):
         def one(kk):
             noisy = dict(base)
-            for s, c in zip(jax.random.split(kk, 3), ("FY", "FX", "FZ"), strict=True):
+            for s, c in zip(jax.random.split(kk, len(channels)), channels, strict=True):
                 noisy[c] = base[c] + sig[c] * jax.random.normal(s, base[c].shape)
             samples = _kinematics(noisy, Dm, rolling_radius * 1e-3)
-            X, L, Dp = parts(samples)
-            res = two_step(jnp, X, L, Dp, samples["fydot_w"], noisy["FY"] @ H.T, H, Dm,
-                           samples["omega"], 1.0 / rate, is_ly=is_ly, is_pneu=is_pneu,
-                           is_p2=is_p2)
-            return (res["x"], res["sigma"], res["compliance"], res["sigma_step2"],
-                    res["compliance_sigma"], res["noise_sigma"])
+            res = fit(fy_struct, samples, noisy["FY"])
+            if mz_struct is None:
+                return summary(res)
+            # as `condition`: the white-noise level of F_y from above the cut-off
+            noise_fy = jnp.sqrt(jnp.sum((noisy["FY"] @ E.T) ** 2) / (n_seg * jnp.sum(E * E)))
+            res_mz = fit(mz_struct, samples, noisy["MZ"] * 1e-3,
+                         instrument=res["fydot_hat"], sigma_fy=noise_fy)
+            return summary(res_mz), summary(res), noise_fy
         return jax.vmap(one)(keys)
 
-    x, sigma, c, s2, sj, sn = run(jax.random.split(jax.random.PRNGKey(key), seeds), base, H,
-                                  Dm)
-    return {"names": lip.names, "x": np.asarray(x), "sigma": np.asarray(sigma),
-            "compliance": np.asarray(c), "sigma_step2": np.asarray(s2),
-            "sigma_joint": np.asarray(sj), "noise_sigma": np.asarray(sn)}
+    out = run(jax.random.split(jax.random.PRNGKey(key), seeds), base, H, E, Dm)
+
+    def as_dict(struct, vals):
+        x, sigma, c, s2, sj, sn = (np.asarray(v) for v in vals)
+        return {"names": struct[0].names, "x": x, "sigma": sigma, "compliance": c,
+                "sigma_step2": s2, "sigma_joint": sj, "noise_sigma": sn}
+
+    if mz_struct is None:
+        return as_dict(fy_struct, out)
+    result = as_dict(mz_struct, out[0])
+    result["fy"] = as_dict(fy_struct, out[1])
+    result["noise_fy"] = np.asarray(out[2])
+    return result
 
 # --------------------------------------------------------------------------------------------
 # Batched structure search (many tyres in one program)
