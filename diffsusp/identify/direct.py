@@ -605,6 +605,7 @@ def _check_measurements(mech: Mechanism, meas: Measurements):
             f"({', '.join(mech.load_points.names) or 'none'}) and {n_d} drivers; build them with "
             "mech.loads(...)."
         )
+    _check_every_part_measured(mech, meas)
     q = np.asarray(meas.coordinates(mech))
     if not np.all(np.isfinite(q)):
         c = int(np.argwhere(~np.isfinite(q))[0][0])
@@ -616,6 +617,48 @@ def _check_measurements(mech: Mechanism, meas: Measurements):
             c = int(np.argwhere(~np.isfinite(value))[0][0])
             raise InputError(f"the {field} of case {c + 1} is not finite (NaN or inf).")
     return q
+
+
+def _check_every_part_measured(mech: Mechanism, meas: Measurements):
+    """Raise, saying why and what to do instead, when a moving part has no measured pose.
+
+    The equations are formed at the measured pose of every part (spec stiffness §1.1, §1.14):
+    the generalised forces D(q)·k need q whole. For an unmeasured part, the joints to the
+    measured parts fix some of its coordinates; the others (e.g. the pseudo-McPherson strut's
+    slide in the hub carrier) are set at each equilibrium by the balance of its elastic
+    elements, i.e. by the stiffnesses being identified: unknown × unknown, not a linear
+    system. The message counts them: 6 per part less the rows of the joints that hold it
+    (exact for independent rows, as in the thesis's models)."""
+    missing = [p for p in mech.parts if p not in meas.parts]
+    if not missing:
+        return
+    from ..model.mechanism import JOINT_ROWS
+
+    lay = mech.topology
+    part_of = [mech.parts[int(k)] if int(k) < len(mech.parts) else "ground"
+               for k in np.asarray(lay.marker_part)]
+    joints = [(n, kind) for n, kind, i, j in zip(mech.joints.names, mech.joints.kind,
+                                                 mech.joints.i_marker, mech.joints.j_marker,
+                                                 strict=True)
+              if part_of[i] in missing or part_of[j] in missing]
+    joints, free = [n for n, _ in joints], max(
+        6 * len(missing) - sum(JOINT_ROWS[k] for _, k in joints), 0)
+    names = ", ".join(map(repr, missing))
+    why = (f"its joints ({', '.join(joints) or 'none'}) leave it {free} free coordinate(s) "
+           "relative to the measured parts, set at every equilibrium by its elastic elements, "
+           "i.e. by the stiffnesses being identified: the equations would not be linear in "
+           "them" if free else
+           f"its joints ({', '.join(joints)}) fix its pose from the measured parts, but the "
+           "direct method does not complete poses from the joints")
+    raise InputError(
+        f"the measurements have no pose for part(s) {names} of model '{mech.name}' "
+        f"(measured: {', '.join(meas.parts) or 'none'}). The direct method writes the "
+        "equilibrium at the measured pose of every moving part (spec stiffness §1.1, §1.14); "
+        f"{why}. Instead: identify.least_squares(mech, measurements, params) fits the "
+        "landmarks of the measured parts through the model's own equilibrium (which places "
+        f"{names}), or identify.iterative; or measure its landmarks; or simplify the model "
+        "(the thesis replaced the unmeasurable strut by a point-on-line joint: spec stiffness "
+        "§1.13).")
 
 
 def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
@@ -1242,8 +1285,9 @@ def direct(
       keeps the linear values in `linear_values` and the fit in `polished`. True: always;
       False: the thesis's linear estimate alone (its σ ignores the errors in variables; the
       consistency verdict still says whether the model reproduces the data). Only bushing
-      stiffnesses per axis and spring rates are polished (offsets, K·L0 and axisymmetric pairs
-      keep their linear values, with a note).
+      stiffnesses per axis and spring rates whose model value is positive are polished
+      (offsets, K·L0, axisymmetric pairs and stiffnesses the model sets to 0 keep their linear
+      values, with a note).
     - `check`: re-solve the identified model at the measured cases and compare with the
       measurements in units of their σ (`report.consistency`; a determined value of an
       inconsistent model is not reported as identified).
@@ -1342,25 +1386,53 @@ RMS above 10⁻³ σ, i.e. data that are not noise-free (noise-free data are rep
 rounding, and the linear estimate is then exact)."""
 
 
-def _polish_params(mech: Mechanism, params: tuple[Parameter, ...]):
-    """The `Params` of the polish (every bushing stiffness per axis and spring rate among the
-    unknowns, log-scaled, started at `mech`'s values) and, per unknown, its index there (or
-    None)."""
+@dataclasses.dataclass(frozen=True)
+class _PolishPlan:
+    """What the polish fits: `params` (the `Params` of `identify.least_squares`, started at
+    the model's values), `index` {unknown: its parameter} for the stiffnesses and spring
+    rates, `free_length` {K·L0 unknown: (parameter of K, parameter of L0)} for the springs
+    whose K·L0 is also unknown (their free length is polished with K, and K·L0 = K·L0 is
+    reported from both)."""
+
+    params: Params
+    index: dict
+    free_length: dict
+
+    @property
+    def unknowns(self) -> list[int]:
+        return sorted([*self.index, *self.free_length])
+
+
+def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan | None:
+    """The plan of the polish (see `_PolishPlan`), None when nothing can be polished.
+
+    Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
+    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there —
+    and, with an unknown K·L0, the spring's free length (mm, no prior). A stiffness the model
+    sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz of the pseudo-McPherson)
+    has no log to start from or to centre a prior on: it keeps its linear value, like offsets
+    and axisymmetric pairs."""
     b, s = mech.bushings, mech.springs
+    k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
     kt = np.zeros((len(b.names), 3), bool)
     kr = np.zeros_like(kt)
     ks = np.zeros(len(s.names), bool)
-    lsq_name = {}
+    spring_k = {p.element: i for i, p in enumerate(params) if p.kind == "spring_k"}
+    lsq_name, l0_name = {}, {}
     for i, p in enumerate(params):
-        if p.kind == "stiffness" and len(p.axes) == 1:
+        if p.kind == "stiffness" and len(p.axes) == 1 and k_model[p.element, p.axes[0]] > 0:
             a = p.axes[0]
             (kt if a < 3 else kr)[p.element, a % 3] = True
             lsq_name[i] = f"{b.names[p.element]}.{STIFFNESS_NAMES[a]}"
-        elif p.kind == "spring_k":
+        elif p.kind == "spring_k" and float(s.k[p.element]) > 0:
             ks[p.element] = True
             lsq_name[i] = f"{s.names[p.element]}.k"
+    for i, p in enumerate(params):
+        if p.kind == "spring_c" and spring_k.get(p.element) in lsq_name:
+            l0_name[i] = (f"{s.names[p.element]}.k", f"{s.names[p.element]}.free_length")
     if not lsq_name:
-        return None, {}
+        return None
     leaves, masks = [], []
     for name, mask in (("k_trans", kt), ("k_rot", kr)):
         if mask.any():
@@ -1369,66 +1441,99 @@ def _polish_params(mech: Mechanism, params: tuple[Parameter, ...]):
     if ks.any():
         leaves.append(lambda m: m.springs.k)
         masks.append(ks)
+    if l0_name:
+        leaves.append(lambda m: m.springs.free_length)
+        masks.append(np.isin(np.arange(len(s.names)),
+                             [params[i].element for i in l0_name]))
     lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
-    return lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()}
+    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()},
+                       {i: (lsq_params.index(k), lsq_params.index(l0))
+                        for i, (k, l0) in l0_name.items()})
 
 
-def _polish_start(lsq_params, index, report: DirectReport) -> np.ndarray:
-    """Start of the polish: the linear estimate where it determined a positive value, the
-    model's value elsewhere."""
-    start = np.array(lsq_params.start)
-    for i, j in index.items():
+def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
+    """Start of the polish: the linear estimate where it determined a positive value (a free
+    length where K and K·L0 were both determined), the model's value elsewhere."""
+    start = np.array(plan.params.start)
+    for i, j in plan.index.items():
         v = report.values[i] * report.parameters_to_model[i]
         if report.identified[i] and v > 0:
             start[j] = v
+    k_of = {j: i for i, j in plan.index.items()}
+    for i, (jk, jl) in plan.free_length.items():
+        ik = k_of[jk]
+        if report.identified[i] and report.identified[ik] and report.values[ik] > 0:
+            start[jl] = report.values[i] / report.values[ik]
     return start
 
 
-def _merge_polish(report: DirectReport, index, fit, max_sigma_pct: float) -> DirectReport:
-    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
+def _linear_left(report: DirectReport, plan: _PolishPlan) -> list[int]:
+    """Unknowns the linear estimate determined that the polish does not cover."""
+    return [i for i in np.flatnonzero(report.identified) if i not in plan.unknowns]
+
+
+def _merge_polish(report: DirectReport, plan: _PolishPlan, fit,
+                  max_sigma_pct: float) -> DirectReport:
+    """The direct report with the polished values, σ and verdicts of the polished unknowns
+    (K·L0 of a spring from its polished K and L0, σ by first-order propagation)."""
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
     status = list(report.status)
+    derived = dict(report.derived)
     conv = report.parameters_to_model
-    for i, j in index.items():
-        values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
-        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
-        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
+    est, cov = np.asarray(fit.estimate), np.asarray(fit.covariance)
+
+    def verdict(i, ok):
         identified[i] = ok
         status[i] = ("identified (polished through the equilibrium)" if ok else
                      f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
-    left = [report.names[i] for i in np.flatnonzero(report.identified) if i not in index]
+
+    for i, j in plan.index.items():
+        values[i], sigma[i] = est[j] / conv[i], fit.sigma[j] / conv[i]
+        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(est[j])
+        verdict(i, bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct)
+    for i, (jk, jl) in plan.free_length.items():
+        g = np.array([est[jl], est[jk]])
+        c = cov[np.ix_([jk, jl], [jk, jl])]
+        values[i], sigma[i] = est[jk] * est[jl], float(np.sqrt(max(g @ c @ g, 0.0)))
+        sigma_pct[i] = 100.0 * sigma[i] / abs(values[i]) if values[i] else np.inf
+        ok = bool(fit.determined[jk] and fit.identifiable[jl]) and sigma_pct[i] <= max_sigma_pct
+        verdict(i, ok)
+        name = report.names[i].rsplit(".", 1)[0] + ".L0"
+        derived[name] = ((est[jl], float(fit.sigma[jl]), "mm") if ok else
+                         (np.nan, np.nan, "mm"))
+    left = [report.names[i] for i in _linear_left(report, plan)]
     notes = list(report.notes)
-    notes.append(f"errors in variables: {len(index)} stiffness(es) polished by least squares "
-                 f"through the equilibrium from the linear estimate ({fit.message}, "
+    notes.append(f"errors in variables: {len(plan.unknowns)} unknown(s) polished by least "
+                 f"squares through the equilibrium from the linear estimate ({fit.message}, "
                  f"{fit.steps} steps)")
     if left:
         notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
-                     "stiffnesses per axis and spring rates): their σ ignores the errors in "
-                     "the regressors")
+                     "stiffnesses per axis whose model value is positive, spring rates and "
+                     "free lengths): their σ ignores the errors in the regressors")
     consistency = dataclasses.replace(
         fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
     return dataclasses.replace(
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
-        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
-        consistency=consistency)
+        status=tuple(status), notes=tuple(notes), derived=derived, polished=fit,
+        linear_values=report.values, consistency=consistency)
 
 
 def _polish(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
             max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
     """Least squares through the equilibrium from the linear estimate (see `direct`,
-    `polish`): every bushing stiffness per axis and spring rate among the unknowns, the weak
-    default prior centred on the model's values."""
+    `polish`), on the model with the linear estimate written (`fitted`: what the polish does
+    not cover keeps its linear value), the weak default prior centred on `mech`'s values."""
     from .least_squares import least_squares_batch
 
-    lsq_params, index = _polish_params(mech, params)
-    if lsq_params is None or not report.identified[list(index)].any():
+    plan = _polish_plan(mech, params)
+    if plan is None or not report.identified[plan.unknowns].any():
         return fitted, report  # nothing determined to polish (e.g. all came out negative)
-    start = _polish_start(lsq_params, index, report)
-    batch = least_squares_batch(mech, _as_batch(data, 1), lsq_params, start=start[None])
+    start = _polish_start(plan, report)
+    batch = least_squares_batch(fitted, _as_batch(data, 1), plan.params, start=start[None])
     fit = batch.reports[0]
-    report = _merge_polish(report, index, fit, max_sigma_pct)
-    return lsq_params.apply(fitted, jnp.asarray(fit.estimate)), report
+    report = _merge_polish(report, plan, fit, max_sigma_pct)
+    return plan.params.apply(fitted, jnp.asarray(fit.estimate)), report
 
 
 def _as_batch(data, n: int, items=None):
@@ -1458,32 +1563,45 @@ def direct_batch(
 ) -> tuple[DirectReport, ...]:
     """`direct` on many measurement sets of one layout under one load table (e.g. a
     Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
-    shared), then the polish of every set at once (`least_squares_batch`, one vmapped program
-    per LM step). `options` go to `direct`. **Returns:** one `DirectReport` per set (with
-    `polished`; the identified mechanisms are `Params.apply` of their values)."""
+    shared), then the polish of every set that needs one at once (`least_squares_batch`, one
+    vmapped program per LM step; set by set when a set determined unknowns the polish does
+    not cover, whose linear values then differ between the models polished). `options` go to
+    `direct`. **Returns:** one `DirectReport` per set (with `polished`; the identified
+    mechanisms are `Params.apply` of their values)."""
     from .least_squares import least_squares_batch
 
     linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
               for m in measurements]
     if not polish:
         return tuple(linear)
-    ctx_params = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
-                                                    or _default_where),
-                             options.get("elements"), options.get("axisymmetric", ()))
-    lsq_params, index = _polish_params(mech, ctx_params)
-    if lsq_params is None:
+    unknowns = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
+                                                  or _default_where),
+                           options.get("elements"), options.get("axisymmetric", ()))
+    plan = _polish_plan(mech, unknowns)
+    if plan is None:
         return tuple(linear)
-    data = [check_data(mech, m) for m in measurements]
-    starts = np.stack([_polish_start(lsq_params, index, r) for r in linear])
-    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), lsq_params,
-                                start=starts)
     # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
-    # noise-free accuracy, or determined nothing, keep it (the batch runs them all).
-    return tuple(
-        _merge_polish(r, index, fit, max_sigma_pct)
-        if polish is True or (r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof
-                              and r.identified[list(index)].any()) else r
-        for r, fit in zip(linear, batch.reports, strict=True))
+    # noise-free accuracy, or determined nothing, keep it.
+    todo = [k for k, r in enumerate(linear)
+            if r.identified[plan.unknowns].any() and (
+                polish is True or r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof)]
+    out = list(linear)
+    if not todo:
+        return tuple(out)
+    data = [check_data(mech, measurements[k]) for k in todo]
+    if any(_linear_left(linear[k], plan) for k in todo):
+        # Some set determined unknowns the polish does not cover (offsets, K·L0 without K,
+        # stiffnesses the model sets to 0): each set is polished on its own linear model.
+        for k, d in zip(todo, data, strict=True):
+            fitted = _apply(mech, unknowns, linear[k].values, linear[k].identified)
+            out[k] = _polish(fitted, linear[k], unknowns, d, max_sigma_pct, mech)[1]
+        return tuple(out)
+    starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
+    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
+                                start=starts)
+    for k, fit in zip(todo, batch.reports, strict=True):
+        out[k] = _merge_polish(linear[k], plan, fit, max_sigma_pct)
+    return tuple(out)
 
 
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,
