@@ -28,7 +28,7 @@ from diffsusp.statics import part_poses
 
 MEASURED = ("front_arm", "rear_arm", "tie_rod", "hub_carrier")
 SIGMA = 0.05
-SEEDS = 40
+SEEDS = 24
 
 JOINTS = (
     GeometricJoint("front_ball_joint", "ball", ("front_arm", "hub_carrier")),
@@ -104,7 +104,9 @@ def test_noise_free_kinematic_joints_exact(steering):
 def test_noise_free_bushings_within_a_few_mm(steering):
     """Table 3.1 (thesis: A 0.99 mm, B 3.20 mm, F 6.95 mm with the strut axis 2.7 mm off).
     Measured here: A 3.98 mm (a stiff bushing taken as a ball: its 1370 N/mm axial direction
-    deflects under the arm load), B 0.67 mm (axial-only compliant link with R^c·u),
+    deflects under the arm load), B 0.67 mm (axial-only compliant link with R^c·u; σ up to
+    6.2 mm from 25 cases, observable within the 10 mm tolerance; its equations fit, χ²/E
+    0.02),
     F 4.82 mm with the axis 0.28° from the strut slide and the located line 1.78 mm from the
     true slide axis (thesis: 2.7 mm); the located centre is 2.09 mm off the slide axis through
     L5 (Table 2.2 puts L4 itself 2.38 mm off it)."""
@@ -113,6 +115,8 @@ def test_noise_free_bushings_within_a_few_mm(steering):
     assert errors["bushing_A"] == pytest.approx(3.98, abs=0.05)
     assert errors["bushing_B"] == pytest.approx(0.67, abs=0.05)
     assert errors["bushing_F"] == pytest.approx(4.82, abs=0.05)
+    assert report["bushing_B"].observable and report["bushing_B"].chi2 < 0.1
+    assert report["bushing_A"].chi2 > 1.5  # the stiff bushing deflects: a lack of fit
     strut = report["bushing_F"]
     assert strut.observable
     z5 = np.asarray(reuler_deg_to_matrix(np.array(JOINT_REULER_DEG["L5"])))[:, 2]
@@ -126,19 +130,22 @@ def test_noise_free_bushings_within_a_few_mm(steering):
 
 
 def test_sigma_against_monte_carlo(steering):
-    """σ = 0.05 mm on every landmark coordinate, 40 seeds: the Monte-Carlo spread of every
-    located coordinate agrees with the reported σ within a factor 1.5."""
+    """σ = 0.05 mm on every landmark coordinate, 24 seeds: the Monte-Carlo spread of every
+    located coordinate agrees with the reported σ (closed form, `_uncertainty`) within a factor
+    1.5, and the noisy equations of the kinematic joints fit at the noise level (χ²/E ≈ 1)."""
     layout, landmarks, report = steering
     rng = np.random.default_rng(7)
-    draws = []
+    draws, chi2 = [], []
     for _ in range(SEEDS):
         noisy = landmarks + rng.normal(scale=SIGMA, size=landmarks.shape)
         rep = locate_joints(from_landmarks(layout, noisy, _loads(25)), JOINTS)
         draws.append([j.estimate for j in rep.joints])
+        chi2.append([j.chi2 for j in rep.joints[:4]])
     spread = np.std(np.array(draws), axis=0, ddof=1)
     sigma = np.array([j.sigma for j in report.joints])
     ratio = spread / sigma
     assert np.all((ratio > 1 / 1.5) & (ratio < 1.5)), ratio
+    np.testing.assert_allclose(np.mean(chi2, axis=0), 1.0, atol=0.15)
 
 
 def test_strut_top_not_observable_without_steering(data):
@@ -149,9 +156,59 @@ def test_strut_top_not_observable_without_steering(data):
     report = locate_joints(meas, JOINTS)
     strut = report["bushing_F"]
     assert not strut.observable and strut.centre is None
-    assert "not observable" in str(report) and "σ up to" in strut.note
+    assert "not observable" in str(report) and "lack of fit" in strut.note
+    # noise-free, 15 mm off: its equations fit 5.5 times worse than landmark noise would
+    # explain (bushing F deflects), which inflates its σ (8.4 mm) beyond the 10 mm tolerance
+    assert strut.chi2 > 3 and 5 < strut.sigma.max() < 10 and _error(report, "bushing_F") > 10
     for name in ("front_ball_joint", "rear_ball_joint", "tie_rod_outer"):
         assert report[name].observable and _error(report, name) < 1e-6
+
+
+def test_bushing_pair_axis_on_a_model():
+    """The bushing-pair solver (3.14–3.16) on simulated landmarks of a model whose arms sit on
+    two bushings each (`double_wishbone_bushing_pairs`, wheel travel −60…+60 mm): noise-free,
+    each pair's axis is the line through its two bushing centres to < 1e-6 rad and the point
+    with the prior's x is that bushing's centre (the pair cannot be told apart along the
+    axis: CORRECTIONS 17); with 0.05 mm noise (24 seeds) the reported σ of the point and of
+    the axis agree with the Monte-Carlo spread within a factor 1.5."""
+    from diffsusp.models import double_wishbone_bushing_pairs
+    from diffsusp.models.double_wishbone import HARDPOINTS as P
+
+    mech = double_wishbone_bushing_pairs()
+    travel = np.array([-60.0, -40, -20, 0, 20, 40, 60])
+    loads = mech.loads(drivers={"wheel_travel": travel})
+    rot, trans = (np.asarray(a) for a in part_poses(mech, solve_statics(mech, loads).q))
+    parts = ("upper_control_arm", "lower_control_arm", "upright")
+    layout = place_landmarks(mech, 4, parts=parts, seed=2)
+    index = [mech.parts.index(p) for p in parts]
+    marks = np.einsum("cpij,pkj->cpki", rot[:, index], np.asarray(layout.position))
+    marks += trans[:, index, None]
+    joints = [GeometricJoint(f"{arm}_{end}", "revolute", ("ground", part),
+                             prior=P[f"{arm}_chassis_{end}"], prior_coordinate="x")
+              for arm, part in (("lca", "lower_control_arm"), ("uca", "upper_control_arm"))
+              for end in ("front", "back")]
+    joints.append(GeometricJoint("lca_ball", "ball", ("lower_control_arm", "upright")))
+    n = len(travel)
+    report = locate_joints(from_landmarks(layout, marks, _loads(n)), joints)
+    for j in report.joints[:4]:
+        arm, end = j.name.split("_")
+        truth = np.subtract(P[f"{arm}_chassis_front"], P[f"{arm}_chassis_back"])
+        assert j.observable, j.note
+        assert np.linalg.norm(np.cross(j.axis, truth / np.linalg.norm(truth))) < 1e-6
+        np.testing.assert_allclose(j.centre, P[f"{arm}_chassis_{end}"], atol=1e-6)
+        assert j.singular_values[2] < 1e-9 * j.singular_values[0]  # the axis: the null one
+    np.testing.assert_allclose(report["lca_ball"].centre, P["lca_upright"], atol=1e-6)
+    rng = np.random.default_rng(5)
+    draws = []
+    for _ in range(24):
+        noisy = marks + rng.normal(scale=SIGMA, size=marks.shape)
+        rep = locate_joints(from_landmarks(layout, noisy, _loads(n)), joints)
+        draws.append([np.concatenate([j.estimate[1:], j.axis]) for j in rep.joints[:4]])
+    spread = np.std(np.array(draws), axis=0, ddof=1)
+    sigma = np.array([np.concatenate([j.sigma[1:], j.sigma_axis]) for j in report.joints[:4]])
+    assert np.all(report.joints[0].sigma[0] == 0.0)  # x is the prior's
+    ratio = spread / sigma
+    assert np.all((ratio > 1 / 1.5) & (ratio < 1.5)), ratio
 
 
 def test_revolute_axis_and_prior():
@@ -295,22 +352,32 @@ def test_correction_bad_input(solved, data):
         correct_geometry(truth, meas, elements=["nope"])
 
 
-def test_design_of_cases(data):
-    """Greedy choice among the 42 candidates (25 steering + 17 force cases): a few cases
-    including a steering one make every joint observable; the 17 force cases alone cannot make
-    the strut top observable (its σ stays above the 5 mm limit). Measured here: cases
-    (40, 24, 38, 39) with predicted strut-top σ 3.15 mm, against 2.94 mm from `locate_joints`
-    on those four cases (the design's sandwich covariance is the same first-order quantity)."""
-    from diffsusp.identify.geometric import design_geometry_cases
+def test_design_of_cases(solved):
+    """The stiffness design's greedy search (`design_experiment`, criterion "sigma") picks among
+    the 42 candidate load cases (25 steering + 17 force cases) of the model: three cases with
+    steering make every joint observable (measured: cases 4, 21, 0; largest σ 4.5 mm, the tie
+    rod's inner joint); for the kinematic joints and bushing A the design's σ (the generalised
+    least-squares bound) agrees with what `locate_joints` reports from the same three cases
+    within a factor 1.5 (measured 1.02–1.21). Not for the compliant bushing B (design 0.18 mm,
+    `locate_joints` 27 mm: the design whitens each joint's equations alone and misses the
+    noise its link's ball centre brings in) nor the strut top (0.86 mm against 1.34 mm)."""
+    from diffsusp.identify.geometric import design_geometry_cases, joints_from_model
 
-    layout, landmarks = data
-    meas = from_landmarks(layout, landmarks, _loads(42))
-    design = design_geometry_cases(meas, JOINTS)
-    assert design.complete and len(design.cases) <= 6
+    mech, loads, rot, trans = solved
+    joints, _ = joints_from_model(mech, MEASURED, compliant=("bushing_B",))
+    layout = place_landmarks(mech, 4, parts=MEASURED, seed=0)
+    design = design_geometry_cases(mech, loads, joints, layout, budget=4)
+    assert design.complete and len(design.cases) <= 4
     assert any(c < 25 and c % 5 != 2 for c in design.cases)  # a case with the rack moved
-    assert all(s <= 5.0 for s in design.sigma.values())
+    assert all(s <= 10.0 for s in design.sigma.values())
     assert list(design.history) == sorted(design.history, reverse=True)
-    forces_only = design_geometry_cases(meas, JOINTS, candidates=range(25, 42))
-    assert not forces_only.complete and not forces_only.observable["bushing_F"]
-    assert forces_only.sigma["bushing_F"] > 5.0
-    assert all(v for k, v in forces_only.observable.items() if k != "bushing_F")
+    assert design.report.chosen[: len(design.cases)] == design.cases
+    index = [mech.parts.index(p) for p in MEASURED]
+    cases = list(design.cases)
+    marks = np.einsum("cpij,pkj->cpki", rot[cases][:, index], np.asarray(layout.position))
+    marks += trans[cases][:, index, None]
+    located = locate_joints(from_landmarks(layout, marks, _loads(len(cases))), joints)
+    for j in located.joints:
+        if j.kind in ("ball", "ball_known_slide"):
+            ratio = j.sigma.max() / design.sigma[j.name]
+            assert 1 / 1.5 < ratio < 1.5, (j.name, ratio)

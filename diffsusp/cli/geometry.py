@@ -83,7 +83,11 @@ def geometry(
     landmark_sigma: Annotated[float, typer.Option(
         help="Landmark noise per coordinate (mm) for the reported sigma.")] = 0.05,
     max_sigma: Annotated[float, typer.Option(
-        help="A joint whose centre sigma exceeds this (mm) is not observable.")] = 5.0,
+        help="Hardpoint tolerance (mm): a joint whose centre sigma (inflated by its lack of "
+             "fit) exceeds it is not observable.")] = 10.0,
+    min_snr: Annotated[float, typer.Option(
+        help="A joint whose weakest singular value is below this many times its noise level "
+             "is not observable.")] = 3.0,
     out: Annotated[Path | None, typer.Option(help="Write the joint table (.csv or .json).")]
     = None,
     write_model: Annotated[Path | None, typer.Option(
@@ -95,8 +99,9 @@ def geometry(
 ):
     """Locate the joints from the relative motion of the measured parts (mm)."""
     _check_paths(out, write_model)
-    if landmark_sigma <= 0 or max_sigma <= 0:
-        raise fail("--landmark-sigma and --max-sigma must be positive.", EXIT_BAD_INPUT)
+    if landmark_sigma <= 0 or max_sigma <= 0 or min_snr <= 0:
+        raise fail("--landmark-sigma, --max-sigma and --min-snr must be positive.",
+                   EXIT_BAD_INPUT)
     enable_x64()
     from ..identify import geometric
 
@@ -112,7 +117,7 @@ def geometry(
             raise fail("no joint to locate: measure the parts on both sides of a joint, or "
                        "give --joints.", EXIT_BAD_INPUT)
         report = geometric.locate_joints(meas, joint_list, landmark_sigma=landmark_sigma,
-                                         max_sigma=max_sigma)
+                                         max_sigma=max_sigma, min_snr=min_snr)
         if out is not None:
             _write_joints(report, out)
         if write_model is not None:

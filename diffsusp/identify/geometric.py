@@ -30,16 +30,18 @@ needed, its axis from the c_max operators:
   R^c u with u = (C − C_ball)/‖C − C_ball‖: minimise Σ‖δ^c × R^c u‖² by Levenberg–Marquardt
   from the ball-joint solution (3.26–3.35; the thesis keeps u, the issue asks for R^c u).
 
-**σ and observability.** Every estimate is a smooth function of the measured landmark
-coordinates (registration by Arun's SVD, relative operators, the solver). Its covariance under
-independent landmark noise of σ_L per coordinate is σ_L² J Jᵀ, with J the exact Jacobian of
-the estimate with respect to the landmarks (`jax.jacrev`); the iterative solvers are
-differentiated implicitly (a Newton step of the criterion from its converged minimiser, whose
-derivative is the implicit-function one). A joint is reported **observable** when the largest
-σ of its centre, at the nominal σ_L, stays below `max_sigma`, and the relative singular values
-of its equations are above `rcond`; otherwise the report says "not observable from these
-cases" and gives no centre (the thesis's strut top without steering input was 175 mm off:
-spec geometry §4.8, §4.10).
+**σ and observability.** Every solver minimises Σ_c ‖r_c(x)‖² with r_c the equations of
+case c, which depend on that case's registered poses only. The first-order covariance of a
+registered pose under independent landmark noise σ_L is closed-form (`_pose_covariance`), and
+the implicit-function theorem gives the estimate's influence matrix case by case, so the
+covariance is a sum over cases of small products (`_uncertainty`: no differentiation through
+the solvers or the registration). A joint is reported **observable** when (1) the weakest
+singular value of its equations stands above the value landmark noise alone gives it
+(`min_snr` times that noise level: the data tell the direction from noise), and (2) the
+largest σ of its centre, inflated by the equations' lack of fit when they fit worse than
+the noise explains (a bushing taken as a joint), is within the hardpoint tolerance
+`max_sigma`; otherwise the report says "not observable from these cases" and gives no centre
+(the thesis's strut top without steering input was 175 mm off: spec geometry §4.8, §4.10).
 
 Units: mm, rad. Every solver is written for one joint and the whole stack of cases; all joints
 of a list are located by one compiled program.
@@ -60,7 +62,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
-from ..geometry.registration import register_landmarks
 
 __all__ = [
     "JOINT_KINDS",
@@ -153,8 +154,12 @@ class JointEstimate:
     σ of the centre's coordinates (mm) and `sigma_axis` (3,) of the axis' components, at the
     nominal landmark noise; `residual`: root-mean-square of the solver's equations (mm; the
     unknown slide: the trajectory points' distance to their line); `singular_values` of the
-    solver's equations (normal matrix square roots, largest first); `observable`; `note`.
-    `estimate` keeps the raw centre even when not observable (for diagnostics).
+    solver's equations (largest first; with σ: of the per-case equations in the unknowns the
+    solver determines, for the unknown slide the centre and its line); `observable`; `note`.
+    `estimate` keeps the raw centre even when not observable (for diagnostics). `snr`: the
+    weakest singular value over its noise level (see `locate_joints`); `chi2`: the residual
+    energy over the energy landmark noise alone would leave (≈ 1 for a joint the data fit,
+    larger for a bushing taken as a joint). NaN without σ.
     """
 
     name: str
@@ -169,6 +174,8 @@ class JointEstimate:
     observable: bool
     note: str
     estimate: np.ndarray
+    snr: float = math.nan
+    chi2: float = math.nan
 
     def to_dict(self) -> dict:
         def arr(v):
@@ -178,7 +185,7 @@ class JointEstimate:
                     centre=arr(self.centre), axis=arr(self.axis), sigma=arr(self.sigma),
                     sigma_axis=arr(self.sigma_axis), residual=float(self.residual),
                     singular_values=arr(self.singular_values), observable=self.observable,
-                    note=self.note)
+                    note=self.note, snr=float(self.snr), chi2=float(self.chi2))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,7 +219,8 @@ class GeometricReport:
             out.append(dict(joint=j.name, kind=j.kind, part_1=j.parts[0], part_2=j.parts[1],
                             x=c[0], y=c[1], z=c[2], sigma_x=j.sigma[0], sigma_y=j.sigma[1],
                             sigma_z=j.sigma[2], axis_x=a[0], axis_y=a[1], axis_z=a[2],
-                            residual=j.residual, observable=j.observable, note=j.note))
+                            residual=j.residual, snr=j.snr, chi2=j.chi2,
+                            observable=j.observable, note=j.note))
         return out
 
     def __str__(self) -> str:
@@ -416,9 +424,203 @@ def _locate(specs, rot, trans, mask, index, slides, priors, starts):
     return [out[k] for k in range(len(specs))]
 
 
-def _estimates(specs, reference, landmarks, weights, mask, index, slides, priors, starts):
-    reg = register_landmarks(reference, landmarks, weights, method="svd")
-    return _locate(specs, reg.rotation, reg.translation, mask, index, slides, priors, starts)
+def _skew(v):
+    z = jnp.zeros_like(v[..., 0])
+    return jnp.stack([jnp.stack([z, -v[..., 2], v[..., 1]], -1),
+                      jnp.stack([v[..., 2], z, -v[..., 0]], -1),
+                      jnp.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+def _pose_covariance(reference, rotation, weights):
+    """First-order covariance, per unit landmark σ, of every registered pose (cases, parts,
+    6, 6), in the perturbation R → (I + [θ]×) R, T → T + δT (θ first).
+
+    The registration minimises Σ_a w_a ‖R P_a + T − Q_a‖² (spec geometry §3.6); a landmark moves
+    by G_a (θ, δT) with G_a = [−[R P_a]×, I], so to first order (θ, δT) = N⁻¹ Σ_a w_a G_aᵀ δQ_a
+    with N = Σ_a w_a G_aᵀ G_a, whose covariance under independent noise of σ per coordinate
+    is σ² N⁻¹ (Σ_a w_a² G_aᵀ G_a) N⁻¹ (σ² N⁻¹ for 0/1 weights)."""
+    w = weights
+    ref = jnp.where(w[..., None] > 0, reference[None], 0.0)
+    a = jnp.einsum("cpij,cpkj->cpki", rotation, ref)
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=a.dtype), a.shape + (3,))
+    g = jnp.concatenate([-_skew(a), eye], -1)  # (c, p, k, 3, 6)
+    info = jnp.einsum("cpk,cpkai,cpkaj->cpij", w, g, g)
+    info2 = jnp.einsum("cpk,cpkai,cpkaj->cpij", w**2, g, g)
+    inv = jnp.linalg.inv(info)
+    return inv @ info2 @ inv
+
+
+def _case_residual(kind, x, r, t, extra):
+    """The equations of one case for one joint (zero at the joint's true location):
+    `'ball'`/`'revolute'`: δ = T + (R − I) C (3.11); `'ball_known_slide'`: δ minus its
+    component along the slide (3.19); `'compliant_bushing'`: δ × R u with u from the link's
+    ball centre `extra` (3.34 with R^c u); `'ball_unknown_slide'`: x = (C, G, u), the distance
+    of the image of C to the line through G along u of S1 (3.22–3.25 as a least-squares
+    problem in the centre and the line)."""
+    if kind == "ball_unknown_slide":
+        u = x[6:] / jnp.linalg.norm(x[6:])
+        d = r @ x[:3] + t - x[3:6]
+        return d - (d @ u) * u
+    delta = t + r @ x - x
+    if kind in ("ball", "revolute"):
+        return delta
+    if kind == "ball_known_slide":
+        u = extra / jnp.linalg.norm(extra)
+        return delta - (delta @ u) * u
+    u = (x - extra) / jnp.linalg.norm(x - extra)
+    return jnp.cross(delta, r @ u)
+
+
+def _sigma_parameters(kind, centre, axis, r, t, mask):
+    """The unknowns of the per-case equations at the estimate: the centre, and for
+    `'ball_unknown_slide'` the line (G, u) through the centre's trajectory."""
+    if kind != "ball_unknown_slide":
+        return centre
+    pts, w = _trajectory(centre, r, t, mask)
+    return jnp.concatenate([centre, (w @ pts) / jnp.sum(w), axis])
+
+
+def _free_basis(kind, coordinate, axis, dtype):
+    """Columns spanning the unknowns the estimator determines: the revolute's point moves in
+    the plane its prior leaves free (⟂ the prior coordinate's axis, or ⟂ the joint axis);
+    every other kind: all its unknowns."""
+    if kind == "revolute":
+        if coordinate is not None:
+            return jnp.eye(3, dtype=dtype)[:, [i for i in range(3) if i != coordinate]]
+        return jnp.linalg.svd(jnp.eye(3, dtype=dtype) - jnp.outer(axis, axis))[0][:, :2]
+    if kind == "ball_unknown_slide":
+        # gauge: G slides along u, and u's length: the seven other directions
+        u = axis
+        gauge = jnp.zeros((9, 2), dtype).at[3:6, 0].set(u).at[6:, 1].set(u)
+        return jnp.linalg.svd(jnp.eye(9, dtype=dtype) - gauge @ gauge.T)[0][:, :7]
+    return jnp.eye(3, dtype=dtype)
+
+
+def _uncertainty(specs, rot, trans, mask, index, pose_cov, slides, outputs):
+    """σ (per unit landmark σ) of every located centre and axis, and the noise level of every
+    joint's singular values, in closed form (no differentiation through the solvers).
+
+    Each solver minimises Σ_c ‖r_c(x)‖² over its unknowns x, with r_c the equations of case c
+    (`_case_residual`), which depend on the noisy poses of that case only. The implicit-function
+    theorem gives δx = −H⁻¹ Σ_c B_c ε_c with H = Σ_c ∂²(½‖r_c‖²)/∂x², B_c = ∂²(½‖r_c‖²)/∂x∂ε_c
+    and ε_c the pose perturbations of case c, whose covariance is `_pose_covariance`; a compliant
+    bushing adds the influence of its link's ball centre. So Cov(x) = Σ_c Φ_c Σ_c Φ_cᵀ with
+    Φ_c = ∂x/∂ε_c: a sum over cases of small products. A revolute axis (the null vector of
+    M = [R^c − I]) moves by δu = −(MᵀM)⁺ Σ_c (R^c − I)ᵀ δR^c u (first-order perturbation of a
+    singular vector); the unknown slide's axis is part of its unknowns.
+
+    The singular values' noise: a direction v of the unknowns is determined by the data when
+    the equations' Jacobian A = [∂r_c/∂x] has ‖A v‖ (its singular value) well above the norm
+    that noise alone gives A v, ‖δA v‖ with δA from the pose noise — its root-mean-square is
+    returned per right singular vector (per unit landmark σ)."""
+    n_parts = rot.shape[1]
+    eye = jnp.eye(3, dtype=rot.dtype)
+    order = sorted(range(len(specs)), key=lambda k: specs[k][1] == "compliant_bushing")
+    relative = {}
+    params, extras = {}, {}
+    for k in order:
+        _, kind, (p1, p2), _, link = specs[k]
+        poses = []
+        for p in (p1, p2):
+            i = index[p]
+            poses.append((jnp.broadcast_to(eye, rot[:, 0].shape), jnp.zeros_like(trans[:, 0]))
+                         if i < 0 else (rot[:, i], trans[:, i]))
+        r, t = relative_operators(*poses[0], *poses[1])
+        relative[k] = (r, t)
+        params[k] = _sigma_parameters(kind, outputs[k]["centre"], outputs[k]["axis"], r, t,
+                                      mask)
+        extras[k] = slides[k] if kind == "ball_known_slide" else (
+            outputs[link]["centre"] if kind == "compliant_bushing" else jnp.zeros(3, rot.dtype))
+
+    def one_case(rot_c, trans_c):
+        def poses(eps, p):
+            i = index[p]
+            if i < 0:
+                return eye, jnp.zeros(3, rot.dtype)
+            return (eye + _skew(eps[i, :3])) @ rot_c[i], trans_c[i] + eps[i, 3:]
+
+        eps0 = jnp.zeros((n_parts, 6), rot.dtype)
+        out = {}
+        for k in order:
+            _, kind, (p1, p2), _, _ = specs[k]
+
+            def residual(x, eps, extra, kind=kind, p1=p1, p2=p2):
+                (r1, t1), (r2, t2) = poses(eps, p1), poses(eps, p2)
+                return _case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extra)
+
+            def cost(x, eps, extra, residual=residual):
+                res = residual(x, eps, extra)
+                return 0.5 * res @ res
+
+            x, extra = params[k], extras[k]
+            grad = jax.grad(cost)
+            out[k] = dict(
+                a=jax.jacfwd(residual)(x, eps0, extra),
+                h=jax.hessian(cost)(x, eps0, extra),
+                b=jax.jacfwd(grad, 1)(x, eps0, extra).reshape(x.shape[0], -1),
+                c=jax.jacfwd(grad, 2)(x, eps0, extra),
+                d=jax.jacfwd(residual, 1)(x, eps0, extra).reshape(-1, 6 * n_parts),
+                r=residual(x, eps0, extra),
+                dj=jax.jacfwd(jax.jacfwd(residual), 1)(x, eps0, extra).reshape(
+                    -1, x.shape[0], 6 * n_parts))
+        return out
+
+    per = jax.vmap(one_case)(rot, trans)
+    cov_pose = jax.vmap(lambda c: jax.scipy.linalg.block_diag(*c))(pose_cov)  # (c, 6P, 6P)
+    cov_pose = cov_pose * mask[:, None, None]
+    influence, noise = {}, {}
+    for k in order:
+        _, kind, _, coordinate, link = specs[k]
+        d = {key: v * mask.reshape((-1,) + (1,) * (v.ndim - 1)) for key, v in per[k].items()}
+        h = jnp.sum(d["h"], 0)
+        axis = outputs[k]["axis"]
+        x = params[k]
+        basis = _free_basis(kind, coordinate, axis, rot.dtype)
+        a_f = jnp.einsum("crp,pq->crq", d["a"], basis)
+        gauss = jnp.einsum("crp,crq->pq", a_f, a_f)
+        rss = jnp.sum(d["r"] ** 2)
+        if kind == "ball_unknown_slide":
+            # the design position is on the line too (C itself, no pose noise)
+            def design(z):
+                u = z[6:] / jnp.linalg.norm(z[6:])
+                g = z[:3] - z[3:6]
+                return g - (g @ u) * u
+
+            a0 = jax.jacfwd(design)(x)
+            h = h + a0.T @ a0 + jnp.einsum("i,ijk->jk", design(x),
+                                           jax.hessian(design)(x))
+            gauss = gauss + basis.T @ a0.T @ a0 @ basis
+            rss = rss + jnp.sum(design(x) ** 2)
+        # lack of fit: the residual energy noise alone would leave, E‖r‖² = tr((I − P_A) Σ_r)
+        cov_r = jnp.einsum("cre,cef,csf->crs", d["d"], cov_pose, d["d"])
+        expected = jnp.einsum("crr->", cov_r) - jnp.trace(jnp.linalg.solve(
+            gauss, jnp.einsum("crp,crs,csq->pq", a_f, cov_r, a_f)))
+        hinv = basis @ jnp.linalg.inv(basis.T @ h @ basis) @ basis.T
+        phi = -jnp.einsum("ij,cjk->cik", hinv, d["b"])  # (c, p, 6P)
+        if kind == "compliant_bushing":
+            coupling = jnp.sum(d["c"], 0)
+            phi = phi - jnp.einsum("ij,jk,ckl->cil", hinv, coupling, influence[link][:, :3])
+        if kind == "revolute":
+            m = d["a"].reshape(-1, 3)
+            w_, v_ = jnp.linalg.eigh(m.T @ m)
+            plane = v_[:, 1:] @ jnp.diag(1.0 / w_[1:]) @ v_[:, 1:].T
+            du = jnp.einsum("crpe,p->cre", d["dj"], axis)
+            phi_axis = -jnp.einsum("ij,crj,cre->cie", plane, d["a"], du)
+        elif kind == "ball_unknown_slide":
+            phi_axis = phi[:, 6:] - jnp.einsum("i,j,cje->cie", axis, axis, phi[:, 6:])
+            phi_axis = phi_axis / jnp.linalg.norm(x[6:])
+        else:
+            phi_axis = jnp.zeros_like(phi[:, :3])
+        influence[k] = jnp.concatenate([phi[:, :3], phi_axis], 1)
+        # noise of A v for every right singular vector v of the (free) equations
+        a_free = a_f.reshape(-1, basis.shape[1])
+        _, _, vt = jnp.linalg.svd(a_free, full_matrices=False)
+        dv = jnp.einsum("crpe,pq,iq->crie", d["dj"], basis, vt)
+        noise[k] = (jnp.linalg.svd(a_free, compute_uv=False),
+                    jnp.sqrt(jnp.einsum("crie,cef,crif->i", dv, cov_pose, dv)), rss, expected)
+    phi_all = jnp.concatenate([influence[k] for k in range(len(specs))], 1)
+    cov = jnp.einsum("cie,cef,cjf->ij", phi_all, cov_pose, phi_all)
+    return cov, [noise[k] for k in range(len(specs))]
 
 
 def _flat(outputs):
@@ -426,22 +628,15 @@ def _flat(outputs):
 
 
 @functools.partial(jax.jit, static_argnames=("specs", "index", "with_sigma"))
-def _run_landmarks(specs, reference, landmarks, weights, mask, index, slides, priors, starts,
-                   with_sigma):
-    outputs = _estimates(specs, reference, landmarks, weights, mask, index, slides, priors,
-                         starts)
+def _run(specs, rot, trans, mask, index, slides, priors, starts, reference, weights,
+         with_sigma):
+    outputs = _locate(specs, rot, trans, mask, index, slides, priors, starts)
     if not with_sigma:
-        return outputs, None
-    jac = jax.jacrev(lambda lm: _flat(_estimates(specs, reference, lm, weights, mask, index,
-                                                 slides, priors, starts)))(landmarks)
-    jac = jac * ((weights > 0) & (mask[:, None, None] > 0))[None, ..., None]
-    jac = jac.reshape(jac.shape[0], -1)
-    return outputs, jac @ jac.T
-
-
-@functools.partial(jax.jit, static_argnames=("specs", "index"))
-def _run_poses(specs, rot, trans, mask, index, slides, priors, starts):
-    return _locate(specs, rot, trans, mask, index, slides, priors, starts)
+        return outputs, None, None
+    pose_cov = _pose_covariance(reference, rot, weights)
+    cov, noise = _uncertainty(specs, rot, trans, mask, index, pose_cov, slides,
+                              jax.lax.stop_gradient(outputs))
+    return outputs, cov, noise
 
 
 CASE_BUCKET = 16
@@ -493,7 +688,8 @@ def locate_joints(
     joints: Sequence[GeometricJoint],
     *,
     landmark_sigma: float = 0.05,
-    max_sigma: float = 5.0,
+    max_sigma: float = 10.0,
+    min_snr: float = 3.0,
     rcond: float = 1e-6,
     with_sigma: bool = True,
 ) -> GeometricReport:
@@ -507,10 +703,19 @@ def locate_joints(
     - `joints`: the joint list (`GeometricJoint`s).
     - `landmark_sigma`: σ_L of every landmark coordinate (mm) for the reported σ (the
       measuring arm's ±0.05 mm: spec geometry §1.6).
-    - `max_sigma`: a joint whose largest centre σ exceeds this (mm) is not observable.
-    - `rcond`: a joint whose equations' smallest singular value is below `rcond` × the
-      largest (after the one the kind leaves free: the revolute axis) is not observable.
-    - `with_sigma`: compute σ (the Jacobian through registration and solvers).
+    - `min_snr`: a joint is not observable when the weakest singular value of its equations
+      (after the revolute's axis, which is their null direction) is below `min_snr` times the
+      root-mean-square value landmark noise alone gives it (‖δA v‖ for its singular vector v):
+      the data do not tell that direction from noise.
+    - `max_sigma`: the hardpoint tolerance (mm): a joint whose largest centre σ, inflated by
+      its lack of fit (× √(χ²/E) when the equations' residual energy χ² exceeds the energy E
+      landmark noise alone would leave: a bushing taken as a joint), exceeds it is not
+      observable. Default 10 mm: the thesis accepts its bushing locations within 7 mm
+      (Table 3.1) and calls the strut top's 50 mm and 175 mm failures (spec geometry §4.8–4.9).
+    - `rcond`: without landmarks (poses only, no σ): a joint whose equations' smallest
+      singular value is below `rcond` × the largest (after the revolute's axis) is not
+      observable.
+    - `with_sigma`: compute σ and the noise-relative verdict (closed form: `_uncertainty`).
 
     The number of cases is padded up to a multiple of `CASE_BUCKET` with masked cases, so that
     tables of similar size share one compiled program.
@@ -530,30 +735,41 @@ def locate_joints(
     n_cases = int(measurements.n_cases)
     n_pad = -(-n_cases // CASE_BUCKET) * CASE_BUCKET
     mask = jnp.concatenate([jnp.ones(n_cases), jnp.zeros(n_pad - n_cases)])
-    if measurements.landmarks is not None and measurements.layout is not None:
-        outputs, cov = _run_landmarks(
-            specs, jnp.asarray(measurements.layout.position),
-            _pad(measurements.landmarks, n_pad), _pad(measurements.weights, n_pad), mask,
-            _IndexMap(lookup), slides, priors, starts, bool(with_sigma))
+    landmarks = measurements.landmarks is not None and measurements.layout is not None
+    with_sigma = bool(with_sigma) and landmarks
+    if landmarks:
+        reference = jnp.asarray(measurements.layout.position)
+        weights = _pad(measurements.weights, n_pad)
     else:
-        outputs = _run_poses(specs, _pad(measurements.rotation, n_pad),
-                             _pad(measurements.translation, n_pad), mask, _IndexMap(lookup),
-                             slides, priors, starts)
-        cov = None
+        reference = jnp.zeros((len(parts), 1, 3))
+        weights = jnp.ones((n_pad, len(parts), 1))
+    outputs, cov, noise = _run(specs, _pad(measurements.rotation, n_pad),
+                               _pad(measurements.translation, n_pad), mask, _IndexMap(lookup),
+                               slides, priors, starts, reference, weights, with_sigma)
     cov = None if cov is None else np.asarray(cov) * landmark_sigma**2
     results = []
     for k, (j, o) in enumerate(zip(joints, outputs, strict=True)):
         centre = np.asarray(o["centre"])
         axis = np.asarray(o["axis"]) if j.kind != "ball" and j.kind != "compliant_bushing" \
             else None
+        sv = np.asarray(o["sv"])
+        snr, chi2 = math.nan, math.nan
         if cov is not None:
             block = cov[6 * k: 6 * k + 6, 6 * k: 6 * k + 6]
             sigma = np.sqrt(np.clip(np.diag(block)[:3], 0, None))
             sigma_axis = None if axis is None else np.sqrt(np.clip(np.diag(block)[3:], 0, None))
-            worst = float(np.sqrt(max(np.linalg.eigvalsh(block[:3, :3]).max(), 0.0)))
+            worst = float(np.sqrt(max(np.linalg.eigvalsh(block[:3, :3]).max(), 0.0))) \
+                if np.all(np.isfinite(block[:3, :3])) else math.inf
+            free, level, rss, expected = (np.asarray(v) for v in noise[k])
+            # the weakest direction the solver determines (a revolute: in the plane its prior
+            # leaves free; its axis is the null direction of M, kept in `singular_values`)
+            snr = float(free[-1] / max(landmark_sigma * level[-1], 1e-300))
+            sv = sv if j.kind == "revolute" else free
+            chi2 = float(rss / max(landmark_sigma**2 * expected, 1e-300))
+            worst_fit = worst * math.sqrt(max(1.0, chi2)) if math.isfinite(chi2) else math.inf
         else:
             sigma, sigma_axis, worst = np.full(3, np.nan), None, float("nan")
-        sv = np.asarray(o["sv"])
+            worst_fit = math.nan
         if j.kind == "revolute":
             relative = sv[1] / sv[0] if sv[0] > 0 else 0.0
         else:
@@ -565,21 +781,25 @@ def locate_joints(
                                        "relative to each other")
         elif not np.all(np.isfinite(centre)):
             observable, note = False, "the solver found no finite centre"
-        elif not relative > rcond:
+        elif cov is None and not relative > rcond:
             observable, note = False, (f"singular equations (relative singular value "
                                        f"{relative:.1e})")
-        elif math.isfinite(worst) and worst > max_sigma:
-            observable, note = False, (f"σ up to {worst:.3g} mm at landmark noise "
-                                       f"{landmark_sigma:g} mm (limit {max_sigma:g} mm)")
-        elif not math.isfinite(worst) and cov is not None:
-            observable, note = False, "σ is not finite"
+        elif cov is not None and not snr >= min_snr:
+            observable, note = False, (
+                f"the weakest singular value of the equations is {snr:.2g} × its noise level "
+                f"(at landmark noise {landmark_sigma:g} mm; needs ≥ {min_snr:g})")
+        elif cov is not None and not worst_fit <= max_sigma:
+            observable, note = False, (
+                f"σ up to {worst_fit:.3g} mm at landmark noise {landmark_sigma:g} mm"
+                + (f" and lack of fit χ²/E = {chi2:.2g}" if chi2 > 1 else "")
+                + f" (limit {max_sigma:g} mm)")
         else:
             observable = True
         results.append(JointEstimate(
             name=j.name, kind=j.kind, parts=tuple(j.parts),
             centre=centre if observable else None, axis=axis if observable else None,
             sigma=sigma, sigma_axis=sigma_axis, residual=float(o["rms"]), singular_values=sv,
-            observable=observable, note=note, estimate=centre))
+            observable=observable, note=note, estimate=centre, snr=snr, chi2=chi2))
     return GeometricReport(tuple(results), float(landmark_sigma), int(measurements.n_cases),
                            tuple(measurements.notes))
 
@@ -1024,10 +1244,13 @@ def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoi
 class GeometryDesign:
     """Result of `design_geometry_cases`.
 
-    **Fields:** `cases`: chosen case indices, in the order they were added; `sigma`: joint name
-    → largest centre σ (mm) with the chosen cases (at the landmark noise σ_L); `observable`:
-    joint name → σ ≤ `max_sigma`; `history`: the worst joint σ after each added case;
-    `complete`: every joint observable.
+    **Fields:** `cases`: the chosen candidate indices, in the order they were added, up to
+    the first step at which every joint is observable (all of them if none is); `sigma`:
+    joint name → largest coordinate σ (mm) of its centre with those cases (at the landmark
+    noise σ_L; inf when not determined); `observable`: joint name → σ finite and ≤
+    `max_sigma`; `history`: the worst joint σ after each added case; `complete`: every joint
+    observable; `report`: the stiffness design's `DesignReport` of the whole greedy run
+    (`budget` steps; targets named `'<marker>.x'`…).
     """
 
     cases: tuple[int, ...]
@@ -1035,189 +1258,182 @@ class GeometryDesign:
     observable: dict
     history: tuple[float, ...]
     complete: bool
+    report: object = None
 
 
-def _case_residual(kind, x, r, t, extra):
-    if kind == "ball_unknown_slide":
-        # x = (C, G, u): distance of the image of C to the line through G along u, both
-        # unknowns too (the line is fitted with the centre)
-        u = x[6:] / jnp.linalg.norm(x[6:])
-        d = r @ x[:3] + t - x[3:6]
-        return d - (d @ u) * u
-    delta = t + r @ x - x
-    if kind in ("ball", "revolute"):
-        return delta
-    if kind == "ball_known_slide":
-        u = extra[0] / jnp.linalg.norm(extra[0])
-        return delta - (delta @ u) * u
-    # compliant_bushing
-    u = (x - extra[0]) / jnp.linalg.norm(x - extra[0])
-    return jnp.cross(delta, r @ u)
+def _design_parameters(mech, joints, table):
+    """The model numbers that stand for each joint's unknowns: its centre (the position of
+    the I marker of its first element; a revolute's coordinate along the axis is fixed by
+    its prior and left out) and, for the unknown slide, the slide's line on S1 (the position
+    and z axis of the translational/cylindrical joint's marker on S1, one coordinate of each
+    left out for the gauge). Returns (Params, per joint (centre marker, line marker or None),
+    target names)."""
+    from .params import Params
 
-
-@functools.partial(jax.jit, static_argnames=("specs", "index"))
-def _case_blocks(specs, reference, landmarks, weights, mask, index, extras, centres):
-    """Per joint and case: H_c = A_cᵀA_c and G_c = A_cᵀ D_c D_cᵀ A_c, with A_c = ∂r_c/∂x and
-    D_c = ∂r_c/∂(landmarks of case c) (the residual's noise per unit landmark σ)."""
-    n_cases = landmarks.shape[0]
-    eye = jnp.eye(3, dtype=landmarks.dtype)
-
-    def one_case(lm, w, m):
-        out = []
-        for k, (_, kind, (p1, p2), _, _) in enumerate(specs):
-            def residual(x, lm_c, k=k, kind=kind, p1=p1, p2=p2):
-                reg_c = register_landmarks(reference, lm_c, w, method="svd")
-
-                def pose(p):
-                    i = index[p]
-                    return (eye, jnp.zeros(3, eye.dtype)) if i < 0 else \
-                        (reg_c.rotation[i], reg_c.translation[i])
-
-                (r1, t1), (r2, t2) = pose(p1), pose(p2)
-                return _case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extras[k])
-
-            a = jax.jacfwd(residual)(centres[k], lm)
-            d = jax.jacfwd(residual, argnums=1)(centres[k], lm)
-            d = (d * (w > 0)[None, ..., None]).reshape(d.shape[0], -1)
-            out.append((m * a.T @ a, m * a.T @ d @ d.T @ a))
-        return out
-
-    return jax.vmap(one_case)(landmarks, weights, mask), n_cases
-
-
-def _sigma_of(kind, h, g, axis):
-    """Largest σ (per unit landmark σ) of the centre from summed blocks."""
-    if kind == "ball_unknown_slide":
-        # (C, G, u) with two gauge directions (G along u, the scale of u): pseudo-inverse
-        h, g = np.asarray(h), np.asarray(g)
-        w = np.linalg.eigvalsh(h)
-        if w[2] <= 1e-10 * max(w[-1], 1e-300):  # more than the two gauge directions free
-            return math.inf
-        hinv = np.linalg.pinv(h, rcond=1e-10, hermitian=True)
-        cov = (hinv @ g @ hinv)[:3, :3]
-        return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
-    if kind == "revolute":
-        # the point along the axis is fixed by the prior: invert in the plane ⟂ axis
-        basis = jnp.linalg.svd(jnp.eye(3) - jnp.outer(axis, axis))[0][:, :2]
-        h, g = basis.T @ h @ basis, basis.T @ g @ basis
-    w = np.linalg.eigvalsh(np.asarray(h))
-    if w[0] <= 1e-12 * max(w[-1], 1e-300):
-        return math.inf
-    hinv = np.linalg.inv(np.asarray(h))
-    cov = hinv @ np.asarray(g) @ hinv
-    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
-
-
-def _relative_all(measurements, pair):
-    """Relative operators (R^c, T^c) of a pair over all cases, NumPy."""
-    n = measurements.n_cases
-
-    def pose(p):
-        if p == GROUND:
-            return np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3))
-        i = measurements.parts.index(p)
-        return np.asarray(measurements.rotation[:, i]), np.asarray(measurements.translation[:, i])
-
-    (r1, t1), (r2, t2) = pose(pair[0]), pose(pair[1])
-    return np.einsum("cji,cjk->cik", r1, r2), np.einsum("cji,cj->ci", r1, t2 - t1)
+    n_markers = len(mech.markers.names)
+    pos_mask = np.zeros((n_markers, 3), bool)
+    ori_mask = np.zeros((n_markers, 3, 3), bool)
+    ori = np.asarray(mech.markers.orientation)
+    markers, targets = [], []
+    for j in joints:
+        if not j.elements or j.elements[0] not in table:
+            raise InputError(f"joint '{j.name}': the design needs elements=(name of a joint or "
+                             f"bushing of model '{mech.name}'), whose marker is its centre "
+                             "(joints_from_model fills it).")
+        centre = table[j.elements[0]][4]
+        keep = [True, True, True]
+        if j.kind == "revolute":
+            axis = ori[centre][:, 2]
+            drop = "xyz".index(j.prior_coordinate) if j.prior_coordinate else \
+                int(np.argmax(np.abs(axis)))
+            keep[drop] = False
+        pos_mask[centre] |= keep
+        targets += [f"{mech.markers.names[centre]}.{c}" for c, k in zip("xyz", keep,
+                                                                         strict=True) if k]
+        line = None
+        if j.kind == "ball_unknown_slide":
+            s1 = mech.part_index(j.parts[0])
+            for _, kind, pi, pj, mi, mj in table.values():
+                if kind in ("translational", "cylindrical") and s1 in (pi, pj):
+                    line = mi if pi == s1 else mj
+                    break
+            if line is None:
+                raise InputError(f"joint '{j.name}': model '{mech.name}' has no translational "
+                                 f"or cylindrical joint on '{j.parts[0]}' for the slide.")
+            axis = ori[line][:, 2]
+            fixed = int(np.argmax(np.abs(axis)))
+            pos_mask[line] = [c != fixed for c in range(3)]
+            ori_mask[line, :, 2] = [c != fixed for c in range(3)]
+        markers.append((centre, line))
+    params = Params.leaves(mech, lambda m: (m.markers.position, m.markers.orientation),
+                           (pos_mask, ori_mask))
+    return params, markers, targets
 
 
 def design_geometry_cases(
-    measurements,
+    mech,
+    candidates,
     joints: Sequence[GeometricJoint],
+    layout,
     *,
-    candidates: Sequence[int] | None = None,
     landmark_sigma: float = 0.05,
-    max_sigma: float = 5.0,
+    max_sigma: float = 10.0,
     budget: int | None = None,
+    start: Sequence[int] = (),
 ) -> GeometryDesign:
     """Which load cases make every joint observable (spec geometry §4.10: steering inputs,
-    varied rotations): greedy forward selection among candidate cases.
+    varied rotations), chosen by the stiffness design's greedy search
+    (`diffsusp.identify.design_experiment`, criterion "sigma").
 
-    The candidates are measured or simulated cases (e.g. `diffsusp.measure.synthesize` over a
-    grid of wheel heights × rack positions × forces). The joints are first located from all
-    candidates; then each case's contribution to every joint's information is computed once —
-    H_c = A_cᵀA_c and G_c = A_cᵀ D_c D_cᵀ A_c with A_c the Jacobian of that case's equations
-    with respect to the centre and D_c with respect to that case's landmarks — and a subset S
-    has the centre covariance σ_L² H_S⁻¹ G_S H_S⁻¹ (sums over S; the sandwich form of the
-    estimators' first-order covariance, the same quantity `locate_joints` reports; for the
-    strut top the line's point and direction are unknowns with the centre). Cases are
-    added one at a time, each time the one that most lowers the worst joint σ, until every
-    joint's σ ≤ `max_sigma` or `budget` cases. As the stiffness design (`design_experiment`)
-    does with the direct method's rows, this ranks cases by the information they add.
-    (Approximation: a compliant link's ball centre is held at its all-candidates value.)
+    The joint localisation is a least-squares problem in the joint centres whose equations
+    r_c (`_case_residual`) hold case by case; so is a stiffness identification in the
+    stiffnesses, and `design_experiment` chooses cases from any per-case measurement model.
+    Here the measurement model of a case is the whitened geometric equations of every joint at
+    the model's equilibrium, W_c r_c(x) with x the model's joint hardpoints (the parameters),
+    the poses held at the equilibrium (its derivative with respect to the hardpoints is not
+    the localisation's: the equations use the measured poses) and W_c = (D_c Σ_c D_cᵀ)^(−1/2)
+    from the poses' landmark noise (`_pose_covariance`, D_c = ∂r_c/∂poses), joint by joint
+    (each solver uses its own equations only): each case adds A_cᵀ (D_c Σ_c D_cᵀ)⁻¹ A_c / σ_L²
+    to the information of the centres (the generalised least-squares bound of the estimators'
+    covariance, a little below the σ `locate_joints` reports for its ordinary least squares;
+    far below it for a compliant bushing, whose link-ball noise it misses: see
+    tests/test_geometric.py). The strut top's line (a point and the direction of the slide on
+    S1) are nuisance parameters; a compliant bushing and its link's
+    ball share the ball centre; a revolute's coordinate along the axis is fixed by its prior.
+
+    **Arguments:**
+
+    - `mech`: the model (the truth or the nominal design); `candidates`: candidate `Loads`
+      (e.g. wheel heights × rack positions × forces: `mech.loads(...)`).
+    - `joints`: the joint list, each with `elements` (as `joints_from_model` gives it).
+    - `layout`: the `LandmarkLayout` of the measured parts (their noise whitens the equations).
+    - `landmark_sigma` (mm), `max_sigma` (mm: a joint is observable when its centre's largest
+      coordinate σ is within it), `budget`: greedy steps (default: the number of candidates,
+      at most 12), `start`: cases already in the plan.
 
     **Returns:** a `GeometryDesign`.
+
+    **Raises:** `InputError` for a joint without `elements`, a part without landmarks, or an
+    unknown slide whose model has no slide joint on S1.
     """
-    parts = tuple(measurements.parts)
-    specs, index = _specs(joints, parts)
-    if measurements.landmarks is None or measurements.layout is None:
-        raise InputError("design_geometry_cases needs landmark measurements (for the noise).")
-    n = int(measurements.n_cases)
-    pool = list(range(n)) if candidates is None else [int(c) for c in candidates]
-    if not pool or any(not 0 <= c < n for c in pool):
-        raise InputError(f"candidates must be case indices in [0, {n}).")
-    full = locate_joints(measurements, joints, with_sigma=False)
-    extras, centres = [], []
-    for j, est in zip(joints, full.joints, strict=True):
-        centres.append(jnp.asarray(est.estimate))
-        if j.kind == "ball_known_slide":
-            extras.append((jnp.asarray(j.slide, float),))
-        elif j.kind == "compliant_bushing":
-            extras.append((jnp.asarray(full[j.link_ball].estimate),))
-        elif j.kind == "ball_unknown_slide":
-            rel = _relative_all(measurements, j.parts)
-            pts = np.concatenate([est.estimate[None], np.einsum("cij,j->ci", rel[0],
-                                                                est.estimate) + rel[1]])
-            axis = est.axis if est.axis is not None else np.linalg.svd(
-                pts - pts.mean(0))[2][0]
-            centres[-1] = jnp.concatenate([centres[-1], jnp.asarray(pts.mean(0)),
-                                           jnp.asarray(axis)])
-            extras.append(())
-        else:
-            extras.append(())
-    n_pad = -(-n // CASE_BUCKET) * CASE_BUCKET
-    mask = jnp.concatenate([jnp.ones(n), jnp.zeros(n_pad - n)])
-    blocks, _ = _case_blocks(specs, jnp.asarray(measurements.layout.position),
-                             _pad(measurements.landmarks, n_pad),
-                             _pad(measurements.weights, n_pad), mask,
-                             _IndexMap(tuple(index)), tuple(extras), tuple(centres))
-    h = [np.asarray(b[0]) for b in blocks]
-    g = [np.asarray(b[1]) for b in blocks]
-    # the strut top's design position is on the line too (C itself, no measurement noise)
-    fixed = []
-    for k, j in enumerate(joints):
-        if j.kind == "ball_unknown_slide":
-            a = np.asarray(jax.jacfwd(lambda x: _case_residual(
-                "ball_unknown_slide", x, jnp.eye(3), jnp.zeros(3), ()))(centres[k]))
-            fixed.append(a.T @ a)
-        else:
-            fixed.append(0.0)
-    axes = [np.asarray(e.axis) if e.axis is not None else np.zeros(3) for e in full.joints]
+    from ..statics import part_poses
+    from .sensitivity import design_experiment
 
-    def worst(subset):
-        out = {}
-        for k, j in enumerate(joints):
-            hs, gs = h[k][subset].sum(0) + fixed[k], g[k][subset].sum(0)
-            out[j.name] = landmark_sigma * _sigma_of(j.kind, hs, gs, axes[k])
-        return out
+    table = element_table(mech)
+    parts = tuple(layout.parts)
+    _specs(joints, parts)  # unknown parts, links
+    params, markers, targets = _design_parameters(mech, joints, table)
+    measured = [mech.part_index(p) for p in parts]
+    reference = jnp.asarray(layout.position)
+    present = jnp.asarray(layout.present, dtype=reference.dtype)
+    part_index = {p: (-1 if p == GROUND else mech.part_index(p)) for j in joints
+                  for p in j.parts}
+    slot = {i: k for k, i in enumerate(measured)}
+    kinds = [(j.kind, j.parts, None if j.kind != "compliant_bushing" else
+              [g.name for g in joints].index(j.link_ball), j.slide) for j in joints]
 
-    chosen, history = [], []
-    limit = len(pool) if budget is None else min(budget, len(pool))
-    sig = {j.name: math.inf for j in joints}
-    while len(chosen) < limit and max(sig.values()) > max_sigma:
-        best, best_key = None, None
-        for c in pool:
-            if c in chosen:
-                continue
-            s = worst(chosen + [c])
-            values = sorted((min(v, 1e12) for v in s.values()), reverse=True)
-            key = (sum(v > max_sigma for v in s.values()), values)
-            if best_key is None or key < best_key:
-                best, best_key, best_sig = c, key, s
-        chosen.append(best)
-        sig = best_sig
+    def observe(m, q):
+        q = jax.lax.stop_gradient(q)
+        rot, trans = part_poses(m, q)
+        rot_m, trans_m = rot[jnp.asarray(measured)], trans[jnp.asarray(measured)]
+        pose_cov = _pose_covariance(reference, rot_m[None], present[None])[0]
+        eye = jnp.eye(3, dtype=rot.dtype)
+        pos, ori = m.markers.position, m.markers.orientation
+
+        def residuals(eps):
+            def pose(p):
+                i = part_index[p]
+                if i < 0:
+                    return eye, jnp.zeros(3, rot.dtype)
+                k = slot[i]
+                return (eye + _skew(eps[k, :3])) @ rot_m[k], trans_m[k] + eps[k, 3:]
+
+            out = []
+            for (kind, (p1, p2), link, slide), (centre, line) in zip(kinds, markers,
+                                                                     strict=True):
+                (r1, t1), (r2, t2) = pose(p1), pose(p2)
+                r, t = r1.T @ r2, r1.T @ (t2 - t1)
+                x = pos[centre]
+                extra = jnp.zeros(3, rot.dtype)
+                if kind == "ball_unknown_slide":
+                    x = jnp.concatenate([x, pos[line], ori[line][:, 2]])
+                elif kind == "ball_known_slide":
+                    extra = jnp.asarray(slide, rot.dtype)
+                elif kind == "compliant_bushing":
+                    extra = pos[markers[link][0]]
+                out.append(_case_residual(kind, x, r, t, extra))
+            return out
+
+        eps0 = jnp.zeros((len(measured), 6), rot.dtype)
+        cov_pose = jax.scipy.linalg.block_diag(*pose_cov)
+        out = []
+        for res, d in zip(residuals(eps0), jax.jacfwd(residuals)(eps0), strict=True):
+            # each joint whitened on its own: its solver does not use the other joints'
+            # equations (nor their correlated noise)
+            d = jax.lax.stop_gradient(d.reshape(-1, 6 * len(measured)))
+            w, v = jnp.linalg.eigh(d @ cov_pose @ d.T)
+            out.append((v / jnp.sqrt(jnp.maximum(w, 1e-12 * w[-1]))) @ v.T @ res)
+        return jnp.concatenate(out)
+
+    n_cand = int(candidates.n_cases)
+    steps = min(n_cand, 12) if budget is None else min(int(budget), n_cand)
+    report = design_experiment(mech, candidates, params, steps, sigma=landmark_sigma,
+                               observe=observe, targets=targets, criterion="sigma",
+                               start=tuple(start))
+    per_joint = []
+    for centre, _ in markers:
+        prefix = f"{mech.markers.names[centre]}."
+        per_joint.append([t for t, name in enumerate(report.targets)
+                          if name.startswith(prefix)])
+    history, observable, sigma = [], {}, {}
+    stop = len(report.chosen)
+    for step in range(len(report.chosen)):
+        sig = {j.name: float(np.max(report.sigma[step][cols]))
+               for j, cols in zip(joints, per_joint, strict=True)}
         history.append(max(sig.values()))
-    observable = {k: v <= max_sigma for k, v in sig.items()}
-    return GeometryDesign(tuple(chosen), sig, observable, tuple(history),
-                          all(observable.values()))
+        sigma, observable = sig, {k: bool(v <= max_sigma) for k, v in sig.items()}
+        if all(observable.values()):
+            stop = step + 1
+            break
+    return GeometryDesign(tuple(report.chosen[:stop]), sigma, observable, tuple(history),
+                          all(observable.values()), report)

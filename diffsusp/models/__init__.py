@@ -23,6 +23,7 @@ from collections.abc import Callable
 from ..model import Mechanism
 from .crank_slider import crank_slider
 from .double_wishbone import DOUBLE_WISHBONE_DESIGN_LOAD, double_wishbone
+from .double_wishbone_bushing_pairs import double_wishbone_bushing_pairs
 from .front_axle_table_3_3 import front_axle_table_3_3
 from .isolated_bushing import isolated_bushing
 from .loadcases import TABLE_4_4, TABLE_5_1, thesis_load_cases
@@ -53,5 +54,6 @@ __all__ = [
     "DOUBLE_WISHBONE_DESIGN_LOAD", "STOP_VARIANTS", "TABLE_4_4", "TABLE_5_1", "ZOO",
     "crank_slider",
     "double_wishbone", "front_axle_table_3_3", "isolated_bushing", "pseudo_mcpherson",
+    "double_wishbone_bushing_pairs",
     "pseudo_mcpherson_steering", "thesis_load_cases", "two_bushing_coupler",
 ]
