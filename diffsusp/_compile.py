@@ -7,6 +7,11 @@ CPU), so the programs below are compiled without them. Set on the CPU only, when
 first called (asking for the backend at import time would initialise it too early for a user who
 configures JAX after importing diffsusp).
 
+They are compiled with XLA's classic loop emitters instead of its MLIR fusion emitters
+(`xla_cpu_use_fusion_emitters`): the programs here are many small fusions, which the MLIR path
+compiles ~1.7× slower for the same code speed (pseudo-McPherson 13-case solve: 4.9 → 2.9 s of
+CPU to compile, 5.4 → 4.7 ms to run; its wheel-centre Jacobian: 9.1 → 5.1 s, 6.5 → 6.2 ms).
+
 They are also compiled without Eigen's intra-op thread pool (`xla_cpu_multi_thread_eigen`):
 jaxlib's batched LAPACK kernels (LU, eigen-decomposition, SVD) split a batch over that pool and
 wait for it from a pool thread, so two such calls running at once — two independent ones in one
@@ -37,9 +42,10 @@ import pickle
 import equinox as eqx
 import jax
 
-CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_multi_thread_eigen": False}
+CPU_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_multi_thread_eigen": False,
+               "xla_cpu_use_fusion_emitters": False}
 XLA_FLAGS = ("--xla_cpu_experimental_ynn_fusion_type=",  # the same, for XLA_FLAGS (CLI, tests)
-             "--xla_cpu_multi_thread_eigen=false")
+             "--xla_cpu_multi_thread_eigen=false", "--xla_cpu_use_fusion_emitters=false")
 
 _PROGRAM_DIR: list = [None]  # where exported programs are kept (None: off)
 
