@@ -28,15 +28,18 @@ jax.config.update("jax_enable_x64", True)
 
 
 def _tables(folder: pathlib.Path, n: int, mech):
+    import equinox as eqx
+
     from diffsusp import measure
     from diffsusp.models import thesis_load_cases
 
     exact = measure.synthesize(mech, thesis_load_cases(mech),
                                layout=measure.place_landmarks(mech, seed=0))
+    draw = eqx.filter_jit(lambda key: measure.add_noise(
+        exact, measure.GaussianNoise(landmarks=0.05), key))
     for seed in range(n):
-        noisy = measure.add_noise(exact, measure.GaussianNoise(landmarks=0.05),
-                                  jax.random.PRNGKey(seed))
-        measure.write_measurements(noisy, folder / f"draw{seed:05d}.csv", mech)
+        measure.write_measurements(draw(jax.random.PRNGKey(seed)),
+                                   folder / f"draw{seed:05d}.csv", mech)
 
 
 def main():
@@ -81,8 +84,11 @@ def main():
 
     # ------------------------------------------------------------ 2 local worker processes
     c0, t0 = time.process_time(), time.perf_counter()
+    # The workers see as many CPU devices as this process (one per core, `_common`): the same
+    # device topology, so the programs the in-process run compiled are found in the cache.
+    env = {**worker_environment(), "JAX_NUM_CPU_DEVICES": str(jax.local_device_count())}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=":0", env=worker_environment()) as cluster, \
+                                  dashboard_address=":0", env=env) as cluster, \
             distributed.Client(cluster) as client:
         started = time.perf_counter() - t0
         remote = fleet.run("least_squares", glob, work / "cluster", model=mech,

@@ -2,11 +2,15 @@
 `diffsusp fleet status DIR`: one identification per data set, many data sets
 (`diffsusp.fleet`).
 
-RECIPE is `direct`, `iterative` or `least-squares`. `--items` is a glob (quote it: the
-program expands it, so a remote scheduler sees the same list), a table path, or a `.txt` file
-listing one path per line; repeatable. Each item's report goes to `DIR/reports/ITEM.json` (the
-JSON of `diffsusp identify … --out report.json`) as soon as its batch is done, one row per item
-to `DIR/summary.csv`; a second run in the same DIR skips the items done (same content hash).
+RECIPE is `direct`, `iterative`, `least-squares` (measurement tables), `kc` (K&C load tables
+with columns F_vert, F_lat, F_long; or, with `--option event=NAME`, model files run through
+that event of `diffsusp kc`) or `tyre-fit` (bench tables, `--model START.tir`). `--items` is a
+glob (quote it: the program expands it, so a remote scheduler sees the same list), a path, or
+a `.txt` file listing one path per line; repeatable. Each item's report goes to
+`DIR/reports/ITEM.json` (the JSON of the single-item verb: `diffsusp identify … --out`,
+`diffsusp kc --json`, `diffsusp tyre fit --report`) as soon as its batch is done, one row per
+item to `DIR/summary.csv`; a second run in the same DIR skips the items done (same content
+hash). `--devices N|all` splits a batch over a worker's local devices.
 Without `--workers` or `--scheduler` the fleet runs in this process. Exit codes: 0 every item
 ok, 3 some items failed (listed, and in the summary), 2 bad input.
 """
@@ -36,8 +40,12 @@ ItemsOpt = Annotated[list[str], typer.Option(
     "--items", "-i", help="Data sets: a glob ('data/*.csv', quoted), a table, or a .txt list "
     "of paths (repeatable).")]
 OutOpt = Annotated[pathlib.Path, typer.Option("--out", "-o", help="Output folder.")]
-ModelOpt = Annotated[str, typer.Option(
-    "--model", "-M", help="Model file (.toml, .adm, .json) or built-in name, for every item.")]
+ModelOpt = Annotated[str | None, typer.Option(
+    "--model", "-M", help="Model file (.toml, .adm, .json) or built-in name, for every item "
+    "(tyre-fit: the start .tir).")]
+DevicesOpt = Annotated[str | None, typer.Option(
+    help="Local devices a worker splits a batch over: a count or 'all' (default "
+    "$DIFFSUSP_DEVICES, else 1).")]
 WorkersOpt = Annotated[int | None, typer.Option(
     help="Start a local Dask cluster of N worker processes.")]
 SchedulerOpt = Annotated[str | None, typer.Option(
@@ -76,13 +84,17 @@ def _options(values: list[str] | None) -> dict:
 
 
 def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output):
+         retry_failed, json_output, devices=None):
     if workers is not None and scheduler is not None:
         raise fail("give --workers or --scheduler, not both.", EXIT_BAD_INPUT)
     if workers is not None and workers < 1:
         raise fail("--workers must be at least 1.", EXIT_BAD_INPUT)
     check_output(out, what="fleet folder", directory=True)
     options = _options(option)
+    if devices is not None and devices != "all":
+        if not devices.isdigit() or int(devices) < 1:
+            raise fail(f"--devices must be a count or 'all'; got '{devices}'.", EXIT_BAD_INPUT)
+        devices = int(devices)
     enable_x64()
     from .. import fleet
 
@@ -90,7 +102,7 @@ def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, 
         result = fleet.run(recipe, _items(items), out, model=model, options=options,
                            workers=workers, scheduler=scheduler, batch_size=batch_size,
                            time_limit=time_limit, retry_failed=retry_failed,
-                           progress=not json_output)
+                           devices=devices, progress=not json_output)
         state = fleet.status(out)
     if json_output:
         print_json({"ok": result.ok, "failed": result.failed, "skipped": result.skipped,
@@ -110,30 +122,56 @@ def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, 
 @fleet_app.command("direct")
 def direct(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
            scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-           option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+           option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+           devices: DevicesOpt = None):
     """The direct (linear) stiffness identification on every data set."""
     _run("direct", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output)
+         retry_failed, json_output, devices)
 
 
 @fleet_app.command("iterative")
 def iterative(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
               scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
               time_limit: TimeOpt = None, option: OptionOpt = None,
-              retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+              retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+              devices: DevicesOpt = None):
     """The iterative (correlation loop) identification on every data set."""
     _run("iterative", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output)
+         retry_failed, json_output, devices)
 
 
 @fleet_app.command("least-squares")
 def least_squares(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
                   scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
                   time_limit: TimeOpt = None, option: OptionOpt = None,
-                  retry_failed: RetryOpt = False, json_output: JsonOpt = False):
+                  retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+                  devices: DevicesOpt = None):
     """Least squares through the equilibrium on every data set, a batch at a time (vmapped)."""
     _run("least_squares", items, out, model, workers, scheduler, batch_size, time_limit,
-         option, retry_failed, json_output)
+         option, retry_failed, json_output, devices)
+
+
+@fleet_app.command("kc")
+def kc(items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
+       scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+       option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+       devices: DevicesOpt = None):
+    """A K&C event on every item: load tables (F_vert, F_lat, F_long, N) on --model, or with
+    --option event=NAME (and its ranges, e.g. travel=-80:80:161) every item a model file."""
+    _run("kc", items, out, model, workers, scheduler, batch_size, time_limit, option,
+         retry_failed, json_output, devices)
+
+
+@fleet_app.command("tyre-fit")
+def tyre_fit(items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
+             scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
+             time_limit: TimeOpt = None, option: OptionOpt = None,
+             retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+             devices: DevicesOpt = None):
+    """A Magic Formula fit of every bench table from the start tyre --model START.tir
+    (options: groups, names, loss, noise, ...; a batch is one vmapped fit)."""
+    _run("tyre_fit", items, out, model, workers, scheduler, batch_size, time_limit, option,
+         retry_failed, json_output, devices)
 
 
 @fleet_app.command("status")

@@ -1,9 +1,25 @@
 """Where a fleet's batches run: in this process, or on a Dask distributed cluster.
 
-An engine takes a function and a list of tasks and yields `(index, result)` as tasks finish
-(`result` is what the function returned, or the exception that ended the task). That is the
-whole interface (`Engine`): a Ray engine would be another ~40 lines (`ray.remote(fn)`,
-`ray.wait` in a loop, `max_retries` for dead workers).
+An engine takes a function, a list of tasks and optionally a time limit per task, and yields
+`(index, result)` as tasks finish (`result` is what the function returned, or the exception
+that ended the task: `ItemTimeout` for a task stopped at its limit). That is the whole
+interface (`Engine`): a Ray engine would be another ~60 lines (`ray.remote(fn)`, `ray.wait`
+with a timeout in a loop, `ray.cancel(force=True)` at the limit, `max_retries` for dead
+workers).
+
+**Time limits: what is guaranteed.** `InProcessEngine` cannot stop a running call (Python
+cannot interrupt a thread inside XLA): the limit is only what the recipes check between items
+and between the steps of a fit. `DaskEngine` enforces it: each task announces its start
+(`Worker.log_event`, topic `diffsusp-fleet`), the driver watches the clock, and a task still
+running `limit + HARD_GRACE` seconds after its start is cancelled and its worker restarted
+(`Client.restart_workers`, through the worker's nanny: the process is killed, whatever it was
+doing, and a fresh one joins); the task's result is an `ItemTimeout`. Guaranteed: no task
+occupies a worker longer than its limit + `HARD_GRACE` + the restart (a few seconds) plus the
+driver's polling (≤ 1 s). Not guaranteed: a worker run without a nanny (`dask worker
+--no-nanny`) cannot be restarted (the task is still reported `timeout`, but its worker stays
+busy until the call returns); the other tasks queued on a restarted worker are rescheduled
+(they are not lost, and not counted against `allowed-failures`). The clock of a task includes
+its reading and compiling (the first batch of a shape on a worker).
 
 **Why Dask.** The unit of work is independent (one batch of data sets → their reports), so a
 task scheduler with retries fits, and lock-step multi-host JAX (`jax.distributed`) does not.
@@ -17,17 +33,28 @@ with a heavier runtime (its own object store and raylet daemon per node).
 
 import abc
 import os
+import threading
+import time
 
-__all__ = ["DaskEngine", "Engine", "InProcessEngine", "engine_for"]
+from .recipes import ItemTimeout
+
+__all__ = ["HARD_GRACE", "DaskEngine", "Engine", "InProcessEngine", "engine_for"]
+
+HARD_GRACE = 2.0
+"""Seconds past a task's time limit before `DaskEngine` restarts its worker (so that a recipe's
+own checks, which stop a fit cleanly, come first)."""
+_TOPIC = "diffsusp-fleet"
 
 
 class Engine(abc.ABC):
-    """Runs tasks; yields `(index, result or exception)` in the order they finish."""
+    """Runs tasks; yields `(index, result or exception)` in the order they finish. `limits`:
+    seconds per task (a list, None entries: no limit), enforced as the engine can (see the
+    module docstring)."""
 
     workers: int = 1
 
     @abc.abstractmethod
-    def map_unordered(self, fn, tasks: list):
+    def map_unordered(self, fn, tasks: list, limits: list | None = None):
         ...
 
     def close(self) -> None:  # noqa: B027 - nothing to release by default
@@ -44,9 +71,10 @@ class Engine(abc.ABC):
 
 
 class InProcessEngine(Engine):
-    """Every task in this process, one after the other (the reference the clusters match)."""
+    """Every task in this process, one after the other (the reference the clusters match).
+    Time limits are left to the tasks' own checks: a running call is not interrupted."""
 
-    def map_unordered(self, fn, tasks: list):
+    def map_unordered(self, fn, tasks: list, limits: list | None = None):
         for i, task in enumerate(tasks):
             try:
                 result = fn(task)
@@ -66,7 +94,8 @@ class DaskEngine(Engine):
     `tcp://10.0.0.5:8786`, or of `dask-jobqueue`'s cluster), or `workers` (start a
     `LocalCluster` of that many worker processes, one thread each, closed with the engine).
     `retries`: re-runs of a task that raised (a task that lost its worker is re-run by the
-    scheduler anyway).
+    scheduler anyway). Time limits are enforced by restarting the worker of a task that runs
+    past its limit + `HARD_GRACE` (see the module docstring).
     """
 
     def __init__(self, *, workers: int | None = None, scheduler: str | None = None,
@@ -98,20 +127,55 @@ class DaskEngine(Engine):
     def workers(self) -> int:
         return max(1, len(self.client.scheduler_info(n_workers=-1).get("workers", {})))
 
-    def map_unordered(self, fn, tasks: list):
-        futures = [self.client.submit(fn, task, pure=False, retries=self.retries,
+    def map_unordered(self, fn, tasks: list, limits: list | None = None):
+        limited = limits is not None and any(x is not None for x in limits)
+        call = _announced if limited else _plain
+        futures = [self.client.submit(call, fn, task, pure=False, retries=self.retries,
                                       key=f"diffsusp-fleet-{getattr(task, 'key', i)}")
                    for i, task in enumerate(tasks)]
         index = {f.key: i for i, f in enumerate(futures)}
+        started: dict[str, tuple[str, float]] = {}  # key → (worker, monotonic start)
+        lock = threading.Lock()
+
+        def on_start(event):
+            _, msg = event
+            with lock:
+                started[msg["key"]] = (msg["worker"], time.monotonic())
+
+        if limited:
+            self.client.subscribe_topic(_TOPIC, on_start)
         try:
-            for future in self._distributed.as_completed(futures):
+            if not limited:
+                for future in self._distributed.as_completed(futures):
+                    yield index[future.key], _result(future)
+                    future.release()
+                return
+            pending = set(futures)
+            while pending:
                 try:
-                    result = future.result()
-                except Exception as e:  # the task raised, or its workers kept dying
-                    result = e
-                yield index[future.key], result
-                future.release()
+                    done, pending = self._distributed.wait(
+                        pending, timeout=1.0, return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    done = set()
+                for future in done:
+                    yield index[future.key], _result(future)
+                    future.release()
+                now = time.monotonic()
+                for future in list(pending):
+                    limit = limits[index[future.key]]
+                    with lock:
+                        worker, t0 = started.get(future.key, (None, None))
+                    if limit is None or t0 is None or now - t0 < limit + HARD_GRACE:
+                        continue
+                    pending.discard(future)
+                    future.cancel()
+                    self.client.restart_workers([worker], raise_for_error=False)
+                    yield index[future.key], ItemTimeout(
+                        f"the batch ran past its time limit ({limit:.3g} s; hard limit, "
+                        f"its worker was restarted)")
         finally:
+            if limited:
+                self.client.unsubscribe_topic(_TOPIC)
             for f in futures:
                 if not f.done():
                     f.cancel()
@@ -123,6 +187,26 @@ class DaskEngine(Engine):
 
     def describe(self) -> str:
         return f"dask ({self.workers} workers, scheduler {self.client.scheduler.address})"
+
+
+def _result(future):
+    try:
+        return future.result()
+    except Exception as e:  # the task raised, or its workers kept dying
+        return e
+
+
+def _plain(fn, task):
+    return fn(task)
+
+
+def _announced(fn, task):
+    """`fn(task)` in a worker, after telling the driver that it starts (and where)."""
+    from distributed import get_worker
+
+    worker = get_worker()
+    worker.log_event(_TOPIC, {"key": worker.get_current_task(), "worker": worker.address})
+    return fn(task)
 
 
 def engine_for(workers: int | None = None, scheduler: str | None = None, client=None) -> Engine:

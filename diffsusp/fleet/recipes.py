@@ -1,29 +1,37 @@
-"""What a fleet does with each item: a recipe reads an item (a measurement table) and runs one
-identification on a batch of items of the same shape.
+"""What a fleet does with each item: a recipe reads an item (a data table, or nothing when the
+item is a model) and runs one identification or analysis on a batch of items of one shape.
 
 A recipe is a small picklable object (it travels to the workers): its `name` and `options`
 (JSON-able; part of every item's content hash, so changing an option re-runs the fleet), and
 
-- `read(mech, path)`: the item's data from its file (CSV or Parquet table, as the single-item
+- `load_model(spec)`: the model of a file name, built-in name or object (a suspension
+  `Mechanism`; a Magic Formula tyre for `tyre_fit`), in the driver;
+- `read(model, path)`: the item's data from its file (CSV or Parquet table, as the single-item
   verbs read it);
-- `run(mech, data, deadline)`: the reports of a batch of items (a list of data of one shape),
-  one `(report_dict, values)` or an exception per item: `report_dict` is the report the
-  single-item verb writes with `--out report.json`, `values` the estimates for the summary
-  table (name → float).
+- `run(models, data, deadline, mesh)`: the reports of a batch of items, one model and one data
+  per item (a batch holds one model structure and one data shape; items with the same model
+  share the same object), one `(report_dict, values)` or an exception per item: `report_dict`
+  is the report the single-item verb writes as JSON, `values` the numbers for the summary table
+  (name → float). `mesh` (a `jax.sharding.Mesh` over the worker's devices, or None) is where a
+  batched recipe places its batch axis.
 
-A batched recipe (`least_squares`) solves the whole batch as one vmapped program
-(`identify.least_squares_batch`); the others run the items of a batch one after the other in
-the same worker, which still compiles their programs once per batch shape.
+A batched recipe (`least_squares`, `tyre_fit`) solves the items of a batch that share their
+model and layout as one vmapped program, padded to the fleet's batch size (`pad_to`) so that
+every batch of a shape compiles one program; the others (`direct`, `iterative`, `kc`) run the
+items of a batch one after the other in the same worker, which compiles their programs once per
+model structure and data shape (no retrace when only values change).
 """
 
 import dataclasses
 import math
 import time
 import typing
+import warnings
 
 import numpy as np
 
-__all__ = ["Direct", "ItemTimeout", "Iterative", "LeastSquares", "Recipe", "RECIPES", "recipe"]
+__all__ = ["KC", "Direct", "ItemTimeout", "Iterative", "LeastSquares", "RECIPES", "Recipe",
+           "TyreFit", "recipe"]
 
 _DEG = math.pi / 180.0
 
@@ -45,14 +53,30 @@ class Recipe:
     name: typing.ClassVar[str] = ""
     batched: typing.ClassVar[bool] = False
 
+    @property
+    def items_are_models(self) -> bool:
+        """True when an item is a model file and nothing else (the `kc` recipe with a named
+        event): a path given as an item is then the item's model."""
+        return False
+
+    def load_model(self, spec):
+        """A suspension `Mechanism` from a model file, a built-in name or a `Mechanism`."""
+        from ..model.mechanism import Mechanism
+
+        if isinstance(spec, Mechanism):
+            return spec
+        from ..io import load_model_file
+
+        return load_model_file(spec).mechanism
+
     def read(self, mech, path):
         from .. import measure
 
         return measure.read_measurements(path, mech)
 
-    def run(self, mech, data: list, deadline: float | None) -> list:
+    def run(self, mechs: list, data: list, deadline: float | None, mesh=None) -> list:
         out = []
-        for item in data:
+        for mech, item in zip(mechs, data, strict=True):
             try:
                 _check_deadline(deadline)
                 out.append(self.run_one(mech, item))
@@ -96,46 +120,76 @@ class Iterative(Recipe):
         return d, values
 
 
+def _padded(items: list, pad_to, mesh) -> list:
+    """`items` repeated (the last one) up to `pad_to`, and up to a multiple of the mesh's
+    devices (every device gets the same share)."""
+    n = max(len(items), int(pad_to or 0))
+    if mesh is not None:
+        n = -(-n // mesh.size) * mesh.size
+    return items + [items[-1]] * (n - len(items))
+
+
+def _shard(array, mesh):
+    """`array` placed with its leading (batch) axis split over `mesh`'s one axis
+    (`jax.sharding.NamedSharding`); the programs that take it run their share of the batch on
+    each device (GSPMD partitions a vmapped program along its batch axis)."""
+    if mesh is None:
+        return array
+    import jax
+    from jax.sharding import NamedSharding, PartitionSpec
+
+    return jax.device_put(array, NamedSharding(mesh, PartitionSpec(mesh.axis_names[0])))
+
+
 class LeastSquares(Recipe):
     """Least squares through the equilibrium (`identify.least_squares_batch`). `options`:
     `bushings` (default all) and `axes` (default all six) of the stiffnesses identified, start
     at the model's values; `sigma` (mm, landmarks or pose translations; default 0.05) and
     `sigma_rotation` (deg, poses; 0.01); `pad_to` (set by the fleet to its batch size); any
     other keyword argument of `least_squares_batch` (`max_steps`, `loss`, …). The items of a
-    batch that share their loads, landmark layout and mask are fitted as one vmapped program,
-    padded to `pad_to` data sets (repeating its last item) so that every batch of a fleet has
-    the same shape and compiles once. Summary values: the estimates (N/mm, N·mm/rad)."""
+    batch that share their model, loads, landmark layout and mask are fitted as one vmapped
+    program, padded to `pad_to` data sets (repeating its last item) so that every batch of a
+    fleet has the same shape and compiles once; with a mesh, the data sets are split over its
+    devices. Summary values: the estimates (N/mm, N·mm/rad)."""
 
     name = "least_squares"
     batched = True
     _OWN = ("bushings", "axes", "sigma", "sigma_rotation", "pad_to")
 
     def read(self, mech, path):
+        return self._measurement(super().read(mech, path))
+
+    def _measurement(self, m):
+        """A `measure.Measurements` (a table read, or an in-memory item) as the fit's
+        measurement, with the recipe's σ; a measurement already is one."""
         from ..measure.data import from_measurements
 
-        return from_measurements(super().read(mech, path), self.options.get("sigma", 0.05),
+        if hasattr(m, "_values"):
+            return m
+        return from_measurements(m, self.options.get("sigma", 0.05),
                                  self.options.get("sigma_rotation", 0.01) * _DEG)
 
-    def run(self, mech, data: list, deadline: float | None) -> list:
+    def run(self, mechs: list, data: list, deadline: float | None, mesh=None) -> list:
         from ..identify import Params, least_squares_batch
 
+        data = [self._measurement(m) for m in data]
         o = self.options
         bushings = o.get("bushings")
-        params = Params.bushing_stiffness(
-            mech, None if bushings is None else list(bushings),
-            list(o.get("axes") or ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")))
         kwargs = {k: v for k, v in o.items() if k not in self._OWN}
         out: list = [None] * len(data)
-        for group in _same_layout(data):
-            items = [data[i] for i in group]
-            items = items + [items[-1]] * (max(len(items), o.get("pad_to") or 0) - len(items))
+        for group in _same_layout(data, mechs):
+            mech = mechs[group[0]]
+            items = _padded([data[i] for i in group], o.get("pad_to"), mesh)
 
             def check(step, arrays, deadline=deadline):
                 _check_deadline(deadline, "the batch")
 
             try:
-                batch = least_squares_batch(mech, _stack(items), params, callback=check,
-                                            **kwargs)
+                params = Params.bushing_stiffness(
+                    mech, None if bushings is None else list(bushings),
+                    list(o.get("axes") or ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")))
+                batch = least_squares_batch(mech, _stack(items, mesh), params,
+                                            callback=check, **kwargs)
             except Exception as e:
                 for i in group:
                     out[i] = e
@@ -156,28 +210,252 @@ def _layout_key(m) -> bytes:
     return repr((type(m).__name__, [np.asarray(x).tobytes() for x in leaves])).encode()
 
 
-def _same_layout(data: list) -> list[list[int]]:
-    groups: dict[bytes, list[int]] = {}
-    for i, m in enumerate(data):
-        groups.setdefault(_layout_key(m), []).append(i)
+def _same_layout(data: list, models: list) -> list[list[int]]:
+    """Indices of the items that share their model (the same object) and data layout."""
+    groups: dict[tuple, list[int]] = {}
+    for i, (m, mech) in enumerate(zip(data, models, strict=True)):
+        groups.setdefault((id(mech), _layout_key(m)), []).append(i)
     return list(groups.values())
 
 
-def _stack(items):
+def _stack(items, mesh=None):
+    """One measurement whose measured values carry a leading data-set axis (split over `mesh`'s
+    devices when given)."""
     import equinox as eqx
     import jax.numpy as jnp
 
     first = items[0]
     return eqx.tree_at(lambda x: tuple(getattr(x, f) for f in x._values), first,
-                       tuple(jnp.stack([getattr(m, f) for m in items]) for f in first._values))
+                       tuple(_shard(jnp.stack([getattr(m, f) for m in items]), mesh)
+                             for f in first._values))
 
 
-RECIPES = {"direct": Direct, "iterative": Iterative, "least_squares": LeastSquares}
+# ----------------------------------------------------------------------------- K&C events
+
+
+def _load_table(mech, path):
+    """A K&C load table file: columns F_vert, F_lat, F_long (per side, at the contact point:
+    vertical up, lateral inboard, longitudinal rearward; N unless the header gives a force
+    unit), one load case per row."""
+    from ..errors import InputError
+    from ..io.tables import read_table, unit_factor
+
+    table = read_table(path)
+    lower = {n.lower(): n for n in table.names}
+    columns = []
+    for want in ("f_vert", "f_lat", "f_long"):
+        if want not in lower:
+            raise InputError(f"{path}: no column {want.upper()} (N); columns are "
+                             f"{', '.join(table.names)}: a K&C load table has F_vert, F_lat "
+                             "and F_long (N, per side, at the contact point).")
+        name = lower[want]
+        try:
+            factor = unit_factor(table.units.get(name), "force")
+        except ValueError as e:
+            raise InputError(f"{path}: column {name}: {e}.") from None
+        columns.append(np.asarray(table[name], float) * factor)
+    return np.stack(columns, axis=1)
+
+
+def _event_report(ev, model_name: str, caught) -> dict:
+    """The JSON of `diffsusp kc MODEL --json` (display units per metric) for an event."""
+    from .. import kc
+
+    def clean(a):
+        a = np.asarray(a, dtype=float)
+        return [None if not math.isfinite(v) else v for v in a.ravel().tolist()] \
+            if a.ndim <= 1 else [clean(r) for r in a]
+
+    def flags(value):
+        return None if value is None else np.asarray(value, dtype=bool).tolist()
+
+    x_scale = 1e-3 if ev.x_unit == "N·mm" else 1.0
+    out = {
+        "model": model_name, "event": ev.name,
+        "x": {"name": ev.x_name, "unit": "N·m" if ev.x_unit == "N·mm" else ev.x_unit,
+              "values": clean(np.asarray(ev.x) * x_scale)},
+        "held": ev.held,
+        "status": np.asarray(ev.solution.status).tolist(),
+        "iterations": np.asarray(ev.solution.iterations).tolist(),
+        "stable": flags(ev.solution.stable), "law_valid": flags(ev.solution.law_valid),
+        "metrics": {name: {"unit": kc.display_unit(name), "values": clean(kc.display(name, v))}
+                    for name, v in sorted(ev.metrics.items())},
+        "warnings": [str(w.message) for w in caught],
+    }
+    if ev.compliance:
+        out["compliance_matrix"] = {
+            "unit": "mm/N, mm/(N·mm), rad/N, rad/(N·mm); rows and columns x, y, z, rx, ry, rz "
+                    "(global) at the wheel centre",
+            "values": {prefix or "corner": clean(c) for prefix, c in ev.compliance.items()}}
+    return out
+
+
+class KC(Recipe):
+    """A K&C event on every item (`diffsusp.kc`; metrics with the Adams/Car per-side
+    conventions of `diffsusp.kc.metrics`). Two kinds of fleet, by `options["event"]`:
+
+    - `"table"` (default): every item is a load table (CSV/Parquet, columns F_vert, F_lat,
+      F_long in N per side at the contact point, one case per row), run on the fleet's model
+      (or the item's own) by `kc.load_table`;
+    - an event name of `diffsusp kc --event` (`parallel-travel`, `vertical-force`,
+      `steering`, …; `kc.dispatch.EVENTS`) with its ranges as options (`travel`, `fz`,
+      `force`, `torque`, `rack`: `start:stop:count` text or a list; mm, N, N·m): every item is
+      a model (a design variant: a model file, or an `Item` with `model=`), the event is run
+      on it by `kc.dispatch.run_event`.
+
+    Each item's report is the JSON of `diffsusp kc MODEL --json` (every metric at every case,
+    display units) plus the warnings the event raised; its summary values are the metrics at
+    the event's reference case (`kc.dispatch.reference_case`: zero travel or force, the design
+    load, the first row of a table), display units (deg, mm, N/mm …). A case that does not
+    converge fails the item (status `error`, with the case and its residual). The items of a
+    batch run one after the other (one compiled program per model structure and number of
+    cases); the cases of an event are split over the worker's devices by `solve_statics`
+    (`$DIFFSUSP_DEVICES`, which the fleet sets in its workers)."""
+
+    name = "kc"
+    _RANGES = ("travel", "fz", "force", "torque", "rack")
+
+    @property
+    def event(self) -> str:
+        return self.options.get("event", "table")
+
+    @property
+    def items_are_models(self) -> bool:
+        return self.event != "table"
+
+    def read(self, mech, path):
+        return _load_table(mech, path)
+
+    def run_one(self, mech, data):
+        from .. import kc
+        from ..errors import InputError
+        from ..kc.dispatch import EVENTS, reference_case, run_event
+
+        unknown = sorted(set(self.options) - {"event", *self._RANGES})
+        if unknown:
+            raise InputError(f"unknown kc option(s) {', '.join(unknown)}; the options are "
+                             f"event and its ranges ({', '.join(self._RANGES)}).")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if self.event == "table":
+                ev = kc.load_table(mech, data)
+            elif self.event not in EVENTS:
+                raise InputError(f"unknown event '{self.event}'; known events: table, "
+                                 f"{', '.join(EVENTS)}.")
+            else:
+                ranges = {k: self.options[k] for k in self._RANGES if k in self.options}
+                ev = run_event(mech, self.event, **ranges)
+        ref = reference_case(ev)
+        values = {name: float(np.asarray(kc.display(name, v))[ref])
+                  for name, v in sorted(ev.metrics.items())}
+        return _event_report(ev, mech.name, caught), values
+
+
+# ----------------------------------------------------------------------------- tyre fits
+
+
+class TyreFit(Recipe):
+    """A Magic Formula fit on every item (`diffsusp.tyre.fit`, spec tyre §7 E item 22): the
+    item is a bench table (CSV/Parquet with units in the header, as `diffsusp tyre fit`
+    reads it), the model the start tyre: a `.tir` file (MF 5.2/6.1/6.2), a `MagicFormula6`
+    or a `MagicFormula89` object; an item may carry its own start tyre. `options`: `groups`
+    (coefficient groups of `tyre.fit.GROUPS` fitted in order, each from the previous fit;
+    default as `diffsusp tyre fit`: pure_lateral, pure_longitudinal, pure_aligning as the
+    data's channels allow, `mf1989_lateral` for a 1989 tyre) or `names` (the coefficients of one
+    fit, reported as group "fit"), `loss` (default "huber"),
+    `noise` (per channel σ, N / N·mm), `loss_scale`, `combined`, `max_steps`, `rtol`,
+    `atol`, `threshold`; `pad_to` (set by the fleet). The items of a batch that share their
+    channels and number of rows are fitted together by `tyre.fit.fit_many` (one vmapped
+    Levenberg–Marquardt), padded to `pad_to`. The report is the JSON `diffsusp tyre fit
+    --report` writes (one fit report per group) plus the rows excluded at reading
+    (`warnings`); summary values: the fitted coefficients of every group."""
+
+    name = "tyre_fit"
+    batched = True
+    _FIT = ("loss", "noise", "loss_scale", "combined", "max_steps", "rtol", "atol",
+            "threshold")
+
+    def load_model(self, spec):
+        from .. import tyre
+
+        if isinstance(spec, tyre.MagicFormula6 | tyre.MagicFormula89):
+            return spec
+        from ..io.tir import read_tir
+
+        return tyre.MagicFormula6.from_tir(read_tir(spec))
+
+    def read(self, model, path):
+        from ..tyre import fit as F
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            bench = F.read_bench(path)
+        return bench, tuple(str(w.message) for w in caught)
+
+    def _groups(self, model, channels) -> list[str]:
+        from .. import tyre
+
+        if self.options.get("names"):
+            return ["fit"]
+        if self.options.get("groups"):
+            return list(self.options["groups"])
+        if isinstance(model, tyre.MagicFormula89):
+            return ["mf1989_lateral"]
+        return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
+                                ("pure_aligning", "MZ")) if ch in channels]
+
+    def run(self, models: list, data: list, deadline: float | None, mesh=None) -> list:
+        import jax
+
+        from ..tyre import fit as F
+
+        kwargs = {k: v for k, v in self.options.items() if k in self._FIT}
+        out: list = [None] * len(data)
+        groups: dict[tuple, list[int]] = {}
+        for i, (model, (bench, _)) in enumerate(zip(models, data, strict=True)):
+            key = (repr(jax.tree.structure(model)), bench.channels, bench.n)
+            groups.setdefault(key, []).append(i)
+        for group in groups.values():
+            try:
+                _check_deadline(deadline, "the batch")
+                fitted = _padded([models[i] for i in group], self.options.get("pad_to"), None)
+                benches = _padded([data[i][0] for i in group], self.options.get("pad_to"),
+                                  None)
+                reports: list[dict] = [{} for _ in fitted]
+                for g in self._groups(fitted[0], benches[0].channels):
+                    if g == "fit":
+                        names = list(self.options["names"])
+                    elif g not in F.GROUPS:
+                        from ..errors import InputError
+
+                        raise InputError(f"unknown coefficient group {g!r}; one of "
+                                         f"{', '.join(F.GROUPS)}.")
+                    else:
+                        names = [n for n in F.GROUPS[g] if n in fitted[0].coefficients]
+                    fitted, reps = F.fit_many(fitted, benches, names, **kwargs)
+                    for k, r in enumerate(reps):
+                        reports[k][g] = r
+                    _check_deadline(deadline, "the batch")
+            except Exception as e:
+                for i in group:
+                    out[i] = e
+                continue
+            for k, i in enumerate(group):
+                report = {g: r.to_dict() for g, r in reports[k].items()}
+                report["warnings"] = list(data[i][1])
+                values = {n: float(v) for r in reports[k].values()
+                          for n, v in zip(r.names, r.values, strict=True)}
+                out[i] = (report, values)
+        return out
+
+
+RECIPES = {"direct": Direct, "iterative": Iterative, "least_squares": LeastSquares, "kc": KC,
+           "tyre_fit": TyreFit}
 
 
 def recipe(name_or_recipe, **options) -> Recipe:
-    """A recipe from its name (`'direct'`, `'iterative'`, `'least_squares'`) and options, or
-    the recipe itself."""
+    """A recipe from its name (`'direct'`, `'iterative'`, `'least_squares'`, `'kc'`,
+    `'tyre_fit'`) and options, or the recipe itself."""
     from ..errors import InputError
 
     if isinstance(name_or_recipe, Recipe):

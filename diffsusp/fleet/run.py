@@ -42,12 +42,15 @@ FORMAT = "diffsusp-fleet-1"
 
 @dataclasses.dataclass(frozen=True)
 class Item:
-    """One data set of a fleet: a `path` (CSV or Parquet table), or in-memory `data` (what the
-    recipe's `read` would return, e.g. a `measure.Measurements`), under a unique `name`."""
+    """One item of a fleet, under a unique `name`: a `path` (CSV or Parquet table), or
+    in-memory `data` (what the recipe's `read` would return, e.g. a `measure.Measurements`),
+    and its own `model` (a model file, built-in name or object; None: the fleet's model). An
+    item of a recipe that reads no data (`kc` with a named event) is its model alone."""
 
     name: str
     path: str | None = None
     data: object = None
+    model: object = None
 
 
 @dataclasses.dataclass
@@ -58,6 +61,9 @@ class _Prepared:
     suffix: str = ""
     content: bytes | None = None
     data: object = None
+    model: str = ""  # the fingerprint of the item's model (a key of _Batch.models)
+    structure: str = ""  # the model's structure (tree and leaf shapes): batches are vmappable
+    error: str | None = None  # the item's model could not be loaded
 
 
 @dataclasses.dataclass
@@ -66,12 +72,13 @@ class _Batch:
 
     key: str
     recipe: Recipe
-    model: object
+    models: dict  # fingerprint → the model as a NumPy tree (those of this batch's items)
     items: list
     time_limit: float | None
     cache_dir: str | None
     cache_min_seconds: float
     x64: bool
+    devices: int | str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,7 +110,7 @@ class FleetResult:
 # ----------------------------------------------------------------------------- items
 
 
-def _as_items(items) -> list[Item]:
+def _as_items(items, items_are_models: bool = False) -> list[Item]:
     from ..errors import InputError
 
     if isinstance(items, str | os.PathLike):
@@ -117,14 +124,19 @@ def _as_items(items) -> list[Item]:
         paths = sorted(glob.glob(text)) if glob.has_magic(text) else [text]
         if not paths:
             raise InputError(f"--items {text!r} matches no file.")
-        out += [Item(name=pathlib.Path(p).stem, path=p) for p in paths]
+        out += [Item(name=pathlib.Path(p).stem, model=p) if items_are_models
+                else Item(name=pathlib.Path(p).stem, path=p) for p in paths]
     seen: dict[str, str] = {}
     for it in out:
         if it.name in seen:
             raise InputError(f"two items are named {it.name!r} ({seen[it.name]} and "
-                             f"{it.path}): item names (file stems) must be unique.")
-        seen[it.name] = it.path or "<data>"
-        if (it.path is None) == (it.data is None):
+                             f"{it.path or it.model}): item names (file stems) must be unique.")
+        seen[it.name] = str(it.path or it.model or "<data>")
+        if items_are_models:
+            if it.model is None or it.path is not None or it.data is not None:
+                raise InputError(f"item {it.name!r}: this recipe's items are models (give "
+                                 "Item(name, model=...), or model files as paths), not data.")
+        elif (it.path is None) == (it.data is None):
             raise InputError(f"item {it.name!r}: give a path or data (one of them).")
     if not out:
         raise InputError("the fleet has no items.")
@@ -170,62 +182,129 @@ def _shape_of_file(path: str, content: bytes) -> tuple:
     return (suffix, lines[0].strip() if lines else b"", len([x for x in lines if x.strip()]))
 
 
-def _prepare(items: list[Item], salt: bytes) -> list[_Prepared]:
+class _Models:
+    """The models of a fleet, each loaded once in the driver (by file name, or by object), with
+    its fingerprint (hash of every leaf and of the tree: values and structure) and structure
+    key (the tree and its leaf shapes: models with equal keys vmap together)."""
+
+    def __init__(self, rec: Recipe, default):
+        self.recipe = rec
+        self.default = default
+        self.trees: dict[str, object] = {}
+        self.structures: dict[str, str] = {}
+        self._seen: dict[object, tuple] = {}
+        self._keep: list = []  # the objects whose id is a key of _seen stay alive
+        self._kinds: dict[tuple, str] = {}
+        self.names: set[str] = set()
+
+    def get(self, spec) -> tuple[str, str]:
+        """(fingerprint, structure) of a model spec; raises what loading it raised."""
+        if spec is None:
+            spec = self.default
+        if spec is None:
+            from ..errors import InputError
+
+            raise InputError("no model: give the fleet a model= or every item its own.")
+        key = os.fspath(spec) if isinstance(spec, str | os.PathLike) else id(spec)
+        if key not in self._seen:
+            import jax
+
+            try:
+                model = self.recipe.load_model(spec)
+            except Exception as e:
+                self._seen[key] = (None, e)
+            else:
+                tree = _numpy_tree(model)
+                leaves, treedef = jax.tree.flatten(tree)
+                fp = _digest(_fingerprint(tree))
+                self.trees.setdefault(fp, tree)
+                # Tree definitions compare by their static data (not by repr: a model's
+                # topology object prints its address); numbered in the order first seen.
+                shapes = tuple(np.shape(x) for x in leaves if isinstance(x, np.ndarray))
+                kinds = self._kinds.setdefault((treedef, shapes), f"{len(self._kinds):06d}")
+                self.structures[fp] = kinds
+                self.names.add(str(getattr(model, "name", type(model).__name__)))
+                self._seen[key] = (fp, None)
+            if not isinstance(key, str):
+                self._keep.append(spec)
+        fp, error = self._seen[key]
+        if error is not None:
+            raise error
+        return fp, self.structures[fp]
+
+
+def _prepare(items: list[Item], salt: bytes, models: _Models) -> list[_Prepared]:
     out = []
     for it in items:
+        try:
+            fp, structure = models.get(it.model)
+            error = None
+        except Exception as e:
+            fp, structure = "", ""
+            error = f"the item's model: {_message(e)}"
+        model_bytes = fp.encode() if fp else _digest(b"unloadable", repr(it.model).encode(
+            ) if not isinstance(it.model, str | os.PathLike) else _file_bytes(it.model)).encode()
         if it.path is not None:
             try:
                 content = pathlib.Path(it.path).read_bytes()
             except OSError as e:
                 content = None
                 shape = ("unreadable", str(e))
-                digest = _digest(salt, b"missing", str(it.path).encode())
+                digest = _digest(salt, model_bytes, b"missing", str(it.path).encode())
             else:
                 shape = _shape_of_file(it.path, content)
-                digest = _digest(salt, content)
-            out.append(_Prepared(it.name, digest, shape, pathlib.Path(it.path).suffix.lower(),
-                                 content=content))
-        else:
+                digest = _digest(salt, model_bytes, content)
+            p = _Prepared(it.name, digest, shape, pathlib.Path(it.path).suffix.lower(),
+                          content=content)
+        elif it.data is not None:
             import jax
 
             data = _numpy_tree(it.data)
             leaves = jax.tree.leaves(data)
             shape = ("data", type(it.data).__name__,
                      tuple(np.shape(x) for x in leaves if isinstance(x, np.ndarray)))
-            digest = _digest(salt, pickle.dumps(
+            digest = _digest(salt, model_bytes, pickle.dumps(
                 [x.tobytes() if isinstance(x, np.ndarray) else repr(x) for x in leaves]),
                 repr(jax.tree.structure(data)).encode())
-            out.append(_Prepared(it.name, digest, shape, data=data))
+            p = _Prepared(it.name, digest, shape, data=data)
+        else:  # the item is its model
+            p = _Prepared(it.name, _digest(salt, model_bytes), ("model",))
+        p.model, p.structure, p.error = fp, structure, error
+        out.append(p)
     return out
 
 
+def _file_bytes(path) -> bytes:
+    try:
+        return pathlib.Path(path).read_bytes()
+    except OSError:
+        return os.fspath(path).encode()
+
+
 def _batches(prepared: list[_Prepared], batch_size: int) -> list[list[_Prepared]]:
+    """Batches of one model structure and data shape, items of the same model together."""
     groups: dict[str, list[_Prepared]] = {}
     for p in prepared:
-        groups.setdefault(repr(p.shape), []).append(p)
+        groups.setdefault(repr((p.structure, p.shape)), []).append(p)
     out = []
     for key in sorted(groups):
-        members = sorted(groups[key], key=lambda p: p.name)
+        members = sorted(groups[key], key=lambda p: (p.model, p.name))
         out += [members[i:i + batch_size] for i in range(0, len(members), batch_size)]
     return out
 
 
-def _model_of(model):
-    from ..model.mechanism import Mechanism
-
-    if isinstance(model, Mechanism):
-        return model
-    from ..io import load_model_file
-
-    return load_model_file(model).mechanism
-
-
 def _fingerprint(mech) -> bytes:
+    """Every leaf's bytes, dtype and shape, and the tree with its static data, the same in
+    every process (object addresses masked: a mechanism's topology, derived from the other
+    static data, prints one), so that a re-run in another process finds its items done."""
+    import re
+
     import jax
 
     leaves, treedef = jax.tree.flatten(_numpy_tree(mech))
-    return pickle.dumps(([x.tobytes() if isinstance(x, np.ndarray) else repr(x) for x in leaves],
-                         repr(treedef)))
+    return pickle.dumps(([(x.tobytes(), x.dtype.str, x.shape) if isinstance(x, np.ndarray)
+                          else repr(x) for x in leaves],
+                         re.sub(r" at 0x[0-9a-fA-F]+", "", repr(treedef))))
 
 
 # ----------------------------------------------------------------------------- worker side
@@ -261,6 +340,15 @@ def _setup(batch: _Batch, own_process: bool) -> None:
         import jax
 
         jax.config.update("jax_enable_x64", batch.x64)
+        if batch.devices not in (None, 1, "1"):
+            # Several CPU devices in this worker (before JAX starts its backend; no effect on
+            # GPUs, which are devices already), and K&C tables split over them too.
+            n = os.cpu_count() or 1 if batch.devices == "all" else int(batch.devices)
+            try:
+                jax.config.update("jax_num_cpu_devices", n)
+            except RuntimeError:  # the backend had started: keep its devices
+                pass
+            os.environ["DIFFSUSP_DEVICES"] = str(batch.devices)
         if batch.cache_dir and not jax.config.jax_compilation_cache_dir:
             jax.config.update("jax_compilation_cache_dir", batch.cache_dir)
             jax.config.update("jax_persistent_cache_min_compile_time_secs",
@@ -275,11 +363,12 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
 
     _setup(batch, own_process)
     compiled0, hits0 = _WORKER["compiled"], _WORKER["hits"]
-    mech = _jax_tree(batch.model)
+    models = {fp: _jax_tree(tree) for fp, tree in batch.models.items()}
+    mesh = _mesh(batch.devices)
     start = time.monotonic()
     deadline = None if batch.time_limit is None else start + batch.time_limit * len(batch.items)
     results: list[dict] = []
-    data, where = [], []
+    data, mechs, where = [], [], []
     with tempfile.TemporaryDirectory(prefix="diffsusp-fleet-") as tmp:
         for k, p in enumerate(batch.items):
             folder = pathlib.Path(tmp)
@@ -287,8 +376,11 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
                      "values": None}
             results.append(entry)
             try:
+                mech = models[p.model]
                 if p.data is not None:
                     data.append(_jax_tree(p.data))
+                elif p.shape == ("model",):  # the item is its model
+                    data.append(None)
                 else:
                     if p.content is None:
                         raise FileNotFoundError(p.shape[1])
@@ -297,10 +389,11 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
                     path = folder / f"{p.name}{p.suffix}"
                     path.write_bytes(p.content)
                     data.append(batch.recipe.read(mech, path))
+                mechs.append(mech)
                 where.append(k)
             except Exception as e:
                 entry.update(status="error", message=_message(e, f"{folder}{os.sep}"))
-        outcomes = batch.recipe.run(mech, data, deadline) if data else []
+        outcomes = batch.recipe.run(mechs, data, deadline, mesh) if data else []
     for k, outcome in zip(where, outcomes, strict=True):
         entry = results[k]
         if isinstance(outcome, ItemTimeout):
@@ -317,6 +410,20 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
     hits = _WORKER["hits"] - hits0  # a cache hit is also a backend-compile event
     return {"results": results, "worker": f"{socket.gethostname()}:{os.getpid()}",
             "compiled": _WORKER["compiled"] - compiled0 - hits, "hits": hits}
+
+
+def _mesh(devices):
+    """A one-axis ("items") mesh over this process's first `devices` local devices (a count,
+    "all"; None: `$DIFFSUSP_DEVICES`, else 1), None for one device."""
+    import jax
+
+    if devices is None:
+        devices = os.environ.get("DIFFSUSP_DEVICES", "1")
+    local = jax.local_devices()
+    n = len(local) if devices == "all" else min(int(devices), len(local))
+    if n <= 1:
+        return None
+    return jax.sharding.Mesh(np.array(local[:n]), ("items",))
 
 
 def _message(e: BaseException, hide: str = "") -> str:
@@ -351,7 +458,7 @@ def run(
     items: str | os.PathLike | Sequence,
     out: str | os.PathLike,
     *,
-    model,
+    model=None,
     options: dict | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
@@ -359,25 +466,40 @@ def run(
     engine: Engine | None = None,
     batch_size: int = 16,
     time_limit: float | None = None,
+    devices: int | str | None = None,
     cache_dir: str | None = None,
     retry_failed: bool = False,
     progress: bool | Callable[[dict], None] = False,
 ) -> FleetResult:
-    """Run one identification per item, on this process or a Dask cluster, streaming the
-    reports to `out` and skipping what an earlier run there finished (see `diffsusp.fleet`).
+    """Run one identification or analysis per item, on this process or a Dask cluster,
+    streaming the reports to `out` and skipping what an earlier run there finished (see
+    `diffsusp.fleet`).
 
     **Arguments:**
-    - `recipe`: `'direct'`, `'iterative'`, `'least_squares'` (with `options`, the function's
-      keyword arguments), or a `Recipe` object.
-    - `items`: a glob (`'data/*.csv'`), a path, or a list of paths and `Item`s (in-memory data).
-      An item's name is its file stem; its report is `out/reports/NAME.json`.
+    - `recipe`: `'direct'`, `'iterative'`, `'least_squares'`, `'kc'`, `'tyre_fit'` (with
+      `options`: see each recipe in `diffsusp.fleet.recipes`), or a `Recipe` object.
+    - `items`: a glob (`'data/*.csv'`), a path, or a list of paths and `Item`s (in-memory data,
+      a model of its own). An item's name is its file stem; its report is
+      `out/reports/NAME.json`. For `kc` with a named event the paths are model files (one
+      design variant per item).
     - `out`: the output folder (made if needed): see `diffsusp.fleet.store`.
-    - `model`: a `Mechanism`, a model file or a built-in name, the same for every item.
+    - `model`: the model of every item without its own: a `Mechanism`, a model file or a
+      built-in name (a `.tir` file or Magic Formula object for `tyre_fit`). Items are batched
+      by model structure and data shape, so items with different models of one structure
+      share their compiled programs.
     - `workers` (start a local Dask cluster of that many processes), `scheduler` (address of a
       running Dask scheduler), `client` (a `distributed.Client`), or `engine`; none: in-process.
     - `batch_size`: items per task (and the padded batch of a batched recipe).
-    - `time_limit`: seconds per item (a batch gets `time_limit × its items`); checked between
-      items and between the steps of an iterative fit.
+    - `time_limit`: seconds per item (a batch gets `time_limit × its items`). Everywhere it is
+      checked between items and between the steps of a fit (status `timeout`, the worker goes
+      on); on the Dask engine it is also enforced: a batch still running `HARD_GRACE` s past
+      its limit is cancelled, its worker restarted (the nanny), and its items reported
+      `timeout` (`diffsusp.fleet.engine.DaskEngine`). In-process, a call that hangs inside XLA
+      is not interrupted.
+    - `devices`: local devices of a worker that a batch is split over (`jax.sharding`): a
+      count or "all" (in a worker process started for the fleet, on the CPU, that many CPU
+      devices are made); None: `$DIFFSUSP_DEVICES`, else 1. Batched `least_squares` places the
+      batch axis on them; `kc` splits each event's cases (`solve_statics(devices=...)`).
     - `cache_dir`: the persistent compilation cache the workers share (default: this
       process's, else `$DIFFSUSP_CACHE` or `~/.cache/diffsusp/jax` as the CLI).
     - `retry_failed`: also re-run the items that failed before.
@@ -397,32 +519,45 @@ def run(
         raise InputError(f"time_limit must be positive (seconds per item); got {time_limit}.")
     if rec.batched and rec.options.get("pad_to") is None:
         rec = dataclasses.replace(rec, options={**rec.options, "pad_to": batch_size})
-    mech = _model_of(model)
-    item_list = _as_items(items)
+    if devices is not None and devices != "all" and not (isinstance(devices, int)
+                                                         and devices >= 1):
+        raise InputError(f"devices must be a count (at least 1) or 'all'; got {devices!r}.")
+    item_list = _as_items(items, rec.items_are_models)
+    if model is None and any(it.model is None for it in item_list):
+        raise InputError("no model: give the fleet a model= (or every item its own).")
+    models = _Models(rec, model)
     salt = _digest(FORMAT.encode(), rec.name.encode(),
-                   json.dumps(rec.options, sort_keys=True, default=str).encode(),
-                   _fingerprint(mech)).encode()
-    prepared = _prepare(item_list, salt)
+                   json.dumps(rec.options, sort_keys=True, default=str).encode()).encode()
+    prepared = _prepare(item_list, salt, models)
     store = Store(out)
     done = store.entries()
     todo = [p for p in prepared if not (
         p.name in done and done[p.name]["hash"] == p.hash
         and (done[p.name]["status"] == "ok" or not retry_failed)
         and (done[p.name]["status"] != "ok" or (store.reports / f"{p.name}.json").exists()))]
+    names = sorted(models.names)
     manifest = {"format": FORMAT, "recipe": rec.name, "options": rec.options,
-                "model": mech.name, "batch_size": batch_size,
+                "model": names[0] if len(names) == 1 else f"{len(names)} models",
+                "batch_size": batch_size,
                 "items": [{"item": p.name, "hash": p.hash} for p in prepared],
                 "last_run": store.manifest().get("last_run")}
     store.open(manifest)
+    for p in todo:  # an item whose model does not load fails here, without a batch
+        if p.error is not None:
+            store.record({"item": p.name, "hash": p.hash, "status": "error",
+                          "message": p.error, "values": None, "seconds": None,
+                          "worker": None, "batch": None}, None)
+    unloadable = sum(p.error is not None for p in todo)
+    todo = [p for p in todo if p.error is None]
     if cache_dir is None:
         cache_dir = jax.config.jax_compilation_cache_dir or os.environ.get(
             "DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax")) or None
     cache_min = (float(jax.config.jax_persistent_cache_min_compile_time_secs)
                  if jax.config.jax_compilation_cache_dir else 0.0)
-    model_np = _numpy_tree(mech)
-    tasks = [_Batch(key=_digest(*(p.hash.encode() for p in b))[:16], recipe=rec, model=model_np,
-                    items=b, time_limit=time_limit, cache_dir=cache_dir,
-                    cache_min_seconds=cache_min, x64=bool(jax.config.jax_enable_x64))
+    tasks = [_Batch(key=_digest(*(p.hash.encode() for p in b))[:16], recipe=rec,
+                    models={p.model: models.trees[p.model] for p in b}, items=b,
+                    time_limit=time_limit, cache_dir=cache_dir, cache_min_seconds=cache_min,
+                    x64=bool(jax.config.jax_enable_x64), devices=devices)
              for b in _batches(todo, batch_size)]
     show = _progress_printer() if progress is True else (progress or None)
     owned = engine is None
@@ -433,16 +568,20 @@ def run(
             engine = DaskEngine(workers=workers, scheduler=scheduler, client=client,
                                 env=worker_environment())
     in_process = isinstance(engine, InProcessEngine)
-    counts = {"ok": 0, "failed": 0, "compiled": 0, "hits": 0}
+    counts = {"ok": 0, "failed": unloadable, "compiled": 0, "hits": 0}
+    total = len(todo) + unloadable
+    limits = None if time_limit is None else [time_limit * len(t.items) for t in tasks]
     t0 = time.perf_counter()
     try:
         fn = _run_here if in_process else run_batch
-        for i, result in engine.map_unordered(fn, tasks):
+        for i, result in engine.map_unordered(fn, tasks, limits=limits):
             batch = tasks[i]
             if isinstance(result, BaseException):  # the batch itself failed (lost workers…)
+                timeout = isinstance(result, ItemTimeout)
+                message = str(result) if timeout else f"the batch failed: {_message(result)}"
                 result = {"worker": None, "compiled": 0, "hits": 0, "results": [
-                    {"item": p.name, "status": "error", "values": None, "report": None,
-                     "seconds": None, "message": f"the batch failed: {_message(result)}"}
+                    {"item": p.name, "status": "timeout" if timeout else "error",
+                     "values": None, "report": None, "seconds": None, "message": message}
                     for p in batch.items]}
             counts["compiled"] += result["compiled"]
             counts["hits"] += result["hits"]
@@ -457,7 +596,7 @@ def run(
             if show is not None:
                 elapsed = time.perf_counter() - t0
                 n = counts["ok"] + counts["failed"]
-                show({"done": n, "failed": counts["failed"], "total": len(todo),
+                show({"done": n, "failed": counts["failed"], "total": total,
                       "items_per_s": n / elapsed if elapsed > 0 else 0.0,
                       "batch_worker": result["worker"]})
     finally:
@@ -471,7 +610,7 @@ def run(
         store.open(manifest)
         summary = store.write_summary()
     return FleetResult(out=store.out, total=len(prepared), ok=counts["ok"],
-                       failed=counts["failed"], skipped=len(prepared) - len(todo),
+                       failed=counts["failed"], skipped=len(prepared) - total,
                        batches=len(tasks), seconds=seconds,
                        items_per_s=n / seconds if seconds > 0 and n else 0.0,
                        compiled=counts["compiled"], cache_hits=counts["hits"],
