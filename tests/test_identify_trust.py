@@ -241,5 +241,5 @@ def test_direct_polish_leaves_a_zero_model_stiffness_linear(results):
         assert report.polished is not None and "bushing_F.Krz" not in report.polished.names
         assert report.values[i] == report.linear_values[i]
         assert "polished" not in report.status[i] and not report.identified[i]
-        assert any("errors in variables: 12 unknown(s) polished" in n for n in report.notes)
+        assert any("errors in variables: 12 stiffness(es) polished" in n for n in report.notes)
         assert report.consistent

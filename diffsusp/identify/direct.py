@@ -1389,37 +1389,32 @@ rounding, and the linear estimate is then exact)."""
 @dataclasses.dataclass(frozen=True)
 class _PolishPlan:
     """What the polish fits: `params` (the `Params` of `identify.least_squares`, started at
-    the model's values), `index` {unknown: its parameter} for the stiffnesses and spring
-    rates, `free_length` {K·L0 unknown: (parameter of K, parameter of L0)} for the springs
-    whose K·L0 is also unknown (their free length is polished with K, and K·L0 = K·L0 is
-    reported from both)."""
+    the model's values) and `index` {unknown: its parameter} for the stiffnesses and spring
+    rates polished."""
 
     params: Params
     index: dict
-    free_length: dict
 
     @property
     def unknowns(self) -> list[int]:
-        return sorted([*self.index, *self.free_length])
+        return sorted(self.index)
 
 
 def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan | None:
     """The plan of the polish (see `_PolishPlan`), None when nothing can be polished.
 
     Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
-    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there —
-    and, with an unknown K·L0, the spring's free length (mm, no prior). A stiffness the model
-    sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz of the pseudo-McPherson)
-    has no log to start from or to centre a prior on: it keeps its linear value, like offsets
-    and axisymmetric pairs."""
+    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there.
+    A stiffness the model sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz
+    of the pseudo-McPherson) has no log to start from or to centre a prior on: it keeps its
+    linear value, like offsets, K·L0 and axisymmetric pairs."""
     b, s = mech.bushings, mech.springs
     k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
         if b.names else np.zeros((0, 6))
     kt = np.zeros((len(b.names), 3), bool)
     kr = np.zeros_like(kt)
     ks = np.zeros(len(s.names), bool)
-    spring_k = {p.element: i for i, p in enumerate(params) if p.kind == "spring_k"}
-    lsq_name, l0_name = {}, {}
+    lsq_name = {}
     for i, p in enumerate(params):
         if p.kind == "stiffness" and len(p.axes) == 1 and k_model[p.element, p.axes[0]] > 0:
             a = p.axes[0]
@@ -1428,9 +1423,6 @@ def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan 
         elif p.kind == "spring_k" and float(s.k[p.element]) > 0:
             ks[p.element] = True
             lsq_name[i] = f"{s.names[p.element]}.k"
-    for i, p in enumerate(params):
-        if p.kind == "spring_c" and spring_k.get(p.element) in lsq_name:
-            l0_name[i] = (f"{s.names[p.element]}.k", f"{s.names[p.element]}.free_length")
     if not lsq_name:
         return None
     leaves, masks = [], []
@@ -1441,29 +1433,18 @@ def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan 
     if ks.any():
         leaves.append(lambda m: m.springs.k)
         masks.append(ks)
-    if l0_name:
-        leaves.append(lambda m: m.springs.free_length)
-        masks.append(np.isin(np.arange(len(s.names)),
-                             [params[i].element for i in l0_name]))
     lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
-    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()},
-                       {i: (lsq_params.index(k), lsq_params.index(l0))
-                        for i, (k, l0) in l0_name.items()})
+    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
 
 
 def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
-    """Start of the polish: the linear estimate where it determined a positive value (a free
-    length where K and K·L0 were both determined), the model's value elsewhere."""
+    """Start of the polish: the linear estimate where it determined a positive value, the
+    model's value elsewhere."""
     start = np.array(plan.params.start)
     for i, j in plan.index.items():
         v = report.values[i] * report.parameters_to_model[i]
         if report.identified[i] and v > 0:
             start[j] = v
-    k_of = {j: i for i, j in plan.index.items()}
-    for i, (jk, jl) in plan.free_length.items():
-        ik = k_of[jk]
-        if report.identified[i] and report.identified[ik] and report.values[ik] > 0:
-            start[jl] = report.values[i] / report.values[ik]
     return start
 
 
@@ -1474,63 +1455,50 @@ def _linear_left(report: DirectReport, plan: _PolishPlan) -> list[int]:
 
 def _merge_polish(report: DirectReport, plan: _PolishPlan, fit,
                   max_sigma_pct: float) -> DirectReport:
-    """The direct report with the polished values, σ and verdicts of the polished unknowns
-    (K·L0 of a spring from its polished K and L0, σ by first-order propagation)."""
+    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
     status = list(report.status)
-    derived = dict(report.derived)
     conv = report.parameters_to_model
-    est, cov = np.asarray(fit.estimate), np.asarray(fit.covariance)
-
-    def verdict(i, ok):
+    for i, j in plan.index.items():
+        values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
+        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
+        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
         identified[i] = ok
         status[i] = ("identified (polished through the equilibrium)" if ok else
                      f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
-
-    for i, j in plan.index.items():
-        values[i], sigma[i] = est[j] / conv[i], fit.sigma[j] / conv[i]
-        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(est[j])
-        verdict(i, bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct)
-    for i, (jk, jl) in plan.free_length.items():
-        g = np.array([est[jl], est[jk]])
-        c = cov[np.ix_([jk, jl], [jk, jl])]
-        values[i], sigma[i] = est[jk] * est[jl], float(np.sqrt(max(g @ c @ g, 0.0)))
-        sigma_pct[i] = 100.0 * sigma[i] / abs(values[i]) if values[i] else np.inf
-        ok = bool(fit.determined[jk] and fit.identifiable[jl]) and sigma_pct[i] <= max_sigma_pct
-        verdict(i, ok)
-        name = report.names[i].rsplit(".", 1)[0] + ".L0"
-        derived[name] = ((est[jl], float(fit.sigma[jl]), "mm") if ok else
-                         (np.nan, np.nan, "mm"))
     left = [report.names[i] for i in _linear_left(report, plan)]
     notes = list(report.notes)
-    notes.append(f"errors in variables: {len(plan.unknowns)} unknown(s) polished by least "
+    notes.append(f"errors in variables: {len(plan.index)} stiffness(es) polished by least "
                  f"squares through the equilibrium from the linear estimate ({fit.message}, "
                  f"{fit.steps} steps)")
     if left:
         notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
-                     "stiffnesses per axis whose model value is positive, spring rates and "
-                     "free lengths): their σ ignores the errors in the regressors")
+                     "stiffnesses per axis and spring rates whose model value is positive, "
+                     "and holds the other unknowns at the model's values): their σ ignores "
+                     "the errors in the regressors")
     consistency = dataclasses.replace(
         fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
     return dataclasses.replace(
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
-        status=tuple(status), notes=tuple(notes), derived=derived, polished=fit,
-        linear_values=report.values, consistency=consistency)
+        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
+        consistency=consistency)
 
 
 def _polish(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
             max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
     """Least squares through the equilibrium from the linear estimate (see `direct`,
-    `polish`), on the model with the linear estimate written (`fitted`: what the polish does
-    not cover keeps its linear value), the weak default prior centred on `mech`'s values."""
+    `polish`): every bushing stiffness per axis and spring rate among the unknowns with a
+    positive model value, the other unknowns held at the model's values (a linear K·L0 biased
+    by the errors in variables would bias the polish), the weak default prior centred on the
+    model's values."""
     from .least_squares import least_squares_batch
 
     plan = _polish_plan(mech, params)
     if plan is None or not report.identified[plan.unknowns].any():
         return fitted, report  # nothing determined to polish (e.g. all came out negative)
     start = _polish_start(plan, report)
-    batch = least_squares_batch(fitted, _as_batch(data, 1), plan.params, start=start[None])
+    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None])
     fit = batch.reports[0]
     report = _merge_polish(report, plan, fit, max_sigma_pct)
     return plan.params.apply(fitted, jnp.asarray(fit.estimate)), report
@@ -1564,10 +1532,9 @@ def direct_batch(
     """`direct` on many measurement sets of one layout under one load table (e.g. a
     Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
     shared), then the polish of every set that needs one at once (`least_squares_batch`, one
-    vmapped program per LM step; set by set when a set determined unknowns the polish does
-    not cover, whose linear values then differ between the models polished). `options` go to
-    `direct`. **Returns:** one `DirectReport` per set (with `polished`; the identified
-    mechanisms are `Params.apply` of their values)."""
+    vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
+    per set (with `polished`; the identified mechanisms are `Params.apply` of their
+    values)."""
     from .least_squares import least_squares_batch
 
     linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
@@ -1589,13 +1556,6 @@ def direct_batch(
     if not todo:
         return tuple(out)
     data = [check_data(mech, measurements[k]) for k in todo]
-    if any(_linear_left(linear[k], plan) for k in todo):
-        # Some set determined unknowns the polish does not cover (offsets, K·L0 without K,
-        # stiffnesses the model sets to 0): each set is polished on its own linear model.
-        for k, d in zip(todo, data, strict=True):
-            fitted = _apply(mech, unknowns, linear[k].values, linear[k].identified)
-            out[k] = _polish(fitted, linear[k], unknowns, d, max_sigma_pct, mech)[1]
-        return tuple(out)
     starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
     batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
                                 start=starts)

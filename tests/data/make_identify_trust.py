@@ -1,11 +1,19 @@
-"""Writes identify_trust.npz, the data of tests/test_identify_trust.py (issue 12): random true
+"""Writes the shipped data of the identification tests.
+
+identify_trust.npz, the data of tests/test_identify_trust.py (issue 12): random true
 stiffnesses of bushings A and B of `pseudo_mcpherson` (×0.5–×2 of the thesis values, Table 2.1;
 seeds 1208, then 1211 and 1207, used nowhere else), the 13 cases of Table 5-1, four landmarks
 per part (`measure.place_landmarks(seed=0)`) synthesised by `diffsusp.measure`: 20 noise draws
 (σ = 0.05 mm, spec stiffness §2.8, keys split from PRNGKey(1208)) of the first truth, then the
 noise-free landmarks of the other two. Float64, as measured and registered (poses, rms), so
 the test builds its `Measurements` without solving or registering anything (≈ 20 s of CPU
-spared per run). Run from the repository root: python tests/data/make_identify_trust.py"""
+spared per run).
+
+identify_direct_mc.npz, the data of tests/test_direct.py's Monte-Carlo: the nominal
+`pseudo_mcpherson` (the thesis values), the same 13 cases and landmarks, 20 noise draws
+(σ = 0.05 mm, keys split from PRNGKey(2024)).
+
+Run from the repository root: python tests/data/make_identify_trust.py"""
 
 import pathlib
 
@@ -22,6 +30,8 @@ from diffsusp.identify import Params  # noqa: E402
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 
 PATH = pathlib.Path(__file__).parent / "identify_trust.npz"
+MC_PATH = pathlib.Path(__file__).parent / "identify_direct_mc.npz"
+MC_SEED = 2024
 A_B = ("bushing_A", "bushing_B")
 N_SEEDS = 20
 TRUTH_SEED, NOISELESS_SEEDS = 1208, (1211, 1207)
@@ -53,8 +63,20 @@ def record():
                 parts=np.array(layout.parts), sigma=np.array([noisy.sigma, exact[1].sigma]))
 
 
+def record_nominal():
+    ref = pseudo_mcpherson()
+    exact = measure.synthesize(ref, thesis_load_cases(ref), seed=0)
+    keys = jax.random.split(jax.random.PRNGKey(MC_SEED), N_SEEDS)
+    noisy = jax.jit(jax.vmap(lambda k: measure.add_noise(exact, measure.GaussianNoise(), k)))(
+        keys)
+    return dict({f: np.asarray(getattr(noisy, f)) for f in FIELDS},
+                layout=np.asarray(exact.layout.position), parts=np.array(exact.parts),
+                sigma=np.array(noisy.sigma))
+
+
 def main():
     np.savez_compressed(PATH, **record())
+    np.savez_compressed(MC_PATH, **record_nominal())
 
 
 if __name__ == "__main__":
