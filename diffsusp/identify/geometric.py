@@ -330,20 +330,6 @@ def _lm(residual, x0, steps=LM_STEPS):
     return x, f
 
 
-def _implicit(residual, x_star, data):
-    """x* with the derivative of argmin ‖residual(x, data)‖² with respect to `data` (one Newton
-    step from the stopped minimiser: its value is x*, its derivative the implicit one)."""
-    x_star = jax.lax.stop_gradient(x_star)
-
-    def cost(x, d):
-        r = residual(x, d)
-        return 0.5 * r @ r
-
-    h = jax.lax.stop_gradient(jax.hessian(cost)(x_star, data))
-    g = jax.grad(cost)(x_star, data)
-    return x_star - jnp.linalg.lstsq(h, g)[0]
-
-
 def _gn_singular_values(residual, x):
     return jnp.linalg.svd(jax.jacfwd(residual)(x), compute_uv=False)
 
@@ -395,8 +381,7 @@ def _locate(specs, rot, trans, mask, index, slides, priors, starts):
             offsets = jnp.stack(jnp.meshgrid(grid, grid, grid, indexing="ij"), -1).reshape(-1, 3)
             frozen = functools.partial(fn, d=jax.lax.stop_gradient(data))
             xs, fs = jax.vmap(lambda x0, f=frozen: _lm(f, x0))(starts[k] + offsets)
-            best = xs[jnp.argmin(jnp.where(jnp.isfinite(fs), fs, jnp.inf))]
-            c = _implicit(fn, best, data)
+            c = xs[jnp.argmin(jnp.where(jnp.isfinite(fs), fs, jnp.inf))]
             _, axis = _line_residual(c, r, t, mask)
             axis = axis * jnp.where(axis[jnp.argmax(jnp.abs(axis))] < 0, -1.0, 1.0)
             pts, w = _trajectory(c, r, t, mask)
@@ -412,8 +397,7 @@ def _locate(specs, rot, trans, mask, index, slides, priors, starts):
 
             frozen = functools.partial(fn, d=jax.lax.stop_gradient(data))
             start, _ = _ball(*jax.lax.stop_gradient((r, t)))
-            best, _ = _lm(frozen, start)
-            c = _implicit(fn, best, data)
+            c, _ = _lm(frozen, start)
             res = fn(c, data)
             sv = _gn_singular_values(frozen, jax.lax.stop_gradient(c))
         centres[k] = c
@@ -548,21 +532,29 @@ def _uncertainty(specs, rot, trans, mask, index, pose_cov, slides, outputs):
                 (r1, t1), (r2, t2) = poses(eps, p1), poses(eps, p2)
                 return _case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extra)
 
-            def cost(x, eps, extra, residual=residual):
-                res = residual(x, eps, extra)
-                return 0.5 * res @ res
-
             x, extra = params[k], extras[k]
-            grad = jax.grad(cost)
+            n_x, n_e = x.shape[0], 6 * n_parts
+
+            def flat(z, residual=residual, n_x=n_x, n_e=n_e):
+                return residual(z[:n_x], z[n_x:n_x + n_e].reshape(n_parts, 6), z[n_x + n_e:])
+
+            rest = jnp.concatenate([eps0.ravel(), extra])
+
+            def first(x, flat=flat, rest=rest):
+                jac = jax.jacfwd(flat)(jnp.concatenate([x, rest]))
+                return jac, (jac, flat(jnp.concatenate([x, rest])))
+
+            # one forward-over-forward program gives every first and second derivative:
+            # second[r, i, j] = ∂²r/∂z_i∂x_j with z = (x, pose perturbations, extra)
+            second, (jac, res) = jax.jacfwd(first, has_aux=True)(x)
+            a, dx = jac[:, :n_x], jac[:, n_x:]
+            curvature = jnp.einsum("r,rij->ji", res, second)  # (x, z)
             out[k] = dict(
-                a=jax.jacfwd(residual)(x, eps0, extra),
-                h=jax.hessian(cost)(x, eps0, extra),
-                b=jax.jacfwd(grad, 1)(x, eps0, extra).reshape(x.shape[0], -1),
-                c=jax.jacfwd(grad, 2)(x, eps0, extra),
-                d=jax.jacfwd(residual, 1)(x, eps0, extra).reshape(-1, 6 * n_parts),
-                r=residual(x, eps0, extra),
-                dj=jax.jacfwd(jax.jacfwd(residual), 1)(x, eps0, extra).reshape(
-                    -1, x.shape[0], 6 * n_parts))
+                a=a, r=res, d=dx[:, :n_e],
+                h=a.T @ a + curvature[:, :n_x],
+                b=a.T @ dx[:, :n_e] + curvature[:, n_x:n_x + n_e],
+                c=a.T @ dx[:, n_e:] + curvature[:, n_x + n_e:],
+                dj=jnp.swapaxes(second[:, n_x:n_x + n_e], 1, 2))
         return out
 
     per = jax.vmap(one_case)(rot, trans)
