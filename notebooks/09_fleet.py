@@ -39,6 +39,7 @@ import pathlib
 import tempfile
 
 import distributed
+import equinox as eqx
 import numpy as np
 
 from diffsusp import fleet, identify, measure
@@ -59,10 +60,11 @@ mech = pseudo_mcpherson()
 exact = measure.synthesize(mech, thesis_load_cases(mech),
                            layout=measure.place_landmarks(mech, seed=0))
 folder = pathlib.Path(tempfile.mkdtemp(prefix="fleet09-"))
+draw = eqx.filter_jit(lambda key: measure.add_noise(  # one compiled program for every draw
+    exact, measure.GaussianNoise(landmarks=0.05), key))
 for seed in range(N_DRAWS):
-    noisy = measure.add_noise(exact, measure.GaussianNoise(landmarks=0.05),
-                              jax.random.PRNGKey(1000 + seed))
-    measure.write_measurements(noisy, folder / f"draw{seed:04d}.csv", mech)
+    measure.write_measurements(draw(jax.random.PRNGKey(1000 + seed)),
+                               folder / f"draw{seed:04d}.csv", mech)
 print(f"{N_DRAWS} tables in {folder}, e.g. {sorted(folder.iterdir())[0].name}")
 
 # %% [markdown]

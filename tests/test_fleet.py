@@ -2,19 +2,25 @@
 draws made with diffsusp.measure, two broken files) identified by the direct method in-process
 and on a local Dask cluster of two worker processes, one of which is killed mid-run: every good
 item's report equals the in-process one (1e-12), the broken ones carry their error, the two
-summaries are identical, and a re-run skips everything. Also the time limit, the CLI and bad
-input.
+summaries are identical, and a re-run skips everything. Also the time limit (checked in
+process, enforced on the cluster by restarting the worker of a hung batch), the CLI and bad
+input. The recipes beyond `direct` and the devices of a worker: test_fleet_recipes.py.
 
-CPU: one cluster for the module; the recipe is the cheapest (direct: linear); the workers load
-the programs the in-process run compiled from the run's persistent compilation cache."""
+CPU: one cluster for the module; the recipe is the cheapest (direct: linear); the noise draws
+are one jitted program; the workers load the programs the in-process run compiled from the
+run's persistent compilation cache."""
 
 import inspect
 import json
 import math
 import os
+import pathlib
 import shutil
 import signal
+import sys
+import time
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -45,10 +51,11 @@ def items(tmp_path_factory, mech):
     folder = tmp_path_factory.mktemp("fleet_items")
     exact = measure.synthesize(mech, thesis_load_cases(mech),
                                layout=measure.place_landmarks(mech, seed=0))
+    draw = eqx.filter_jit(lambda key: measure.add_noise(
+        exact, measure.GaussianNoise(landmarks=0.05), key))
     for seed in range(N_DRAWS):
-        noisy = measure.add_noise(exact, measure.GaussianNoise(landmarks=0.05),
-                                  jax.random.PRNGKey(seed))
-        measure.write_measurements(noisy, folder / f"draw{seed:03d}.csv", mech)
+        measure.write_measurements(draw(jax.random.PRNGKey(seed)),
+                                   folder / f"draw{seed:03d}.csv", mech)
     lines = (folder / "draw000.csv").read_text().splitlines()
     cells = lines[5].split(",")
     cells[3] = "abc"
@@ -207,3 +214,36 @@ def test_bad_input(items, mech, tmp_path):
     with pytest.raises(InputError, match="two items are named 'draw001'"):
         fleet.run("direct", [items / "draw001.csv", tmp_path / "draw001.csv"], tmp_path,
                   model=mech)
+
+
+class _Hang(fleet.Recipe):
+    """Runs `draw001` as a call that never returns nor checks its deadline (as a hung XLA
+    call would); the other items at once."""
+
+    name = "hang"
+
+    def read(self, mech, path):
+        return pathlib.Path(path).stem
+
+    def run(self, mechs, data, deadline, mesh=None):
+        if "draw001" in data:
+            time.sleep(600)
+        return [({"item": d}, {"length": float(len(d))}) for d in data]
+
+
+def test_hard_time_limit_on_the_cluster(items, mech, client, tmp_path):
+    """On the cluster the time limit is enforced: the batch that hangs is cancelled once past
+    its limit (+ HARD_GRACE), its worker restarted, its item reported 'timeout'; the other
+    item is done, and the cluster has its two workers again."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # _Hang, to the workers
+    start = time.monotonic()
+    result = fleet.run(_Hang(), [items / "draw001.csv", items / "draw002.csv"], tmp_path,
+                       model=mech, batch_size=1, time_limit=1.0, client=client)
+    assert time.monotonic() - start < 120  # not the 600 s of the hung call
+    assert (result.ok, result.failed) == (1, 1)
+    (item, status, message), = fleet.status(tmp_path).failures
+    assert (item, status) == ("draw001", "timeout") and "worker was restarted" in message
+    assert _report(tmp_path, "draw002") == {"item": "draw002"}
+    client.wait_for_workers(2, timeout=60)

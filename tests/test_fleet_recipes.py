@@ -15,8 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from diffsusp import fleet, kc, measure
+from diffsusp.cli import app
 from diffsusp.identify import Params, least_squares_batch
 from diffsusp.io import load_model, save_model
 from diffsusp.measure.data import from_measurements
@@ -73,6 +75,13 @@ def test_kc_load_tables(mech, tmp_path):
     assert float(row_a["toe"]) == toe
     failure = fleet.status(out).failures[0]
     assert failure[:2] == ("c", "error") and "no column F_LONG" in failure[2]
+    # The command line: `diffsusp fleet kc --items TABLE --out DIR --model NAME`.
+    cli = CliRunner().invoke(app, ["fleet", "kc", "--items", str(tmp_path / "a.csv"), "--out",
+                                   str(tmp_path / "cli"), "--model", "pseudo_mcpherson",
+                                   "--json"])
+    assert cli.exit_code == 0, cli.output
+    assert json.loads(cli.stdout)["ok"] == 1
+    _metrics_equal(_report(tmp_path / "cli", "a"), kc.load_table(mech, TABLE))
 
 
 def test_kc_design_variants(mech, tmp_path):
