@@ -1,22 +1,29 @@
 """The fleet driver: items → content hashes → batches of one shape → an engine → the store.
 
-**Batches and shapes.** Items are grouped by a cheap shape key read without parsing (a CSV
+**Models.** Every item has the fleet's model or its own (`Item(model=...)`; for `kc` with a
+named event, the item *is* a model file). Each distinct model is loaded once in the driver and
+fingerprinted (every leaf's bytes and the tree's static data, the same in every process); the
+fingerprint is part of the item's content hash, and the batch carries the models of its items.
+
+**Batches and shapes.** Items are grouped by their model's structure (tree definition and leaf
+shapes: models that vmap together) and a cheap data shape key read without parsing (a CSV
 table's header and number of rows, a Parquet file's schema and row count, an in-memory
-measurement's array shapes), sorted by name, and cut into batches of `batch_size`. A worker
-compiles each program once per shape (and loads it from the shared persistent compilation
-cache when another worker compiled it already); a batched recipe also pads every batch to
-`batch_size` data sets, so a fleet of ragged data sets compiles one program per distinct table
+measurement's array shapes), sorted by model and name, and cut into batches of `batch_size`.
+A worker compiles each program once per structure and shape (and loads it from the shared
+persistent compilation cache when another worker compiled it already); a batched recipe also
+pads every batch to `batch_size` data sets (to a multiple of the worker's devices when it splits
+a batch over them), so a fleet of ragged data sets compiles one program per distinct table
 shape, not one per item or per batch length. The batches are the same whatever the engine, so
 an in-process run and a cluster run compute the same numbers.
 
-**Faults.** An item that fails (unreadable file, a fit that raises) gets status `error` and the
-message; a batch past its time (`time_limit` seconds per item, checked between items and
-between the steps of a fit) gets `timeout`; a batch whose workers kept dying (Dask gives up
-after `distributed.scheduler.allowed-failures` deaths) gets `error` with the reason. None of
-these stops the fleet. A worker killed mid-batch loses only that batch, which the scheduler runs
-again elsewhere.
+**Faults.** An item that fails (unreadable file, a model that does not load, a fit that
+raises) gets status `error` and the message; a batch past its time (`time_limit` seconds per
+item, checked between items and between the steps of a fit; on Dask also enforced by
+restarting the worker: `diffsusp.fleet.engine`) gets `timeout`; a batch whose workers kept
+dying (Dask gives up after `distributed.scheduler.allowed-failures` deaths) gets `error` with
+the reason. None of these stops the fleet. A worker killed mid-batch loses only that batch,
+which the scheduler runs again elsewhere.
 """
-
 import dataclasses
 import glob
 import hashlib
