@@ -33,6 +33,29 @@ from diffsusp.models import pseudo_mcpherson
 from diffsusp.tyre import MagicFormula6, example_path
 from diffsusp.tyre import rig as R
 
+def quick_jit(fn):
+    """`eqx.filter_jit`'s semantics (arrays traced, everything else static) compiled with
+    XLA's backend (LLVM) optimisation off: this file's two programs (the coupled solve with its
+    forward derivatives, on the bushing wheel and on the pseudo-McPherson) run in well under a
+    second in all but cost most of the file's CPU to compile."""
+    from diffsusp._compile import CPU_OPTIONS
+
+    compiled = {}
+
+    def call(*args):
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        leaves, treedef = jax.tree.flatten(static)
+        key = (treedef, tuple(leaves))
+        if key not in compiled:
+            options = {"xla_backend_optimization_level": 0}
+            if jax.default_backend() == "cpu":
+                options.update(CPU_OPTIONS)
+            compiled[key] = jax.jit(lambda d: fn(*eqx.combine(d, static)),
+                                    compiler_options=options)
+        return compiled[key](dynamic)
+    return call
+
+
 K_T = 500.0  # N/mm
 K_RZ = 4.0e7  # N·mm/rad: about 0.7 kN·m/deg
 R_L = 300.0
@@ -99,7 +122,8 @@ def wheel_rig(tyre):
 
 @pytest.fixture(scope="module")
 def wheel_jvp(wheel_rig):
-    """Solution and its forward derivative along a tangent of the mechanism (default K_rz), one
+    """Solution and its forward derivative along a tangent of the bushing stiffnesses (a
+    mechanism-shaped tangent of which only `bushings.k_trans`, `k_rot` are used; default K_rz), one
     program for every bushing-wheel variant and both modes (`driven` 0: contact patch, 1: wheel
     centre); values reused for FD. Outputs: F_x, F_y, M_z, α, γ, steer, status, and the arm from
     the contact point to the wheel centre (3)."""
@@ -110,9 +134,11 @@ def wheel_jvp(wheel_rig):
                           jnp.zeros_like(wheel_rig.mech.bushings.k_rot).at[0, 2].set(1.0))
     lp, rc = wheel_rig.mech.load_points, wheel_rig.corner
 
-    @eqx.filter_jit
-    def program(mech, d_mech, driven):
-        def f(m):
+    @quick_jit
+    def program(mech, d_stiffness, driven):
+        def f(k_trans, k_rot):
+            m = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech,
+                            (k_trans, k_rot))
             sol = R.solve(eqx.tree_at(lambda r: (r.mech, r.driven), wheel_rig, (m, driven)),
                           **CASES, throw=False)
             pos = jax.vmap(lambda q: marker_poses(m, q)[0])(sol.q)
@@ -120,10 +146,14 @@ def wheel_jvp(wheel_rig):
             return (sol.forces.fx, sol.forces.fy, sol.forces.mz, sol.slip_angle,
                     sol.inclination, sol.steer, sol.status.astype(float), arm)
 
-        return jax.jvp(f, (mech,), (d_mech,))
+        # only the stiffnesses carry a tangent (the tests' directions): a smaller program
+        # than a tangent on every leaf of the mechanism
+        b = mech.bushings
+        return jax.jvp(f, (b.k_trans, b.k_rot), d_stiffness)
 
     def run(mech, d_mech, driven=0.0):
-        return program(mech, d_mech, jnp.asarray(driven))
+        d = (d_mech.bushings.k_trans, d_mech.bushings.k_rot)
+        return program(mech, d, jnp.asarray(driven))
 
     return run, tangent
 
@@ -276,7 +306,7 @@ def pm_jvp(tir):
     rig = R.tyre_rig(pseudo_mcpherson(), MagicFormula6.from_tir(tir))
     alphas = jnp.radians(jnp.array([-3.0, 1.0, 2.0]))
 
-    @eqx.filter_jit
+    @quick_jit
     def run(k_trans, k_rot, spring):
         def f(kt, kr):
             m = eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.springs.k,
@@ -286,7 +316,10 @@ def pm_jvp(tir):
             return jnp.stack([sol.forces.fy, sol.forces.mz, sol.slip_angle,
                               sol.inclination, sol.status.astype(float)])
 
-        return f(k_trans, k_rot), jax.jacfwd(f, argnums=(0, 1))(k_trans, k_rot)
+        # the value as jacfwd's aux: f traced once (the program is half the size)
+        jac, value = jax.jacfwd(lambda kt, kr: (f(kt, kr),) * 2, argnums=(0, 1),
+                                has_aux=True)(k_trans, k_rot)
+        return value, jac
 
     return rig, alphas, run
 

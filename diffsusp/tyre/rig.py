@@ -286,11 +286,11 @@ def _coupled(rig, case, design_steer, row_scale, y, u):
 def _coupled_jvp(primals, tangents):
     rig, case, design_steer, row_scale, y, u = primals
     t_rig, t_case, t_steer, _, t_y, t_u = tangents
-    w = u * _scale(rig, case[0])
-    lin = linearize_internal(rig.mech, _loads(rig, w, case[0]), y)
     r, dr = eqx.filter_jvp(lambda rg, c, u_: _statics_residual(rg, c, row_scale, y, u_),
                            (rig, case, u), (t_rig, t_case, t_u))
-    if t_y is not None:
+    if t_y is not None:  # (only then: the implicit adjoint's ∂/∂(rig) needs no assembly)
+        w = u * _scale(rig, case[0])
+        lin = linearize_internal(rig.mech, _loads(rig, w, case[0]), y)
         dr = (0.0 if dr is None else dr) + row_scale * (lin.jacobian @ t_y)
     g, dg = eqx.filter_jvp(_tyre_residual, (rig, case, design_steer, y, u),
                            (t_rig, t_case, t_steer, t_y, t_u))
@@ -310,12 +310,22 @@ def _solve(rig: TyreRig, cases, q0, rtol, atol, max_steps):
         y_scaled, u = z
         return _coupled(rig_, case, steer0, row_scale, col_scale * y_scaled, u)
 
+    # The starting point from inputs without tangents: the root's derivative comes from the
+    # implicit function theorem (`optx.ImplicitAdjoint`), never from the start, and a
+    # forward-mode trace through the start's KKT linearisation only made every
+    # differentiated program bigger (to trace and to compile).
+    dynamic, static = eqx.partition((rig, design_steer), eqx.is_inexact_array)
+    rig_start, steer_start = eqx.combine(jax.lax.stop_gradient(dynamic), static)
+
     def one(case, q_start):
         scale = _scale(rig, case[0])
-        u0 = _tyre_state(rig, q_start, case, design_steer)[0] / scale  # rigid suspension
+        case0 = jax.lax.stop_gradient(case)
+        scale0 = _scale(rig_start, case0[0])
+        u0 = _tyre_state(rig_start, q_start, case0, steer_start)[0] / scale0  # rigid suspension
         # Multipliers start at 0: the KKT residual is linear in them, so Newton's first step
         # gives them (no line search here, unlike solve_statics, hence no merit to start well).
-        lin0 = linearize(mech, _loads(rig, u0 * scale, case[0]), q_start, jnp.zeros(m))
+        lin0 = linearize(rig_start.mech, _loads(rig_start, u0 * scale0, case0[0]), q_start,
+                         jnp.zeros(m))
         y0 = lin0.y
         # Rows in displacement units (mm or rad): each row / its largest Jacobian entry, so
         # that atol means the same for force, moment and constraint rows; then the columns
