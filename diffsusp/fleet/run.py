@@ -350,7 +350,7 @@ def _setup(batch: _Batch, own_process: bool) -> None:
         if batch.devices not in (None, 1, "1"):
             # Several CPU devices in this worker (before JAX starts its backend; no effect on
             # GPUs, which are devices already), and K&C tables split over them too.
-            n = os.cpu_count() or 1 if batch.devices == "all" else int(batch.devices)
+            n = (os.cpu_count() or 1) if batch.devices == "all" else int(batch.devices)
             try:
                 jax.config.update("jax_num_cpu_devices", n)
             except RuntimeError:  # the backend had started: keep its devices
