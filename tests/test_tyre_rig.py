@@ -33,6 +33,7 @@ from diffsusp.models import pseudo_mcpherson
 from diffsusp.tyre import MagicFormula6, example_path
 from diffsusp.tyre import rig as R
 
+
 def quick_jit(fn):
     """`eqx.filter_jit`'s semantics (arrays traced, everything else static) compiled with
     XLA's backend (LLVM) optimisation off: this file's two programs (the coupled solve with its
