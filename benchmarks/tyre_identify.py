@@ -13,7 +13,9 @@ relaxation columns (69 columns) filtered in parallel, thinning, the R-factor, th
 search (σ % > 10 % eliminated one at a time from R, `bench.eliminate_r`), step 2 (K_y⁻¹).
 Baseline in the same run: the same pipeline in NumPy/SciPy (`scipy.signal.sosfiltfilt`,
 `numpy.linalg.qr`, the elimination loop with `numpy.linalg` on the R-factor), one data set
-after the other.
+after the other. Then the library's own identification set by set (`bench.condition`,
+`bench.identify_output`: the structure search with the F-test against the noise level on the
+noise-model σ, the instrumental-variable estimate), timed and checked against the truth.
 
     python benchmarks/tyre_identify.py [--quick]
 """
@@ -189,12 +191,34 @@ def main():
     print(f"NumPy/SciPy: {np_wall:.3f} s wall, {np_cpu:.3f} s CPU; K_y error "
           f"{100 * np.max(np.abs(1 / comp_np / K_true - 1)):.3f} % max")
     print(f"ratio NumPy/JAX: {np_wall / wall:.2f}× wall, {np_cpu / cpu:.2f}× CPU")
+
+    # ---- the library's identification, set by set (`bench.condition` + `identify_output`:
+    # the structure search with the F-test on the noise-model σ, the instrumental-variable
+    # estimate and its sandwich σ); a first set untimed (compiles its programs)
+    bench.identify_output(bench.condition(tables[0]), "Fy", DEGREES)
+    t0, c0 = time.perf_counter(), time.process_time()
+    reps = [bench.identify_output(bench.condition(tb), "Fy", DEGREES) for tb in tables]
+    lib_wall, lib_cpu = time.perf_counter() - t0, time.process_time() - c0
+    K_lib = np.array([r.stiffness for r in reps])
+    within = np.abs(K_lib - K_true) / (np.array([r.compliance_sigma for r in reps])
+                                       * K_true**2)
+    kept_lib = np.array([len(r.reduced.names) for r in reps])
+    misfit = np.array([r.noise_sigma / 6.0 for r in reps])
+    print(f"library (search with the F-test, IV): {lib_wall:.3f} s wall, {lib_cpu:.3f} s CPU; "
+          f"kept {kept_lib.min()}–{kept_lib.max()}; K_y error "
+          f"{100 * np.max(np.abs(K_lib / K_true - 1)):.3f} % max, {within.max():.2f} σ max; "
+          f"residual noise / injected {misfit.min():.2f}–{misfit.max():.2f}")
     results = {"samples": int(total), "data_sets": len(SETS), "columns": p,
                "jax_wall_s": wall, "jax_cpu_s": cpu, "compile_wall_s": compile_wall,
                "compile_cpu_s": compile_cpu, "numpy_wall_s": np_wall, "numpy_cpu_s": np_cpu,
                "kept_min": int(kept.min()), "kept_max": int(kept.max()),
                "K_error_pct_max": float(100 * np.max(np.abs(K / K_true - 1))),
-               "K_error_pct_max_numpy": float(100 * np.max(np.abs(1 / comp_np / K_true - 1)))}
+               "K_error_pct_max_numpy": float(100 * np.max(np.abs(1 / comp_np / K_true - 1))),
+               "library_wall_s": lib_wall, "library_cpu_s": lib_cpu,
+               "library_kept_min": int(kept_lib.min()), "library_kept_max": int(kept_lib.max()),
+               "K_error_pct_max_library": float(100 * np.max(np.abs(K_lib / K_true - 1))),
+               "K_error_sigma_max_library": float(within.max()),
+               "library_residual_over_noise_max": float(misfit.max())}
     print(save_results("tyre_identify", results, QUICK))
 
 
