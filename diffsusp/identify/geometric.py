@@ -1327,10 +1327,10 @@ def design_geometry_cases(
     from the poses' landmark noise (`_pose_covariance`, D_c = ∂r_c/∂poses), joint by joint
     (each solver uses its own equations only): each case adds A_cᵀ (D_c Σ_c D_cᵀ)⁻¹ A_c / σ_L²
     to the information of the centres (the generalised least-squares bound of the estimators'
-    covariance, a little below the σ `locate_joints` reports for its ordinary least squares;
-    far below it for a compliant bushing, whose link-ball noise it misses: see
-    tests/test_geometric.py). The strut top's line (a point and the direction of the slide on
-    S1) are nuisance parameters; a compliant bushing and its link's
+    covariance, a little below the σ `locate_joints` reports for its ordinary least squares).
+    The strut top's line (a point and the direction of the slide on
+    S1) are nuisance parameters (without the localisation's design-position equation: the
+    design is pessimistic there); a compliant bushing and its link's
     ball share the ball centre; a revolute's coordinate along the axis is fixed by its prior.
 
     **Arguments:**
@@ -1402,9 +1402,12 @@ def design_geometry_cases(
         for res, d in zip(residuals(eps0), jax.jacfwd(residuals)(eps0), strict=True):
             # each joint whitened on its own: its solver does not use the other joints'
             # equations (nor their correlated noise)
+            # (pseudo-inverse square root: a combination of the equations that no noise
+            # reaches is an identity — the compliant link's r·R u = 0 — not information)
             d = jax.lax.stop_gradient(d.reshape(-1, 6 * len(measured)))
             w, v = jnp.linalg.eigh(d @ cov_pose @ d.T)
-            out.append((v / jnp.sqrt(jnp.maximum(w, 1e-12 * w[-1]))) @ v.T @ res)
+            scale = jnp.where(w > 1e-6 * w[-1], 1.0 / jnp.sqrt(jnp.maximum(w, 1e-300)), 0.0)
+            out.append((v * scale) @ v.T @ res)
         return jnp.concatenate(out)
 
     n_cand = int(candidates.n_cases)
