@@ -1415,7 +1415,8 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
 
 
 def eliminate_r(R, n, *, sigma_pct_threshold: float = 10.0, max_steps: int | None = None):
-    """The σ % elimination loop of `identify_output` (without the behaviour rules), traced:
+    """The white-σ % elimination loop (`lsq.eliminate` with the σ % rule: what
+    `identify_output` ran before its F-test against the noise level; no behaviour rules), traced:
     from the augmented R-factor of one data set (`lsq.qr_r` of [W, −y]), repeatedly hold at 0
     the kept coefficient whose combination has the largest σ % above `sigma_pct_threshold`,
     refitting from R alone (spec: guaranteed_least_squares §3.9), until none is left.
