@@ -593,13 +593,15 @@ def run(
             counts["compiled"] += result["compiled"]
             counts["hits"] += result["hits"]
             hashes = {p.name: p.hash for p in batch.items}
+            finished = []
             for r in result["results"]:
                 entry = {"item": r["item"], "hash": hashes[r["item"]], "status": r["status"],
                          "message": r["message"], "values": r["values"],
                          "seconds": r["seconds"], "worker": result["worker"],
                          "batch": batch.key}
-                store.record(entry, r["report"])
+                finished.append((entry, r["report"]))
                 counts["ok" if r["status"] == "ok" else "failed"] += 1
+            store.record_batch(finished)
             if show is not None:
                 elapsed = time.perf_counter() - t0
                 n = counts["ok"] + counts["failed"]
