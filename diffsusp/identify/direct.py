@@ -56,18 +56,16 @@ numbers computed with the mirrored law can differ in the second order of the def
 **Offsets.** Optional unknown offsets δ0 (spec §1.10, "Offsets", and §0: F = f(T − T0)) are
 identified as the constant force K·δ0 (+ the model's preload), linear like the spring's K·L0.
 
-**Size.** About 1 300 lines: selection, the system (exact rows from the solver's force laws),
-the noise whitening, the identifiability analysis, the report and the write-back are one
-method sharing the `Parameter` description and the assembled `_Context`; the report's common
-part is in `identify.report`. Splitting the whitening and the report into their own modules is
-the next step (issue 11), not done yet.
+**Size.** About 1 200 lines: selection, the system (exact rows from the solver's force laws),
+the noise whitening, the identifiability analysis and the write-back are one method sharing
+the `Parameter` description and the assembled `_Context`. The report (`DirectReport`) is in
+`identify.direct_report`, the errors-in-variables polish and `direct_batch` in
+`identify.direct_polish`; the report's common part is in `identify.report`.
 """
 
 import dataclasses
 import functools
-import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -79,11 +77,9 @@ from ..errors import InputError, ModelError
 from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
+from .direct_report import DEG, DirectReport
 from .params import Params, selected_entries
 from .report import (
-    Consistency,
-    IdentificationReport,
-    MeasurementResiduals,
     check_consistency,
     check_data,
 )
@@ -91,7 +87,6 @@ from .report import (
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
            "direct_system"]
 
-DEG = math.pi / 180.0
 AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 STIFFNESS_NAMES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 OFFSET_NAMES = ("Fx0", "Fy0", "Fz0", "Mx0", "My0", "Mz0")
@@ -797,208 +792,6 @@ def direct_system(
     return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
 
 
-# ----------------------------------------------------------------------------- the report
-
-
-@dataclasses.dataclass(frozen=True)
-class DirectReport(IdentificationReport):
-    """What the direct identification found (values in the units of the thesis's tables).
-
-    **Per unknown (p,)**, aligned with `names`: `values` (the least-squares solution; for the
-    basic method non-identifiable ones are 0, the thesis's zeros), `sigma`, `sigma_pct`,
-    `identified` (individually determined by the data with σ% ≤ `max_sigma_pct`),
-    `identifiable` (individually determined, whatever its σ%), `status` (a phrase), `units`,
-    `prior` (the model's values).
-
-    **Also:** `relations` [(combination, value, σ)] — the combinations of several unknowns the
-    data determine (e.g. "bushing_1.Krx + bushing_2.Krx"); `derived` {name: (value, σ, unit)}
-    (spring free lengths L0 = K·L0/K, bushing offsets δ0); `case_residuals` (cases,) the norm
-    of each case's equation residual (N) and `case_scale` (cases,) the norm of its right-hand
-    side; `cases` labels; `notes` (measurement exclusions, warnings); `fit` the `lsq.Fit` of
-    the estimate; `method`; `rank` (of the unweighted equations); `n_equations`; `weighted`.
-    """
-
-    names: tuple[str, ...]
-    values: np.ndarray
-    sigma: np.ndarray
-    sigma_pct: np.ndarray
-    identified: np.ndarray
-    identifiable: np.ndarray
-    status: tuple[str, ...]
-    units: tuple[str, ...]
-    prior: np.ndarray
-    relations: tuple[tuple[str, float, float], ...]
-    derived: dict
-    case_residuals: np.ndarray
-    case_scale: np.ndarray
-    cases: tuple[str, ...]
-    notes: tuple[str, ...]
-    fit: object
-    method: str
-    rank: int
-    n_equations: int
-    max_sigma_pct: float
-    weighted: bool = False
-    equation_residuals: np.ndarray | None = None
-    whitened_equation_residuals: np.ndarray | None = None
-    consistency: Consistency | None = None
-    polished: object = None
-    linear_values: np.ndarray | None = None
-
-    family: ClassVar[str] = "direct"
-
-    @property
-    def determined(self) -> np.ndarray:
-        """Identifiable with σ% ≤ `max_sigma_pct` (`identified` before the consistency
-        check)."""
-        return np.asarray(self.identified, dtype=bool)
-
-    # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
-    @property
-    def _to_model(self) -> np.ndarray:
-        return np.array([1.0 / DEG if u == "N·mm/deg" else 1.0 for u in self.units])
-
-    @property
-    def parameters_to_model(self) -> np.ndarray:
-        """Per unknown, the factor from its table unit to the model's (π/180 → 180/π)."""
-        return self._to_model
-
-    @property
-    def estimates(self) -> np.ndarray:
-        return self.values * self._to_model
-
-    @property
-    def sigmas(self) -> np.ndarray:
-        return self.sigma * self._to_model
-
-    @property
-    def estimate_units(self) -> tuple[str, ...]:
-        return tuple("N·mm/rad" if u == "N·mm/deg" else u for u in self.units)
-
-    @property
-    def residuals(self) -> dict:
-        """`{'equations': MeasurementResiduals}`: the residual of every equation (N; rows of
-        a case together, (cases, rows)), raw and as weighted in the solve."""
-        if self.equation_residuals is None:
-            return {}
-        return {"equations": MeasurementResiduals(self.equation_residuals,
-                                                  self.whitened_equation_residuals)}
-
-    def value(self, name: str) -> float:
-        return float(self.values[self._index(name)])
-
-    def _index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise InputError(f"unknown parameter {name!r}; the report has "
-                             f"{', '.join(self.names)}.") from None
-
-    @property
-    def combinations(self) -> list[str]:
-        """The identifiable combinations of several unknowns, as printed."""
-        return [text for text, _, _ in self.relations]
-
-    def rows(self) -> list[dict]:
-        """One dict per unknown (and per derived quantity): for CSV/JSON export."""
-        out = []
-        for i, name in enumerate(self.names):
-            out.append(dict(parameter=name, value=float(self.values[i]),
-                            sigma=_nan_none(self.sigma[i]), sigma_pct=_nan_none(self.sigma_pct[i]),
-                            unit=self.units[i], identified=bool(self.is_identified[i]),
-                            prior=float(self.prior[i]), status=self.status[i]))
-        for name, (v, s, unit) in self.derived.items():
-            out.append(dict(parameter=name, value=_nan_none(v), sigma=_nan_none(s),
-                            sigma_pct=_nan_none(100 * s / abs(v)) if v else None, unit=unit,
-                            identified=bool(np.isfinite(v)), prior=None, status="derived"))
-        return out
-
-    def to_dict(self) -> dict:
-        return {
-            "method": self.method, "rank": self.rank, "n_equations": self.n_equations,
-            "n_unknowns": len(self.names), "parameters": self.rows(),
-            "relations": [{"combination": t, "value": float(v), "sigma": _nan_none(s)}
-                          for t, v, s in self.relations],
-            "cases": [{"case": c, "residual": float(r), "scale": float(s)} for c, r, s in
-                      zip(self.cases, self.case_residuals, self.case_scale, strict=True)],
-            "notes": list(self.notes),
-            "consistency": None if self.consistency is None else self.consistency.summary(),
-            "polished": self.polished is not None,
-        }
-
-    def table(self) -> str:
-        """The report as text: one line per unknown (value, σ%, status), the identifiable
-        combinations, derived quantities, residual per case and notes."""
-        width = max([9] + [len(n) for n in self.names] + [len(n) for n in self.derived])
-        lines = [
-            f"direct identification ({self.method}): {self.n_equations} equations, "
-            f"{len(self.names)} unknowns, rank {self.rank}",
-            f"{'parameter':<{width}}  {'value':>12}  {'sigma%':>8}  {'unit':<9} status",
-        ]
-        for i, name in enumerate(self.names):
-            shown = self.identified[i] or self.status[i].startswith("fixed")
-            value = f"{self.values[i]:12.6g}" if shown else f"{'—':>12}"
-            pct = f"{self.sigma_pct[i]:7.3g}%" if np.isfinite(self.sigma_pct[i]) else f"{'—':>8}"
-            lines.append(f"{name:<{width}}  {value}  {pct:>8}  {self.units[i]:<9} "
-                         f"{self.status[i]}")
-        if self.relations:
-            lines.append("identifiable combinations:")
-            for text, v, s in self.relations:
-                pct = f" ({100 * s / abs(v):.3g}%)" if np.isfinite(s) and v else ""
-                lines.append(f"  {text} = {v:.6g}{pct}")
-        if self.derived:
-            lines.append("derived:")
-            for name, (v, s, unit) in self.derived.items():
-                pct = f" ({100 * s / abs(v):.3g}%)" if np.isfinite(s) and v else ""
-                txt = f"{v:.6g}" if np.isfinite(v) else "—"
-                lines.append(f"  {name:<{width}} = {txt} {unit}{pct}")
-        lines.append("residual per case (N, relative to the case's load terms):")
-        lines.append("  " + ", ".join(
-            f"{c}: {r:.3g} ({r / s:.2g})" if s > 0 else f"{c}: {r:.3g}"
-            for c, r, s in zip(self.cases, self.case_residuals, self.case_scale, strict=True)))
-        if self.consistency is not None:
-            lines.append(f"model vs data: {self.consistency.verdict}")
-        for note in self.notes:
-            lines.append(f"note: {note}")
-        return "\n".join(lines)
-
-    def __str__(self) -> str:
-        return self.table()
-
-    def plot(self, axes=None):
-        """Identified values against the model's (prior) values with ±σ bars, and the residual
-        per case. Returns the matplotlib Figure."""
-        import matplotlib.pyplot as plt
-
-        if axes is None:
-            fig, axes = plt.subplots(1, 2, figsize=(11, 4), width_ratios=(2, 1))
-        else:
-            fig = axes[0].figure
-        idx = np.arange(len(self.names))
-        ax = axes[0]
-        ax.bar(idx - 0.2, np.abs(self.prior), 0.4, label="model (prior)", color="0.75")
-        ok = self.identified
-        ax.bar(idx[ok] + 0.2, np.abs(self.values[ok]), 0.4,
-               yerr=np.nan_to_num(self.sigma[ok]), label="identified", color="C0", capsize=2)
-        ax.set_yscale("log")
-        ax.set_xticks(idx, self.names, rotation=90, fontsize=7)
-        ax.set_ylabel("|value| (table units)")
-        ax.legend(fontsize=8)
-        ax.set_title("direct identification (no bar: not identified)", fontsize=9)
-        ax = axes[1]
-        ax.bar(np.arange(len(self.cases)), self.case_residuals, color="C1")
-        ax.set_xticks(np.arange(len(self.cases)), self.cases, fontsize=7)
-        ax.set_xlabel("case")
-        ax.set_ylabel("equation residual (N)")
-        fig.tight_layout()
-        return fig
-
-
-def _nan_none(v):
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
 # ----------------------------------------------------------------------------- identify
 
 
@@ -1374,194 +1167,12 @@ def direct(
     data = check_data(mech, measurements)
     consistency = check_consistency(fitted, data, int(np.sum(write)), cases=raw.cases)
     report = dataclasses.replace(report, consistency=consistency)
+    from .direct_polish import polish_linear
+
     noisy = consistency.chi2 > POLISH_CHI2 * consistency.dof
     if polish is True or (polish == "auto" and noisy):
-        fitted, report = _polish(fitted, report, params, data, max_sigma_pct, mech)
+        fitted, report = polish_linear(fitted, report, params, data, max_sigma_pct, mech)
     return fitted, report
-
-
-POLISH_CHI2 = 1e-6
-"""`direct(polish="auto")` polishes when χ²/dof of the linear estimate exceeds this: a residual
-RMS above 10⁻³ σ, i.e. data that are not noise-free (noise-free data are reproduced to
-rounding, and the linear estimate is then exact)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class _PolishPlan:
-    """What the polish fits: `params` (the `Params` of `identify.least_squares`, started at
-    the model's values) and `index` {unknown: its parameter} for the stiffnesses and spring
-    rates polished."""
-
-    params: Params
-    index: dict
-
-    @property
-    def unknowns(self) -> list[int]:
-        return sorted(self.index)
-
-
-def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan | None:
-    """The plan of the polish (see `_PolishPlan`), None when nothing can be polished.
-
-    Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
-    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there.
-    A stiffness the model sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz
-    of the pseudo-McPherson) has no log to start from or to centre a prior on: it keeps its
-    linear value, like offsets, K·L0 and axisymmetric pairs."""
-    b, s = mech.bushings, mech.springs
-    k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    kt = np.zeros((len(b.names), 3), bool)
-    kr = np.zeros_like(kt)
-    ks = np.zeros(len(s.names), bool)
-    lsq_name = {}
-    for i, p in enumerate(params):
-        if p.kind == "stiffness" and len(p.axes) == 1 and k_model[p.element, p.axes[0]] > 0:
-            a = p.axes[0]
-            (kt if a < 3 else kr)[p.element, a % 3] = True
-            lsq_name[i] = f"{b.names[p.element]}.{STIFFNESS_NAMES[a]}"
-        elif p.kind == "spring_k" and float(s.k[p.element]) > 0:
-            ks[p.element] = True
-            lsq_name[i] = f"{s.names[p.element]}.k"
-    if not lsq_name:
-        return None
-    leaves, masks = [], []
-    for name, mask in (("k_trans", kt), ("k_rot", kr)):
-        if mask.any():
-            leaves.append(lambda m, name=name: getattr(m.bushings, name))
-            masks.append(mask)
-    if ks.any():
-        leaves.append(lambda m: m.springs.k)
-        masks.append(ks)
-    lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
-    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
-
-
-def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
-    """Start of the polish: the linear estimate where it determined a positive value, the
-    model's value elsewhere."""
-    start = np.array(plan.params.start)
-    for i, j in plan.index.items():
-        v = report.values[i] * report.parameters_to_model[i]
-        if report.identified[i] and v > 0:
-            start[j] = v
-    return start
-
-
-def _linear_left(report: DirectReport, plan: _PolishPlan) -> list[int]:
-    """Unknowns the linear estimate determined that the polish does not cover."""
-    return [i for i in np.flatnonzero(report.identified) if i not in plan.unknowns]
-
-
-def _merge_polish(report: DirectReport, plan: _PolishPlan, fit,
-                  max_sigma_pct: float) -> DirectReport:
-    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
-    values, sigma = report.values.copy(), report.sigma.copy()
-    sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
-    status = list(report.status)
-    conv = report.parameters_to_model
-    for i, j in plan.index.items():
-        values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
-        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
-        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
-        identified[i] = ok
-        status[i] = ("identified (polished through the equilibrium)" if ok else
-                     f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
-    left = [report.names[i] for i in _linear_left(report, plan)]
-    notes = list(report.notes)
-    notes.append(f"errors in variables: {len(plan.index)} stiffness(es) polished by least "
-                 f"squares through the equilibrium from the linear estimate ({fit.message}, "
-                 f"{fit.steps} steps)")
-    if left:
-        notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
-                     "stiffnesses per axis and spring rates whose model value is positive, "
-                     "and holds the other unknowns at the model's values): their σ ignores "
-                     "the errors in the regressors")
-    consistency = dataclasses.replace(
-        fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
-    return dataclasses.replace(
-        report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
-        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
-        consistency=consistency)
-
-
-def _polish(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
-            max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
-    """Least squares through the equilibrium from the linear estimate (see `direct`,
-    `polish`): every bushing stiffness per axis and spring rate among the unknowns with a
-    positive model value, the other unknowns held at the model's values (a linear K·L0 biased
-    by the errors in variables would bias the polish), the weak default prior centred on the
-    model's values."""
-    from .least_squares import least_squares_batch
-
-    plan = _polish_plan(mech, params)
-    if plan is None or not report.identified[plan.unknowns].any():
-        return fitted, report  # nothing determined to polish (e.g. all came out negative)
-    start = _polish_start(plan, report)
-    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None])
-    fit = batch.reports[0]
-    report = _merge_polish(report, plan, fit, max_sigma_pct)
-    return plan.params.apply(fitted, jnp.asarray(fit.estimate)), report
-
-
-def _as_batch(data, n: int, items=None):
-    """Measurements (one data set each) stacked along a leading data-set axis: `data` repeated
-    `n` times, or the measured values of `items` (lists of measurements like `data`)."""
-    out = []
-    for k, m in enumerate(data):
-        fields = m._values
-        if items is None:
-            values = tuple(jnp.broadcast_to(getattr(m, f), (n, *getattr(m, f).shape))
-                           for f in fields)
-        else:
-            values = tuple(jnp.stack([getattr(it[k], f) for it in items]) for f in fields)
-        out.append(eqx.tree_at(lambda mm, fields=fields: tuple(getattr(mm, f) for f in fields),
-                               m, values))
-    return tuple(out)
-
-
-def direct_batch(
-    mech: Mechanism,
-    measurements: Sequence[Measurements],
-    params: Params | Callable[[Mechanism], object] | None = None,
-    *,
-    polish: bool | str = "auto",
-    max_sigma_pct: float = MAX_SIGMA_PCT,
-    **options,
-) -> tuple[DirectReport, ...]:
-    """`direct` on many measurement sets of one layout under one load table (e.g. a
-    Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
-    shared), then the polish of every set that needs one at once (`least_squares_batch`, one
-    vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
-    per set (with `polished`; the identified mechanisms are `Params.apply` of their
-    values)."""
-    from .least_squares import least_squares_batch
-
-    linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
-              for m in measurements]
-    if not polish:
-        return tuple(linear)
-    unknowns = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
-                                                  or _default_where),
-                           options.get("elements"), options.get("axisymmetric", ()))
-    plan = _polish_plan(mech, unknowns)
-    if plan is None:
-        return tuple(linear)
-    # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
-    # noise-free accuracy, or determined nothing, keep it.
-    todo = [k for k, r in enumerate(linear)
-            if r.identified[plan.unknowns].any() and (
-                polish is True or r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof)]
-    out = list(linear)
-    if not todo:
-        return tuple(out)
-    data = [check_data(mech, measurements[k]) for k in todo]
-    starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
-    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
-                                start=starts)
-    for k, fit in zip(todo, batch.reports, strict=True):
-        out[k] = _merge_polish(linear[k], plan, fit, max_sigma_pct)
-    return tuple(out)
 
 
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,
@@ -1596,3 +1207,6 @@ def _estimate(system, method, hold, eliminate, threshold, prior_sigma, max_sigma
     for step in getattr(fit, "log", ()):
         eliminated[system.names.index(step.removed)] = True
     return fit, eliminated
+
+
+from .direct_polish import POLISH_CHI2, direct_batch  # noqa: E402  (it uses `direct`)

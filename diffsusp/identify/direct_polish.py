@@ -1,0 +1,213 @@
+"""Errors in variables for the direct method (issue 12): the polish of its linear estimate by
+least squares through the equilibrium, and `direct_batch` (many measurement sets, one batched
+polish). spec: stiffness §1.10 (the regressors are built from measured poses), §6 item 8 (the
+gradient-based fit through the equilibrium, `identify.least_squares`, which the polish runs)."""
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..measure.measurements import Measurements
+from ..model.mechanism import Mechanism
+from .direct import (
+    MAX_SIGMA_PCT,
+    STIFFNESS_NAMES,
+    Parameter,
+    _default_where,
+    _parameters,
+    _selected_fields,
+    _selection_of,
+    direct,
+)
+from .direct_report import DirectReport
+from .params import Params
+from .report import check_data
+
+__all__ = ["POLISH_CHI2", "direct_batch"]
+
+
+POLISH_CHI2 = 1e-6
+"""`direct(polish="auto")` polishes when χ²/dof of the linear estimate exceeds this: a residual
+RMS above 10⁻³ σ, i.e. data that are not noise-free (noise-free data are reproduced to
+rounding, and the linear estimate is then exact)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _PolishPlan:
+    """What the polish fits: `params` (the `Params` of `identify.least_squares`, started at
+    the model's values) and `index` {unknown: its parameter} for the stiffnesses and spring
+    rates polished."""
+
+    params: Params
+    index: dict
+
+    @property
+    def unknowns(self) -> list[int]:
+        return sorted(self.index)
+
+
+def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan | None:
+    """The plan of the polish (see `_PolishPlan`), None when nothing can be polished.
+
+    Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
+    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there.
+    A stiffness the model sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz
+    of the pseudo-McPherson) has no log to start from or to centre a prior on: it keeps its
+    linear value, like offsets, K·L0 and axisymmetric pairs."""
+    b, s = mech.bushings, mech.springs
+    k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    kt = np.zeros((len(b.names), 3), bool)
+    kr = np.zeros_like(kt)
+    ks = np.zeros(len(s.names), bool)
+    lsq_name = {}
+    for i, p in enumerate(params):
+        if p.kind == "stiffness" and len(p.axes) == 1 and k_model[p.element, p.axes[0]] > 0:
+            a = p.axes[0]
+            (kt if a < 3 else kr)[p.element, a % 3] = True
+            lsq_name[i] = f"{b.names[p.element]}.{STIFFNESS_NAMES[a]}"
+        elif p.kind == "spring_k" and float(s.k[p.element]) > 0:
+            ks[p.element] = True
+            lsq_name[i] = f"{s.names[p.element]}.k"
+    if not lsq_name:
+        return None
+    leaves, masks = [], []
+    for name, mask in (("k_trans", kt), ("k_rot", kr)):
+        if mask.any():
+            leaves.append(lambda m, name=name: getattr(m.bushings, name))
+            masks.append(mask)
+    if ks.any():
+        leaves.append(lambda m: m.springs.k)
+        masks.append(ks)
+    lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
+    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
+
+
+def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
+    """Start of the polish: the linear estimate where it determined a positive value, the
+    model's value elsewhere."""
+    start = np.array(plan.params.start)
+    for i, j in plan.index.items():
+        v = report.values[i] * report.parameters_to_model[i]
+        if report.identified[i] and v > 0:
+            start[j] = v
+    return start
+
+
+def _linear_left(report: DirectReport, plan: _PolishPlan) -> list[int]:
+    """Unknowns the linear estimate determined that the polish does not cover."""
+    return [i for i in np.flatnonzero(report.identified) if i not in plan.unknowns]
+
+
+def _merge_polish(report: DirectReport, plan: _PolishPlan, fit,
+                  max_sigma_pct: float) -> DirectReport:
+    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
+    values, sigma = report.values.copy(), report.sigma.copy()
+    sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
+    status = list(report.status)
+    conv = report.parameters_to_model
+    for i, j in plan.index.items():
+        values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
+        sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
+        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
+        identified[i] = ok
+        status[i] = ("identified (polished through the equilibrium)" if ok else
+                     f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
+    left = [report.names[i] for i in _linear_left(report, plan)]
+    notes = list(report.notes)
+    notes.append(f"errors in variables: {len(plan.index)} stiffness(es) polished by least "
+                 f"squares through the equilibrium from the linear estimate ({fit.message}, "
+                 f"{fit.steps} steps)")
+    if left:
+        notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
+                     "stiffnesses per axis and spring rates whose model value is positive, "
+                     "and holds the other unknowns at the model's values): their σ ignores "
+                     "the errors in the regressors")
+    consistency = dataclasses.replace(
+        fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
+    return dataclasses.replace(
+        report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
+        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
+        consistency=consistency)
+
+
+def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
+            max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
+    """Least squares through the equilibrium from the linear estimate (see `direct`,
+    `polish`): every bushing stiffness per axis and spring rate among the unknowns with a
+    positive model value, the other unknowns held at the model's values (a linear K·L0 biased
+    by the errors in variables would bias the polish), the weak default prior centred on the
+    model's values."""
+    from .least_squares import least_squares_batch
+
+    plan = _polish_plan(mech, params)
+    if plan is None or not report.identified[plan.unknowns].any():
+        return fitted, report  # nothing determined to polish (e.g. all came out negative)
+    start = _polish_start(plan, report)
+    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None])
+    fit = batch.reports[0]
+    report = _merge_polish(report, plan, fit, max_sigma_pct)
+    return plan.params.apply(fitted, jnp.asarray(fit.estimate)), report
+
+
+def _as_batch(data, n: int, items=None):
+    """Measurements (one data set each) stacked along a leading data-set axis: `data` repeated
+    `n` times, or the measured values of `items` (lists of measurements like `data`)."""
+    out = []
+    for k, m in enumerate(data):
+        fields = m._values
+        if items is None:
+            values = tuple(jnp.broadcast_to(getattr(m, f), (n, *getattr(m, f).shape))
+                           for f in fields)
+        else:
+            values = tuple(jnp.stack([getattr(it[k], f) for it in items]) for f in fields)
+        out.append(eqx.tree_at(lambda mm, fields=fields: tuple(getattr(mm, f) for f in fields),
+                               m, values))
+    return tuple(out)
+
+
+def direct_batch(
+    mech: Mechanism,
+    measurements: Sequence[Measurements],
+    params: Params | Callable[[Mechanism], object] | None = None,
+    *,
+    polish: bool | str = "auto",
+    max_sigma_pct: float = MAX_SIGMA_PCT,
+    **options,
+) -> tuple[DirectReport, ...]:
+    """`direct` on many measurement sets of one layout under one load table (e.g. a
+    Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
+    shared), then the polish of every set that needs one at once (`least_squares_batch`, one
+    vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
+    per set (with `polished`; the identified mechanisms are `Params.apply` of their
+    values)."""
+    from .least_squares import least_squares_batch
+
+    linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
+              for m in measurements]
+    if not polish:
+        return tuple(linear)
+    unknowns = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
+                                                  or _default_where),
+                           options.get("elements"), options.get("axisymmetric", ()))
+    plan = _polish_plan(mech, unknowns)
+    if plan is None:
+        return tuple(linear)
+    # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
+    # noise-free accuracy, or determined nothing, keep it.
+    todo = [k for k, r in enumerate(linear)
+            if r.identified[plan.unknowns].any() and (
+                polish is True or r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof)]
+    out = list(linear)
+    if not todo:
+        return tuple(out)
+    data = [check_data(mech, measurements[k]) for k in todo]
+    starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
+    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
+                                start=starts)
+    for k, fit in zip(todo, batch.reports, strict=True):
+        out[k] = _merge_polish(linear[k], plan, fit, max_sigma_pct)
+    return tuple(out)
