@@ -298,8 +298,7 @@ def _coupled_jvp(primals, tangents):
     return (r, g), (zero(r) if dr is None else dr, zero(g) if dg is None else dg)
 
 
-@eqx.filter_jit
-def _solve(rig: TyreRig, cases, q0, rtol, atol, max_steps):
+def _solve_traced(rig: TyreRig, cases, q0, rtol, atol, max_steps):
     mech = rig.mech
     design = jnp.zeros(mech.n_coordinates)
     design_steer = corner_geometry(mech, rig.corner, design)["steer"]
@@ -355,6 +354,9 @@ def _solve(rig: TyreRig, cases, q0, rtol, atol, max_steps):
     return TyreRigSolution(design_steer=design_steer, **out)
 
 
+_solve = eqx.filter_jit(_solve_traced)
+
+
 def solve(rig: TyreRig, slip_angle: ArrayLike, *, fz: ArrayLike | None = None,
           slip_ratio: ArrayLike = 0.0, camber_offset: ArrayLike = 0.0,
           q0: Float[Array, "*cases n"] | None = None, rtol: float = 1e-9,
@@ -401,7 +403,12 @@ def solve(rig: TyreRig, slip_angle: ArrayLike, *, fz: ArrayLike | None = None,
     nq = rig.mech.n_coordinates
     q0 = jnp.zeros((n, nq)) if q0 is None else jnp.broadcast_to(jnp.asarray(q0, float), (n, nq))
     case_array = jnp.stack(cases, axis=1)
-    sol = _solve(rig, case_array, q0, rtol, atol, max_steps)
+    # Inside a caller's trace (its jit compiles this too) the solve is traced inline: a
+    # nested jit is traced twice under autodiff (the function, then the derivative of its
+    # jaxpr), which cost a differentiated program a quarter of its tracing.
+    inside = any(isinstance(leaf, jax.core.Tracer)
+                 for leaf in jax.tree.leaves((eqx.filter(rig, eqx.is_array), case_array, q0)))
+    sol = (_solve_traced if inside else _solve)(rig, case_array, q0, rtol, atol, max_steps)
     if concrete and not isinstance(sol.status, jax.core.Tracer):
         status = np.asarray(sol.status)
         bad = np.flatnonzero(status != 0)
