@@ -111,7 +111,10 @@ def test_simulate_toml_parquet_json_and_named_table(csv_run, loads_csv, tmp_path
     out = tmp_path / "named.csv"
     result = invoke("simulate", model, "--loads", "three", "--out", out)
     assert result.exit_code == 3
-    np.testing.assert_array_equal(read_table(out)["arm.x"], reference["arm.x"])
+    named = read_table(out)["arm.x"]
+    np.testing.assert_array_equal(named[:2], reference["arm.x"][:2])
+    # The stalled case stops where its line search gives up: a round-off zero (mm).
+    np.testing.assert_allclose(named[2], reference["arm.x"][2], atol=1e-12)
 
 
 def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_path,

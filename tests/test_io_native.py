@@ -155,6 +155,36 @@ def test_builtin_name_loads_the_builtin_model(zoo):
                                   np.linspace(-50.0, 50.0, 11))
 
 
+def test_io_depends_on_the_model_layer_only():
+    """No module of `diffsusp.io` imports a package above `diffsusp.model` (solvers, K&C,
+    identification, built-in models, CLI), at module level or inside a function; the one
+    upward name is the compatibility forwarding of `diffsusp.io.load_model` to
+    `diffsusp.resolve`. And the file reader knows no built-in name of its own."""
+    import ast
+
+    from diffsusp.io import read_model_file
+
+    below = {"errors", "geometry", "model", "_compile"}
+    io_dir = pathlib.Path(importlib.import_module("diffsusp.io").__file__).parent
+    found = set()
+    for path in sorted(io_dir.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level >= 2:
+                names = [node.module] if node.module else [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("diffsusp."):
+                names = [node.module.split(".")[1]]
+            elif isinstance(node, ast.Import):
+                names = [a.name.split(".")[1] for a in node.names
+                         if a.name.startswith("diffsusp.")]
+            else:
+                continue
+            found |= {(path.name, n.split(".")[0]) for n in names}
+    assert {(f, n) for f, n in found if n not in below} == {("__init__.py", "resolve")}
+    with pytest.raises(ModelFileError, match=r"expected a \.toml, \.adm or \.json path\."):
+        read_model_file("isolated_bushing")
+    assert load_model_file is importlib.import_module("diffsusp.resolve").load_model_file
+
+
 def test_dispatch_on_suffix(tmp_path, monkeypatch):
     calls = []
     fake_adams = types.ModuleType("diffsusp.io.adams")

@@ -248,9 +248,9 @@ def side_value(side) -> str | None:
 
 
 def load_model_file(model, *, check: bool = True, side=None):
-    """`diffsusp.io.load_model_file` (built-in names, the stop variants included), on `side`
-    (a `SideOption` value)."""
-    from ..io import load_model_file as load
+    """`diffsusp.resolve.load_model_file` (built-in names, the stop variants included), on
+    `side` (a `SideOption` value)."""
+    from ..resolve import load_model_file as load
 
     return load(model, check=check, side=side_value(side))
 

@@ -49,14 +49,14 @@ from .common import (
 
 def _model(name: str, side=None):
     """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file, through the
-    library's one resolver (`diffsusp.io.load_model_file`), on `side` (`SideOption`)."""
+    library's one resolver (`diffsusp.resolve.load_model_file`), on `side` (`SideOption`)."""
     from diffsusp.errors import InputError
-    from diffsusp.io import load_model_file
-    from diffsusp.models import STOP_VARIANTS, ZOO
+    from diffsusp.resolve import builtin_models, load_model_file
 
-    if name not in ZOO and name not in STOP_VARIANTS and not pathlib.Path(name).exists():
+    builtin = builtin_models()
+    if name not in builtin and not pathlib.Path(name).exists():
         raise InputError(
-            f"model '{name}' is neither a built-in model ({', '.join([*ZOO, *STOP_VARIANTS])}) "
+            f"model '{name}' is neither a built-in model ({', '.join(builtin)}) "
             "nor an existing file. Give a built-in name or the path of a model file (.toml, "
             ".adm, .json)."
         )

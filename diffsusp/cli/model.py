@@ -30,8 +30,8 @@ from .common import (
 )
 
 _CHUNK = 256
-"""Cases per solve when a table is large enough to show a progress bar (the last chunk is
-padded so every chunk reuses one compiled shape)."""
+"""Cases per solve (`diffsusp.statics.solve_statics_chunks`: the last chunk is padded so every
+chunk reuses one compiled shape)."""
 
 
 def parameter_leaves(mech) -> list[dict]:
@@ -200,28 +200,39 @@ class _Run:
         self.done = 0
         self.interrupted = None
 
+    def record(self, start: int, stop: int, sol) -> None:
+        """Keep the status, flags and residuals of the solved cases `start:stop`."""
+        import numpy as np
+
+        self.status[start:stop] = np.asarray(sol.status)
+        self.stable[start:stop] = np.asarray(sol.stable)
+        self.law_valid[start:stop] = np.asarray(sol.law_valid)
+        self.residual[start:stop] = np.asarray(sol.residual)
+        self.constraint_error[start:stop] = np.asarray(sol.constraint_error)
+        self.done = stop
+
 
 def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _Run:
-    """Solve every case in chunks and append each chunk's rows to `out` as it completes; on
-    SIGINT / SIGTERM, write the cases not solved with status -1 and stop (a spinner for one
-    chunk, a progress bar over chunks otherwise)."""
-    import jax
-    import numpy as np
+    """Solve every case in chunks (`diffsusp.statics.solve_statics_chunks`) and append each
+    chunk's rows to `out` as it completes; on SIGINT / SIGTERM, write the cases not solved with
+    status -1 and stop (a spinner for one chunk, a progress bar over chunks otherwise)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from ..io import results_table
-    from ..io.tables import Table, TableWriter
-    from ..statics import solve_statics
+    from ..io.tables import TableWriter
+    from ..statics import solve_statics_chunks
     from .common import _Terminated, interruptible
 
     err = console(stderr=True, markup=False)
     n = loads.n_cases
-    chunk = max(min(n, _CHUNK), 1)
     run = _Run(n)
     writer = None
 
-    def rows(res, k):
-        return {name: res[name][:k] for name in res.names}
+    def write(res):
+        nonlocal writer
+        if writer is None:
+            writer = TableWriter(out, res.names, res.units)
+            run.columns = len(res.names)
+        writer.append(dict(res.columns))
 
     try:
         with interruptible(), Progress(
@@ -229,47 +240,43 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
                 MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True,
                 disable=quiet) as bar:
             task = bar.add_task("cases", total=n)
-            for start in range(0, n, chunk):
-                stop = min(start + chunk, n)
-                # The last chunk is padded with copies of the last case: one compiled shape.
-                index = np.minimum(np.arange(start, start + chunk), n - 1)
-                case_loads = jax.tree.map(lambda a, i=index: a[i], loads)
-                sol = solve_statics(mech, case_loads, max_steps=max_steps, throw=False)
-                part = Table(columns={k: v[index] for k, v in table.columns.items()},
-                             units=dict(table.units))
-                res = with_flag_columns(results_table(mech, sol, part, first_case=start), sol)
-                if writer is None:
-                    writer = TableWriter(out, res.names, res.units)
-                    run.columns = len(res.names)
-                writer.append(rows(res, stop - start))
-                run.status[start:stop] = np.asarray(sol.status)[: stop - start]
-                for flag in FLAG_COLUMNS:
-                    value = getattr(sol, flag, None)
-                    if value is not None:
-                        getattr(run, flag)[start:stop] = np.asarray(value)[: stop - start]
-                run.residual[start:stop] = np.asarray(sol.residual)[: stop - start]
-                run.constraint_error[start:stop] = np.asarray(
-                    sol.constraint_error)[: stop - start]
-                run.done = stop
+            for start, stop, sol in solve_statics_chunks(mech, loads, _CHUNK,
+                                                         max_steps=max_steps, throw=False):
+                write(_results(mech, sol, table, start, stop))
+                run.record(start, stop, sol)
                 bar.update(task, completed=stop)
     except KeyboardInterrupt as e:
         run.interrupted = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
     finally:
         if run.done < n:
             # The rest: their loads and status -1, every output NaN.
-            rest = np.arange(run.done, n)
-            part = Table(columns={k: v[rest] for k, v in table.columns.items()},
-                         units=dict(table.units))
-            dummy = _unsolved(mech, rest.size)
-            res = with_flag_columns(results_table(mech, dummy, part, first_case=run.done),
-                                    dummy)
-            if writer is None:
-                writer = TableWriter(out, res.names, res.units)
-                run.columns = len(res.names)
-            writer.append(rows(res, rest.size))
+            write(_results(mech, _unsolved(mech, n - run.done), table, run.done, n,
+                           solved=False))
         if writer is not None:
             writer.close()
     return run
+
+
+def _results(mech, sol, table, start: int, stop: int, *, solved: bool = True):
+    """The results rows of cases `start:stop` (`diffsusp.io.results_table` with the flag
+    columns), their load columns from `table` (`solved=False`: the stand-in of cases not
+    solved)."""
+    import numpy as np
+
+    from ..io import results_table
+    from ..io.tables import Table
+    from ..statics import bushing_states, spring_states
+
+    part = Table(columns={k: v[start:stop] for k, v in table.columns.items()},
+                 units=dict(table.units))
+    if solved:
+        bushings = bushing_states(mech, sol.q) if mech.bushings.names else None
+        springs = spring_states(mech, sol.q) if mech.springs.names else None
+    else:  # NaN element states, no program to compile
+        k, n_b, n_s = stop - start, len(mech.bushings.names), len(mech.springs.names)
+        bushings, springs = [np.full((k, n_b, 3), np.nan)] * 4, [np.full((k, n_s), np.nan)] * 2
+    res = results_table(mech, sol, part, first_case=start, bushings=bushings, springs=springs)
+    return with_flag_columns(res, sol)
 
 
 def _flagged(status, flag) -> list[int]:

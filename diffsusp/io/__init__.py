@@ -2,12 +2,16 @@
 importers of other tools' models (Adams .adm, Chrono JSON), probed geometry (IGES points,
 lines and planes) and tyre property files (.tir, MF 5.2/6.1/6.2).
 
-`load_model(source)` reads any model diffsusp knows: a `.toml` native file, an Adams `.adm`
-dataset, a Chrono `.json` template, or the name of a built-in model (`diffsusp.models.ZOO`).
+`read_model_file(source)` reads a model file: a `.toml` native file, an Adams `.adm` dataset or
+a Chrono `.json` template. io depends on `diffsusp.model` only: the resolver that also knows
+the built-in models by name is `diffsusp.load_model` / `diffsusp.load_model_file`
+(`diffsusp.resolve`); `diffsusp.io.load_model` and `load_model_file` are that resolver, kept
+under these names.
 """
 
 import dataclasses
 import os
+from collections.abc import Callable, Mapping
 
 from .iges import IgesFile, read_iges
 from .native import (
@@ -30,23 +34,39 @@ from .tir import TirFile, read_tir, tir_from_text, write_tir
 
 __all__ = [
     "IgesFile", "TirFile", "read_iges", "read_tir", "tir_from_text", "write_tir",
-    "SIDES", "ModelFile", "Table", "load_columns", "load_model", "load_model_file",
+    "SIDES", "ModelFile", "NamedModels", "Table", "library_model_file", "load_columns",
+    "load_model", "load_model_file",
     "loads_from_table", "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml",
-    "read_table", "results_table", "save_model", "write_model_toml", "write_table",
+    "read_model_file", "read_table", "results_table", "save_model", "write_model_toml",
+    "write_table",
 ]
 
 
 SIDES = ("left", "right")
-"""The sides `load_model(side=...)` gives a half axle."""
+"""The sides `read_model_file(side=...)` gives a half axle."""
+
+NamedModels = Mapping[str, Callable[[], ModelFile]]
+"""Name → zero-argument reader of a model that is not a file (`read_model_file(named=...)`)."""
 
 
-def load_model_file(source, *, check: bool = True, side: str | None = None) -> ModelFile:
-    """`_load_model_file` on the requested side of the vehicle.
+def read_model_file(source, *, check: bool = True, side: str | None = None,
+                    named: NamedModels | None = None) -> ModelFile:
+    """Read a model file, or a named model of `named`, on the requested side of the vehicle.
 
-    `side` ('left', 'right', or None: as the model is): a Chrono file is read on that side
-    (`read_chrono(side=...)`); any other half axle whose corner (`Mechanism.corners`) is on the
-    other side is mirrored (`diffsusp.model.mirror.mirror`, its corner follows). Raises
-    `InputError` for a model without a corner, or with more than one (an axle)."""
+    **Arguments:** `source`: a path (`.toml`, `.adm`, `.json`) or a key of `named`; `check`:
+    validate the model at build (native files); `side` ('left', 'right', or None: as the model
+    is): a Chrono file is read on that side (`read_chrono(side=...)`); any other half axle whose
+    corner (`Mechanism.corners`) is on the other side is mirrored (`diffsusp.model.mirror.mirror`,
+    its corner follows); `named`: the models known by name (an existing path wins over a name).
+    `diffsusp.load_model_file` passes the built-in models (`diffsusp.resolve`): this module
+    depends on `diffsusp.model` only.
+
+    **Returns:** a `ModelFile`.
+
+    **Raises:** `ModelFileError` for a file that cannot be read, or a source that is neither a
+    file nor a name of `named`; `InputError` for a `side` on a model without a corner, or with
+    more than one (an axle).
+    """
     from ..errors import InputError
 
     if side is not None and side not in SIDES:
@@ -58,7 +78,7 @@ def load_model_file(source, *, check: bool = True, side: str | None = None) -> M
         if os.path.isfile(text):
             return ModelFile(mechanism=read_chrono(text, side=side), load_tables={},
                              units=dict(_LIBRARY), path=text)
-    out = _load_model_file(source, check=check)
+    out = _read_model_file(source, check=check, named=named or {})
     if side is None:
         return out
     mech = out.mechanism
@@ -74,41 +94,20 @@ def load_model_file(source, *, check: bool = True, side: str | None = None) -> M
     return dataclasses.replace(out, mechanism=mirror(mech, name=f"{mech.name} ({side})"))
 
 
-def _load_model_file(source, *, check: bool = True) -> ModelFile:
-    """Read a model and whatever comes with it (named load tables for native files).
-
-    **Arguments:** `source`: a path (`.toml`, `.adm`, `.json`) or a built-in model name (a key
-    of `diffsusp.models.ZOO`; its load tables are those of the shipped file
-    `diffsusp/models/data/<name>.toml`; or of `diffsusp.models.STOP_VARIANTS`, e.g.
-    'pseudo_mcpherson_stops', with the load tables of the model it adds stops to); `check`:
-    validate the model at build (native files).
-
-    **Returns:** a `ModelFile`.
-
-    **Raises:** `ModelFileError` for a file that cannot be read, or a name that is neither a
-    file nor a built-in model.
-    """
+def _read_model_file(source, *, check: bool, named: NamedModels) -> ModelFile:
+    """A model file by its suffix, or a named model (see `read_model_file`)."""
     from ..errors import ModelFileError
-    from ..models import STOP_VARIANTS, ZOO
 
     text = os.fspath(source)
-    if text in STOP_VARIANTS and not os.path.exists(text):
-        # An axle with bump and rebound stops: the load tables of the model it adds them to.
-        base = _load_model_file(text.removesuffix("_stops"), check=False)
-        return dataclasses.replace(base, mechanism=STOP_VARIANTS[text]())
-    if text in ZOO and not os.path.exists(text):
-        mech = ZOO[text]()
-        data = os.path.join(os.path.dirname(__file__), "..", "models", "data", f"{text}.toml")
-        tables = {}
-        if os.path.exists(data):
-            tables = read_model_toml(data, check=False).load_tables
-        return ModelFile(mechanism=mech, load_tables=tables, units=dict(_LIBRARY), path=None)
+    if text in named and not os.path.exists(text):
+        return named[text]()
+    hint = f" or a built-in model name ({', '.join(named)})" if named else ""
     suffix = os.path.splitext(text)[1].lower()
     if suffix in (".toml", ".adm", ".json"):
         if not os.path.exists(text):
             raise ModelFileError(
-                "no such file; give the path of a model file (.toml, .adm, .json) or a "
-                f"built-in model name ({', '.join(ZOO)}).", path=text)
+                f"no such file; give the path of a model file (.toml, .adm, .json){hint}.",
+                path=text)
         if os.path.isdir(text):
             raise ModelFileError("is a directory, not a model file.", path=text)
     if suffix == ".toml":
@@ -123,18 +122,18 @@ def _load_model_file(source, *, check: bool = True) -> ModelFile:
 
         return ModelFile(mechanism=read_chrono(text), load_tables={}, units=dict(_LIBRARY),
                          path=text)
+    models = f", or one of {', '.join(named)}" if named else ""
     raise ModelFileError(
-        f"not a model file or a built-in model: expected a .toml, .adm or .json path, or one of "
-        f"{', '.join(ZOO)}.", path=text)
+        f"not a model file or a built-in model: expected a .toml, .adm or .json path{models}.",
+        path=text)
+
+
+def library_model_file(mech) -> ModelFile:
+    """A `ModelFile` for a mechanism built in Python: no load tables, library units."""
+    return ModelFile(mechanism=mech, load_tables={}, units=dict(_LIBRARY), path=None)
 
 
 _LIBRARY = {"length": "mm", "force": "N", "angle": "rad"}
-
-
-def load_model(source, *, check: bool = True, side: str | None = None):
-    """The `Mechanism` of a model file or built-in model name (see `load_model_file`), on
-    `side` ('left', 'right'; None: as the model is)."""
-    return load_model_file(source, check=check, side=side).mechanism
 
 
 def save_model(mech, path, *, load_tables: dict | None = None, units: dict | None = None,
@@ -162,6 +161,13 @@ def __getattr__(name):
         from . import adams
 
         return getattr(adams, name)
+    if name in ("load_model", "load_model_file"):
+        # The public names of the model resolver (built-in names included), kept here for
+        # callers of `diffsusp.io.load_model`: the resolver lives above io, in `diffsusp.resolve`
+        # (no module of io imports the built-in models).
+        from .. import resolve
+
+        return getattr(resolve, name)
     if name == "read_chrono":
         from .chrono import read_chrono
 

@@ -39,7 +39,6 @@ import os
 import re
 from collections.abc import Mapping
 
-import equinox as eqx
 import numpy as np
 
 from ..errors import ModelFileError
@@ -586,7 +585,8 @@ RESULT_STATUS = {0: "converged", 1: "max_steps reached", 2: "non-finite", 3: "st
 """Meaning of the `status` column of a results table (`diffsusp.statics` status codes)."""
 
 
-def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0) -> Table:
+def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0,
+                  bushings=None, springs=None) -> Table:
     """One row per load case and a column per output of a batched `StaticSolution`.
 
     Columns (library units): `case` (0-based), the load columns of `loads` (converted to N,
@@ -597,6 +597,11 @@ def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0)
     (deformation, mm, in J), `.ax` … `.az` (projected angles, rad), `.fx` … `.fz` (N) and
     `.tx` … `.tz` (N·mm) on the I part in J axes; per spring `<spring>.length` (mm) and
     `.tension` (N). `first_case`: the number of the first row (a chunk of a longer table).
+
+    The element columns are formatted, not computed, here (io depends on `diffsusp.model`
+    only): `bushings` is `diffsusp.statics.bushing_states(mech, sol.q)` and `springs`
+    `diffsusp.statics.spring_states(mech, sol.q)`, required when the model has bushings /
+    springs.
     """
     from ..errors import ModelError
 
@@ -632,27 +637,23 @@ def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0)
             add(f"{part}.{axis}", q[:, 6 * p + a], "mm")
         for a, axis in enumerate("xyz"):
             add(f"{part}.g{axis}", q[:, 6 * p + 3 + a], None)
-    bushing, spring = _element_outputs(mech, sol.q)
+    for given, names, arg in ((bushings, mech.bushings.names, "bushings=bushing_states"),
+                              (springs, mech.springs.names, "springs=spring_states")):
+        if names and given is None:
+            raise ValueError(
+                f"results_table: model '{mech.name}' has {len(names)} element(s) "
+                f"({', '.join(names)}); pass {arg}(mech, sol.q) from diffsusp.statics.")
     if mech.bushings.names:
-        states = [np.asarray(s) for s in bushing]
+        states = [np.asarray(s) for s in bushings]
         for e, name in enumerate(mech.bushings.names):
             for state, prefix, unit in zip(states, "daft", ("mm", "rad", "N", "N·mm"),
                                            strict=True):
                 for a, axis in enumerate("xyz"):
                     add(f"{name}.{prefix}{axis}", state[:, e, a], unit)
     if mech.springs.names:
-        length, tension = (np.asarray(s) for s in spring)
+        length, tension = (np.asarray(s) for s in springs)
         for e, name in enumerate(mech.springs.names):
             add(f"{name}.length", length[:, e], "mm")
             add(f"{name}.tension", tension[:, e], "N")
     return Table(columns=columns, units=units)
 
-
-@eqx.filter_jit
-def _element_outputs(mech, q):
-    """Bushing states and spring states of every case, in one compiled program."""
-    from ..statics import bushing_states, spring_states
-
-    bushing = bushing_states(mech, q) if mech.bushings.names else None
-    spring = spring_states(mech, q) if mech.springs.names else None
-    return bushing, spring

@@ -9,10 +9,18 @@ from .outputs import (
     part_poses,
     spring_states,
 )
-from .solve import STATUS_TEXT, StaticSolution, Status, solve_statics, solve_sweep
+from .solve import (
+    STATUS_TEXT,
+    StaticSolution,
+    Status,
+    solve_statics,
+    solve_statics_chunks,
+    solve_sweep,
+)
 
 __all__ = [
     "STATUS_TEXT", "Linearization", "StaticSolution", "Status", "bushing_states", "joint_reactions",
     "linearize", "linearize_internal", "marker_poses", "part_poses", "residual", "scaled_solve",
-    "solve_statics", "solve_sweep", "spring_states", "to_internal", "to_public",
+    "solve_statics", "solve_statics_chunks", "solve_sweep", "spring_states", "to_internal",
+    "to_public",
 ]

@@ -22,7 +22,7 @@ solution (one more linear solve), in forward and reverse mode; the Newton loop i
 import enum
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import equinox as eqx
 import jax
@@ -540,3 +540,29 @@ def solve_sweep(
     sol = with_flags(mech, loads, sol)
     _check_validity(mech, sol)
     return _report(sol, throw, "solve_sweep")
+
+
+def solve_statics_chunks(
+    mech: Mechanism, loads: Loads, chunk: int = 256, **solve_kwargs
+) -> Iterator[tuple[int, int, StaticSolution]]:
+    """`solve_statics` over a table of load cases, `chunk` cases at a time, for a caller that
+    streams results (writes each chunk's rows as it completes, shows progress, can stop).
+
+    **Arguments:** `mech`, `loads` (with a leading case axis); `chunk`: cases per solve (the
+    last chunk is padded with copies of the last case, so every chunk runs one compiled
+    program); `solve_kwargs`: passed to `solve_statics` (`max_steps`, `throw`, ...).
+
+    **Yields:** `(start, stop, solution)` in case order: the `StaticSolution` of cases
+    `start:stop` (the padding dropped).
+    """
+    n = loads.n_cases
+    if n is None:
+        raise ValueError("solve_statics_chunks needs loads with a leading case axis.")
+    if chunk < 1:
+        raise ValueError(f"chunk must be at least 1; got {chunk}.")
+    chunk = min(chunk, max(n, 1))
+    for start in range(0, n, chunk):
+        stop = min(start + chunk, n)
+        index = np.minimum(np.arange(start, start + chunk), n - 1)
+        sol = solve_statics(mech, jax.tree.map(lambda a, i=index: a[i], loads), **solve_kwargs)
+        yield start, stop, jax.tree.map(lambda a, k=stop - start: a[:k], sol)
