@@ -76,7 +76,7 @@ def test_identify_direct_from_landmarks_json_and_csv(tables, tmp_path):
     assert report["parameters"][0]["value"] == pytest.approx(100.0, rel=1e-8)
     lines = out.read_text().splitlines()
     assert lines[0].startswith("parameter,value,sigma") and len(lines) == 7
-    assert _run("isolated_bushing", "-m", tables["marks_csv"]).exit_code == 0
+    assert _run("isolated_bushing", "-m", tables["marks_csv"], "--polish", "off").exit_code == 0
 
 
 def test_bad_measurement_path(tmp_path):
@@ -114,6 +114,8 @@ def test_malformed_tables(tables, tmp_path):
     assert result.exit_code == 2 and "hub.fz" in _text(result)
     result = _run("isolated_bushing", "-m", tables["poses"], "--method", "qr")
     assert result.exit_code == 2 and "--method must be one of" in _text(result)
+    result = _run("isolated_bushing", "-m", tables["poses"], "--polish", "yes")
+    assert result.exit_code == 2 and "--polish must be one of auto, on, off" in _text(result)
 
 
 # ----------------------------------------------------------------------------- iterative, fit

@@ -49,6 +49,7 @@ _CHOICES = {
     "method": ("basic", "min_norm", "tsvd", "tikhonov", "nonneg"),
     "hold": ("zero", "model"),
     "weighting": ("noise", "none"),
+    "polish": ("auto", "on", "off"),
 }
 
 
@@ -99,13 +100,18 @@ def direct(
         help="Largest sigma% still called identified.")] = 10.0,
     threshold: Annotated[float | None, typer.Option(
         help="Relative identifiability threshold (default 1e-5).")] = None,
+    polish: Annotated[str, typer.Option(
+        help="Refine the determined stiffnesses by least squares through the equilibrium "
+        "(errors in variables): auto (noisy data) | on | off (the thesis's linear "
+        "estimate).")] = "auto",
     json_output: JsonOpt = False,
 ):
     """Identify bushing and spring stiffnesses by the direct (linear) method.
 
     Units: N/mm and N·mm/deg (as the thesis's tables), spring K·L0 in N.
     """
-    for name, value in (("method", method), ("hold", hold), ("weighting", weighting)):
+    for name, value in (("method", method), ("hold", hold), ("weighting", weighting),
+                        ("polish", polish)):
         _check_choice(name, value)
     _check_paths(out, write_model)
     enable_x64()
@@ -125,7 +131,7 @@ def direct(
             mech, meas, where=where, elements=element or None,
             axisymmetric=tuple(axisymmetric or ()), method=method, hold=hold,
             eliminate=eliminate, weighting=weighting, threshold=threshold,
-            max_sigma_pct=max_sigma_pct)
+            max_sigma_pct=max_sigma_pct, polish={"on": True, "off": False}.get(polish, "auto"))
         if out is not None:
             _write_report(report, out)
         if write_model is not None:
