@@ -38,9 +38,9 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
 
 @app.callback()
 def _main(
-    max_file_mb: float | None = typer.Option(
-        None, "--max-file-mb", help="Largest input file read, in MiB (default: 16 for model "
-        "files, 512 for tables; also $DIFFSUSP_MAX_FILE_MB).", show_default=False),
+    max_file_mb: Annotated[float | None, typer.Option(
+        "--max-file-mb", help="Largest input file read, in MiB (default: 16 for model "
+        "files, 512 for tables; also $DIFFSUSP_MAX_FILE_MB).", show_default=False)] = None,
 ):
     """diffsusp: static equilibrium, K&C analysis and identification of suspension models."""
     if max_file_mb is not None:

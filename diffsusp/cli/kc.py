@@ -15,6 +15,7 @@ Exit codes (`cli.common`): 2 bad input (unknown model, file or event, bad range)
 not converge, 4 a model that cannot be solved.
 """
 
+import enum
 import pathlib
 import time
 import warnings
@@ -33,18 +34,31 @@ from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the oth
     run_event,
 )
 from .common import (
-    EXIT_BAD_INPUT,
     SideOption,
     check_output,
     cli_errors,
     console,
     enable_x64,
-    fail,
     print_json,
     show_warnings,
     side_value,
     warn,
 )
+
+Event = enum.StrEnum("Event", {name.replace("-", "_"): name for name in EVENTS})
+"""The `--event` choices: the events of `diffsusp.kc.dispatch.EVENTS` (the one registry)."""
+
+
+class Frame(enum.StrEnum):
+    """The `--frame` choices: the model frame of a corner (`diffsusp.kc.Corner.frame`)."""
+
+    adams = "adams"
+    iso = "iso"
+
+
+EventOption = Annotated[Event, typer.Option(
+    "--event", "-e", help="K&C event: " + "; ".join(f"{k}: {v}" for k, v in EVENTS.items()))]
+"""The one `--event` option of the verbs that run a K&C event (`kc`, `sensitivity`)."""
 
 
 def _model(name: str, side=None):
@@ -64,12 +78,13 @@ def _model(name: str, side=None):
 
 
 def _corner(mech, frame, loaded_radius, kingpin):
-    return corner_with(mech, frame=frame, loaded_radius=loaded_radius, kingpin=kingpin)
+    return corner_with(mech, frame=None if frame is None else Frame(frame).value,
+                       loaded_radius=loaded_radius, kingpin=kingpin)
 
 
 def _run_event(mech, event, corner, travel, fz, force, torque, rack):
-    return run_event(mech, event, corner, travel=travel, fz=fz, force=force, torque=torque,
-                     rack=rack)
+    return run_event(mech, Event(event).value, corner, travel=travel, fz=fz, force=force,
+                     torque=torque, rack=rack)
 
 
 def _json(ev, mech_name: str) -> dict:
@@ -171,8 +186,7 @@ def _table(ev, mech_name: str) -> Table:
 
 def kc_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
-    event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
-                                       + ", ".join(EVENTS))] = "parallel-travel",
+    event: EventOption = Event.parallel_travel,
     travel: Annotated[str, typer.Option(help="wheel travel range (mm) start:stop:count")]
     = "-80:80:161",
     fz: Annotated[str | None, typer.Option(
@@ -183,8 +197,8 @@ def kc_command(
     torque: Annotated[str, typer.Option(help="aligning torque range (N·m)")] = "-200:200:17",
     rack: Annotated[str, typer.Option(help="rack travel range (mm)")] = "-30:30:61",
     side: SideOption = None,
-    frame: Annotated[str | None, typer.Option(
-        help="model frame: adams or iso (default: the model's own corner)")] = None,
+    frame: Annotated[Frame | None, typer.Option(
+        help="model frame (default: the model's own corner)")] = None,
     loaded_radius: Annotated[float | None, typer.Option(
         help="loaded tyre radius (mm; default: the model's own corner)")] = None,
     kingpin: Annotated[str | None, typer.Option(
@@ -196,9 +210,6 @@ def kc_command(
 ):
     """Run a K&C event on MODEL and print its metrics (Adams/Car conventions, per side)."""
     enable_x64()
-    if event not in EVENTS:
-        raise fail(f"unknown event '{event}'; known events: {', '.join(EVENTS)}.",
-                   EXIT_BAD_INPUT)
     check_output(out, what="figures folder", directory=True)
     err = console(stderr=True, markup=False)
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
@@ -206,7 +217,8 @@ def kc_command(
         mech = _model(model, side)
         corner = _corner(mech, frame, loaded_radius, kingpin)
         t0 = time.perf_counter()
-        with err.status(f"running {event} on {mech.name} (the first run compiles, ~30 s)..."):
+        with err.status(f"running {event.value} on {mech.name} (the first run compiles, "
+                        "~30 s)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
         elapsed = time.perf_counter() - t0
         if out is not None:

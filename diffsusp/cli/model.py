@@ -8,6 +8,7 @@ table (columns in `diffsusp.io.tables`) or the name of a load table in the model
 
 import time
 import warnings
+from typing import Annotated
 
 import typer
 from rich import box
@@ -54,10 +55,16 @@ def _load(model: str, *, check: bool = True, side=None):
     return load_model_file(model, check=check, side=side)
 
 
+ModelArgument = Annotated[str, typer.Argument(
+    help="Model file (.toml, .adm, .json) or built-in name.")]
+"""MODEL of `info` and `simulate`."""
+
+
 def info(
-    model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
+    model: ModelArgument,
     side: SideOption = None,
-    json_output: bool = typer.Option(False, "--json", help="Machine-readable output."),
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable output.")]
+    = False,
 ):
     """Describe a model: parts, markers, joints, elements, DOF, rank, redundant rows, free modes
     and its parameters (float leaves) with their shapes and units."""
@@ -300,13 +307,15 @@ def _unsolved(mech, n):
 
 
 def simulate(
-    model: str = typer.Argument(..., help="Model file (.toml, .adm, .json) or built-in name."),
-    loads: str = typer.Option(..., "--loads", "-l",
-                              help="Load table (.csv, .parquet) or a load table of the model."),
-    out: str = typer.Option(..., "--out", "-o", help="Results table to write (.csv, .parquet)."),
+    model: ModelArgument,
+    loads: Annotated[str, typer.Option(
+        "--loads", "-l", help="Load table (.csv, .parquet) or a load table of the model.")],
+    out: Annotated[str, typer.Option(
+        "--out", "-o", help="Results table to write (.csv, .parquet).")],
     side: SideOption = None,
-    max_steps: int = typer.Option(50, "--max-steps", help="Newton iterations per case."),
-    json_output: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    max_steps: Annotated[int, typer.Option(
+        "--max-steps", help="Newton iterations per case.")] = 50,
+    json_output: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ):
     """Solve the static equilibrium of MODEL under every row of a load table and write one row
     of results per case (status, stable and law_valid flags, poses, bushing deformations and

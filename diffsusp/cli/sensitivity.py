@@ -27,14 +27,13 @@ from .common import (
     fail,
     print_json,
 )
-from .kc import EVENTS, _corner, _model, _nan_to_none, _run_event
+from .kc import Event, EventOption, _corner, _model, _nan_to_none, _run_event
 
 
 def sensitivity_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
     side: SideOption = None,
-    event: Annotated[str, typer.Option("--event", "-e", help="K&C event: "
-                                       + ", ".join(EVENTS))] = "parallel-travel",
+    event: EventOption = Event.parallel_travel,
     params: Annotated[str, typer.Option(
         "--params", "-p", help="parameters: " + "; ".join(f"{k}: {v}" for k, v in
                                                          PARAMETER_SETS.items()))]
@@ -61,9 +60,6 @@ def sensitivity_command(
 ):
     """Exact sensitivities of MODEL's K&C metrics over an event to its stiffnesses or
     hardpoints, ranked by elasticity."""
-    if event not in EVENTS:
-        raise fail(f"unknown event '{event}'; known events: {', '.join(EVENTS)}.",
-                   EXIT_BAD_INPUT)
     if params not in PARAMETER_SETS:
         raise fail(f"--params must be one of {', '.join(PARAMETER_SETS)}; got '{params}'.",
                    EXIT_BAD_INPUT)
@@ -78,7 +74,7 @@ def sensitivity_command(
         mech = _model(model, side)
         corner = _corner(mech, None, None, None)
         t0 = time.perf_counter()
-        with err.status(f"running {event} on {mech.name} and differentiating (the first run "
+        with err.status(f"running {event.value} on {mech.name} and differentiating (the first run "
                         "compiles, 1–3 min)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
             selection = parameter_set(ev.rig.mech, params)
