@@ -12,7 +12,6 @@ import pathlib
 import re
 import signal
 import threading
-import types
 
 import numpy as np
 import pytest
@@ -24,6 +23,7 @@ import diffsusp.cli.model as cli_model
 from diffsusp.cli import app
 from diffsusp.errors import ModelFileError
 from diffsusp.io import read_table, write_table
+from diffsusp.statics import StaticSolution
 
 ROOT = pathlib.Path(__file__).parent
 DATA = ROOT / "data"
@@ -377,8 +377,8 @@ def test_output_paths_are_checked_before_the_work(tmp_path, loads5, no_solve, mo
 
 
 def _fake_solutions(stop_after, interrupt):
-    """A stand-in for solve_statics: zero displacement, converged, for `stop_after` calls;
-    then `interrupt()`."""
+    """A stand-in for solve_statics (patched where `solve_statics_chunks` calls it): zero
+    displacement, converged, for `stop_after` calls; then `interrupt()`."""
     calls = []
 
     def solve(mech, loads, **kwargs):
@@ -386,10 +386,10 @@ def _fake_solutions(stop_after, interrupt):
         if len(calls) > stop_after:
             interrupt()
         n = loads.n_cases
-        return types.SimpleNamespace(
-            q=np.zeros((n, 6 * len(mech.parts))), status=np.zeros(n, int),
-            iterations=np.ones(n, int), residual=np.zeros(n), constraint_error=np.zeros(n),
-            stable=np.ones(n, bool), law_valid=np.ones(n, bool))
+        return StaticSolution(
+            q=np.zeros((n, 6 * len(mech.parts))), multipliers=np.zeros((n, 0)),
+            status=np.zeros(n, int), iterations=np.ones(n, int), residual=np.zeros(n),
+            constraint_error=np.zeros(n), stable=np.ones(n, bool), law_valid=np.ones(n, bool))
 
     return solve
 
@@ -407,10 +407,10 @@ def _send_sigterm():
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_an_interrupted_simulate_leaves_the_finished_cases_on_disk(
         tmp_path, loads5, monkeypatch, interrupt, word, suffix):
-    import diffsusp.statics
+    import diffsusp.statics.solve
 
     monkeypatch.setattr(cli_model, "_CHUNK", 2)
-    monkeypatch.setattr(diffsusp.statics, "solve_statics", _fake_solutions(1, interrupt))
+    monkeypatch.setattr(diffsusp.statics.solve, "solve_statics", _fake_solutions(1, interrupt))
     out = tmp_path / f"r{suffix}"
     result = invoke("simulate", "isolated_bushing", "-l", loads5, "-o", out)
     assert result.exit_code == 130, result.output
@@ -426,7 +426,7 @@ def test_an_interrupted_simulate_leaves_the_finished_cases_on_disk(
 
 def test_simulate_writes_chunk_by_chunk(tmp_path, loads5, monkeypatch):
     """The rows of a finished chunk are on disk while the next one is being solved."""
-    import diffsusp.statics
+    import diffsusp.statics.solve
 
     out = tmp_path / "r.csv"
     seen = []
@@ -442,7 +442,7 @@ def test_simulate_writes_chunk_by_chunk(tmp_path, loads5, monkeypatch):
         return solve(mech, loads, **kwargs)
 
     monkeypatch.setattr(cli_model, "_CHUNK", 2)
-    monkeypatch.setattr(diffsusp.statics, "solve_statics", solve_and_look)
+    monkeypatch.setattr(diffsusp.statics.solve, "solve_statics", solve_and_look)
     result = invoke("simulate", "isolated_bushing", "-l", loads5, "-o", out)
     assert result.exit_code == 0, result.output
     assert seen == [2, 4]

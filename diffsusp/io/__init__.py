@@ -14,13 +14,8 @@ import os
 from collections.abc import Callable, Mapping
 
 from .iges import IgesFile, read_iges
-from .native import (
-    ModelFile,
-    model_from_toml,
-    model_to_toml,
-    read_model_toml,
-    write_model_toml,
-)
+from .native import ModelFile, model_from_toml, read_model_toml
+from .native_write import model_to_toml, write_model_toml
 from .tables import (
     Table,
     load_columns,

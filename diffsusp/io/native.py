@@ -91,42 +91,49 @@ Saving writes mm, N, rad and every float with the digits that read back to the s
 save → load reproduces the mechanism exactly (orientations are written as `axes`, or as `z`
 alone when that rebuilds the same matrix).
 
-**Size.** About 1 100 lines: one file format, read and written both ways (every element kind
-of a `Mechanism`, named load tables, units, comment-preserving saves), with line-numbered
-errors for each field; reader and writer are kept side by side so they stay each other's
-inverse.
+**Modules.** This one reads (`read_model_toml`, `model_from_toml`); `native_write` writes
+(`model_to_toml`, `write_model_toml`, re-exported here); `native_values` holds the units, the
+key locator and the typed value reader both share. The round-trip tests
+(`tests/test_io_native.py`) keep reader and writer each other's inverse.
 """
 
 import dataclasses
-import math
 import os
 import re
 import tomllib
 
 import numpy as np
 
-from ..errors import ModelError, ModelFileError
-from ..model import GROUND, Mechanism, MechanismBuilder
+from ..errors import ModelFileError
+from ..model import Mechanism, MechanismBuilder
 from ..model.mechanism import BUSHING_AXES, JOINT_ROWS
+from .native_values import (
+    _ANG,
+    _FORCE,
+    _LEN,
+    _TORQUE,
+    _UNIT_TABLES,
+    ANGLE_UNITS,
+    FORCE_UNITS,
+    LENGTH_UNITS,
+    LIBRARY_UNITS,
+    MAX_MAGNITUDE,
+    _kind,
+    _Reader,
+    _Source,
+)
 from .tables import Table, split_header, unit_factor
+
+__all__ = [
+    "ANGLE_UNITS", "FORCE_UNITS", "FORMAT_VERSION", "LENGTH_UNITS", "LIBRARY_UNITS",
+    "MAX_MAGNITUDE", "READ_VERSIONS", "ModelFile", "model_from_toml", "read_model_toml",
+]  # and, from `native_write`, model_to_toml and write_model_toml
 
 FORMAT_VERSION = 2
 """Version written: 2 adds the wheel corners (`[[corner]]`); version-1 files (no corner) are
 still read."""
 READ_VERSIONS = (1, 2)
-MAX_MAGNITUDE = 1e15
-"""Largest magnitude of any number in a model file, in mm, N and rad (beyond it a value is a
-typo or a unit mistake, and products in the checks would overflow)."""
 
-LENGTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
-FORCE_UNITS = {"N": 1.0, "daN": 10.0, "kN": 1000.0, "lbf": 4.4482216152605}
-ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
-_UNIT_TABLES = {"length": LENGTH_UNITS, "force": FORCE_UNITS, "angle": ANGLE_UNITS}
-LIBRARY_UNITS = {"length": "mm", "force": "N", "angle": "rad"}
-
-# Dimensions as exponents of (length, force, angle).
-_NONE, _LEN, _ANG, _FORCE = (0, 0, 0), (1, 0, 0), (0, 0, 1), (0, 1, 0)
-_TORQUE = (1, 1, 0)
 _BUSHING_FIELDS = {
     "k_trans": (-1, 1, 0), "k_rot": (1, 1, -1),
     "cubic_trans": (-3, 1, 0), "cubic_rot": (1, 1, -3),
@@ -150,187 +157,6 @@ class ModelFile:
     load_tables: dict[str, Table]
     units: dict[str, str]
     path: str | None
-
-
-# --------------------------------------------------------------------------------- locating
-
-
-_BARE = r"[A-Za-z0-9_-]+"
-_BASIC = r'"(?:[^"\\]|\\.)*"'
-_LITERAL = r"'[^']*'"
-_KEY = rf"(?:{_BARE}|{_BASIC}|{_LITERAL})"
-_KEY_RE = re.compile(rf"\s*({_KEY})\s*")
-
-
-def _split_keys(text: str) -> tuple[str, ...] | None:
-    """Dotted TOML key → its parts (quotes removed), or None if it cannot be read."""
-    keys, pos = [], 0
-    while True:
-        match = _KEY_RE.match(text, pos)
-        if not match:
-            return None
-        raw = match.group(1)
-        if raw[0] == '"':
-            try:
-                import json
-
-                keys.append(json.loads(raw))
-            except ValueError:
-                return None
-        elif raw[0] == "'":
-            keys.append(raw[1:-1])
-        else:
-            keys.append(raw)
-        pos = match.end()
-        if pos == len(text):
-            return tuple(keys)
-        if text[pos] != ".":
-            return None
-        pos += 1
-
-
-class _Source:
-    """The text of a file, to find the line of a key path for error messages."""
-
-    _HEADER_RE = re.compile(r"^\s*\[\[?\s*(.*?)\s*\]\]?\s*(?:#.*)?$")
-
-    def __init__(self, text: str, path):
-        self.path = path
-        self.lines = text.splitlines()
-        self.headers: list[tuple[int, tuple[str, ...]]] = [(0, ())]
-        for n, raw in enumerate(self.lines):
-            if raw.lstrip().startswith("["):
-                match = self._HEADER_RE.match(raw)
-                keys = _split_keys(match.group(1)) if match else None
-                if keys is not None:
-                    self.headers.append((n, keys))
-
-    def line(self, keys: tuple[str, ...]) -> int:
-        """1-based line of the deepest part of `keys` found in the text (1 if none)."""
-        for depth in range(len(keys), -1, -1):
-            prefix = keys[:depth]
-            for h, (start, header) in enumerate(self.headers):
-                if header != prefix:
-                    continue
-                end = self.headers[h + 1][0] if h + 1 < len(self.headers) else len(self.lines)
-                rest = keys[depth:]
-                if rest:
-                    found = self._key_line(start + (h > 0), end, rest)
-                    if found is not None:
-                        return found
-                if depth > 0:
-                    return start + 1
-            # A table defined only through deeper headers ([a.b] defines a).
-            for start, header in self.headers[1:]:
-                if depth > 0 and header[:depth] == prefix:
-                    return start + 1
-        return 1
-
-    def _key_line(self, start, end, rest) -> int | None:
-        for n in range(start, end):
-            raw = self.lines[n]
-            match = re.match(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*=", raw)
-            if not match:
-                continue
-            keys = _split_keys(match.group(1))
-            if keys and tuple(keys[: len(rest)]) == tuple(rest[: len(keys)]):
-                return n + 1
-        return None
-
-    def error(self, message: str, keys: tuple[str, ...], *, line: int | None = None):
-        return ModelFileError(message, path=self.path, line=line or self.line(keys),
-                              field=".".join(keys) if keys else None)
-
-
-# --------------------------------------------------------------------------------- values
-
-
-class _Reader:
-    """Typed access to the parsed document, with unit conversion and located errors."""
-
-    def __init__(self, source: _Source, units: dict[str, float]):
-        self.src = source
-        self.units = units
-
-    def factor(self, dims) -> float:
-        f = 1.0
-        for name, e in zip(("length", "force", "angle"), dims, strict=True):
-            if e:
-                f *= self.units[name] ** e
-        return f
-
-    def table(self, value, keys, what: str) -> dict:
-        if not isinstance(value, dict):
-            raise self.src.error(f"expected a table ({what}); got {_kind(value)}.", keys)
-        return value
-
-    def keys(self, table: dict, keys, allowed, required=()):
-        unknown = [k for k in table if k not in allowed]
-        if unknown:
-            raise self.src.error(
-                f"unknown key '{unknown[0]}'; allowed keys here: {', '.join(allowed)}.",
-                (*keys, unknown[0]),
-            )
-        for k in required:
-            if k not in table:
-                raise self.src.error(f"missing required key '{k}'.", keys)
-
-    def string(self, value, keys, what="a name") -> str:
-        if not isinstance(value, str):
-            raise self.src.error(f"expected a string ({what}); got {_kind(value)}.", keys)
-        return value
-
-    def number(self, value, keys, dims=_NONE, *, convert=True) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.src.error(f"expected a number; got {_kind(value)}.", keys)
-        try:
-            x = float(value)
-        except OverflowError:
-            x = math.inf
-        if not math.isfinite(x):
-            raise self.src.error(f"expected a finite number; got {value}.", keys)
-        f = self.factor(dims) if convert else 1.0
-        x = x * f if f != 1.0 else x
-        if abs(x) > MAX_MAGNITUDE:
-            raise self.src.error(
-                f"{value} is out of range (|value| ≤ {MAX_MAGNITUDE:g} in mm, N, rad); check "
-                "the number and the [units].", keys)
-        return x
-
-    def vector(self, value, keys, dims=_NONE, *, scalar=False, convert=True) -> np.ndarray:
-        if scalar and not isinstance(value, list):
-            return np.full(3, self.number(value, keys, dims, convert=convert))
-        if not isinstance(value, list) or len(value) != 3:
-            what = "a number or a list of 3 numbers" if scalar else "a list of 3 numbers"
-            raise self.src.error(f"expected {what}; got {_kind(value)}.", keys)
-        return np.array([self.number(v, keys, dims, convert=convert) for v in value])
-
-    def numbers(self, value, keys, dims=_NONE) -> np.ndarray:
-        if not isinstance(value, list) or len(value) < 2:
-            raise self.src.error(f"expected a list of at least 2 numbers; got {_kind(value)}.",
-                                 keys)
-        return np.array([self.number(v, keys, dims) for v in value])
-
-    def xy(self, value, keys, dims_x, dims_y):
-        table = self.table(value, keys, "with x and y lists")
-        self.keys(table, keys, ("x", "y"), ("x", "y"))
-        return (self.numbers(table["x"], (*keys, "x"), dims_x),
-                self.numbers(table["y"], (*keys, "y"), dims_y))
-
-
-def _kind(value) -> str:
-    if isinstance(value, bool):
-        return f"a boolean ({str(value).lower()})"
-    if isinstance(value, int | float):
-        return f"the number {value}"
-    if isinstance(value, str):
-        shown = value if len(value) <= 40 else value[:37] + "..."
-        return f"the string {shown!r}"
-    if isinstance(value, list):
-        return f"a list of {len(value)} items"
-    if isinstance(value, dict):
-        return "a table"
-    return type(value).__name__
 
 
 # --------------------------------------------------------------------------------- reading
@@ -763,39 +589,6 @@ def _read_corner(rd: _Reader, c: dict, keys):
         raise rd.src.error(str(e), keys) from None
 
 
-def _write_corners(doc, mech, put, factor):
-    import tomlkit
-
-    corners = tomlkit.aot()
-    for c in mech.corners:
-        t = tomlkit.table()
-        if c.prefix:
-            t.add("prefix", c.prefix)
-        t.add("wheel_centre", c.wheel_centre)
-        t.add("contact_point", c.contact_point)
-        t.add("wheel_centre_load", False if c.wheel_centre_load is None else c.wheel_centre_load)
-        if c.kingpin is not None:
-            refs = tomlkit.array()
-            for ref in c.kingpin:
-                if isinstance(ref, str):
-                    refs.append(ref)
-                else:
-                    it = tomlkit.inline_table()
-                    it.add("part", ref[0])
-                    it.add("offset", _floats(ref[1], factor(_LEN)))
-                    refs.append(it)
-            t.add("kingpin", refs)
-            t["kingpin"].comment("steering axis [upper, lower]: markers or {part, offset = "
-                                 "[forward, outboard, up] from the wheel centre}")
-        t.add("side", c.side)
-        t.add("frame", c.frame)
-        put(t, "loaded_radius", c.loaded_radius, _LEN, vector=False)
-        if c.design_load is not None:
-            put(t, "design_load", c.design_load, _FORCE, vector=False)
-        corners.append(t)
-    doc.add("corner", corners)
-
-
 def _point(rd: _Reader, e: dict, keys) -> dict:
     if "marker" in e:
         if "part" in e or "at" in e:
@@ -860,351 +653,10 @@ def _load_table(rd: _Reader, mech: Mechanism, t: dict, keys, units) -> Table:
                  units=out_units, path=rd.src.path)
 
 
-# --------------------------------------------------------------------------------- writing
+def __getattr__(name):
+    # The writer (`native_write`) loads on first use; its public names stay here too.
+    if name in ("model_to_toml", "write_model_toml"):
+        from . import native_write
 
-
-def _unit_text(dims, units: dict[str, str]) -> str:
-    num, den = [], []
-    for key, e in zip(("length", "force", "angle"), dims, strict=True):
-        if e == 0:
-            continue
-        sym = units[key] + (f"^{abs(e)}" if abs(e) > 1 else "")
-        (num if e > 0 else den).append(sym)
-    num.sort(key=lambda s: s[0] not in "NkdlM")  # force first: N·mm
-    text = "·".join(num) or "1"
-    return text + ("/" + "·".join(den) if den else "")
-
-
-def _floats(values, factor: float = 1.0) -> list:
-    arr = np.asarray(values, dtype=float).ravel()
-    if factor != 1.0:
-        arr = arr / factor
-    return [float(v) for v in arr]
-
-
-def _is_zero(values) -> bool:
-    arr = np.asarray(values, dtype=float)
-    return bool(np.all(arr == 0) and not np.any(np.signbit(arr)))
-
-
-def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
-                  units: dict | None = None, source: str | None = None):
-    """A native model file for `mech`, as a tomlkit document (`tomlkit.dumps` gives the text).
-
-    **Arguments:** `load_tables`: name → `Table` (or mapping column → values, library units)
-    written as `[load_tables.<name>]`; `units`: the file's units (default mm, N, rad: exact);
-    `source`: a line for the header comment (where the model comes from).
-    """
-    import tomlkit
-
-    units = dict(LIBRARY_UNITS, **(units or {}))
-    for key, value in units.items():
-        if key not in _UNIT_TABLES or value not in _UNIT_TABLES[key]:
-            raise ValueError(f"units: unknown {key} unit {value!r}.")
-    fac = {k: _UNIT_TABLES[k][v] for k, v in units.items()}
-
-    def factor(dims):
-        f = 1.0
-        for key, e in zip(("length", "force", "angle"), dims, strict=True):
-            if e:
-                f *= fac[key] ** e
-        return f
-
-    def put(table, key, values, dims, *, vector=True, comment=True):
-        data = _floats(values, factor(dims))
-        table.add(key, data if vector else data[0])
-        if comment and dims != _NONE:
-            table[key].comment(_unit_text(dims, units))
-
-    doc = tomlkit.document()
-    doc.add(tomlkit.comment(f"{mech.name}: diffsusp model file (format {FORMAT_VERSION})."))
-    if source:
-        doc.add(tomlkit.comment(source))
-    doc.add(tomlkit.comment("Positions are global at the design position (q = 0), in [units]; "
-                            "see diffsusp.io.native for the format."))
-    doc.add("diffsusp", FORMAT_VERSION)
-    doc.add("name", mech.name)
-    doc.add("parts", list(mech.parts))
-    doc["parts"].comment("moving parts; 'ground' always exists")
-    ut = tomlkit.table()
-    for key in ("length", "force", "angle"):
-        ut.add(key, units[key])
-    doc.add("units", ut)
-
-    names = mech.markers.names
-    part_name = ["ground" if p == GROUND else mech.parts[p] for p in mech.markers.part]
-    pos = np.asarray(mech.markers.position)
-    rot = np.asarray(mech.markers.orientation)
-    markers = tomlkit.table(is_super_table=True)
-    for k, name in enumerate(names):
-        m = tomlkit.table()
-        m.add("part", part_name[k])
-        put(m, "position", pos[k], _LEN)
-        _write_orientation(m, rot[k])
-        markers.add(name, m)
-    doc.add("markers", markers)
-
-    if mech.joints.names:
-        joints = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(mech.joints.names):
-            j = tomlkit.table()
-            j.add("kind", mech.joints.kind[e])
-            j.add("i", names[mech.joints.i_marker[e]])
-            j.add("j", names[mech.joints.j_marker[e]])
-            joints.add(name, j)
-        doc.add("joints", joints)
-
-    bu = mech.bushings
-    if bu.names:
-        bushings = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(bu.names):
-            t = tomlkit.table()
-            t.add("i", names[bu.i_marker[e]])
-            t.add("j", names[bu.j_marker[e]])
-            for field, dims in _BUSHING_FIELDS.items():
-                value = np.asarray(getattr(bu, field))[e]
-                if field in ("k_trans", "k_rot") or not _is_zero(value):
-                    put(t, field, value, dims)
-            if any(bu.spline_axes[e]):
-                splines = tomlkit.table(is_super_table=True)
-                sx, sy = np.asarray(bu.spline_x)[e], np.asarray(bu.spline_y)[e]
-                for a, axis in enumerate(BUSHING_AXES):
-                    if bu.spline_axes[e][a]:
-                        rot_axis = axis.startswith("r")
-                        st = tomlkit.table()
-                        put(st, "x", sx[a], _ANG if rot_axis else _LEN)
-                        put(st, "y", sy[a], _TORQUE if rot_axis else _FORCE)
-                        splines.add(axis, st)
-                t.add("splines", splines)
-            bushings.add(name, t)
-        doc.add("bushings", bushings)
-
-    sp = mech.springs
-    if sp.names:
-        springs = tomlkit.table(is_super_table=True)
-        k, free = np.asarray(sp.k), np.asarray(sp.free_length)
-        for e, name in enumerate(sp.names):
-            t = tomlkit.table()
-            t.add("i", names[sp.i_marker[e]])
-            t.add("j", names[sp.j_marker[e]])
-            if not sp.tabulated[e] or not _is_zero(k[e]):
-                put(t, "k", k[e], (-1, 1, 0), vector=False)
-            if not sp.tabulated[e] or not _is_zero(free[e]):
-                put(t, "free_length", free[e], _LEN, vector=False)
-            if sp.tabulated[e]:
-                tt = tomlkit.table()
-                put(tt, "x", np.asarray(sp.table_x)[e], _LEN)
-                put(tt, "y", np.asarray(sp.table_y)[e], _FORCE)
-                t.add("table", tt)
-            springs.add(name, t)
-        doc.add("springs", springs)
-
-    st = mech.stops
-    if st.names:
-        stops = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(st.names):
-            t = tomlkit.table()
-            t.add("i", names[st.i_marker[e]])
-            t.add("j", names[st.j_marker[e]])
-            t.add("kind", st.kind[e])
-            put(t, "length", np.asarray(st.length)[e], _LEN, vector=False)
-            put(t, "k", np.asarray(st.k)[e], (-1, 1, 0), vector=False)
-            cubic = np.asarray(st.cubic)[e]
-            if not _is_zero(cubic):
-                put(t, "cubic", cubic, (-3, 1, 0), vector=False)
-            stops.add(name, t)
-        doc.add("stops", stops)
-
-    dr = mech.drivers
-    if dr.names:
-        drivers = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(dr.names):
-            t = tomlkit.table()
-            t.add("marker", names[dr.marker[e]])
-            t.add("direction", _floats(np.asarray(dr.direction)[e]))
-            t["direction"].comment("global unit vector; the value (travel) is in length units")
-            drivers.add(name, t)
-        doc.add("drivers", drivers)
-
-    lp = mech.load_points
-    if lp.names:
-        points = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(lp.names):
-            t = tomlkit.table()
-            t.add("marker", names[lp.marker[e]])
-            if lp.frame[e] != GROUND:
-                t.add("frame", names[lp.frame[e]])
-            points.add(name, t)
-        doc.add("load_points", points)
-
-    if mech.corners:
-        _write_corners(doc, mech, put, factor)
-
-    if load_tables:
-        tables = tomlkit.table(is_super_table=True)
-        for name, table in load_tables.items():
-            tables.add(name, _write_load_table(table, units))
-        doc.add("load_tables", tables)
-    return doc
-
-
-def _write_orientation(m, rot: np.ndarray):
-    from ..model import frame_from_axes
-
-    rot = np.ascontiguousarray(rot, dtype=float)
-    if rot.tobytes() == np.eye(3).tobytes():  # bitwise: -0.0 must be written out
-        return
-    z = rot[:, 2]
-    try:
-        if np.ascontiguousarray(frame_from_axes(z)).tobytes() == rot.tobytes():
-            m.add("z", _floats(z))
-            return
-    except ModelError:
-        pass
-    import tomlkit
-
-    axes = tomlkit.array()
-    for c in range(3):
-        axes.append(_floats(rot[:, c]))
-    axes.multiline(True)
-    m.add(tomlkit.comment("axes: the x, y, z axes in global components"))
-    m.add("axes", axes)
-
-
-def _write_load_table(table, units: dict[str, str]):
-    """Columns keep their own units; a column without one is in library units, which is
-    written out unless the file itself is in library units."""
-    import tomlkit
-
-    if isinstance(table, Table):
-        columns, col_units = table.columns, table.units
-    else:
-        columns, col_units = dict(table), {}
-    names = list(columns)
-    arrays = [np.asarray(columns[n], dtype=float).ravel() for n in names]
-    if len({a.shape for a in arrays}) > 1:
-        raise ValueError("a load table's columns must all have the same length.")
-    headers = []
-    for n in names:
-        unit = col_units.get(n)
-        if unit is None and n != "case" and units != LIBRARY_UNITS:
-            comp = n.rpartition(".")[2]
-            unit = {"f": "N", "m": "N·mm"}.get(comp[:1], "mm") if comp in _LOAD_COMPONENTS \
-                else "mm"
-        headers.append(f"{n} [{unit}]" if unit else n)
-    t = tomlkit.table()
-    t.add("columns", headers)
-    rows = tomlkit.array()
-    for r in range(len(arrays[0]) if arrays else 0):
-        rows.append([float(a[r]) for a in arrays])
-    rows.multiline(True)
-    t.add("rows", rows)
-    return t
-
-
-def write_model_toml(mech: Mechanism, path, *, load_tables: dict | None = None,
-                     units: dict | None = None, keep_comments: bool = True,
-                     source: str | None = None) -> None:
-    """Write `mech` as a native model file (see `model_to_toml`).
-
-    With `keep_comments` and an existing native file at `path`, the new content is merged into
-    it: comments on keys and sections that still exist are kept, and its `[load_tables]` are
-    kept when `load_tables` is None.
-    """
-    import tomlkit
-
-    doc = model_to_toml(mech, load_tables=load_tables, units=units, source=source)
-    if keep_comments and os.path.exists(path):
-        try:
-            with open(path, encoding="utf-8") as f:
-                old = tomlkit.parse(f.read())
-        except Exception:  # not a readable TOML file: overwrite it
-            old = None
-        if old is not None and isinstance(old.get("units"), dict):
-            if load_tables is None and isinstance(old.get("load_tables"), dict):
-                doc.add("load_tables", _with_units(old["load_tables"], old["units"]))
-            doc = _merge_document(old, doc)
-    text = tomlkit.dumps(doc)
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(text)
-
-
-def _with_units(tables, old_units):
-    """Load tables kept from a file being overwritten: columns without a unit were in that
-    file's units, which the new file may not share, so write them out."""
-    length, force = old_units.get("length", "mm"), old_units.get("force", "N")
-    for table in tables.values():
-        columns = table.get("columns") if isinstance(table, dict) else None
-        if not isinstance(columns, list):
-            continue
-        for c, header in enumerate(list(columns)):
-            if not isinstance(header, str):
-                continue
-            name, unit = split_header(header)
-            if unit is not None or name == "case":
-                continue
-            comp = name.rpartition(".")[2]
-            unit = (force if comp.startswith("f") else f"{force}·{length}") \
-                if comp in _LOAD_COMPONENTS else length
-            columns[c] = f"{name} [{unit}]"
-    return tables
-
-
-def _same(a, b) -> bool:
-    """Equal values, telling -0.0 from 0.0 (an int and the equal float are the same)."""
-    if isinstance(a, list) and isinstance(b, list):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    numbers = (int, float)
-    if isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool) \
-            and not isinstance(b, bool):
-        try:
-            x, y = float(a), float(b)
-        except OverflowError:
-            return False
-        return x == y and math.copysign(1.0, x) == math.copysign(1.0, y)
-    return type(a) is type(b) and a == b
-
-
-def _merge_document(old, new):
-    """`new`'s content in `old`'s layout: keys and tables that exist in both keep `old`'s
-    comments; order follows `new` (marker order matters)."""
-    import tomlkit
-    from tomlkit.items import AoT, Table
-
-    def merge(old_t, new_t):
-        for key in list(old_t.keys()):
-            if key not in new_t:
-                del old_t[key]
-        order = list(new_t.keys())
-        for key in order:
-            new_item = new_t.item(key) if hasattr(new_t, "item") else new_t[key]
-            if key in old_t:
-                old_item = old_t.item(key)
-                if isinstance(old_item, Table) and isinstance(new_item, Table):
-                    merge(old_item, new_item)
-                    continue
-                if not isinstance(old_item, Table | AoT) and not isinstance(new_item, Table):
-                    if _same(old_item.unwrap(), new_item.unwrap()):
-                        continue  # unchanged: keep its layout and the comments inside it
-                    if old_item.trivia.comment:  # a human's comment beats the generated one
-                        new_item.trivia.comment = old_item.trivia.comment
-                        new_item.trivia.comment_ws = old_item.trivia.comment_ws
-                old_t[key] = new_item
-            else:
-                old_t[key] = new_item
-        if list(old_t.keys()) != order:
-            # Reinsert in the new order (sections are tables of named elements).
-            items = [(k, old_t.item(k)) for k in order]
-            for k in order:
-                del old_t[k]
-            for k, item in items:
-                old_t[k] = item
-        return old_t
-
-    merged = merge(old, new)
-    # Sanity: the merged text must read back to the same content.
-    if tomlkit.parse(tomlkit.dumps(merged)).unwrap() != new.unwrap():
-        return new
-    return merged
+        return getattr(native_write, name)
+    raise AttributeError(f"module 'diffsusp.io.native' has no attribute '{name}'")
