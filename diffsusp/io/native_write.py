@@ -154,65 +154,53 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
         doc.add("joints", joints)
 
     bu = mech.bushings
-    if bu.names:
-        bushings = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(bu.names):
-            t = tomlkit.table()
-            t.add("i", names[bu.i_marker[e]])
-            t.add("j", names[bu.j_marker[e]])
-            for field, dims in _BUSHING_FIELDS.items():
-                value = np.asarray(getattr(bu, field))[e]
-                if field in ("k_trans", "k_rot") or not _is_zero(value):
-                    put(t, field, value, dims)
-            if any(bu.spline_axes[e]):
-                splines = tomlkit.table(is_super_table=True)
-                sx, sy = np.asarray(bu.spline_x)[e], np.asarray(bu.spline_y)[e]
-                for a, axis in enumerate(BUSHING_AXES):
-                    if bu.spline_axes[e][a]:
-                        rot_axis = axis.startswith("r")
-                        st = tomlkit.table()
-                        put(st, "x", sx[a], _ANG if rot_axis else _LEN)
-                        put(st, "y", sy[a], _TORQUE if rot_axis else _FORCE)
-                        splines.add(axis, st)
-                t.add("splines", splines)
-            bushings.add(name, t)
-        doc.add("bushings", bushings)
+
+    def bushing(t, e):
+        for field, dims in _BUSHING_FIELDS.items():
+            value = np.asarray(getattr(bu, field))[e]
+            if field in ("k_trans", "k_rot") or not _is_zero(value):
+                put(t, field, value, dims)
+        if any(bu.spline_axes[e]):
+            splines = tomlkit.table(is_super_table=True)
+            sx, sy = np.asarray(bu.spline_x)[e], np.asarray(bu.spline_y)[e]
+            for a, axis in enumerate(BUSHING_AXES):
+                if bu.spline_axes[e][a]:
+                    rot_axis = axis.startswith("r")
+                    st = tomlkit.table()
+                    put(st, "x", sx[a], _ANG if rot_axis else _LEN)
+                    put(st, "y", sy[a], _TORQUE if rot_axis else _FORCE)
+                    splines.add(axis, st)
+            t.add("splines", splines)
+
+    _add_elements(doc, "bushings", bu, names, bushing)
 
     sp = mech.springs
-    if sp.names:
-        springs = tomlkit.table(is_super_table=True)
-        k, free = np.asarray(sp.k), np.asarray(sp.free_length)
-        for e, name in enumerate(sp.names):
-            t = tomlkit.table()
-            t.add("i", names[sp.i_marker[e]])
-            t.add("j", names[sp.j_marker[e]])
-            if not sp.tabulated[e] or not _is_zero(k[e]):
-                put(t, "k", k[e], (-1, 1, 0), vector=False)
-            if not sp.tabulated[e] or not _is_zero(free[e]):
-                put(t, "free_length", free[e], _LEN, vector=False)
-            if sp.tabulated[e]:
-                tt = tomlkit.table()
-                put(tt, "x", np.asarray(sp.table_x)[e], _LEN)
-                put(tt, "y", np.asarray(sp.table_y)[e], _FORCE)
-                t.add("table", tt)
-            springs.add(name, t)
-        doc.add("springs", springs)
+    k, free = np.asarray(sp.k), np.asarray(sp.free_length)
+
+    def spring(t, e):
+        if not sp.tabulated[e] or not _is_zero(k[e]):
+            put(t, "k", k[e], (-1, 1, 0), vector=False)
+        if not sp.tabulated[e] or not _is_zero(free[e]):
+            put(t, "free_length", free[e], _LEN, vector=False)
+        if sp.tabulated[e]:
+            tt = tomlkit.table()
+            put(tt, "x", np.asarray(sp.table_x)[e], _LEN)
+            put(tt, "y", np.asarray(sp.table_y)[e], _FORCE)
+            t.add("table", tt)
+
+    _add_elements(doc, "springs", sp, names, spring)
 
     st = mech.stops
-    if st.names:
-        stops = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(st.names):
-            t = tomlkit.table()
-            t.add("i", names[st.i_marker[e]])
-            t.add("j", names[st.j_marker[e]])
-            t.add("kind", st.kind[e])
-            put(t, "length", np.asarray(st.length)[e], _LEN, vector=False)
-            put(t, "k", np.asarray(st.k)[e], (-1, 1, 0), vector=False)
-            cubic = np.asarray(st.cubic)[e]
-            if not _is_zero(cubic):
-                put(t, "cubic", cubic, (-3, 1, 0), vector=False)
-            stops.add(name, t)
-        doc.add("stops", stops)
+
+    def stop(t, e):
+        t.add("kind", st.kind[e])
+        put(t, "length", np.asarray(st.length)[e], _LEN, vector=False)
+        put(t, "k", np.asarray(st.k)[e], (-1, 1, 0), vector=False)
+        cubic = np.asarray(st.cubic)[e]
+        if not _is_zero(cubic):
+            put(t, "cubic", cubic, (-3, 1, 0), vector=False)
+
+    _add_elements(doc, "stops", st, names, stop)
 
     dr = mech.drivers
     if dr.names:
@@ -245,6 +233,23 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
             tables.add(name, _write_load_table(table, units))
         doc.add("load_tables", tables)
     return doc
+
+
+def _add_elements(doc, section: str, elements, names, fill) -> None:
+    """`[<section>.<name>]` for each element of a stack with I and J markers (bushings,
+    springs, stops): `i`, `j`, then what `fill(table, index)` adds; nothing for no element."""
+    import tomlkit
+
+    if not elements.names:
+        return
+    out = tomlkit.table(is_super_table=True)
+    for e, name in enumerate(elements.names):
+        t = tomlkit.table()
+        t.add("i", names[elements.i_marker[e]])
+        t.add("j", names[elements.j_marker[e]])
+        fill(t, e)
+        out.add(name, t)
+    doc.add(section, out)
 
 
 def _write_orientation(m, rot: np.ndarray):
