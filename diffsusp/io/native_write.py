@@ -203,26 +203,20 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
     _add_elements(doc, "stops", st, names, stop)
 
     dr = mech.drivers
-    if dr.names:
-        drivers = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(dr.names):
-            t = tomlkit.table()
-            t.add("marker", names[dr.marker[e]])
-            t.add("direction", _floats(np.asarray(dr.direction)[e]))
-            t["direction"].comment("global unit vector; the value (travel) is in length units")
-            drivers.add(name, t)
-        doc.add("drivers", drivers)
+
+    def driver(t, e):
+        t.add("direction", _floats(np.asarray(dr.direction)[e]))
+        t["direction"].comment("global unit vector; the value (travel) is in length units")
+
+    _add_elements(doc, "drivers", dr, names, driver, markers=("marker",))
 
     lp = mech.load_points
-    if lp.names:
-        points = tomlkit.table(is_super_table=True)
-        for e, name in enumerate(lp.names):
-            t = tomlkit.table()
-            t.add("marker", names[lp.marker[e]])
-            if lp.frame[e] != GROUND:
-                t.add("frame", names[lp.frame[e]])
-            points.add(name, t)
-        doc.add("load_points", points)
+
+    def load_point(t, e):
+        if lp.frame[e] != GROUND:
+            t.add("frame", names[lp.frame[e]])
+
+    _add_elements(doc, "load_points", lp, names, load_point, markers=("marker",))
 
     if mech.corners:
         _write_corners(doc, mech, put, factor)
@@ -235,9 +229,11 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
     return doc
 
 
-def _add_elements(doc, section: str, elements, names, fill) -> None:
-    """`[<section>.<name>]` for each element of a stack with I and J markers (bushings,
-    springs, stops): `i`, `j`, then what `fill(table, index)` adds; nothing for no element."""
+def _add_elements(doc, section: str, elements, names, fill,
+                  markers=("i_marker", "j_marker")) -> None:
+    """`[<section>.<name>]` for each element of a stack (bushings, springs, stops, drivers,
+    load points): its markers by name (field `i_marker` is written as `i`, `marker` as
+    `marker`), then what `fill(table, index)` adds; nothing for no element."""
     import tomlkit
 
     if not elements.names:
@@ -245,8 +241,8 @@ def _add_elements(doc, section: str, elements, names, fill) -> None:
     out = tomlkit.table(is_super_table=True)
     for e, name in enumerate(elements.names):
         t = tomlkit.table()
-        t.add("i", names[elements.i_marker[e]])
-        t.add("j", names[elements.j_marker[e]])
+        for field in markers:
+            t.add(field.removesuffix("_marker"), names[getattr(elements, field)[e]])
         fill(t, e)
         out.add(name, t)
     doc.add(section, out)
