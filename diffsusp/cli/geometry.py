@@ -12,7 +12,7 @@ geometric correction (spec geometry §3.8, chapter 2).
 - `correct`: the model's joint frames moved so that its equilibrium under the loads of case
   `--case` reproduces the measured poses (iterated to `--tol` mm).
 
-TABLE is a landmark or pose table (format in `diffsusp.measure.table`). Units: mm.
+TABLE is a landmark or pose table (format in `diffsusp.io.measurements`). Units: mm.
 """
 
 import csv

@@ -1,7 +1,8 @@
 """Measurements: landmarks → part poses, landmark re-ordering, noise models, bushing
-deformations, synthetic measurements, measurement tables (CSV/Parquet: see `table`), and the
-measurement types every identification method takes (`data`: `Landmarks`, `Poses`,
-`Deformations`, `Channel`, and the conversions from `Measurements`).
+deformations, synthetic measurements, measurement tables (CSV/Parquet; the format is
+`diffsusp.io.measurements`), and the measurement types every identification method takes
+(`data`: `Landmarks`, `Poses`, `Deformations`, `Channel`, and the conversions from
+`Measurements`).
 
 spec: geometry §3.3–3.7 (landmarks, distance tables, Arun/Kabsch, deformations); stiffness §1.1,
 §1.12, §2.8 (what the direct method needs; the thesis's numerical protocol). Units: mm, N, N·mm,
