@@ -299,9 +299,11 @@ def test_vectorised_transcendentals_match_numpy():
     small = x[np.abs(x) < 1.4]  # away from the poles of tan
     np.testing.assert_allclose(np.asarray(_math.tan(jnp.asarray(small))), np.tan(small),
                                rtol=3e-15, atol=3e-16)
-    pos = np.concatenate([np.abs(x), np.logspace(-30, 30, 300)])
+    # Its range is [1e-30, 1e30]; np.logspace(-30, ...)[0] is 1 ulp below 1e-30 (0 there).
+    pos = np.concatenate([np.abs(x), np.logspace(-30, 30, 300)[1:], [1e-30]])
     np.testing.assert_allclose(np.asarray(_math.sqrt(jnp.asarray(pos))), np.sqrt(pos),
                                rtol=5e-16, atol=0)
+    assert float(_math.sqrt(np.nextafter(1e-30, 0.0))) == 0.0
     assert float(_math.sqrt(0.0)) == 0.0
     g = jnp.asarray(rng.uniform(-3, 3, 50))
     for f, d in ((_math.arctan, lambda v: 1 / (1 + v * v)), (_math.sin, np.cos),
