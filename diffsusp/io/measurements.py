@@ -37,7 +37,6 @@ This module reads and writes the cells (`read_measurement_rows`, `write_measurem
 """
 
 import csv
-import io
 import math
 import os
 
@@ -46,7 +45,7 @@ import numpy as np
 from ..errors import ModelFileError
 from ..model.mechanism import Loads, Mechanism
 from .files import check_input, read_input
-from .tables import Table, loads_from_table, split_header, unit_factor
+from .tables import Table, csv_cells, loads_from_table, split_header, unit_factor
 
 LANDMARK_COLUMNS = ("case", "part", "landmark", "x", "y", "z", "x0", "y0", "z0")
 POSE_COLUMNS = ("case", "part", "x", "y", "z", "psi", "theta", "phi")
@@ -196,31 +195,9 @@ def read_measurement_rows(path) -> MeasurementRows:
     path = os.fspath(path)
     suffix = os.path.splitext(path)[1].lower()
     if suffix in (".csv", ".txt"):
-        data = read_input(path, "measurement table", "table")
-        try:
-            text = data.decode("utf-8-sig")
-        except UnicodeDecodeError:
-            raise ModelFileError("not UTF-8 text; save the table as UTF-8 CSV.",
-                                 path=path) from None
-        reader = csv.reader(io.StringIO(text, newline=""), strict=True)
-        header, rows, lines = None, [], []
-        try:
-            for row in reader:
-                if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                    continue
-                if header is None:
-                    header = (row, reader.line_num)
-                else:
-                    rows.append(row)
-                    lines.append(reader.line_num)
-        except csv.Error as e:
-            raise ModelFileError(f"not a valid CSV row ({e}).", path=path,
-                                 line=max(reader.line_num, 1)) from None
-        if header is None:
-            raise ModelFileError("the table is empty; expected a header row "
-                                 f"({', '.join(LANDMARK_COLUMNS)}, and load columns).",
-                                 path=path, line=1)
-        cells, header_line = header
+        cells, header_line, rows, lines = csv_cells(
+            read_input(path, "measurement table", "table"), path,
+            f"({', '.join(LANDMARK_COLUMNS)}, and load columns)")
         for r, row in enumerate(rows):
             if len(row) != len(cells):
                 raise ModelFileError(f"the row has {len(row)} values but the header names "

@@ -245,7 +245,10 @@ def _decode(data: bytes, path) -> str:
         ) from None
 
 
-def _read_csv(data: bytes, path) -> Table:
+def csv_cells(data: bytes, path, header_hint: str):
+    """The header cells, its line, the rows of cells and their lines of a CSV file's bytes
+    (blank rows and rows starting with '#' skipped); `header_hint` says what the header names
+    in the error for a file without one."""
     text = _decode(data, path)
     reader = csv.reader(io.StringIO(text, newline=""), strict=True)
     header = None
@@ -264,11 +267,14 @@ def _read_csv(data: bytes, path) -> Table:
         raise ModelFileError(f"not a valid CSV row ({e}).", path=path,
                              line=max(reader.line_num, 1)) from None
     if header is None:
-        raise ModelFileError(
-            "the table is empty; expected a header row of column names, e.g. "
-            "'contact_patch.fz [N],contact_patch.fy [N]'.", path=path, line=1,
-        )
-    cells, header_line = header
+        raise ModelFileError(f"the table is empty; expected a header row {header_hint}.",
+                             path=path, line=1)
+    return header[0], header[1], rows, lines
+
+
+def _read_csv(data: bytes, path) -> Table:
+    cells, header_line, rows, lines = csv_cells(
+        data, path, "of column names, e.g. 'contact_patch.fz [N],contact_patch.fy [N]'")
     names, units = [], {}
     for c, cell in enumerate(cells):
         name, unit = split_header(cell)
