@@ -1,10 +1,16 @@
 import gc
 import os
-import shutil
-import tempfile
 
-import jax
-import pytest
+# One BLAS thread per process (set before NumPy loads it; the pytest-xdist workers and the
+# notebook kernels inherit it): two workers on two cores each running a multi-threaded OpenBLAS
+# spin-wait on each other (a 1176 × 60 QR: 0.12 s of CPU against 0.9 ms on one thread).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
 
 from diffsusp._compile import set_xla_flags  # noqa: E402
 
@@ -92,8 +98,9 @@ def _release_compiled_programs():
 
 # The files whose programs cost the most (measured: compile counts and seconds per file), handed
 # out first so that the short files fill the end of the run on both workers.
-_LONG_FILES = ("test_kc.py", "test_statics.py", "test_oracle.py", "test_sensitivity.py",
-               "test_fit.py", "test_direct.py", "test_geometric.py", "test_io_chrono.py")
+_LONG_FILES = ("test_oracle.py", "test_statics.py", "test_sensitivity.py",
+               "test_identify_trust.py", "test_fit.py", "test_geometric.py", "test_tyre_bench.py",
+               "test_direct.py", "test_tyre_rig.py", "test_fleet.py", "test_kc.py")
 
 
 def pytest_collection_modifyitems(items):
