@@ -6,10 +6,15 @@ Hardpoints: `diffsusp.models.double_wishbone.HARDPOINTS` (Project Chrono's
 Chrono's suspension frame (x forward, y to the left, z up), the left side.
 """
 
-import numpy as np
 
 from ..model import Mechanism, MechanismBuilder
-from .double_wishbone import HARDPOINTS, LOADED_RADIUS, SPRING_FREE_LENGTH, SPRING_RATE
+from .double_wishbone import (
+    HARDPOINTS,
+    LOADED_RADIUS,
+    SPRING_FREE_LENGTH,
+    SPRING_RATE,
+    _pivot_frame,
+)
 
 PAIR_K_RADIAL = 5000.0
 """Radial stiffness (N/mm, x and y of each bushing frame) of the pair bushings. Chosen."""
@@ -17,16 +22,6 @@ PAIR_K_AXIAL = 1000.0
 """Axial stiffness (N/mm, along the pair's axis) of each bushing. Chosen."""
 PAIR_K_TILT = 1.0e6
 """Rotational stiffness (N·mm/rad) of each bushing about its two radial axes. Chosen."""
-
-
-def _pair_frame(front, back, outer) -> np.ndarray:
-    """z along front − back (the pair's axis), y normal to the arm's plane, x = y × z."""
-    front, back, outer = (np.asarray(v, dtype=float) for v in (front, back, outer))
-    v = np.cross(back - outer, front - outer)
-    v /= np.linalg.norm(v)
-    w = front - back
-    w /= np.linalg.norm(w)
-    return np.column_stack([np.cross(v, w), v, w])
 
 
 def double_wishbone_bushing_pairs(spring: bool = False, *, k_torsion: float = 0.0,
@@ -74,7 +69,7 @@ def double_wishbone_bushing_pairs(spring: bool = False, *, k_torsion: float = 0.
     for arm, prefix in (("upper_control_arm", "uca"), ("lower_control_arm", "lca")):
         front, back = p[f"{prefix}_chassis_front"], p[f"{prefix}_chassis_back"]
         outer = p[f"{prefix}_upright"]
-        frame = _pair_frame(front, back, outer)
+        frame = _pivot_frame(front, back, outer)  # z along the pair's axis
         for end, at in (("front", front), ("back", back)):
             b.bushing(f"{prefix}_{end}", parts=("ground", arm), at=at, orientation=frame,
                       k_trans=(k_radial, k_radial, k_axial), k_rot=(k_tilt, k_tilt, k_torsion))
