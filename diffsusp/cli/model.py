@@ -165,32 +165,6 @@ def _load_table(mf, loads: str):
     return read_table(loads)
 
 
-FLAG_COLUMNS = ("stable", "law_valid")
-"""Result columns after `status`: 1 where the equilibrium is stable (reduced tangent stiffness
-positive definite) / every bushing's projected angles are within their law's validity, 0
-otherwise and for cases that did not converge or were not solved (`diffsusp.statics.checks`)."""
-
-
-def with_flag_columns(res, sol):
-    """The results table `res` with the `stable` and `law_valid` columns of `sol` inserted after
-    `status` (0 where the solution has no flags)."""
-    import numpy as np
-
-    from ..io.tables import Table
-
-    n = res.n_rows
-    columns, units = {}, {}
-    for name in res.names:
-        columns[name], units[name] = res[name], res.units.get(name)
-        if name == "status":
-            for flag in FLAG_COLUMNS:
-                value = getattr(sol, flag, None)
-                columns[flag] = (np.zeros(n) if value is None
-                                 else np.asarray(value, dtype=np.float64).reshape(n))
-                units[flag] = None
-    return Table(columns=columns, units=units)
-
-
 class _Run:
     """What `_solve_and_write` did: per-case status, flags and residuals (NaN / -1 / False for
     cases not solved), the number of result columns, and whether it was interrupted."""
@@ -265,9 +239,8 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
 
 
 def _results(mech, sol, table, start: int, stop: int, *, solved: bool = True):
-    """The results rows of cases `start:stop` (`diffsusp.io.results_table` with the flag
-    columns), their load columns from `table` (`solved=False`: the stand-in of cases not
-    solved)."""
+    """The results rows of cases `start:stop` (`diffsusp.io.results_table`), their load columns
+    from `table` (`solved=False`: the stand-in of cases not solved)."""
     import numpy as np
 
     from ..io import results_table
@@ -282,8 +255,7 @@ def _results(mech, sol, table, start: int, stop: int, *, solved: bool = True):
     else:  # NaN element states, no program to compile
         k, n_b, n_s = stop - start, len(mech.bushings.names), len(mech.springs.names)
         bushings, springs = [np.full((k, n_b, 3), np.nan)] * 4, [np.full((k, n_s), np.nan)] * 2
-    res = results_table(mech, sol, part, first_case=start, bushings=bushings, springs=springs)
-    return with_flag_columns(res, sol)
+    return results_table(mech, sol, part, first_case=start, bushings=bushings, springs=springs)
 
 
 def _flagged(status, flag) -> list[int]:

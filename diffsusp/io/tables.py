@@ -591,12 +591,20 @@ RESULT_STATUS = {0: "converged", 1: "max_steps reached", 2: "non-finite", 3: "st
 """Meaning of the `status` column of a results table (`diffsusp.statics` status codes)."""
 
 
+FLAG_COLUMNS = ("stable", "law_valid")
+"""Result columns after `status`: 1 where the equilibrium is stable (reduced tangent stiffness
+positive definite) / every bushing's projected angles are within their law's validity, 0
+otherwise and for cases that did not converge, were not solved, or a solution without the flags
+(`diffsusp.statics.checks`)."""
+
+
 def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0,
                   bushings=None, springs=None) -> Table:
     """One row per load case and a column per output of a batched `StaticSolution`.
 
     Columns (library units): `case` (0-based), the load columns of `loads` (converted to N,
-    N·mm, mm), `status` (see `RESULT_STATUS`), `iterations`, `residual` (largest force row
+    N·mm, mm), `status` (see `RESULT_STATUS`), `stable` and `law_valid` (see `FLAG_COLUMNS`),
+    `iterations`, `residual` (largest force row
     relative to the load scale), `constraint_error` (mm); per part `<part>.x`, `.y`, `.z` (mm,
     translation of the part frame, which is the global frame at design) and `.gx`, `.gy`,
     `.gz` (Gibbs vector of its rotation from design); per bushing `<bushing>.dx` … `.dz`
@@ -635,6 +643,9 @@ def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0,
                 add(name, loads[name] * unit_factor(loads.units.get(name), valid[name]),
                     library[valid[name]])
     add("status", sol.status, None)
+    for flag in FLAG_COLUMNS:
+        value = getattr(sol, flag, None)
+        add(flag, np.zeros(n) if value is None else value, None)
     add("iterations", sol.iterations, None)
     add("residual", sol.residual, None)
     add("constraint_error", sol.constraint_error, "mm")
