@@ -139,6 +139,20 @@ def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_pat
             np.testing.assert_array_equal(got[name], reference[name][order])
 
 
+def test_chunked_solve_refuses_a_single_case_and_an_empty_chunk():
+    """`solve_statics_chunks` (the loop `simulate` streams from) needs a case axis and a chunk
+    of at least one case; both are refused before anything is traced."""
+    from diffsusp.statics import solve_statics_chunks
+
+    mech = isolated_bushing()
+    one = mech.loads(forces={"centre": FORCE})
+    with pytest.raises(ValueError, match="leading case axis"):
+        next(solve_statics_chunks(mech, one, 2))
+    table = mech.loads(forces={"centre": np.stack([FORCE, -FORCE])})
+    with pytest.raises(ValueError, match="chunk must be at least 1"):
+        next(solve_statics_chunks(mech, table, 0))
+
+
 @pytest.mark.parametrize("content,message", [
     ("centre.fx,centre.fq\n1,2\n", "unknown column 'centre.fq' for model"),
     ("centre.fx,centre.fy\n1,2\n3\n", ":3: the row has 1 values but the header names 2"),
