@@ -1,6 +1,6 @@
 """`diffsusp info MODEL` and `diffsusp simulate MODEL --loads TABLE --out RESULTS`.
 
-MODEL is anything `diffsusp.io.load_model` reads: a native `.toml` file, an Adams `.adm`, a
+MODEL is anything `diffsusp.load_model` reads: a native `.toml` file, an Adams `.adm`, a
 Chrono `.json`, or a built-in model name (`diffsusp.models.ZOO`, or `STOP_VARIANTS` such as
 `pseudo_mcpherson_stops`: the axles with bump and rebound stops). TABLE is a CSV/Parquet load
 table (columns in `diffsusp.io.tables`) or the name of a load table in the model file.
