@@ -1072,15 +1072,19 @@ def direct(
       measurements to noise-free accuracy (consistency χ²/dof > `POLISH_CHI2`), the determined
       stiffnesses are polished by least squares through the equilibrium
       (`identify.least_squares` on the same landmarks or poses, started at the linear
-      estimate, the other unknowns held at their values): an estimator that compares the
-      model's own equilibria with the data, so its errors are those of the measurements only,
-      and its σ (from the whitened Jacobian) is the spread the estimate really has. The report
-      keeps the linear values in `linear_values` and the fit in `polished`. True: always;
-      False: the thesis's linear estimate alone (its σ ignores the errors in variables; the
-      consistency verdict still says whether the model reproduces the data). Only bushing
-      stiffnesses per axis and spring rates whose model value is positive are polished
-      (offsets, K·L0, axisymmetric pairs and stiffnesses the model sets to 0 keep their linear
-      values, with a note).
+      estimate, the other unknowns held at the model's values): an estimator that compares
+      the model's own equilibria with the data, so its errors are those of the measurements
+      only, and its σ (from the whitened Jacobian) is the spread the estimate really has. The
+      report keeps the linear values in `linear_values` and the fit in `polished`. True:
+      always; False: the thesis's linear estimate alone (its σ ignores the errors in
+      variables; the consistency verdict still says whether the model reproduces the data).
+      Only bushing stiffnesses per axis and spring rates whose model value is positive are
+      polished; offsets, K·L0 (through the spring's free length), axisymmetric pairs and
+      stiffnesses the model sets to 0 are *held at the model's values* — in the polish and in
+      the returned model, whose consistency is the one reported (status "held at the model's
+      value in the polish", with the linear estimate; a linear K·L0 biased by the errors in
+      variables would spoil the polish). A polished stiffness is "identified" by the
+      least-squares gate (σ% at the model's values, `FitReport.determined`).
     - `check`: re-solve the identified model at the measured cases and compare with the
       measurements in units of their σ (`report.consistency`; a determined value of an
       inconsistent model is not reported as identified).

@@ -97,60 +97,86 @@ def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
     return start
 
 
-def _linear_left(report: DirectReport, plan: _PolishPlan) -> list[int]:
-    """Unknowns the linear estimate determined that the polish does not cover."""
-    return [i for i in np.flatnonzero(report.identified) if i not in plan.unknowns]
+def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Parameter, ...],
+                  mech: Mechanism) -> tuple[Mechanism, DirectReport]:
+    """The model the polish fitted and the direct report of exactly that model.
 
+    The returned model is `mech` with the polished values (`plan.params.apply`): every unknown
+    the polish does not cover is *held at the model's value*, as the polish held it (offsets
+    and K·L0 through the spring's free length, axisymmetric pairs, stiffnesses the model sets
+    to 0). So `report.consistency` (the polish's own re-solve, at its equilibria) is the
+    verdict on the returned model, and the report's values are that model's values. Per
+    unknown: polished (value, σ and verdict of the fit; "identified" needs `fit.determined`,
+    the least-squares gate on the information at the model's values, not on the estimate's
+    own σ%), held (the model's value, σ NaN, not identified; the linear estimate, biased by
+    the errors in variables, stays in `linear_values` and in the status), or neither (not
+    determined by the linear estimate: unchanged). Derived quantities (L0, δ0) need a held
+    unknown and are recomputed with the new verdicts."""
+    from .direct import _derived, _prior
 
-def _merge_polish(report: DirectReport, plan: _PolishPlan, fit,
-                  max_sigma_pct: float) -> DirectReport:
-    """The direct report with the polished values, σ and verdicts of the polished unknowns."""
+    model = plan.params.apply(mech, jnp.asarray(fit.estimate))
+    held_values = _prior(model, params)  # the returned model's values, table units
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
     status = list(report.status)
     conv = report.parameters_to_model
+    determined = fit.determined
     for i, j in plan.index.items():
         values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
         sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
-        ok = bool(fit.determined[j]) and sigma_pct[i] <= max_sigma_pct
+        ok = bool(determined[j])
         identified[i] = ok
         status[i] = ("identified (polished through the equilibrium)" if ok else
+                     f"not determined after the polish (sigma {sigma_pct[i]:.3g}% at the "
+                     f"estimate, {fit.gate_sigma_pct[j]:.3g}% at the model's values)"
+                     if fit.gate_sigma_pct is not None else
                      f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
-    left = [report.names[i] for i in _linear_left(report, plan)]
+    held = [i for i in np.flatnonzero(report.identified) if i not in plan.index]
+    for i in held:
+        what = {"constant": " (its offset δ0; K·δ0 with the polished K)",
+                "spring_c": " (its free length L0; K·L0 with the polished K)"}.get(
+                    params[i].kind, "")
+        status[i] = (f"held at the model's value in the polish{what}: linear estimate "
+                     f"{report.values[i]:.6g} ± {report.sigma[i]:.2g}, biased by the errors "
+                     "in variables")
+        values[i], sigma[i], sigma_pct[i], identified[i] = held_values[i], np.nan, np.nan, False
     notes = list(report.notes)
     notes.append(f"errors in variables: {len(plan.index)} stiffness(es) polished by least "
                  f"squares through the equilibrium from the linear estimate ({fit.message}, "
-                 f"{fit.steps} steps)")
-    if left:
-        notes.append(f"{', '.join(left)} keep their linear values (the polish covers bushing "
-                     "stiffnesses per axis and spring rates whose model value is positive, "
-                     "and holds the other unknowns at the model's values): their σ ignores "
-                     "the errors in the regressors")
-    consistency = dataclasses.replace(
-        fit.consistency, n_parameters=fit.consistency.n_parameters + len(left))
-    return dataclasses.replace(
+                 f"{fit.steps} steps); the model returned and judged is the polished one")
+    if held:
+        notes.append(f"{', '.join(report.names[i] for i in held)} held at the model's values "
+                     "in the polish and in the returned model (the polish covers bushing "
+                     "stiffnesses per axis and spring rates whose model value is positive; a "
+                     "K·L0 keeps the spring's free length); their linear estimates are in "
+                     "linear_values")
+    derived = _derived(params, values, np.asarray(report.fit.covariance, float), model,
+                       identified)
+    report = dataclasses.replace(
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
         status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
-        consistency=consistency)
+        consistency=fit.consistency, derived=derived)
+    return model, report
 
 
 def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,
-            max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
+                  max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
     """Least squares through the equilibrium from the linear estimate (see `direct`,
     `polish`): every bushing stiffness per axis and spring rate among the unknowns with a
     positive model value, the other unknowns held at the model's values (a linear K·L0 biased
-    by the errors in variables would bias the polish), the weak default prior centred on the
-    model's values."""
+    by the errors in variables would bias the polish: notebook 02's data, max_steps with
+    χ²/dof ≈ 4000), the weak default prior centred on the model's values. Returns the polished
+    model (held values included) and its report (`_merge_polish`); `fitted` (the linear
+    estimate's model) when there is nothing to polish."""
     from .least_squares import least_squares_batch
 
     plan = _polish_plan(mech, params)
     if plan is None or not report.identified[plan.unknowns].any():
         return fitted, report  # nothing determined to polish (e.g. all came out negative)
     start = _polish_start(plan, report)
-    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None])
-    fit = batch.reports[0]
-    report = _merge_polish(report, plan, fit, max_sigma_pct)
-    return plan.params.apply(fitted, jnp.asarray(fit.estimate)), report
+    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None],
+                                max_sigma_pct=max_sigma_pct)
+    return _merge_polish(report, plan, batch.reports[0], params, mech)
 
 
 def _as_batch(data, n: int, items=None):
@@ -182,8 +208,8 @@ def direct_batch(
     Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
     shared), then the polish of every set that needs one at once (`least_squares_batch`, one
     vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
-    per set (with `polished`; the identified mechanisms are `Params.apply` of their
-    values)."""
+    per set (with `polished`; a polished set's identified mechanism is `mech` with its
+    polished values, every other unknown held at the model's value, as `direct` returns)."""
     from .least_squares import least_squares_batch
 
     linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
@@ -207,7 +233,7 @@ def direct_batch(
     data = [check_data(mech, measurements[k]) for k in todo]
     starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
     batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
-                                start=starts)
+                                start=starts, max_sigma_pct=max_sigma_pct)
     for k, fit in zip(todo, batch.reports, strict=True):
-        out[k] = _merge_polish(linear[k], plan, fit, max_sigma_pct)
+        out[k] = _merge_polish(linear[k], plan, fit, unknowns, mech)[1]
     return tuple(out)

@@ -24,8 +24,11 @@ class DirectReport(IdentificationReport):
     **Per unknown (p,)**, aligned with `names`: `values` (the least-squares solution; for the
     basic method non-identifiable ones are 0, the thesis's zeros), `sigma`, `sigma_pct`,
     `identified` (individually determined by the data with σ% ≤ `max_sigma_pct`),
-    `identifiable` (individually determined, whatever its σ%), `status` (a phrase), `units`,
-    `prior` (the model's values).
+    `identifiable` (individually determined, whatever its σ%), `status` (a phrase: e.g.
+    "identified (polished through the equilibrium)", "held at the model's value in the
+    polish (linear estimate …)"), `units`, `prior` (the model's values). After a polish
+    (`polished`, the `FitReport`), `values` are those of the returned model and
+    `linear_values` the linear estimate.
 
     **Also:** `relations` [(combination, value, σ)] — the combinations of several unknowns the
     data determine (e.g. "bushing_1.Krx + bushing_2.Krx"); `derived` {name: (value, σ, unit)}
@@ -153,7 +156,7 @@ class DirectReport(IdentificationReport):
             f"{'parameter':<{width}}  {'value':>12}  {'sigma%':>8}  {'unit':<9} status",
         ]
         for i, name in enumerate(self.names):
-            shown = self.identified[i] or self.status[i].startswith("fixed")
+            shown = self.identified[i] or self.status[i].startswith(("fixed", "held"))
             value = f"{self.values[i]:12.6g}" if shown else f"{'—':>12}"
             pct = f"{self.sigma_pct[i]:7.3g}%" if np.isfinite(self.sigma_pct[i]) else f"{'—':>8}"
             lines.append(f"{name:<{width}}  {value}  {pct:>8}  {self.units[i]:<9} "
