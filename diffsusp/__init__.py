@@ -5,8 +5,9 @@ Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", T
 
 from . import geometry, io, lsq, statics, tyre
 from .errors import ConvergenceError, InputError, ModelError, ModelFileError, ModelWarning
-from .io import load_model, save_model
+from .io import save_model
 from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
+from .resolve import load_model
 from .statics import (
     Linearization,
     StaticSolution,

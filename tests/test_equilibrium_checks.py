@@ -188,9 +188,10 @@ def test_stop_variants_are_registered_and_documented(axles):
     assert mech.stops.kind == ("bump", "rebound")
     assert mech.name.endswith("(stops)")
     # By name from Python as from the CLI, with the load tables of the stop-free model.
-    loaded = ds.io.load_model_file("pseudo_mcpherson_stops")
+    loaded = ds.resolve.load_model_file("pseudo_mcpherson_stops")
     assert loaded.mechanism.stops.names == ("bump_stop", "rebound_stop")
-    assert loaded.load_tables.keys() == ds.io.load_model_file("pseudo_mcpherson").load_tables.keys()
+    plain = ds.resolve.load_model_file("pseudo_mcpherson")
+    assert loaded.load_tables.keys() == plain.load_tables.keys()
 
 
 def test_axle_at_design_load_and_envelope_corners(axles):

@@ -275,7 +275,7 @@ def rig_command(
 
 
 def _suspension(name: str):
-    """A built-in model (`diffsusp.models.ZOO`) or a model file (`diffsusp.io.load_model`)."""
+    """A built-in model (`diffsusp.models.ZOO`) or a model file (`diffsusp.load_model`)."""
     from diffsusp.errors import InputError
     from diffsusp.models import ZOO
 
@@ -285,7 +285,7 @@ def _suspension(name: str):
     if not path.exists():
         raise InputError(f"model '{name}' is neither a built-in model ({', '.join(ZOO)}) nor "
                          "an existing file (.toml, .adm, .json).")
-    from diffsusp.io import load_model
+    from diffsusp.resolve import load_model
 
     return load_model(path)
 
@@ -377,4 +377,5 @@ from .tyre_identify import register as _register_identify  # noqa: E402  (issue 
 _register_identify(tyre_app)
 
 from .tyre_onboard import register as _register_onboard  # noqa: E402  (issue 17)
+
 _register_onboard(tyre_app)

@@ -65,7 +65,7 @@ class Recipe:
 
         if isinstance(spec, Mechanism):
             return spec
-        from ..io import load_model_file
+        from ..resolve import load_model_file
 
         return load_model_file(spec).mechanism
 
