@@ -5,7 +5,7 @@ import os
 import pathlib
 import time
 
-from diffsusp._compile import set_xla_flags
+from diffsusp.compilation import set_xla_flags
 
 set_xla_flags(os.environ)  # the CLI's compiler flags, before JAX starts its backend
 import jax  # noqa: E402

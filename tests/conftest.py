@@ -12,7 +12,7 @@ import tempfile  # noqa: E402
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
-from diffsusp._compile import set_xla_flags  # noqa: E402
+from diffsusp.compilation import set_xla_flags  # noqa: E402
 
 # The CLI's compiler flags for every program of the tests and the notebook kernels (they
 # inherit XLA_FLAGS), set before JAX starts its backend, and without XLA's backend (LLVM)

@@ -1,4 +1,4 @@
-"""The program cache of the CLI (`diffsusp._compile.enable_program_cache`): a second process
+"""The program cache of the CLI (`diffsusp.compilation.enable_program_cache`): a second process
 (here: a second wrapper of the same function) loads the exported program instead of tracing
 it, and returns the same bits; any change of a static argument or of a shape is a new entry."""
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import diffsusp as ds
-from diffsusp import _compile
+from diffsusp import compilation
 from diffsusp.models import isolated_bushing
 from diffsusp.statics import solve
 
@@ -29,24 +29,24 @@ def scaled(x, k: int, *, offset):
 
 @pytest.fixture
 def cache_dir(tmp_path):
-    _compile.enable_program_cache(tmp_path)
+    compilation.enable_program_cache(tmp_path)
     yield tmp_path
-    _compile.enable_program_cache(None)
+    compilation.enable_program_cache(None)
 
 
 def test_a_second_wrapper_loads_the_program_instead_of_tracing(cache_dir):
     x, offset = jnp.linspace(0.0, 1.0, 5), jnp.asarray(0.5)
-    first = _compile.filter_jit(scaled)(x, 3, offset=offset)
+    first = compilation.filter_jit(scaled)(x, 3, offset=offset)
     assert len(traces) == 1 and len(list(cache_dir.iterdir())) == 1
-    again = _compile.filter_jit(scaled)(x, 3, offset=offset)  # a new process, in effect
+    again = compilation.filter_jit(scaled)(x, 3, offset=offset)  # a new process, in effect
     assert len(traces) == 1  # loaded, not traced
     assert again[0].label == "k=3" and again[1] is None
     np.testing.assert_array_equal(np.asarray(again[0].value), np.asarray(first[0].value))
-    _compile.filter_jit(scaled)(x, 4, offset=offset)  # another static argument
-    _compile.filter_jit(scaled)(x[:4], 3, offset=offset)  # another shape
+    compilation.filter_jit(scaled)(x, 4, offset=offset)  # another static argument
+    compilation.filter_jit(scaled)(x[:4], 3, offset=offset)  # another shape
     assert len(traces) == 3 and len(list(cache_dir.iterdir())) == 3
     # Under a transformation the plain (differentiable) path is taken.
-    grad = jax.grad(lambda o: _compile.filter_jit(scaled)(x, 3, offset=o)[0].value.sum())(offset)
+    grad = jax.grad(lambda o: compilation.filter_jit(scaled)(x, 3, offset=o)[0].value.sum())(offset)
     assert float(grad) == 5.0
 
 
@@ -56,11 +56,11 @@ def test_a_cached_equilibrium_is_bit_identical(tmp_path):
     loads = mech.loads(forces={"tip": jnp.array([[10.0, -20.0, 30.0], [0.0, 5.0, -8.0]])})
     args = (mech, loads, jnp.zeros((2, mech.n_coordinates)), 1e-12, 1e-10, 50, 4096)
     plain = solve._solve_batch(*args)
-    _compile.enable_program_cache(tmp_path)
+    compilation.enable_program_cache(tmp_path)
     try:
         cached = solve._solve_batch(*args)
     finally:
-        _compile.enable_program_cache(None)
+        compilation.enable_program_cache(None)
     assert isinstance(cached, ds.StaticSolution) and len(list(tmp_path.iterdir())) == 1
     for a, b in zip(jax.tree.leaves(plain), jax.tree.leaves(cached), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -39,7 +39,7 @@ def quick_jit(fn):
     XLA's backend (LLVM) optimisation off: this file's two programs (the coupled solve with its
     forward derivatives, on the bushing wheel and on the pseudo-McPherson) run in well under a
     second in all but cost most of the file's CPU to compile."""
-    from diffsusp._compile import CPU_OPTIONS
+    from diffsusp.compilation import CPU_OPTIONS
 
     compiled = {}
 

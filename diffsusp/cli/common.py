@@ -54,7 +54,7 @@ def enable_x64():
     """float64, and a persistent compilation cache so that the second run of a command does
     not trace or compile again (`$DIFFSUSP_CACHE`, default `~/.cache/diffsusp/jax`; set it to an
     empty string to disable)."""
-    from .._compile import set_xla_flags
+    from ..compilation import set_xla_flags
 
     set_xla_flags(os.environ)  # before JAX starts its backend
     import jax
@@ -69,7 +69,7 @@ def enable_x64():
         pass
     cache = os.environ.get("DIFFSUSP_CACHE", os.path.expanduser("~/.cache/diffsusp/jax"))
     if cache and not jax.config.jax_compilation_cache_dir:
-        from .._compile import enable_program_cache
+        from ..compilation import enable_program_cache
 
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)

@@ -218,8 +218,8 @@ def engine_for(workers: int | None = None, scheduler: str | None = None, client=
 
 def worker_environment() -> dict:
     """Variables a local worker process needs before JAX starts: the compiler flags
-    (`diffsusp._compile.XLA_FLAGS`) and float64."""
-    from .._compile import set_xla_flags
+    (`diffsusp.compilation.XLA_FLAGS`) and float64."""
+    from ..compilation import set_xla_flags
 
     env = {"XLA_FLAGS": os.environ.get("XLA_FLAGS", "")}
     set_xla_flags(env)

@@ -341,7 +341,7 @@ def _setup(batch: _Batch, own_process: bool) -> None:
         return
     _WORKER["setup"] = True
     if own_process:
-        from .._compile import set_xla_flags
+        from ..compilation import set_xla_flags
 
         set_xla_flags(os.environ)  # before JAX starts its backend (a fresh worker)
         import jax

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._compile import filter_jit
+from ..compilation import filter_jit
 from ..errors import ConvergenceError, InputError
 from ..model import GROUND, Loads, Mechanism
 from ..models.loadcases import TABLE_4_4, TABLE_5_1

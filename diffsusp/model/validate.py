@@ -14,7 +14,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
+from ..compilation import filter_jit
 from ..errors import ModelError
 from .mechanism import JOINT_ROWS, Mechanism
 

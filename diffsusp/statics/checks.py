@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._compile import filter_jit
+from ..compilation import filter_jit
 from ..errors import ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from .linearize import linearize

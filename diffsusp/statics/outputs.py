@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
+from ..compilation import filter_jit
 from ..geometry import gibbs_to_matrix
 from ..model.mechanism import GROUND, Mechanism
 from .kernel import (

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._compile import filter_jit
+from ..compilation import filter_jit
 from ..errors import ConvergenceError
 from ..model.mechanism import Loads, Mechanism
 from .checks import warn_law_validity, with_flags
@@ -324,7 +324,7 @@ def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh=None):
         return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
     # One share of the cases per device, each solved by its own pool, no communication; the
     # case count is padded to a multiple of the devices by repeating the last case. (On the
-    # CPU this needs `_compile.CPU_OPTIONS`: see there.)
+    # CPU this needs `compilation.CPU_OPTIONS`: see there.)
     n_cases, k = loads.force.shape[0], mesh.size
     pad = -n_cases % k
 

@@ -66,7 +66,7 @@ def _quick_jit(fn):
     second, and compiling them at the default level costs 3× more CPU than it saves (the
     Monte-Carlo program: 2.7 s instead of 8.3 s to compile, 1.1 s instead of 0.8 s for 40
     seeds)."""
-    from .._compile import CPU_OPTIONS
+    from ..compilation import CPU_OPTIONS
 
     compiled = {}
 
