@@ -393,3 +393,47 @@ def test_design_of_cases(solved, data):
             cols = [t for t, name in enumerate(report.targets) if name.startswith(centre + ".")]
             ratio = j.sigma.max() / np.max(report.sigma[16][cols])
             assert 1 / 1.5 < ratio < 1.5, (j.name, ratio)
+
+
+def test_joint_files_and_figure(solved, steering, tmp_path):
+    """`write_joints` (CSV and JSON), `read_joints` (the joint list round trip and its errors)
+    and `GeometricReport.plot` on the located joints of the steering cases."""
+    import csv
+    import dataclasses
+    import json
+
+    from diffsusp.errors import ModelFileError
+    from diffsusp.identify.geometric import read_joints, write_joints
+
+    mech, report = solved[0], steering[2]
+    write_joints(report, tmp_path / "joints.csv")
+    with open(tmp_path / "joints.csv", newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["joint"] for r in rows] == [j.name for j in report.joints]
+    for row, j in zip(rows, report.joints, strict=True):
+        if j.centre is None:
+            assert row["x"] == ""
+        else:
+            np.testing.assert_allclose([float(row[c]) for c in "xyz"], j.centre, rtol=1e-12)
+    write_joints(report, tmp_path / "joints.json")
+    assert json.loads((tmp_path / "joints.json").read_text()) == json.loads(report.to_json())
+
+    listed = [{k: list(v) if isinstance(v, tuple) else v
+               for k, v in dataclasses.asdict(j).items()} for j in JOINTS]
+    (tmp_path / "list.json").write_text(json.dumps(listed))
+    assert read_joints(tmp_path / "list.json") == tuple(JOINTS)
+    (tmp_path / "bad.json").write_text(json.dumps([listed[0], {"name": "x", "kind": "hinge",
+                                                               "parts": ["a", "b"]}]))
+    with pytest.raises(ModelFileError, match="joint 2"):
+        read_joints(tmp_path / "bad.json")
+    (tmp_path / "obj.json").write_text("{}")
+    with pytest.raises(ModelFileError, match="JSON list"):
+        read_joints(tmp_path / "obj.json")
+
+    fig = report.plot(mech, JOINTS)
+    located = sum(j.centre is not None for j in report.joints)
+    modelled = sum(len(j.elements) for j in JOINTS)
+    for ax in fig.axes:
+        assert len(ax.containers) == located
+        assert sum(len(line.get_xdata()) for line in ax.lines
+                   if line.get_marker() == "o") == modelled

@@ -15,7 +15,6 @@ geometric correction (spec geometry §3.8, chapter 2).
 TABLE is a landmark or pose table (format in `diffsusp.io.measurements`). Units: mm.
 """
 
-import csv
 import json
 from pathlib import Path
 from typing import Annotated
@@ -43,33 +42,6 @@ def _load(model, measurements, reorder):
     mech = model_file.mechanism
     meas = measure.read_measurements(measurements, mech, reorder=reorder)
     return model_file, mech, meas
-
-
-def _joints_file(path: Path):
-    from ..errors import ModelFileError
-    from ..identify.geometric import GeometricJoint
-
-    try:
-        items = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as e:
-        raise ModelFileError(f"cannot read the joint list ({e}).", path=path) from None
-    except json.JSONDecodeError as e:
-        raise ModelFileError(f"not JSON: {e.msg}.", path=path, line=e.lineno) from None
-    if not isinstance(items, list):
-        raise ModelFileError("the joint list must be a JSON list of objects with name, kind, "
-                             "parts (and slide, prior, prior_coordinate, link_ball, elements).",
-                             path=path)
-    joints = []
-    for k, item in enumerate(items):
-        try:
-            item = dict(item)
-            for key in ("parts", "slide", "prior", "elements"):
-                if item.get(key) is not None:
-                    item[key] = tuple(item[key])
-            joints.append(GeometricJoint(**item))
-        except (TypeError, ValueError) as e:
-            raise ModelFileError(f"joint {k + 1}: {e}", path=path, field="joints") from None
-    return joints
 
 
 def geometry(
@@ -109,7 +81,7 @@ def geometry(
         model_file, mech, meas = _load(model, measurements, reorder)
         notes = ()
         if joints is not None:
-            joint_list = _joints_file(joints)
+            joint_list = geometric.read_joints(joints)
         else:
             joint_list, notes = geometric.joints_from_model(mech, meas.parts,
                                                             compliant=tuple(compliant or ()))
@@ -119,12 +91,15 @@ def geometry(
         report = geometric.locate_joints(meas, joint_list, landmark_sigma=landmark_sigma,
                                          max_sigma=max_sigma, min_snr=min_snr)
         if out is not None:
-            _write_joints(report, out)
+            geometric.write_joints(report, out)
         if write_model is not None:
             located, _ = geometric.apply_locations(mech, report, joint_list)
             _write_model(located, write_model, model_file)
         if figures is not None:
-            _figure(mech, report, joint_list, figures)
+            from .. import plot
+
+            fig = report.plot(mech, joint_list)
+            plot.save(fig, figures / "geometry_joints", formats=("png",))
     if json_output:
         print_json(json.loads(report.to_json()) | {"notes_model": list(notes)})
         return
@@ -151,58 +126,6 @@ def geometry(
     for label, path in (("joint table", out), ("model", write_model), ("figure", figures)):
         if path is not None:
             con.print(f"{label} written to {path}", highlight=False)
-
-
-def _write_joints(report, path: Path):
-    if path.suffix.lower() == ".json":
-        path.write_text(report.to_json() + "\n", encoding="utf-8")
-        return
-    rows = report.rows()
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: "" if v != v else v for k, v in row.items()})
-
-
-def _figure(mech, report, joints, directory: Path):
-    """Top (x–y) and side (x–z) views: model hardpoints (circles) and located centres
-    (crosses, with 2σ bars)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from ..identify.geometric import element_table
-
-    directory.mkdir(parents=True, exist_ok=True)
-    table = element_table(mech)
-    pos = np.asarray(mech.markers.position)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
-    for ax, (a, b, label) in zip(axes, ((0, 1, "top view (x, y)"), (0, 2, "side view (x, z)")),
-                                 strict=True):
-        for joint in joints:
-            est = report[joint.name]
-            for element in joint.elements:
-                if element in table:
-                    p = pos[table[element][4]]
-                    ax.plot(p[a], p[b], "o", mfc="none", color="0.4")
-            if est.centre is not None:
-                ax.errorbar(est.centre[a], est.centre[b], xerr=2 * est.sigma[a],
-                            yerr=2 * est.sigma[b], fmt="x", color="C3")
-                ax.annotate(joint.name, (est.centre[a], est.centre[b]), fontsize=7,
-                            xytext=(3, 3), textcoords="offset points")
-        ax.set_title(label)
-        ax.set_xlabel("xyz"[a] + " (mm)")
-        ax.set_ylabel("xyz"[b] + " (mm)")
-        ax.set_aspect("equal", adjustable="datalim")
-    axes[0].plot([], [], "o", mfc="none", color="0.4", label="model")
-    axes[0].plot([], [], "x", color="C3", label="located (±2σ)")
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(directory / "geometry_joints.png", dpi=120)
-    plt.close(fig)
 
 
 def correct(

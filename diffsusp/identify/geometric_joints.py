@@ -1,0 +1,279 @@
+"""Geometric identification's data: the joint description (`GeometricJoint`), the located
+joints (`JointEstimate`, `GeometricReport` with its table, JSON and figure), the model's element
+table, and the joint-list and joint-table files (spec geometry §4.6, §4.9).
+
+The solvers are in `diffsusp.identify.geometric_locate`, the correction in
+`diffsusp.identify.geometric_correct`; `diffsusp.identify.geometric` re-exports every public
+name. Units: mm.
+"""
+
+import csv
+import dataclasses
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
+               "compliant_bushing")
+"""Joint kinds the localisation knows (spec geometry §4.6's joint list)."""
+
+GROUND = "ground"
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometricJoint:
+    """One entry of the joint list: which parts, which kind, and the kind's extra data.
+
+    **Fields:**
+
+    - `name`; `kind`: one of `JOINT_KINDS`; `parts`: (S1, S2), the part names as in the
+      measurements, `'ground'` for the fixed chassis/frame. S2 moves relative to S1; for
+      `'ball_unknown_slide'` S2 is the part carrying the ball (the chassis for the strut top)
+      and S1 the part carrying the slide (the hub carrier); for `'compliant_bushing'` S2 is
+      the link.
+    - `slide`: `'ball_known_slide'`: the slide direction in S1 (e.g. the rack axis (0, 1, 0)).
+    - `prior`: `'revolute'`: a point (mm) whose position along the axis is kept (the thesis
+      fixes x of each bushing of a pair); with `prior_coordinate` ('x', 'y' or 'z') only that
+      coordinate of it is kept, else the point of the axis nearest to `prior` is reported.
+      `'ball_unknown_slide'`: the initial estimate (required).
+    - `link_ball`: `'compliant_bushing'`: name of the ball joint at the link's other end (a
+      `'ball'` joint of the same list, between the link and another part).
+    - `elements`: names of the model's joints or bushings this located joint stands for (their
+      markers are moved by `apply_locations`).
+    """
+
+    name: str
+    kind: str
+    parts: tuple[str, str]
+    slide: tuple[float, float, float] | None = None
+    prior: tuple[float, float, float] | None = None
+    prior_coordinate: str | None = None
+    link_ball: str | None = None
+    elements: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.kind not in JOINT_KINDS:
+            raise InputError(f"joint '{self.name}': unknown kind '{self.kind}'; use one of "
+                             f"{', '.join(JOINT_KINDS)}.")
+        if len(self.parts) != 2 or self.parts[0] == self.parts[1]:
+            raise InputError(f"joint '{self.name}': parts must be two different part names; "
+                             f"got {self.parts!r}.")
+        if self.kind == "ball_known_slide" and self.slide is None:
+            raise InputError(f"joint '{self.name}' (ball_known_slide) needs the slide direction"
+                             " slide=(x, y, z), e.g. the rack axis.")
+        if self.kind == "ball_unknown_slide" and self.prior is None:
+            raise InputError(f"joint '{self.name}' (ball_unknown_slide) needs an initial "
+                             "estimate prior=(x, y, z) of the ball centre (mm).")
+        if self.kind == "revolute" and self.prior is None:
+            raise InputError(
+                f"joint '{self.name}' (revolute) needs prior=(x, y, z): motion does not fix "
+                "the point along the axis (spec geometry §4.3, CORRECTIONS 17).")
+        if self.prior_coordinate not in (None, "x", "y", "z"):
+            raise InputError(f"joint '{self.name}': prior_coordinate must be 'x', 'y' or 'z'.")
+        if self.kind == "compliant_bushing" and self.link_ball is None:
+            raise InputError(f"joint '{self.name}' (compliant_bushing) needs link_ball, the "
+                             "name of the ball joint at the link's other end.")
+
+
+@dataclasses.dataclass(frozen=True)
+class JointEstimate:
+    """Located joint. Coordinates are design (reference) coordinates in the global frame (mm).
+
+    **Fields:** `name`, `kind`, `parts`; `centre` (3,) mm (None when not observable); `axis`
+    (3,) unit (revolute: the axis; slides: the slide direction; None otherwise); `sigma` (3,)
+    σ of the centre's coordinates (mm) and `sigma_axis` (3,) of the axis' components, at the
+    nominal landmark noise; `residual`: root-mean-square of the solver's equations (mm; the
+    unknown slide: the trajectory points' distance to their line); `singular_values` of the
+    solver's equations (largest first; with σ: of the per-case equations in the unknowns the
+    solver determines, for the unknown slide the centre and its line); `observable`; `note`.
+    `estimate` keeps the raw centre even when not observable (for diagnostics). `snr`: the
+    weakest singular value over its noise level (see `locate_joints`); `chi2`: the residual
+    energy over the energy landmark noise alone would leave (≈ 1 for a joint the data fit,
+    larger for a bushing taken as a joint). NaN without σ.
+    """
+
+    name: str
+    kind: str
+    parts: tuple[str, str]
+    centre: np.ndarray | None
+    axis: np.ndarray | None
+    sigma: np.ndarray
+    sigma_axis: np.ndarray | None
+    residual: float
+    singular_values: np.ndarray
+    observable: bool
+    note: str
+    estimate: np.ndarray
+    snr: float = math.nan
+    chi2: float = math.nan
+
+    def to_dict(self) -> dict:
+        def arr(v):
+            return None if v is None else [float(x) for x in np.asarray(v)]
+
+        return dict(name=self.name, kind=self.kind, parts=list(self.parts),
+                    centre=arr(self.centre), axis=arr(self.axis), sigma=arr(self.sigma),
+                    sigma_axis=arr(self.sigma_axis), residual=float(self.residual),
+                    singular_values=arr(self.singular_values), observable=self.observable,
+                    note=self.note, snr=float(self.snr), chi2=float(self.chi2))
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometricReport:
+    """Result of `locate_joints`: one `JointEstimate` per joint of the list, in order, the
+    landmark noise σ_L used for the σ (mm), and the number of cases."""
+
+    joints: tuple[JointEstimate, ...]
+    landmark_sigma: float
+    n_cases: int
+    notes: tuple[str, ...] = ()
+
+    def __getitem__(self, name: str) -> JointEstimate:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(f"no joint named '{name}' (joints: "
+                       f"{', '.join(j.name for j in self.joints)}).")
+
+    def to_json(self) -> str:
+        return json.dumps(dict(landmark_sigma=self.landmark_sigma, n_cases=self.n_cases,
+                               notes=list(self.notes),
+                               joints=[j.to_dict() for j in self.joints]), indent=2)
+
+    def rows(self) -> list[dict]:
+        """One flat row per joint (for tables and CSV): x, y, z, σx, σy, σz, axis, verdict."""
+        out = []
+        for j in self.joints:
+            c = j.centre if j.centre is not None else np.full(3, np.nan)
+            a = j.axis if j.axis is not None else np.full(3, np.nan)
+            out.append(dict(joint=j.name, kind=j.kind, part_1=j.parts[0], part_2=j.parts[1],
+                            x=c[0], y=c[1], z=c[2], sigma_x=j.sigma[0], sigma_y=j.sigma[1],
+                            sigma_z=j.sigma[2], axis_x=a[0], axis_y=a[1], axis_z=a[2],
+                            residual=j.residual, snr=j.snr, chi2=j.chi2,
+                            observable=j.observable, note=j.note))
+        return out
+
+    def plot(self, mech=None, joints: Sequence[GeometricJoint] = (), axes=None):
+        """Top (x–y) and side (x–z) views of the located centres (crosses with 2σ bars) and,
+        given the model `mech` and the joint list, the model's hardpoints of each joint's
+        elements (circles). `axes`: two matplotlib Axes (default: a new figure). Returns the
+        matplotlib Figure (made without pyplot: nothing is kept open)."""
+        from matplotlib.figure import Figure
+
+        if axes is None:
+            fig = Figure(figsize=(11, 5))
+            axes = fig.subplots(1, 2)
+        else:
+            fig = axes[0].figure
+        table = {} if mech is None else element_table(mech)
+        pos = None if mech is None else np.asarray(mech.markers.position)
+        elements = {j.name: j.elements for j in joints}
+        views = ((0, 1, "top view (x, y)"), (0, 2, "side view (x, z)"))
+        for ax, (a, b, label) in zip(axes, views, strict=True):
+            for est in self.joints:
+                for element in elements.get(est.name, ()):
+                    if element in table:
+                        p = pos[table[element][4]]
+                        ax.plot(p[a], p[b], "o", mfc="none", color="0.4")
+                if est.centre is not None:
+                    ax.errorbar(est.centre[a], est.centre[b], xerr=2 * est.sigma[a],
+                                yerr=2 * est.sigma[b], fmt="x", color="C3")
+                    ax.annotate(est.name, (est.centre[a], est.centre[b]), fontsize=7,
+                                xytext=(3, 3), textcoords="offset points")
+            ax.set_title(label)
+            ax.set_xlabel("xyz"[a] + " (mm)")
+            ax.set_ylabel("xyz"[b] + " (mm)")
+            ax.set_aspect("equal", adjustable="datalim")
+        if table:
+            axes[0].plot([], [], "o", mfc="none", color="0.4", label="model")
+        axes[0].plot([], [], "x", color="C3", label="located (±2σ)")
+        axes[0].legend(fontsize=8)
+        fig.tight_layout()
+        return fig
+
+    def __str__(self) -> str:
+        lines = [f"Joint locations from {self.n_cases} cases (σ at landmark noise "
+                 f"{self.landmark_sigma:g} mm):"]
+        for j in self.joints:
+            head = f"  {j.name:<24} {j.kind:<19}"
+            if j.centre is None:
+                lines.append(f"{head} not observable from these cases ({j.note})")
+                continue
+            c, s = j.centre, j.sigma
+            text = (f"{head} ({c[0]:9.3f}, {c[1]:9.3f}, {c[2]:9.3f}) mm "
+                    f"± ({s[0]:.3f}, {s[1]:.3f}, {s[2]:.3f})")
+            if j.axis is not None:
+                text += f"  axis ({j.axis[0]:.5f}, {j.axis[1]:.5f}, {j.axis[2]:.5f})"
+            lines.append(text + f"  rms {j.residual:.2e}" + (f"  [{j.note}]" if j.note else ""))
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- solvers
+
+
+def element_table(mech):
+    """name → (group, kind, I part, J part, I marker, J marker) of every joint and bushing."""
+    part_of = mech.markers.part
+    out = {}
+    for name, kind, i, j in zip(mech.joints.names, mech.joints.kind, mech.joints.i_marker,
+                                mech.joints.j_marker, strict=True):
+        out[name] = ("joint", kind, part_of[i], part_of[j], i, j)
+    for name, i, j in zip(mech.bushings.names, mech.bushings.i_marker, mech.bushings.j_marker,
+                          strict=True):
+        out[name] = ("bushing", "bushing", part_of[i], part_of[j], i, j)
+    return out
+
+
+def read_joints(path) -> tuple[GeometricJoint, ...]:
+    """The joint list of a JSON file: a list of objects with the `GeometricJoint` fields (name,
+    kind, parts, and optionally slide, prior, prior_coordinate, link_ball, elements; spec
+    geometry §4.6). Raises `ModelFileError` naming the file (and the line, or the joint) on an
+    unreadable file, non-JSON text or an invalid joint."""
+    from ..errors import ModelFileError
+
+    path = Path(path)
+    try:
+        items = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as e:
+        raise ModelFileError(f"cannot read the joint list ({e}).", path=path) from None
+    except json.JSONDecodeError as e:
+        raise ModelFileError(f"not JSON: {e.msg}.", path=path, line=e.lineno) from None
+    if not isinstance(items, list):
+        raise ModelFileError("the joint list must be a JSON list of objects with name, kind, "
+                             "parts (and slide, prior, prior_coordinate, link_ball, elements).",
+                             path=path)
+    return tuple(_joint_of(item, k, path) for k, item in enumerate(items))
+
+
+def _joint_of(item, k: int, path: Path) -> GeometricJoint:
+    from ..errors import ModelFileError
+
+    try:
+        item = dict(item)
+        for key in ("parts", "slide", "prior", "elements"):
+            if item.get(key) is not None:
+                item[key] = tuple(item[key])
+        return GeometricJoint(**item)
+    except (TypeError, ValueError) as e:
+        raise ModelFileError(f"joint {k + 1}: {e}", path=path, field="joints") from None
+
+
+def write_joints(report: GeometricReport, path) -> None:
+    """Write the joint table: `.json` → `report.to_json()`; otherwise CSV, one row per joint
+    with the columns of `GeometricReport.rows` (an unobservable joint's coordinates empty)."""
+    path = Path(path)
+    if path.suffix.lower() == ".json":
+        path.write_text(report.to_json() + "\n", encoding="utf-8")
+        return
+    rows = report.rows()
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["joint"])
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: "" if v != v else v for k, v in row.items()})
