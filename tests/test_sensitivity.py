@@ -161,7 +161,7 @@ def test_sensitivity_command(tmp_path):
     fd = (toe[0] - toe[1]) / (2e-4 * k)
     np.testing.assert_allclose(np.asarray(out["metrics"]["toe"]["jacobian"])[:, j], fd,
                                rtol=1e-5, atol=1e-6 * np.abs(fd).max())
-    for bad, message in ((["--params", "all"], "--params must be one of"),
+    for bad, message in ((["--params", "all"], "'all' is not one of"),
                          (["--metric", "nope"], "unknown metric(s) ['nope']")):
         result = runner.invoke(app, ["sensitivity", "pseudo_mcpherson", "--no-derivatives",
                                      "--travel", "-40:40:5", *bad])

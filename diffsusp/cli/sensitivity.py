@@ -8,6 +8,7 @@ magnitude over the event, per relative change of a stiffness or per mm of a hard
 `--json` prints the full Jacobians; `--out DIR` writes one bar chart per metric (PNG, SVG).
 """
 
+import enum
 import pathlib
 import time
 from typing import Annotated
@@ -29,15 +30,19 @@ from .common import (
 )
 from .kc import Event, EventOption, _corner, _model, _nan_to_none, _run_event
 
+ParameterSet = enum.StrEnum("ParameterSet", {name: name for name in PARAMETER_SETS})
+"""The `--params` choices: the named sets of `identify.sensitivity.PARAMETER_SETS`."""
+
+ParamsOption = Annotated[ParameterSet, typer.Option(
+    "--params", "-p", help="parameters: " + "; ".join(f"{k}: {v}" for k, v in
+                                                     PARAMETER_SETS.items()))]
+
 
 def sensitivity_command(
     model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
     side: SideOption = None,
     event: EventOption = Event.parallel_travel,
-    params: Annotated[str, typer.Option(
-        "--params", "-p", help="parameters: " + "; ".join(f"{k}: {v}" for k, v in
-                                                         PARAMETER_SETS.items()))]
-    = "stiffness",
+    params: ParamsOption = ParameterSet.stiffness,
     metric: Annotated[list[str] | None, typer.Option(
         "--metric", help="metric to report (repeatable; default: toe, camber, half-track "
         "change and the derivative metrics the event has)")] = None,
@@ -60,9 +65,6 @@ def sensitivity_command(
 ):
     """Exact sensitivities of MODEL's K&C metrics over an event to its stiffnesses or
     hardpoints, ranked by elasticity."""
-    if params not in PARAMETER_SETS:
-        raise fail(f"--params must be one of {', '.join(PARAMETER_SETS)}; got '{params}'.",
-                   EXIT_BAD_INPUT)
     if top < 1:
         raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
     check_output(out, what="figures folder", directory=True)
@@ -77,7 +79,7 @@ def sensitivity_command(
         with err.status(f"running {event.value} on {mech.name} and differentiating (the first run "
                         "compiles, 1–3 min)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
-            selection = parameter_set(ev.rig.mech, params)
+            selection = parameter_set(ev.rig.mech, params.value)
             names = _metric_names(ev, metric, derivatives)
             report = sensitivity(ev, selection, metrics=names, derivatives=derivatives)
         elapsed = time.perf_counter() - t0
