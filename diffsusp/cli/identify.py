@@ -644,7 +644,7 @@ def fit_command(
     sigma_rotation: Annotated[float, typer.Option(
         help="Pose rotation σ (deg), pose tables only.")] = 0.01,
     loss: Annotated[str, typer.Option(help="linear | huber | cauchy.")] = "linear",
-    max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 100,
+    max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 200,
     reorder: ReorderOpt = False,
     out: OutOpt = None,
     write_model: WriteModelOpt = None,

@@ -254,7 +254,9 @@ class IdentificationReport:
     @property
     def determined(self) -> np.ndarray:
         """Which parameters the data determine, by the method's own criterion (default
-        `identifiable`; `direct` also asks σ% ≤ its `max_sigma_pct`)."""
+        `identifiable`; `direct` also asks σ% ≤ its `max_sigma_pct`, `least_squares` σ% at
+        the start values ≤ its `max_sigma_pct`: a bar on the σ% at the estimate selects the
+        draws by their own noise, see `FitReport.determined`)."""
         return np.asarray(self.identifiable, dtype=bool)
 
     @property
