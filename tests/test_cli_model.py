@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 import diffsusp.cli.model as cli_model  # registers `info` and `simulate`
 from diffsusp.cli import app
 from diffsusp.io import read_table, write_table
+from diffsusp.model.mechanism import PARAMETER_UNITS
 from diffsusp.models import isolated_bushing
 
 DATA = pathlib.Path(cli_model.__file__).parents[1] / "models" / "data"
@@ -253,6 +254,10 @@ def test_info_builtin_json_lists_every_parameter_with_its_unit():
         f"bushings.{f}" for f in ("k_trans", "k_rot", "cubic_trans", "cubic_rot",
                                   "offset_trans", "offset_rot", "preload_force",
                                   "preload_torque", "spline_x", "spline_y")}
+    from diffsusp import load_model
+    from diffsusp.model import parameter_leaves
+
+    assert parameter_leaves(load_model("isolated_bushing")) == info["parameters"]
     text = invoke("info", "isolated_bushing")
     assert "bushings.k_trans" in text.stdout and "N/mm" in text.stdout
 
@@ -264,4 +269,4 @@ def test_every_parameter_leaf_has_a_unit():
     mech = isolated_bushing()
     paths = {jax.tree_util.keystr(p).lstrip(".")
              for p, _ in jax.tree_util.tree_leaves_with_path(mech)}
-    assert paths == set(cli_model.PARAMETER_UNITS)
+    assert paths == set(PARAMETER_UNITS)

@@ -15,7 +15,7 @@ from rich import box
 from rich.table import Table as RichTable
 from rich.text import Text
 
-from ..model.mechanism import PARAMETER_UNITS
+from ..model import parameter_leaves
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
@@ -33,20 +33,6 @@ from .common import (
 _CHUNK = 256
 """Cases per solve (`diffsusp.statics.solve_statics_chunks`: the last chunk is padded so every
 chunk reuses one compiled shape)."""
-
-
-def parameter_leaves(mech) -> list[dict]:
-    """Path, shape and unit of every non-empty float leaf of `mech`."""
-    import jax
-    import numpy as np
-
-    out = []
-    for path, leaf in jax.tree_util.tree_leaves_with_path(mech):
-        if not hasattr(leaf, "shape") or np.size(leaf) == 0:
-            continue
-        name = jax.tree_util.keystr(path).lstrip(".")
-        out.append(dict(path=name, shape=list(leaf.shape), unit=PARAMETER_UNITS.get(name, "?")))
-    return out
 
 
 def _load(model: str, *, check: bool = True, side=None):

@@ -13,11 +13,12 @@ from .mechanism import (
     Mechanism,
     Springs,
     Stops,
+    parameter_leaves,
 )
 from .validate import ValidationReport, validate
 
 __all__ = [
     "GROUND", "JOINT_ROWS", "Bushings", "Drivers", "Joints", "LoadPoints", "Loads", "Markers",
     "Mechanism", "MechanismBuilder", "Springs", "Stops", "ValidationReport", "frame_from_axes",
-    "validate",
+    "parameter_leaves", "validate",
 ]

@@ -412,3 +412,15 @@ PARAMETER_UNITS = {
 }
 """Unit of every float leaf of a `Mechanism` (the parameters one can differentiate and fit),
 from the fields' `unit` metadata."""
+
+
+def parameter_leaves(mech: Mechanism) -> list[dict]:
+    """Path, shape and unit of every non-empty array leaf of `mech` (its parameters: what one
+    can differentiate and fit), in pytree order: `[{"path": "bushings.k", "shape": [4, 3],
+    "unit": "N/mm"}, ...]`; the unit from `PARAMETER_UNITS` (`'?'` for a leaf without one)."""
+    import jax
+
+    return [dict(path=(name := jax.tree_util.keystr(path).lstrip(".")),
+                 shape=list(leaf.shape), unit=PARAMETER_UNITS.get(name, "?"))
+            for path, leaf in jax.tree_util.tree_leaves_with_path(mech)
+            if hasattr(leaf, "shape") and np.size(leaf) > 0]
