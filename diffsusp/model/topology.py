@@ -168,5 +168,10 @@ class Topology:
     def __hash__(self):
         return hash(self.key)
 
+    def __repr__(self):
+        # Derived from the mechanism's static fields: its sizes say enough (and print the same
+        # in every process, unlike the default's address).
+        return f"Topology(n={self.n}, m={self.m})"
+
     def __eq__(self, other):
         return isinstance(other, Topology) and self.key == other.key
