@@ -43,7 +43,9 @@ def extra_draws(scenario, n):
     print(f"extra draws: {n}, LM converged {int(fit.converged.sum())}/{n}")
     for j, name in enumerate(params.names):
         ok = np.array([r.is_identified[j] for r in fit.reports])
-        if ok.sum() < 2:
+        if ok.sum() < 2:  # the gate (sigma% at the start values) is one verdict for all draws
+            print(f"  {name:<14} {int(ok.sum()):>4}/{n} (sigma% at the start "
+                  f"{fit.reports[0].gate_sigma_pct[j]:.3g})")
             continue
         sigma = np.sqrt(np.mean(fit.sigma[ok, j] ** 2))
         spread = err[ok, j].std(ddof=1) / sigma
