@@ -33,14 +33,18 @@ sequences of §4.3 A (straight line, small slip steps ±1°, load sine ±500 N a
 sines ±1° at 3, 4.5, 6 Hz, medium slip profiles ±4°) at 40–160 km/h, simulated through the
 state-space model (3-82…3-87, `relaxation.simulate`) from a known polynomial model and K_y,
 plus the bench's noise.
+
+**Modules.** The conditioning is in `diffsusp.tyre.bench_condition`, the synthetic campaign in
+`diffsusp.tyre.bench_synthetic`; this module holds the structure rules, the two-step
+identification, its Monte-Carlo and `eliminate_r`, and re-exports every public name of the
+three. **Size.** About 900 lines: the two-step procedure, its instrumental-variable σ, the
+structure search and its Monte-Carlo check are one method (3-40…3-46, 3-76, 3-77) read
+together with the thesis's chapter 3.
 """
 
 import dataclasses
-import functools
-import math
 from collections.abc import Mapping
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -48,6 +52,35 @@ import numpy as np
 from .. import lsq
 from ..errors import InputError
 from . import relaxation
+from .bench_condition import (  # noqa: F401  (re-exported; tests reach the private helpers)
+    _PROGRAMS,
+    MAX_SEGMENT,
+    REQUIRED,
+    UNITS,
+    Conditioned,
+    _centred_derivative,
+    _check_table,
+    _condition_block,
+    _filtered_regressor,
+    _kinematics,
+    _quick_jit,
+    _regressor_program,
+    _rows,
+    butterworth,
+    condition,
+    difference_matrix,
+    filter_matrix,
+    filtfilt,
+)
+from .bench_synthetic import (  # noqa: F401  (re-exported)
+    Segments,
+    deformation_from_psa,
+    make_segments,
+    psa_from_deformation,
+    segment_inputs,
+    steering_feel_segments,
+    synthetic_flat_trac,
+)
 from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model, table6_domains
 
 __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "segment_inputs",
@@ -56,554 +89,6 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "segment_inputs",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
            "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT", "eliminate_r"]
 
-REQUIRED = ("t", "segment", "steer", "camber", "speed", "omega", "FZ", "FX", "FY", "MZ")
-UNITS = {"t": "s", "segment": None, "steer": "rad", "camber": "rad", "speed": "mm/s",
-         "omega": "rad/s", "FZ": "N", "FX": "N", "FY": "N", "MZ": "N·mm"}
-
-def _quick_jit(fn):
-    """`jax.jit` with XLA's backend optimisation off: this module's programs (the campaign's
-    simulation, the regressors, the Monte-Carlo) are compiled once and run in well under a
-    second, and compiling them at the default level costs 3× more CPU than it saves (the
-    Monte-Carlo program: 2.7 s instead of 8.3 s to compile, 1.1 s instead of 0.8 s for 40
-    seeds)."""
-    from ..compilation import CPU_OPTIONS
-
-    compiled = {}
-
-    def call(*args):
-        if "f" not in compiled:
-            options = {"xla_backend_optimization_level": 0}
-            if jax.default_backend() == "cpu":
-                options.update(CPU_OPTIONS)
-            compiled["f"] = jax.jit(fn, compiler_options=options)
-        return compiled["f"](*args)
-    return call
-
-
-# --------------------------------------------------------------------------------------------
-# Conversions (spec §1.6 (2-96…2-104))
-
-
-def deformation_from_psa(kappa=0.0, delta=0.0, phi=0.0, phibar=0.0, *, rolling_radius=0.294):
-    """The deformations seen by the patch from the PSA inputs, zero longitudinal slip
-    (2-101…2-104): κ′ = R_r·(1/(κ+1) − 1), δ′ = −R_r·tan δ, φ̄′ = −R_r·φ̄, φ′ = −R_r·φ.
-    κ [-], δ [rad], φ, φ̄ [1/m]; R_r [m] → (κ′ [m], δ′ [m], φ′ [rad], φ̄′ [rad])."""
-    r = rolling_radius
-    return (r * (1.0 / (jnp.asarray(kappa) + 1.0) - 1.0), -r * jnp.tan(jnp.asarray(delta)),
-            -r * jnp.asarray(phi), -r * jnp.asarray(phibar))
-
-
-def psa_from_deformation(kappa_p=0.0, delta_p=0.0, phi_p=0.0, phibar_p=0.0, *,
-                         rolling_radius=0.294):
-    """Inverse of `deformation_from_psa`: (κ, δ [rad], φ, φ̄ [1/m])."""
-    r = rolling_radius
-    return (1.0 / (jnp.asarray(kappa_p) / r + 1.0) - 1.0, jnp.arctan(-jnp.asarray(delta_p) / r),
-            -jnp.asarray(phi_p) / r, -jnp.asarray(phibar_p) / r)
-
-
-# --------------------------------------------------------------------------------------------
-# The test sequences of §4.3 A
-
-
-class Segments(eqx.Module):
-    """Stacked steady states with their excitation (one entry per segment), thesis-like units:
-    `speed` [km/h], `fz0`, `fz_amp` [kN], `fz_freq` [Hz], `camber` [deg], `slip0`, `sine_amp`
-    [deg], `sine_freq` [Hz], `step_amp` [deg], `step_period` [s], `ramp_amp` [deg],
-    `ramp_period` [s], `sequence` (1–5, §4.3 A)."""
-
-    speed: jax.Array
-    fz0: jax.Array
-    fz_amp: jax.Array
-    fz_freq: jax.Array
-    camber: jax.Array
-    slip0: jax.Array
-    sine_amp: jax.Array
-    sine_freq: jax.Array
-    step_amp: jax.Array
-    step_period: jax.Array
-    ramp_amp: jax.Array
-    ramp_period: jax.Array
-    sequence: jax.Array
-
-    @property
-    def n(self) -> int:
-        return int(self.speed.shape[0])
-
-
-def steering_feel_segments(speeds=(40.0, 80.0, 120.0, 160.0), *, sequences=(1, 2, 3, 4, 5),
-                           medium_loads=(3.0, 4.5, 6.0)) -> Segments:
-    """The steering-feel procedure of §4.3 A at `speeds` [km/h]:
-
-    1. straight line: loads 3, 4.5, 6 kN × cambers −1.5, 0, 1.5°, slip 0;
-    2. small slip steps ±1° (smoothed square wave, 2 s period): loads 1.5…6 kN × cambers;
-    3. load sine ±0.5 kN around 3 and 4.5 kN at 3 and 6 Hz, camber 0, slip −1° and +1°;
-    4. slip sines ±1° at 3, 4.5, 6 Hz: loads 3, 4.5, 6 kN × cambers;
-    5. medium slip profile ±4° (smoothed triangle ramps, 4 s period, and steps): `medium_loads`
-       × cambers (the thesis also runs 1.5 kN; a polynomial identified on 1.5–6 kN may be past
-       its grip peak there at 4°, which the simulation model refuses: spec §3.4).
-    """
-    rows = []
-    cambers = (-1.5, 0.0, 1.5)
-    for v in speeds:
-        if 1 in sequences:
-            rows += [dict(speed=v, fz0=f, camber=c, sequence=1) for f in (3.0, 4.5, 6.0)
-                     for c in cambers]
-        if 2 in sequences:
-            rows += [dict(speed=v, fz0=f, camber=c, step_amp=1.0, step_period=2.0, sequence=2)
-                     for f in (1.5, 3.0, 4.5, 6.0) for c in cambers]
-        if 3 in sequences:
-            rows += [dict(speed=v, fz0=f, fz_amp=0.5, fz_freq=hz, slip0=s, sequence=3)
-                     for f in (3.0, 4.5) for hz in (3.0, 6.0) for s in (-1.0, 1.0)]
-        if 4 in sequences:
-            rows += [dict(speed=v, fz0=f, camber=c, sine_amp=1.0, sine_freq=hz, sequence=4)
-                     for f in (3.0, 4.5, 6.0) for c in cambers for hz in (3.0, 4.5, 6.0)]
-        if 5 in sequences:
-            rows += [dict(speed=v, fz0=f, camber=c, ramp_amp=3.0, ramp_period=4.0, step_amp=1.0,
-                          step_period=1.0, sequence=5) for f in medium_loads for c in cambers]
-    return make_segments(rows)
-
-
-def make_segments(rows) -> Segments:
-    """Segments from a list of dicts (missing fields: 0, periods 1 s)."""
-    fields = [f.name for f in dataclasses.fields(Segments)]
-    default = {f: 0.0 for f in fields}
-    default.update(step_period=1.0, ramp_period=1.0)
-    cols = {f: jnp.asarray([float(r.get(f, default[f])) for r in rows]) for f in fields}
-    return Segments(**cols)
-
-
-def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
-    """The inputs of one segment at time t [s]: the PSA slip δ [rad], `fz` [kN], `gamma` [rad],
-    `speed` [m/s], `omega` [rad/s] (free rolling, ω = V·cos δ/R_r: κ′ = 0), `delta` δ′ [m],
-    `phi` φ′ = δ̇/ω [rad], `kappa` [m]."""
-    deg = math.pi / 180.0
-    w = 2.0 * math.pi
-
-    def slip(s):
-        tri = jnp.arcsin(0.98 * jnp.sin(w * s / seg.ramp_period)) / math.asin(0.98)
-        return deg * (seg.slip0 + seg.sine_amp * jnp.sin(w * seg.sine_freq * s)
-                      + seg.step_amp * jnp.tanh(3.0 * jnp.sin(w * s / seg.step_period))
-                      / math.tanh(3.0) + seg.ramp_amp * tri)
-
-    d, ddot = jax.jvp(slip, (jnp.asarray(t, dtype=float),), (jnp.ones_like(t, dtype=float),))
-    v = seg.speed / 3.6
-    omega = v * jnp.cos(d) / rolling_radius
-    return {"slip": d, "fz": seg.fz0 + seg.fz_amp * jnp.sin(w * seg.fz_freq * t),
-            "gamma": seg.camber * deg, "speed": v, "omega": omega,
-            "delta": -v * jnp.sin(d) / omega, "phi": ddot / omega,
-            "kappa": v * jnp.cos(d) / omega - rolling_radius}
-
-
-def _simulate_all_impl(fy_model, mz_model, fx_model, k_fy, k_mz, seg, t, rolling_radius):
-    def one(s):
-        sim = relaxation.simulate(
-            fy_model, mz_model, lambda tt: segment_inputs(s, tt, rolling_radius), t,
-            k_fy=k_fy, k_mz=k_mz, fx=lambda u: fx_model(u), throw=False)
-        u = jax.vmap(lambda tt: segment_inputs(s, tt, rolling_radius))(t)
-        return sim.fy, sim.mz, fx_model(u), u, sim.stable
-    return jax.vmap(one)(seg)
-
-
-_simulate_all = _quick_jit(_simulate_all_impl)
-
-
-def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *, k_fy: float,
-                        k_mz: float, segments: Segments, duration: float = 2.0,
-                        rate: float = 200.0, fx_model: PolynomialModel | None = None,
-                        noise: Mapping[str, float] | None = None, disturbances: bool = False,
-                        seed: int = 0, rolling_radius: float = 0.294) -> dict[str, np.ndarray]:
-    """A synthetic Flat Trac campaign: every segment simulated through the state-space model
-    (3-82…3-87) for `duration` s sampled at `rate` Hz, as a bench table (library units, see
-    `REQUIRED`).
-
-    `noise` is the white measurement noise σ per channel in the table's units (default: FY
-    20 N, MZ 2 000 N·mm, FX 10 N, FZ 10 N: the order of the thesis's F_y residuals);
-    `disturbances=True` adds the bench's periodic disturbances of §4.2 with random phases:
-    wheel non-uniformity at the wheel rotation frequency (30 N on F_y, 3 N·m on M_z), the belt
-    roller at 9.29·V/22.225 Hz (20 N), the foundation mode 8.7 Hz (10 N) and the arm mode
-    0.53 Hz (15 N). Raises `ModelError` if a segment goes beyond the grip peak of `fy_model`.
-    """
-    from ..errors import ModelError
-
-    if fx_model is None:
-        fx_model = PolynomialModel.create("Fx", {"one": 1})
-    t = jnp.arange(int(round(duration * rate))) / rate
-    fy, mz, fx, u, stable = _simulate_all(fy_model, mz_model, fx_model, float(k_fy),
-                                          float(k_mz), segments, t, rolling_radius)
-    if not bool(jnp.all(stable)):
-        bad = int(np.flatnonzero(~np.asarray(stable))[0])
-        raise ModelError(f"segment {bad} goes beyond the grip peak of the F_y polynomial "
-                         "(∂Fy_pneu/∂δ′ ≥ 0): the simulation model is unstable there; reduce "
-                         "its slip or load range.")
-    n_seg, n_t = fy.shape
-    rng = np.random.default_rng(seed)
-    sig = {"FY": 20.0, "MZ": 2000.0, "FX": 10.0, "FZ": 10.0}
-    sig.update(noise or {})
-    table = {
-        "t": np.tile(np.asarray(t), n_seg),
-        "segment": np.repeat(np.arange(n_seg, dtype=float), n_t),
-        "steer": np.asarray(u["slip"]).ravel(),
-        "camber": np.asarray(u["gamma"]).ravel(),
-        "speed": 1e3 * np.asarray(u["speed"]).ravel(),
-        "omega": np.asarray(u["omega"]).ravel(),
-        "FZ": 1e3 * np.asarray(u["fz"]).ravel(),
-        "FX": np.asarray(fx).ravel(),
-        "FY": np.asarray(fy).ravel(),
-        "MZ": 1e3 * np.asarray(mz).ravel(),
-    }
-    for c in ("FY", "MZ", "FX", "FZ"):
-        table[c] = table[c] + sig[c] * rng.standard_normal(table[c].shape)
-    if disturbances:
-        tt = table["t"]
-        theta = np.cumsum(table["omega"]) / rate  # wheel angle, per segment up to a constant
-        v = table["speed"] / 1e3
-        ph = rng.uniform(0, 2 * np.pi, (5, n_seg)).repeat(n_t, axis=1)
-        table["FY"] += (30.0 * np.sin(theta + ph[0])
-                        + 20.0 * np.sin(2 * np.pi * 9.29 * v / 22.225 * tt + ph[1])
-                        + 10.0 * np.sin(2 * np.pi * 8.7 * tt + ph[2])
-                        + 15.0 * np.sin(2 * np.pi * 0.53 * tt + ph[3]))
-        table["MZ"] += 3000.0 * np.sin(theta + ph[4])
-    return table
-
-
-# --------------------------------------------------------------------------------------------
-# Signal conditioning
-
-
-def butterworth(cutoff: float, rate: float, order: int = 4) -> np.ndarray:
-    """Butterworth low-pass of even `order` as second-order sections (n, 6) = [b0 b1 b2 1 a1 a2]
-    per row, bilinear transform with pre-warping, unit DC gain per section (the response of
-    `scipy.signal.butter(order, cutoff/(rate/2), output="sos")`, which puts the gain in the
-    first section instead). Order 4, run forward and backward (`filtfilt`), attenuates a 6 Hz
-    signal by 1e-5 at 25 Hz, and 10 Hz by 7e-4 (order 2: 3e-3 and 2.5e-2)."""
-    if order < 2 or order % 2:
-        raise InputError(f"filter order {order}: an even number ≥ 2")
-    if not 0 < cutoff < rate / 2:
-        raise InputError(f"cut-off {cutoff:g} Hz must lie in (0, {rate / 2:g}) Hz (Nyquist)")
-    k = math.tan(math.pi * cutoff / rate)
-    rows = []
-    for m in range(order // 2):
-        q = 1.0 / (2.0 * math.cos(math.pi * (2 * m + 1) / (2 * order)))
-        norm = 1.0 / (1.0 + k / q + k * k)
-        b0 = k * k * norm
-        rows.append([b0, 2.0 * b0, b0, 1.0, 2.0 * (k * k - 1.0) * norm,
-                     (1.0 - k / q + k * k) * norm])
-    return np.array(rows)
-
-
-def _section_zi(sec):
-    """lfilter_zi of one section: (I − companion(a)ᵀ)·zi = b[1:] − a[1:]·b[0]."""
-    A = jnp.array([[1.0 + sec[4], -1.0], [sec[5], 1.0]])
-    return jnp.linalg.solve(A, jnp.stack([sec[1] - sec[4] * sec[0], sec[2] - sec[5] * sec[0]]))
-
-
-def filtfilt(sos, x):
-    """Zero-phase filtering of x along its last axis, as `scipy.signal.sosfiltfilt(sos, x)`
-    with its defaults (odd extension of 3·(2·n_sections + 1) samples, steady-state initial
-    conditions in every section). Traceable (`lax.scan`), vmappable."""
-    sos = jnp.asarray(sos, dtype=float)
-    x = jnp.asarray(x, dtype=float)
-    n_sec = sos.shape[0]
-    pad = 3 * (2 * n_sec + 1)
-    if x.shape[-1] <= pad:
-        raise InputError(f"a segment of {x.shape[-1]} samples is too short for the zero-phase "
-                         f"filter (more than {pad} needed)")
-    # Steady state of section s for a constant input: its input is x0 times the DC gain of
-    # the sections before it.
-    gains = jnp.sum(sos[:, :3], axis=1) / jnp.sum(sos[:, 3:], axis=1)
-    scale = jnp.concatenate([jnp.ones(1), jnp.cumprod(gains)[:-1]])
-    zis = [_section_zi(sos[s]) * scale[s] for s in range(n_sec)]
-
-    def run(v):
-        for s in range(n_sec):
-            v = _sos_one(sos[s], v, zis[s])
-        return v
-
-    def one(v):
-        ext = jnp.concatenate([2 * v[0] - v[pad:0:-1], v, 2 * v[-1] - v[-2:-pad - 2:-1]])
-        y = run(ext)
-        y = run(y[::-1])[::-1]
-        return y[pad:-pad]
-
-    flat = x.reshape(-1, x.shape[-1])
-    return jax.vmap(one)(flat).reshape(x.shape)
-
-
-def _sos_one(sec, v, zi):
-    """One section with initial state zi·v[0] (sosfilt's convention: zi scaled by x[0])."""
-    b0, b1, b2, _, a1, a2 = (sec[i] for i in range(6))
-
-    def step(z, xi):
-        y = b0 * xi + z[0]
-        return jnp.stack([b1 * xi - a1 * y + z[1], b2 * xi - a2 * y]), y
-    return jax.lax.scan(step, zi * v[0], v)[1]
-
-
-MAX_SEGMENT = 2048
-"""Longest segment filtered as one block (samples); longer ones are cut into equal pieces."""
-
-
-@functools.lru_cache(maxsize=16)
-def filter_matrix(cutoff: float, rate: float, m: int, order: int = 4) -> np.ndarray:
-    """The zero-phase filter of a segment of m samples as an (m, m) matrix: `filtfilt(sos, x)
-    = F @ x` (NumPy, cached). `filtfilt` is linear in x (odd extension, steady-state initial
-    conditions scaled by the end samples), so F is the filter applied to the identity; it
-    makes the conditioning a few matrix products and gives the noise model of the
-    identification (`identify_output`) its correlations."""
-    sos = butterworth(cutoff, rate, order)
-    n_sec = sos.shape[0]
-    pad = 3 * (2 * n_sec + 1)
-    if m <= pad:
-        raise InputError(f"a segment of {m} samples is too short for the zero-phase filter "
-                         f"(more than {pad} needed)")
-    gains = sos[:, :3].sum(axis=1) / sos[:, 3:].sum(axis=1)
-    scale = np.concatenate([[1.0], np.cumprod(gains)[:-1]])
-    zis = [np.linalg.solve(np.array([[1.0 + c[4], -1.0], [c[5], 1.0]]),
-                           np.array([c[1] - c[4] * c[0], c[2] - c[5] * c[0]])) * scale[s]
-           for s, c in enumerate(sos)]
-
-    def section(sec, v, zi):
-        b0, b1, b2, _, a1, a2 = sec
-        z0, z1 = zi[0] * v[0], zi[1] * v[0]
-        out = np.empty_like(v)
-        for i in range(v.shape[0]):
-            y = b0 * v[i] + z0
-            z0, z1 = b1 * v[i] - a1 * y + z1, b2 * v[i] - a2 * y
-            out[i] = y
-        return out
-
-    def run(v):
-        for s in range(n_sec):
-            v = section(sos[s], v, zis[s])
-        return v
-
-    x = np.eye(m)
-    ext = np.concatenate([2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2:-pad - 2:-1]])
-    y = run(run(ext)[::-1])[::-1]
-    return np.ascontiguousarray(y[pad:-pad])
-
-
-@functools.lru_cache(maxsize=16)
-def difference_matrix(m: int, dt: float) -> np.ndarray:
-    """`_centred_derivative` as an (m, m) matrix (NumPy, cached)."""
-    return np.asarray(_centred_derivative(np.eye(m).T, dt)).T.copy()
-
-
-@dataclasses.dataclass(frozen=True)
-class Conditioned:
-    """Conditioned bench data (polynomial units: fz [kN], delta, kappa [m], phi, gamma [rad],
-    pi_* products, fydot_w [N], fy, fx [N]).
-
-    **Parallel filtering:** the regression is run on the *filtered* output and the *filtered
-    columns* of the regressor built from the unfiltered inputs, H(y) = H(W(u))·b, which holds
-    exactly for any linear filter H; filtering the inputs instead, W(H(u)), misses the
-    harmonics that the nonlinear terms create (at 25 Hz the δ′³ term of a 6 Hz slip sine is
-    off by several newtons). Ḟ_y too is taken by centred differences of the *unfiltered* F_y
-    inside the relaxation columns, which are then low-passed with the others: the same 25 Hz
-    band as the thesis's filter-then-differentiate, without a second attenuation of the F_y
-    harmonics near the cut-off (filtering F_y before differencing biased the δ′², δ′⁴
-    relaxation terms by one σ on noise-free synthetic data; the noise is removed by the outer
-    filter alike).
-
-    **Fields:** `samples` (input → (segments, samples) unfiltered, full rate, with `omega`),
-    `operator` (the filter's rows at the kept samples, (rows, samples): H_rows),
-    `difference` (the centred-difference matrix), `sos` (the filter's second-order
-    sections), `rows` (the kept sample indices after trimming the ends and thinning),
-    `inputs` (the same inputs at the kept rows, for checks and plots), `fy` [N], `mz` [N·m]
-    (filtered, kept rows), `rate` [Hz] after thinning, `segment` per kept row,
-    `excitation` (input → standard deviation), `dt` [s] the sampling step, `noise` (FY [N],
-    MZ [N·m] → the white-noise σ from their content above the cut-off)."""
-
-    samples: dict
-    sos: np.ndarray
-    rows: np.ndarray
-    inputs: dict
-    fy: np.ndarray
-    mz: np.ndarray
-    rate: float
-    segment: np.ndarray
-    excitation: dict
-    operator: np.ndarray
-    difference: np.ndarray
-    dt: float
-    noise: dict
-
-    def regressor(self, model) -> np.ndarray:
-        """H(W(u)) at the kept rows, (n, p), for a `lsq.algebra.LinearModel`."""
-        W = np.asarray(_regressor_program(model)(self.samples))
-        return np.einsum("rm,smp->srp", self.operator, W).reshape(-1, W.shape[-1])
-
-
-_PROGRAMS: dict = {}
-
-
-def _regressor_program(model):
-    """One compiled regressor per model structure (its names and inputs), reused by every
-    call with equal shapes."""
-    key = (model.names, model.inputs)
-    if key not in _PROGRAMS:
-        _PROGRAMS[key] = _quick_jit(lambda s: model.regressor(s))
-    return _PROGRAMS[key]
-
-
-def _centred_derivative(v, dt):
-    """dv/dt by the five-point centred difference (−v₊₂ + 8v₊₁ − 8v₋₁ + v₋₂)/12h, error
-    O(h⁴) (the three-point one, O(h²), is 0.6 % off at 6 Hz sampled at 200 Hz, which biases
-    the relaxation terms by several σ); three-point at the second and penultimate samples and
-    one-sided at the ends (trimmed away by `condition`). NumPy in, NumPy out."""
-    xp = np if isinstance(v, np.ndarray) else jnp
-    inner = (-v[..., 4:] + 8 * v[..., 3:-1] - 8 * v[..., 1:-3] + v[..., :-4]) / (12 * dt)
-    two = (v[..., 2:] - v[..., :-2]) / (2 * dt)
-    first = (v[..., 1:2] - v[..., 0:1]) / dt
-    last = (v[..., -1:] - v[..., -2:-1]) / dt
-    return xp.concatenate([first, two[..., :1], inner, two[..., -1:], last], axis=-1)
-
-
-def _kinematics(cols, Dm, rolling_radius):
-    """(segments, samples) channels (table units) → the deformation inputs and Ḟ_y/ω at full
-    rate, polynomial units; NumPy or JAX arrays (the difference as the matrix Dm)."""
-    xp = np if isinstance(cols["FY"], np.ndarray) else jnp
-    speed = cols["speed"] * 1e-3
-    steer = cols["steer"]
-    omega = cols["omega"]
-    vx, vy = speed * xp.cos(steer), -speed * xp.sin(steer)
-    bdot = steer @ Dm.T
-    g = cols["camber"]
-    fz = cols["FZ"] * 1e-3
-    # F_x as its load polynomial F̂x_pneu(F_z) (3-48), fitted to the measured F_x: the
-    # coupling column −F_y·F_x of M_z (3-69) built from the raw F_x is an error in the
-    # variables (3 N of F_x noise times F_y: a 0.75 σ bias of M_z's coefficients)
-    V = xp.stack([xp.ones_like(fz), fz, fz**2, fz**3], axis=-1).reshape(-1, 4)
-    coef = xp.linalg.lstsq(V, cols["FX"].reshape(-1), rcond=None)[0]
-    return {
-        "fz": fz, "kappa": vx / omega - rolling_radius, "delta": vy / omega,
-        "phi": bdot / omega, "gamma": g, "pi_gamma_vx": g * vx / omega,
-        "pi_gamma_bdot": g * bdot / omega, "pi_gamma2_bdot": g * g * bdot / omega,
-        "fydot_w": (cols["FY"] @ Dm.T) / omega, "fy": cols["FY"],
-        "fx": (V @ coef).reshape(fz.shape), "omega": omega}
-
-
-@jax.jit
-def _condition_block(cols, sos, dt, rolling_radius):
-    """(segments, samples) arrays → deformation inputs (unfiltered kinematics), Ḟ_y/ω,
-    filtered F_y and M_z, by the scan filter (`filtfilt`): the benchmark's long-record path."""
-    m = cols["FY"].shape[-1]
-    eye = jnp.eye(m)
-    Dm = _centred_derivative(eye, dt).T
-    samples = _kinematics(cols, Dm, rolling_radius)
-    return samples, filtfilt(sos, cols["FY"]), filtfilt(sos, cols["MZ"]) * 1e-3
-
-
-@eqx.filter_jit
-def _filtered_regressor(model, samples, sos, rows):
-    W = model.regressor(samples)  # (segments, samples, p)
-    Wf = filtfilt(sos, jnp.moveaxis(W, -1, -2))  # along time
-    return jnp.moveaxis(Wf[..., rows], -1, -2).reshape(-1, W.shape[-1])
-
-
-def _check_table(table, cutoff):
-    """Check a bench table; returns (channels as (segments, samples) arrays, number of
-    segments, samples per segment, rate [Hz]). Segments longer than `MAX_SEGMENT` samples are
-    cut into equal pieces (each filtered on its own; the tail beyond a whole number of pieces
-    is dropped)."""
-    missing = [c for c in REQUIRED if c not in table]
-    if missing:
-        raise InputError(f"bench table: missing channel(s) {', '.join(missing)}; a Flat Trac "
-                         f"table needs {', '.join(REQUIRED)} (units {UNITS}). Add them, or map "
-                         "your column names to these.")
-    cols = {c: np.asarray(table[c], dtype=float) for c in REQUIRED}
-    n = {len(v) for v in cols.values()}
-    if len(n) != 1:
-        raise InputError("bench table: channels of different lengths")
-    for c, v in cols.items():
-        if not np.all(np.isfinite(v)):
-            i = int(np.flatnonzero(~np.isfinite(v))[0])
-            raise InputError(f"bench table: channel {c} has a non-finite value at row {i + 1}; "
-                             "remove or repair that row.")
-    seg = cols["segment"]
-    ids, starts, counts = np.unique(seg, return_index=True, return_counts=True)
-    order = np.argsort(starts)
-    ids, starts, counts = ids[order], starts[order], counts[order]
-    if np.any(np.diff(starts) != counts[:-1]):
-        raise InputError("bench table: the rows of a segment must be contiguous (sort by "
-                         "segment, then time).")
-    if len(set(counts.tolist())) != 1:
-        raise InputError(f"bench table: segments of different lengths {sorted(set(counts))}; "
-                         "cut them to a common length (the conditioning is batched).")
-    m = int(counts[0])
-    t = cols["t"].reshape(len(ids), m)
-    dt = np.diff(t, axis=1)
-    if np.any(dt <= 0):
-        s, i = np.argwhere(dt <= 0)[0]
-        raise InputError(f"bench table: time is not increasing in segment {ids[s]:g} at row "
-                         f"{starts[s] + i + 2} (t = {t[s, i + 1]:g} s after {t[s, i]:g} s); "
-                         "sort the rows by time or remove duplicates.")
-    step = float(np.median(dt))
-    if np.max(np.abs(dt - step)) > 1e-6 * max(step, 1e-12) + 1e-9:
-        raise InputError("bench table: the sampling is not uniform; resample to a constant "
-                         "rate first (the filter and the centred differences assume one).")
-    rate = 1.0 / step
-    if rate < 4.0 * cutoff:
-        raise InputError(f"bench table: the sampling rate {rate:.4g} Hz is too low for the "
-                         f"{cutoff:g} Hz low-pass filter (at least {4 * cutoff:g} Hz, 4× the "
-                         "cut-off); record faster or lower the cut-off.")
-    if m < 30:
-        raise InputError(f"bench table: segments of {m} samples are too short to filter "
-                         "(at least 30).")
-    if np.any(cols["omega"] <= 0):
-        raise InputError("bench table: omega must be > 0 (the wheel rolls); the deformation "
-                         "inputs divide by it.")
-    blocks = {c: v.reshape(len(ids), m) for c, v in cols.items()}
-    pieces = -(-m // MAX_SEGMENT)
-    if pieces > 1:
-        mm = m // pieces
-        blocks = {c: v[:, :pieces * mm].reshape(len(ids) * pieces, mm)
-                  for c, v in blocks.items()}
-        m = mm
-    return blocks, blocks["FY"].shape[0], m, rate
-
-
-def _rows(m, rate, cutoff, decimate, trim):
-    # (+1e-6: a rate of 199.999… Hz from the time column still thins by 4 at 25 Hz)
-    k = decimate if decimate is not None else max(1, int(rate / (2 * cutoff) + 1e-6))
-    trim = trim if trim is not None else max(5, int(2 * rate / cutoff + 1e-6))
-    rows = np.arange(trim, m - trim, k)
-    if len(rows) < 2:
-        raise InputError(f"bench table: segments of {m} samples leave nothing after trimming "
-                         f"{trim} samples at each end; record longer segments.")
-    return rows, k
-
-
-def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 294.0,
-              decimate: int | None = None, trim: int | None = None, order: int = 4
-              ) -> Conditioned:
-    """Check and condition a bench table (see the module docstring and `Conditioned`).
-
-    **Arguments:** `table` (column → array, library units, `REQUIRED`); `cutoff` [Hz] (25 Hz:
-    above the wheel rotation at 160 km/h, spec §3.4); `rolling_radius` R_r [mm];
-    `order` of the Butterworth filter (run forward and backward); `decimate`: keep every m-th
-    row (default m = ⌊rate/(2·cutoff)⌋); `trim`: samples dropped at
-    each end of a segment (the filter's edge transient; default 2·rate/cutoff, at least 5).
-    """
-    cols, n_seg, m, rate = _check_table(table, cutoff)
-    rows, k = _rows(m, rate, cutoff, decimate, trim)
-    H = filter_matrix(float(cutoff), float(rate), m, order)[rows]
-    Dm = difference_matrix(m, 1.0 / rate)
-    samples = _kinematics(cols, Dm, rolling_radius * 1e-3)
-    inputs = {c: np.asarray(v)[:, rows].ravel() for c, v in samples.items()}
-    segment = np.repeat(np.arange(n_seg, dtype=float), len(rows))
-    exc = {c: float(np.std(inputs[c])) for c in ("kappa", "delta", "phi", "gamma", "fz",
-                                                   "pi_gamma_vx", "pi_gamma_bdot",
-                                                   "pi_gamma2_bdot")}
-    # The white-noise level of F_y and M_z from their content above the cut-off (the
-    # residual of the filter), an estimate independent of the model: I − F removes the band.
-    E = np.eye(m) - filter_matrix(float(cutoff), float(rate), m, order)
-    tr = np.sum(E * E)
-    noise = {c: float(np.sqrt(np.sum((cols[c] @ E.T) ** 2) / (n_seg * tr))) * u
-             for c, u in (("FY", 1.0), ("MZ", 1e-3))}
-    return Conditioned(samples, butterworth(cutoff, rate, order), rows, inputs,
-                       (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3,
-                       rate / k, segment, exc, H, Dm, 1.0 / rate, noise)
 
 # --------------------------------------------------------------------------------------------
 # Structure search rules (spec §3.3 validation criteria, §7 item 19)
