@@ -19,7 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 import oracle  # tests/oracle.py (pytest puts tests/ on sys.path)
 import pytest
+from helpers import tree_allclose
 from scipy.spatial.transform import Rotation
+from zoo import TRAVEL_SWEEP, zoo_case, zoo_solution  # noqa: F401  (fixtures)
 
 import diffsusp
 from diffsusp import MechanismBuilder
@@ -467,113 +469,42 @@ def test_gibbs_round_trip():
 
 # ----------------------------------------------------------------------------- the zoo
 #
-# `diffsusp.models` (built-in reference mechanisms) is imported inside the fixtures, so this file
-# collects even where it is missing; the names are read at collection when it is importable.
-# Every zoo model gets load cases (the thesis envelope at 'contact_patch' for the axles,
-# scaled random loads at its load points otherwise); the axles built with wheel_travel=True
-# get a ±80 mm sweep of driver 'wheel_travel'. These compile diffsusp once per model: slow.
+# Every (model, load set) of `tests/zoo.py` solved by diffsusp (the zoo's one program per entry)
+# and by the oracle (warm-started along a travel sweep, from design for the envelope).
 
 
-def _zoo_names() -> list[str]:
-    try:
-        from diffsusp.models import ZOO
-    except ImportError:
-        return ["<diffsusp.models not importable>"]
-    return list(ZOO)
-
-
-TRAVEL_MODELS = {
-    "pseudo_mcpherson": lambda models: models.pseudo_mcpherson(wheel_travel=True),
-    "double_wishbone": lambda models: models.double_wishbone(wheel_travel=True),
-    "double_wishbone_bushings": lambda models: models.double_wishbone(bushings=True,
-                                                                     wheel_travel=True),
-}
-"""Axles of the zoo built with wheel_travel=True (driver 'wheel_travel', wheel centre z)."""
-
-ENVELOPE_EXTRA = np.array([[6000.0, -3000.0, 3000.0], [4500.0, 3000.0, -3000.0]])
-"""Combined cases added to Table 5-1 (F_vert, F_lat, F_long in N) inside the thesis envelope
-(vertical 1 500–7 500 N, lateral and longitudinal ±4 000 N)."""
-TRAVEL_SWEEP = np.linspace(-80.0, 80.0, 9)  # mm
-
-
-def _models():
-    return pytest.importorskip("diffsusp.models", reason="diffsusp.models is not written yet")
-
-
-def sensible_loads(mech, *, rotation=0.05, displacement=5.0, seed=0):
-    """Load cases for a model without a contact patch: forces and moments of random directions
-    at every load point, each case scaled from a trial solve (by the oracle) so that no part
-    turns more than `rotation` rad and no marker moves more than `displacement` mm."""
-    rng = np.random.default_rng(seed)
-    n_l, n_d = len(mech.load_points.names), len(mech.drivers.names)
-    x0 = np.asarray(mech.markers.position)
-    force, moment = [], []
-    for _ in range(4):
-        f = rng.normal(size=(n_l, 3))
-        m = 0.2 * mech.length_scale * rng.normal(size=(n_l, 3))
-        trial = oracle.solve(mech, f, m, np.zeros(n_d))
-        x, _ = oracle.marker_poses(mech, trial.p, trial.R)
-        turn = float(np.max(oracle.rotation_angle(trial.R), initial=0.0))
-        move = float(np.max(np.abs(x - x0)))
-        scale = min(rotation / max(turn, 1e-300), displacement / max(move, 1e-300), 1e5)
-        force.append(scale * f)
-        moment.append(scale * m)
-    return diffsusp.Loads(force=jnp.asarray(np.array(force)), moment=jnp.asarray(
-        np.array(moment)), driver=jnp.zeros((len(force), n_d)))
-
-
-@pytest.fixture(scope="module", params=_zoo_names())
-def zoo(request):
-    """One zoo model and its load cases, solved by diffsusp and by the oracle."""
-    models = _models()
-    name = request.param
-    if name not in getattr(models, "ZOO", {}):
-        pytest.skip("diffsusp.models.ZOO is not available yet")
-    mech = models.ZOO[name]()
-    if "contact_patch" in mech.load_points.names:
-        table = np.vstack([np.asarray(models.TABLE_5_1), ENVELOPE_EXTRA])
-        loads = models.thesis_load_cases(mech, table)
-    else:
-        loads = sensible_loads(mech)
-    sol = diffsusp.solve_statics(mech, loads)
-    return name, mech, sol, solve_oracle(mech, loads, chain=False)
-
-
-@pytest.fixture(scope="module", params=list(TRAVEL_MODELS))
-def zoo_travel(request):
-    """One axle built with wheel_travel=True, swept over ±80 mm by both solvers (diffsusp from
-    the design position for every case, the oracle warm-started along the sweep)."""
-    models = _models()
-    name = request.param
-    mech = TRAVEL_MODELS[name](models)
-    loads = mech.loads(drivers={"wheel_travel": jnp.asarray(TRAVEL_SWEEP)})
-    sol = diffsusp.solve_statics(mech, loads)
-    return name, mech, sol, solve_oracle(mech, loads, chain=True)
+@pytest.fixture(scope="module")
+def zoo_oracle(zoo_solution):  # noqa: F811  (the zoo fixture)
+    case, sol = zoo_solution
+    return case, sol, solve_oracle(case.mech, case.loads, chain=case.load_set == "travel")
 
 
 @pytest.mark.slow
-def test_zoo_loads_agree_with_oracle(zoo):
-    name, mech, sol, sols = zoo
+def test_zoo_agrees_with_oracle(zoo_oracle):
+    case, sol, sols = zoo_oracle
+    mech = case.mech
     assert np.all(np.asarray(sol.status) == 0)
     assert all(s.converged for s in sols)
+    if case.load_set == "travel":
+        k = mech.drivers.names.index("wheel_travel")
+        m, direction = mech.drivers.marker[k], np.asarray(mech.drivers.direction[k])
+        x0 = np.asarray(mech.markers.position[m])
+        travel = [(oracle.marker_poses(mech, s.p, s.R)[0][m] - x0) @ direction for s in sols]
+        np.testing.assert_allclose(travel, TRAVEL_SWEEP, rtol=0, atol=1e-10)
     diff = compare(mech, np.asarray(sol.q), np.asarray(sol.multipliers), sols)
-    AGREEMENT[f"zoo {name} loads"] = diff
+    AGREEMENT[f"zoo {case.model} {case.load_set}"] = diff
     check_agreement(diff)
 
 
 @pytest.mark.slow
-def test_zoo_wheel_travel_agrees_with_oracle(zoo_travel):
-    name, mech, sol, sols = zoo_travel
-    assert np.all(np.asarray(sol.status) == 0)
-    assert all(s.converged for s in sols)
-    k = mech.drivers.names.index("wheel_travel")
-    m, direction = mech.drivers.marker[k], np.asarray(mech.drivers.direction[k])
-    x0 = np.asarray(mech.markers.position[m])
-    travel = [(oracle.marker_poses(mech, s.p, s.R)[0][m] - x0) @ direction for s in sols]
-    np.testing.assert_allclose(travel, TRAVEL_SWEEP, rtol=0, atol=1e-10)
-    diff = compare(mech, np.asarray(sol.q), np.asarray(sol.multipliers), sols)
-    AGREEMENT[f"zoo {name} wheel travel"] = diff
-    check_agreement(diff)
+def test_zoo_batch_equals_loop(zoo_solution):  # noqa: F811  (the zoo fixture)
+    """vmap = loop over the zoo: every case of the batch is solved as if alone (no cross-talk
+    between the cases of a batch: the batch reversed, the same compiled program, gives every
+    case the same solution)."""
+    case, sol = zoo_solution
+    flipped = diffsusp.solve_statics(case.mech, jax.tree.map(lambda a: a[::-1], case.loads))
+    tree_allclose((flipped.q[::-1], flipped.multipliers[::-1], flipped.status[::-1]),
+                  (sol.q, sol.multipliers, sol.status), rtol=0, atol=1e-10)
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import central_fd
 
 import diffsusp as ds
 from diffsusp.geometry import gibbs_to_matrix, projected_angles, reuler_deg_to_matrix
@@ -96,14 +97,6 @@ def _tip_position(mech, loads):
     return pos[mech.markers.index("tip")]
 
 
-def _central_fd(fn, x, h):
-    cols = []
-    for k in range(x.size):
-        e = jnp.zeros(x.size).at[k].set(h).reshape(x.shape)
-        cols.append((fn(x + e) - fn(x - e)) / (2 * h))
-    return jnp.stack(cols, axis=-1)
-
-
 @pytest.fixture(scope="module")
 def mount_loads(mount):
     return mount.loads(forces={"load": [50.0, -100.0, 150.0]}, moments={"load": [0, 2e3, 0]})
@@ -144,7 +137,7 @@ def test_gradients_match_central_differences(mount, mount_loads, mount_jacobians
     # Jacobian leaves have shape (3, *leaf.shape): the output axis comes first.
     fwd = where(fwd_all[0]).reshape(3, -1)
     rev = where(rev_all[0]).reshape(-1)
-    fd = _central_fd(f, x0, h).reshape(3, -1)
+    fd = central_fd(f, x0, h).reshape(3, -1)
     scale = jnp.max(jnp.abs(fd))
     np.testing.assert_allclose(weights @ fwd, rev, rtol=1e-10, atol=1e-12 * scale)
     np.testing.assert_allclose(fwd, fd, rtol=1e-6, atol=1e-6 * scale)
@@ -158,7 +151,7 @@ def test_gradient_wrt_loads(mount, mount_loads, mount_jacobians):
 
     fwd = fwd_all[1].force.reshape(3, -1)
     rev = rev_all[1].force.reshape(-1)
-    fd = _central_fd(f, mount_loads.force, 1e-2).reshape(3, -1)
+    fd = central_fd(f, mount_loads.force, 1e-2).reshape(3, -1)
     np.testing.assert_allclose(weights @ fwd, rev, rtol=1e-10, atol=1e-14)
     np.testing.assert_allclose(fwd, fd, rtol=1e-6, atol=1e-10)
 

@@ -1,0 +1,39 @@
+"""Shared test helpers: pytree comparison and finite-difference derivatives (issue 11, item 5).
+
+Import from a test file as `from helpers import tree_allclose, central_fd, fd_jvp` (pytest puts
+`tests/` on `sys.path`).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def tree_allclose(actual, desired, *, rtol=1e-7, atol=0.0, err_msg=""):
+    """Assert that two pytrees have the same structure and every pair of array leaves is close
+    (`numpy.testing.assert_allclose`); a failure names the leaf's path."""
+    with_path = jax.tree_util.tree_leaves_with_path(actual)
+    desired_leaves, desired_def = jax.tree_util.tree_flatten(desired)
+    assert jax.tree_util.tree_structure(actual) == desired_def, (
+        f"{err_msg} pytree structures differ: {jax.tree_util.tree_structure(actual)} vs "
+        f"{desired_def}")
+    for (path, a), d in zip(with_path, desired_leaves, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(d), rtol=rtol, atol=atol,
+                                   err_msg=f"{err_msg} leaf {jax.tree_util.keystr(path)}")
+
+
+def fd_jvp(fn, x, v, h):
+    """Central finite-difference JVP of `fn` at the pytree `x` in the direction `v` (a pytree
+    like `x`): (fn(x + h v) − fn(x − h v)) / 2h, leaf by leaf (second-order accurate)."""
+    plus = fn(jax.tree.map(lambda a, b: a + h * b, x, v))
+    minus = fn(jax.tree.map(lambda a, b: a - h * b, x, v))
+    return jax.tree.map(lambda p, m: (p - m) / (2 * h), plus, minus)
+
+
+def central_fd(fn, x, h):
+    """Jacobian of the array function `fn` at the array `x` by central differences, one column
+    per element of `x` (in C order) stacked on the last axis: shape `fn(x).shape + (x.size,)`."""
+    x = jnp.asarray(x)
+    cols = [fd_jvp(fn, x, jnp.zeros(x.size).at[k].set(1.0).reshape(x.shape), h)
+            for k in range(x.size)]
+    return jnp.stack(cols, axis=-1)
