@@ -898,8 +898,9 @@ def least_squares(
       prior rows scaled by ŝ (`ADAPTIVE_PRIOR_ROUNDS` at most; noise-free data: the pull falls
       as ŝ² each round, to rounding). `prior=None`: no prior (the pre-issue-12 behaviour);
       `prior_sigma` alone: a prior at the start values with that σ (not rescaled).
-    - `max_steps`: LM steps (default `MAX_STEPS` = 200). The stop does not depend on directions the data cannot see: it
-      converges when, at an accepted point, a full Gauss–Newton step would lower χ² (prior
+    - `max_steps`: LM steps (default `MAX_STEPS` = 200). The stop does not depend on
+      directions the data cannot see: it converges when, at an accepted point, a full
+      Gauss–Newton step would lower χ² (prior
       rows included) by less than `gtol` + `ftol`·χ² (`gtol` absolute, in χ² units), or when
       every trial is rejected at a point where such a step would gain less than `STALL_CHI2`
       (the precision of the equilibria); `report.message` says which. `rtol`, `atol`: kept
