@@ -122,30 +122,10 @@ def identify_command(
 
 
 def _figures(rep, table, folder: Path, cutoff, rolling_radius):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    from diffsusp import plot
     from diffsusp.tyre import bench
 
-    folder.mkdir(parents=True, exist_ok=True)
     cond = bench.condition(table, cutoff=cutoff, rolling_radius=rolling_radius)
-    from diffsusp.tyre.poly import regressor_model
-
     for o, r in rep.outputs.items():
-        lip = regressor_model(o, dict(r.model.degrees), ly=True, p2=(o == "Mz"))
-        W = cond.regressor(lip)
-        x = np.array([dict(zip(r.reduced.names, r.reduced.x, strict=True)).get(n, 0.0)
-                      for n in lip.names])
-        y = cond.fy if o == "Fy" else cond.mz
-        fig, ax = plt.subplots(figsize=(9, 4))
-        ax.plot(y, "k-", lw=0.6, label="measured (filtered)")
-        ax.plot(W @ x, "b-", lw=0.6, label="model")
-        ax.plot(y - W @ x, "r-", lw=0.6, label="residual")
-        ax.set_xlabel("sample (conditioned)")
-        ax.set_ylabel(f"{o} [{'N' if o == 'Fy' else 'N·m'}]")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(folder / f"{o.lower()}_measured_vs_model.png", dpi=110)
-        plt.close(fig)
+        plot.save(r.plot(cond), folder / f"{o.lower()}_measured_vs_model", formats=("png",),
+                  dpi=110)

@@ -80,20 +80,8 @@ def register(tyre_app: typer.Typer) -> None:
 
 
 def _figures(out, folder: Path) -> None:
-    import matplotlib
+    from diffsusp import plot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    folder.mkdir(parents=True, exist_ok=True)
     for r in out["reports"]:
-        fig, ax = plt.subplots(figsize=(6, 3))
-        res = r.fit.residuals
-        if res is not None:
-            ax.plot(res, lw=0.6)
-        ax.set_title(f"F_y residuals, {r.grouping}, camber {'in' if r.camber else 'out'}")
-        ax.set_xlabel("row")
-        ax.set_ylabel("N")
-        fig.tight_layout()
-        fig.savefig(folder / f"onboard_{r.grouping}_{'camber' if r.camber else 'nocamber'}.png")
-        plt.close(fig)
+        plot.save(r.plot(), folder / f"onboard_{r.grouping}_"
+                  f"{'camber' if r.camber else 'nocamber'}", formats=("png",), dpi=100)

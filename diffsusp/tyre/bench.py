@@ -245,6 +245,35 @@ class OutputReport:
     @property
     def stiffness_sigma_pct(self) -> float:
         return 100.0 * self.compliance_sigma / abs(self.compliance)
+
+    def plot(self, cond: Conditioned, axes=None):
+        """The conditioned measurement of this output, the identified pneumatic model's
+        prediction W·x on the same rows and the residual, sample by sample (F_y in N, M_z in
+        N·m). `cond`: the `condition` of the table identified. Returns the matplotlib Figure
+        (made without pyplot)."""
+        from matplotlib.figure import Figure
+
+        lip = regressor_model(self.output, dict(self.model.degrees), ly=True,
+                              p2=(self.output == "Mz"))
+        x = np.array([dict(zip(self.reduced.names, self.reduced.x, strict=True)).get(n, 0.0)
+                      for n in lip.names])
+        y = cond.fy if self.output == "Fy" else cond.mz
+        fitted = cond.regressor(lip) @ x
+        if axes is None:
+            fig = Figure(figsize=(9, 4))
+            axes = fig.subplots()
+        else:
+            fig = axes.figure
+        axes.plot(y, "k-", lw=0.6, label="measured (filtered)")
+        axes.plot(fitted, "b-", lw=0.6, label="model")
+        axes.plot(y - fitted, "r-", lw=0.6, label="residual")
+        axes.set_xlabel("sample (conditioned)")
+        axes.set_ylabel(f"{self.output} [{'N' if self.output == 'Fy' else 'N·m'}]")
+        axes.legend(fontsize=7)
+        fig.tight_layout()
+        return fig
+
+
 @dataclasses.dataclass
 class BenchReport:
     """The result of `identify`: `outputs` ("Fy", "Mz" → `OutputReport`), `stable` (the

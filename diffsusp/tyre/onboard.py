@@ -582,6 +582,25 @@ class Report:
         return {"grouping": self.grouping, "camber": self.camber, "delay_s": self.delay,
                 "rows": self.rows, "excluded": self.excluded, "fit": self.fit.to_dict()}
 
+    def plot(self, axes=None):
+        """The F_y residuals of the fit, row by row (N). Returns the matplotlib Figure (made
+        without pyplot)."""
+        from matplotlib.figure import Figure
+
+        if axes is None:
+            fig = Figure(figsize=(6, 3))
+            axes = fig.subplots()
+        else:
+            fig = axes.figure
+        if self.fit.residuals is not None:
+            axes.plot(self.fit.residuals, lw=0.6)
+        axes.set_title(f"F_y residuals, {self.grouping}, camber "
+                       f"{'in' if self.camber else 'out'}")
+        axes.set_xlabel("row")
+        axes.set_ylabel("N")
+        fig.tight_layout()
+        return fig
+
 
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _delay_program(data, options, half, dt):
