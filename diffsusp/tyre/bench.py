@@ -37,7 +37,7 @@ plus the bench's noise.
 **Modules.** The conditioning is in `diffsusp.tyre.bench_condition`, the synthetic campaign in
 `diffsusp.tyre.bench_synthetic`; this module holds the structure rules, the two-step
 identification, its Monte-Carlo and `eliminate_r`, and re-exports every public name of the
-three. **Size.** About 900 lines: the two-step procedure, its instrumental-variable σ, the
+three. **Size.** About 970 lines: the two-step procedure, its instrumental-variable σ, the
 structure search and its Monte-Carlo check are one method (3-40…3-46, 3-76, 3-77) read
 together with the thesis's chapter 3.
 """

@@ -40,7 +40,7 @@ Units SI as `diffsusp.tyre.vehicle` (m, N, s, rad); F_z in kN inside the load po
 Coefficient names follow the thesis: b_delta_2, b_delta_1, b_delta_0 (K_δ = c_{Fy,δ′,1}(F_z)),
 b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (L_R), and b_offset_1 (S_v) when asked for.
 
-**Size.** About 700 lines, one file: the stages (ground plane, body twist, tyre inputs,
+**Size.** About 730 lines, one file: the stages (ground plane, body twist, tyre inputs,
 regression signals, Correvit delay, even/odd IV fit) are one pipeline whose programs are
 compiled together (`_signals_program`, `_iv_program`) and whose windowing choices (`Options`)
 every stage reads; they follow the thesis's chapter 4 section by section.
