@@ -35,9 +35,12 @@ from .geometric import (
     apply_locations,
     correct_geometry,
     design_geometry_cases,
+    element_table,
     joints_from_model,
     locate_joints,
     offset_equivalent,
+    read_joints,
+    write_joints,
 )
 from .iterative import IterativeReport, iterative
 from .least_squares import (
@@ -53,8 +56,8 @@ from .sensitivity import DesignReport, SensitivityReport, design_experiment, sen
 
 __all__ = [
     "CorrectionReport", "GeometricJoint", "GeometricReport", "GeometryDesign", "JointEstimate",
-    "apply_locations", "correct_geometry", "design_geometry_cases", "joints_from_model",
-    "locate_joints", "offset_equivalent",
+    "apply_locations", "correct_geometry", "design_geometry_cases", "element_table",
+    "joints_from_model", "locate_joints", "offset_equivalent", "read_joints", "write_joints",
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
     "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
