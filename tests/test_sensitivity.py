@@ -12,7 +12,7 @@ import pytest
 import diffsusp as ds
 from diffsusp import kc
 from diffsusp.identify.params import Params
-from diffsusp.identify.sensitivity import design_experiment, sensitivity
+from diffsusp.identify.sensitivity import design_experiment, sensitivity, sensitivity_metrics
 from diffsusp.models import isolated_bushing, pseudo_mcpherson, two_bushing_coupler
 
 
@@ -95,6 +95,24 @@ def test_metric_sensitivities_match_finite_differences(travel):
     ranked = rep.ranked("vertical_force")
     assert ranked[0][0] == "spring.k"
     assert abs(ranked[0][1]) >= max(abs(v) for _, v in ranked[1:])
+
+
+def test_sensitivity_metrics_default_to_the_registry_choice(travel):
+    """The default metrics are the event's metrics the K&C registry marks for sensitivity;
+    without derivatives the derivative ones are left out; asked names are checked."""
+    from diffsusp.errors import InputError
+    from diffsusp.kc.metrics import METRICS
+
+    ev = travel[0]
+    names = sensitivity_metrics(ev)
+    expected = sorted(k for k in ev.metrics if k in METRICS and METRICS[k].sensitivity)
+    assert list(names) == expected and {"toe", "camber", "bump_steer"} <= set(names)
+    geometric = sensitivity_metrics(ev, derivatives=False)
+    assert list(geometric) == [k for k in expected if not METRICS[k].derivative]
+    assert "bump_steer" not in geometric and "toe" in geometric
+    assert sensitivity_metrics(ev, ["toe", "camber"]) == ("toe", "camber")
+    with pytest.raises(InputError, match=r"unknown metric\(s\) \['bump_steer'\]"):
+        sensitivity_metrics(ev, ["bump_steer"], derivatives=False)
 
 
 @pytest.mark.slow

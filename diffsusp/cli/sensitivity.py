@@ -69,7 +69,7 @@ def sensitivity_command(
         raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
     check_output(out, what="figures folder", directory=True)
     enable_x64()
-    from diffsusp.identify.sensitivity import parameter_set, sensitivity
+    from diffsusp.identify.sensitivity import parameter_set, sensitivity, sensitivity_metrics
 
     err = console(stderr=True, markup=False)
     with cli_errors():
@@ -80,7 +80,7 @@ def sensitivity_command(
                         "compiles, 1–3 min)..."):
             ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
             selection = parameter_set(ev.rig.mech, params.value)
-            names = _metric_names(ev, metric, derivatives)
+            names = sensitivity_metrics(ev, metric, derivatives=derivatives)
             report = sensitivity(ev, selection, metrics=names, derivatives=derivatives)
         elapsed = time.perf_counter() - t0
         paths = []
@@ -100,22 +100,6 @@ def sensitivity_command(
               f"cases, {len(report.params)} parameters, {elapsed:.1f} s.", highlight=False)
     if paths:
         con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
-
-
-def _metric_names(ev, asked, derivatives: bool) -> tuple[str, ...]:
-    from diffsusp.errors import InputError
-    from diffsusp.kc.metrics import DERIVATIVE_METRICS, flagged
-
-    available = {k for k in ev.metrics if not k.rsplit("/", 1)[-1].startswith("_")}
-    if not derivatives:
-        available = {k for k in available if k.rsplit("/", 1)[-1] not in DERIVATIVE_METRICS}
-    if asked:
-        unknown = sorted(set(asked) - available)
-        if unknown:
-            raise InputError(f"unknown metric(s) {unknown} for the {ev.name} event; available: "
-                             f"{', '.join(sorted(available))}.")
-        return tuple(asked)
-    return tuple(k for k in sorted(available) if k.rsplit("/", 1)[-1] in flagged("sensitivity"))
 
 
 def _table(report, mech_name, ev, params, top) -> Table:

@@ -121,6 +121,38 @@ def _check_metric(report, metric):
     return metric
 
 
+def sensitivity_metrics(event, metrics: Sequence[str] | None = None, *,
+                        derivatives: bool = True) -> tuple[str, ...]:
+    """The metric names of a K&C `event` to differentiate (`sensitivity(..., metrics=)`).
+
+    spec: stiffness §3 (perspective 3: which metrics a parameter moves). The event's public
+    metrics (its `metrics` keys, possibly per side as 'left/toe'; names starting with '_' are
+    internal), without the derivative metrics (`kc.metrics.DERIVATIVE_METRICS`) when
+    `derivatives` is False. With `metrics` given, those names, checked against that set;
+    otherwise the ones the K&C registry marks for sensitivity studies
+    (`kc.metrics.flagged('sensitivity')`: toe, camber, half-track change and the derivative
+    metrics the event has), sorted.
+
+    **Raises:** `InputError` for a name the event does not have.
+    """
+    from ..kc.metrics import DERIVATIVE_METRICS, flagged
+
+    def base(k):
+        return k.rsplit("/", 1)[-1]
+
+    available = {k for k in event.metrics if not base(k).startswith("_")}
+    if not derivatives:
+        available = {k for k in available if base(k) not in DERIVATIVE_METRICS}
+    if metrics:
+        unknown = sorted(set(metrics) - available)
+        if unknown:
+            raise InputError(f"unknown metric(s) {unknown} for the {event.name} event; "
+                             f"available: {', '.join(sorted(available))}.")
+        return tuple(metrics)
+    chosen = flagged("sensitivity")
+    return tuple(k for k in sorted(available) if base(k) in chosen)
+
+
 @eqx.filter_jit
 def _metric_jacobian(rig, loads, params: Params, theta, derivatives: bool):
     from ..kc.events import evaluate, raw_metrics
