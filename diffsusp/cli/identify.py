@@ -14,10 +14,8 @@ name). TABLE is a landmark or pose table with the loads, CSV or Parquet (format 
 (.toml native file; .adm: the stiffnesses written into the Adams dataset the model came from,
 or a complete dataset), and for `iterative` and `fit` the figures to `--figures`.
 
-**Size.** About 750 lines for three verbs (direct, iterative, fit) with their options, outputs
-(terminal table, CSV/JSON reports, model files, figures) and interrupt handling; moving the
-bushing selection and the report rows into the library (the reports' `rows()`) is the next step
-of issue 11, not done yet (the CSV columns are a file format).
+The bushing and parameter selection and start values are `diffsusp.identify.selection`, the
+CSV rows and figures `diffsusp.identify.tables`; this module parses, calls and formats.
 """
 
 import contextlib
@@ -209,7 +207,6 @@ def _print(report, mech, measurements, out, write_model):
 
 
 _DEG = 3.141592653589793 / 180.0
-_ROTATIONAL = ("Krx", "Kry", "Krz")
 
 
 def _check_paths(out, write_model, figures=None):
@@ -219,94 +216,22 @@ def _check_paths(out, write_model, figures=None):
     check_output(figures, what="figures folder", directory=True)
 
 
-def _measured_bushings(mech, meas, names):
-    """The bushings to identify: as named, or every bushing whose parts are all measured."""
-    from ..errors import InputError
-
-    if names:
-        for n in names:
-            if n not in mech.bushings.names:
-                raise InputError(f"model '{mech.name}' has no bushing '{n}'; its bushings: "
-                                 f"{', '.join(mech.bushings.names) or 'none'}.")
-        return tuple(names)
-    out = []
-    for b, name in enumerate(mech.bushings.names):
-        parts = {mech.markers.part[mech.bushings.i_marker[b]],
-                 mech.markers.part[mech.bushings.j_marker[b]]}
-        if all(p < 0 or mech.parts[p] in meas.parts for p in parts):
-            out.append(name)
-    if not out:
-        raise InputError("no bushing of the model connects measured parts only; measure the "
-                         "parts of the bushings to identify, or name them with --bushing.")
-    return tuple(out)
-
-
-def _with_start(mech, names, start):
-    """`mech` with every stiffness of the bushings `names` set to `start` (N/mm and N·mm/deg,
-    the thesis's start: 10⁴ for both)."""
-    import equinox as eqx
-    import numpy as np
-
-    if start is None:
-        return mech
-    if not start > 0:
-        raise fail(f"--start must be a positive stiffness; got {start}.", EXIT_BAD_INPUT)
-    kt, kr = np.array(mech.bushings.k_trans), np.array(mech.bushings.k_rot)
-    for n in names:
-        b = mech.bushings.index(n)
-        kt[b], kr[b] = start, start / _DEG
-    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot), mech, (kt, kr))
-
-
-def _case_channels(mech, q):
-    """Per-case channels for the measured-vs-model figure: toe, camber (deg) and wheel-centre
-    height (mm) of the model's wheel corner when it has one, else the displacement of each
-    part's frame origin (mm). `q`: (cases, n) public coordinates."""
-    import jax
-    import numpy as np
-
-    from .. import kc
-    from ..errors import InputError
-    from ..kc.metrics import corner_geometry
-    from ..statics import part_poses
-
-    try:
-        rc = kc.default_corner(mech).resolve(mech)
-    except (InputError, KeyError, ValueError):
-        rc = None
-    if rc is not None:
-        geo = jax.vmap(lambda qq: corner_geometry(mech, rc, qq))(q)
-        return ({"toe": np.degrees(np.asarray(geo["toe"])),
-                 "camber": np.degrees(np.asarray(geo["camber"])),
-                 "wheel_centre_z": np.asarray(geo["wheel_centre_z"])},
-                [("toe", "toe (deg, in +)"), ("camber", "camber (deg)"),
-                 ("wheel_centre_z", "wheel centre z (mm)")], mech.markers.part[rc.wheel_centre])
-    _, trans = part_poses(mech, q)
-    trans = np.asarray(trans)
-    channels, values = [], {}
-    for p, part in enumerate(mech.parts[:3]):
-        values[part] = np.linalg.norm(trans[:, p], axis=-1)
-        channels.append((part, f"{part} displacement (mm)"))
-    return values, channels, None
-
-
-def _comparison_figure(mech_start, mech_fitted, meas, title):
-    """Measured vs start vs identified model per load case."""
+def _save_figures(figures: dict, folder: Path) -> list:
+    """Save each figure as folder/<name>.png and .svg; the paths written."""
     from .. import plot
-    from ..statics import solve_statics
 
-    series = {}
-    values, channels, wheel_part = _case_channels(mech_fitted, meas.coordinates(
-        mech_fitted, unmeasured="design"))
-    measured_parts = set(meas.parts)
-    if wheel_part is not None and mech_fitted.parts[wheel_part] in measured_parts:
-        series["measured"] = values
-    elif wheel_part is None:
-        series["measured"] = {k: v for k, v in values.items() if k in measured_parts}
-    for label, m in (("start model", mech_start), ("identified", mech_fitted)):
-        sol = solve_statics(m, meas.loads, throw=False)
-        series[label] = _case_channels(m, sol.q)[0]
-    return plot.case_comparison(series, channels, title=title)
+    return [p for name, fig in figures.items() for p in plot.save(fig, folder / name)]
+
+
+def _fit_params(mech, bushings, axes, centres, springs, start, notes):
+    """`identify.selection.fit_selection` with its notes appended to `notes` (kept for
+    tests/test_hardening.py, which imports this name)."""
+    from ..identify.selection import fit_selection
+
+    params, more = fit_selection(mech, bushings, axes, centres=centres, springs=springs,
+                                 start=start)
+    notes.extend(more)
+    return params
 
 
 @contextlib.contextmanager
@@ -334,36 +259,6 @@ def _save_on_interrupt(out, rows, what):
         elif not data:
             where = f"; no {what} had finished"
         raise fail(f"{how}{where}.", EXIT_INTERRUPTED) from None
-
-
-def _partial_fit_rows(params, last):
-    if not last:
-        return []
-    rows = []
-    for k, name in enumerate(params.names):
-        value, unit = _display(name, float(last[0].estimate[k]))
-        rows.append(dict(parameter=name, value=value, unit=unit,
-                         start=float(_display(name, float(params.start[k]))[0]),
-                         step=last[0].step, status="interrupted"))
-    return rows
-
-
-def _partial_iterative_rows(mech0, names, last):
-    from ..identify.iterative import AXES
-
-    if not last:
-        return []
-    rows = []
-    for b, name in enumerate(names):
-        index = mech0.bushings.index(name)
-        for a, axis in enumerate(AXES):
-            scale = _DEG if axis in _ROTATIONAL else 1.0
-            start = (mech0.bushings.k_trans if a < 3 else mech0.bushings.k_rot)[index][a % 3]
-            rows.append(dict(parameter=f"{name}.{axis}",
-                             value=float(last[0].stiffness[b, a] * scale),
-                             unit="N*mm/deg" if axis in _ROTATIONAL else "N/mm",
-                             start=float(start) * scale, status="interrupted"))
-    return rows
 
 
 def _progress():
@@ -419,19 +314,21 @@ def iterative_command(
     enable_x64()
     from .. import measure
     from ..identify.iterative import iterative
+    from ..identify.selection import measured_bushings, with_start
+    from ..identify.tables import interrupted_iterative_rows, iterative_figures
     from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        names = _measured_bushings(mech, meas, bushing)
+        names = measured_bushings(mech, meas, bushing)
         d_t, d_r = measure.bushing_deformations(mech, meas, names)
         measured = np.concatenate([np.asarray(d_t), np.asarray(d_r)], axis=-1)
-        mech0 = _with_start(mech, names, start)
+        mech0 = with_start(mech, names, start)
         last = []
-        with _progress() as progress, _save_on_interrupt(out, lambda: _partial_iterative_rows(
-                mech0, names, last), "iteration"):
+        with _progress() as progress, _save_on_interrupt(out, lambda: interrupted_iterative_rows(
+                mech0, names, last[0] if last else None), "iteration"):
             task = progress.add_task("iteration", total=max_iterations)
 
             def step(i, record):
@@ -450,7 +347,7 @@ def iterative_command(
             _write_model(fitted, write_model, model_file)
         paths = []
         if figures is not None:
-            paths = _iterative_figures(report, mech0, fitted, meas, figures)
+            paths = _save_figures(iterative_figures(report, mech0, fitted, meas), figures)
     if json_output:
         print_json(report.to_dict())
     else:
@@ -469,29 +366,15 @@ def iterative_command(
                    "--max-iterations or a larger --eps.", EXIT_NOT_CONVERGED)
 
 
-def _iterative_rows(report):
-    from ..identify.iterative import AXES
-
-    rows = []
-    for b, name in enumerate(report.bushings):
-        for a, axis in enumerate(AXES):
-            scale = _DEG if axis in _ROTATIONAL else 1.0
-            rows.append(dict(
-                parameter=f"{name}.{axis}", value=float(report.stiffness[b, a] * scale),
-                unit="N*mm/deg" if axis in _ROTATIONAL else "N/mm",
-                start=float(report.start[b, a] * scale),
-                identified=bool(report.identified[b, a]),
-                equalised=bool(report.equalised[b, a]), r=float(report.r[b, a])))
-    return rows
-
-
 def _write_iterative(report, path: Path):
     import json
 
     if path.suffix.lower() == ".json":
         path.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
         return
-    _write_rows(_iterative_rows(report), path)
+    from ..identify.tables import iterative_rows
+
+    _write_rows(iterative_rows(report), path)
 
 
 def _write_rows(rows, path: Path):
@@ -501,123 +384,7 @@ def _write_rows(rows, path: Path):
         writer.writerows(rows)
 
 
-def _iterative_figures(report, mech0, fitted, meas, folder: Path):
-    import numpy as np
-
-    from .. import plot
-    from ..identify.iterative import AXES
-
-    k = np.stack([r.stiffness for r in report.history])  # (iterations, n, 6)
-    histories = {}
-    for b, name in enumerate(report.bushings):
-        for a, axis in enumerate(AXES):
-            if report.identified[b, a]:
-                histories[f"{name}.{axis}"] = np.abs(k[:, b, a] / report.stiffness[b, a] - 1.0
-                                                     ) + 1e-16
-    fig = plot.convergence(histories, ylabel="|K / K_final − 1|",
-                           title=f"{fitted.name}: iterative identification")
-    paths = plot.save(fig, folder / "iterative_convergence")
-    fig = _comparison_figure(mech0, fitted, meas, f"{fitted.name}: measured vs identified")
-    return paths + plot.save(fig, folder / "iterative_cases")
-
-
 # ----------------------------------------------------------------------------- fit
-
-
-def _fit_params(mech, bushings, axes, centres, springs, start, notes):
-    """The selection of `identify fit`. Without --start, a stiffness that is 0 in the model
-    (a free direction of a bushing: no log-scaled start exists) is left out, with a note."""
-    import numpy as np
-
-    from ..errors import InputError
-    from ..identify.params import AXES, Params
-
-    axes = tuple(a.strip() for a in axes.split(",")) if axes else AXES
-    names = tuple(bushings or mech.bushings.names)
-    params = None
-    if names and axes and start is None:
-        for name in names:
-            if name not in mech.bushings.names:
-                break  # Params names the unknown bushing
-        else:
-            k = np.concatenate([np.asarray(mech.bushings.k_trans),
-                                np.asarray(mech.bushings.k_rot)], axis=1)
-            zero = [f"{n}.{a}" for n in names for a in axes
-                    if a in AXES and not k[mech.bushings.index(n), AXES.index(a)] > 0]
-            if zero:
-                notes.append(
-                    f"left out {len(zero)} stiffness(es) that are 0 in the model (free "
-                    f"directions; a zero cannot be fitted on a log scale): {', '.join(zero)}. "
-                    "Give --start to fit every selected stiffness from one positive value.")
-            pairs = [(n, a) for n in names for a in axes if f"{n}.{a}" not in zero]
-            for n in dict.fromkeys(n for n, _ in pairs):
-                axes_n = tuple(a for m, a in pairs if m == n)
-                p = Params.bushing_stiffness(mech, (n,), axes=axes_n)
-                params = p if params is None else params + p
-    elif names and axes:
-        # Every value is replaced by --start: select from a copy without zero stiffnesses.
-        params = Params.bushing_stiffness(_without_zeros(mech), names, axes=axes)
-    if centres:
-        c = Params.bushing_centres(mech, names)
-        params = c if params is None else params + c
-    if springs and mech.springs.names:
-        rate = np.asarray(mech.springs.k) > 0
-        if start is None and not rate.all():
-            notes.append("left out the spring rate(s) that are 0 in the model: " + ", ".join(
-                n for n, ok in zip(mech.springs.names, rate, strict=True) if not ok) + ".")
-        if rate.any() or start is not None:
-            s = Params.leaves(_without_zeros(mech), lambda m: m.springs.k,
-                              None if start is not None else rate)
-            params = s if params is None else params + s
-    if params is None:
-        raise InputError("nothing to identify: the model has no bushings (or --axes is empty, "
-                         "or every selected stiffness is 0: give --start) and neither "
-                         "--centres nor --springs was asked.")
-    if start is not None:
-        values = np.array(params.start, dtype=float)
-        for k, name in enumerate(params.names):
-            axis = name.rsplit(".", 1)[-1]
-            if axis in AXES:
-                values[k] = start / _DEG if axis in _ROTATIONAL else start
-        params = params.with_start(values)
-    return params
-
-
-def _without_zeros(mech):
-    """`mech` with every non-positive stiffness and spring rate set to 1 (a placeholder for a
-    selection whose start values are all given)."""
-    import equinox as eqx
-    import numpy as np
-
-    def positive(a):
-        a = np.asarray(a, dtype=float)
-        return np.where(a > 0, a, 1.0)
-
-    return eqx.tree_at(lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.springs.k), mech,
-                       tuple(positive(a) for a in (mech.bushings.k_trans, mech.bushings.k_rot,
-                                                  mech.springs.k)))
-
-
-def _display(name, value):
-    """Value in the thesis's units: rotational stiffness per degree."""
-    axis = name.rsplit(".", 1)[-1]
-    if axis in _ROTATIONAL:
-        return value * _DEG, "N*mm/deg"
-    if axis in ("Ktx", "Kty", "Ktz") or name.endswith(".k"):
-        return value, "N/mm"
-    return value, "mm"
-
-
-def _fit_rows(report):
-    rows = []
-    for k, name in enumerate(report.names):
-        value, unit = _display(name, report.estimate[k])
-        scale = value / report.estimate[k] if report.estimate[k] else 1.0
-        rows.append(dict(parameter=name, value=float(value), sigma=float(report.sigma[k] * scale),
-                         sigma_pct=float(report.sigma_percent[k]), unit=unit,
-                         start=float(_display(name, report.start[k])[0]),
-                         identifiable=bool(report.identifiable[k])))
-    return rows
 
 
 def fit_command(
@@ -656,6 +423,7 @@ def fit_command(
     derivatives), with σ, σ% and the combinations the data cannot see.
     """
     from ..identify.least_squares import LOSSES
+    from ..identify.tables import fit_rows
 
     _check_paths(out, write_model, figures)
     if loss not in LOSSES:
@@ -665,6 +433,8 @@ def fit_command(
     enable_x64()
     from .. import measure
     from ..identify.least_squares import least_squares
+    from ..identify.selection import fit_selection
+    from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements
     from .common import load_model_file
 
@@ -673,11 +443,11 @@ def fit_command(
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
         data = from_measurements(meas, sigma, sigma_rotation * _DEG)
-        notes: list[str] = []
-        params = _fit_params(mech, bushing, axes, centres, springs, start, notes)
+        params, notes = fit_selection(mech, bushing, axes, centres=centres, springs=springs,
+                                      start=start)
         last = []
-        with _progress() as progress, _save_on_interrupt(out, lambda: _partial_fit_rows(
-                params, last), "LM step"):
+        with _progress() as progress, _save_on_interrupt(out, lambda: interrupted_fit_rows(
+                params, last[0] if last else None), "LM step"):
             task = progress.add_task("step", total=max_steps)
 
             def step(i, record):
@@ -694,13 +464,13 @@ def fit_command(
 
                 out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
             else:
-                _write_rows(_fit_rows(report), out)
+                _write_rows(fit_rows(report), out)
         if write_model is not None:
             _write_model(fitted, write_model, model_file)
         paths = []
         if figures is not None:
-            paths = _fit_figures(report, params.apply(mech, params.start), fitted, meas,
-                                 figures)
+            paths = _save_figures(fit_figures(report, params.apply(mech, params.start), fitted,
+                                              meas), figures)
     if json_output:
         print_json(dict(report.to_dict(), notes=notes))
     else:
@@ -711,18 +481,6 @@ def fit_command(
                    "other --start values, or fewer parameters.", EXIT_NOT_CONVERGED)
 
 
-def _fit_figures(report, mech0, fitted, meas, folder: Path):
-    from .. import plot
-
-    losses = {"loss ½Σr² at the estimate": [max(r.trial_loss, 1e-300) if r.accepted else
-                                            float("nan") for r in report.history]}
-    fig = plot.convergence(losses, ylabel="loss", xlabel="LM step",
-                           title=f"{fitted.name}: least-squares fit")
-    paths = plot.save(fig, folder / "fit_convergence")
-    fig = _comparison_figure(mech0, fitted, meas, f"{fitted.name}: measured vs identified")
-    return paths + plot.save(fig, folder / "fit_cases")
-
-
 def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=()):
     con = console(markup=False)
     table = RichTable(
@@ -731,7 +489,9 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=
     for col in ("parameter", "start", "estimate", "sigma", "sigma%", "unit", "status"):
         table.add_column(col, justify="left" if col in ("parameter", "unit", "status")
                          else "right", no_wrap=col != "status")
-    for row in _fit_rows(report):
+    from ..identify.tables import fit_rows
+
+    for row in fit_rows(report):
         pct = row["sigma_pct"]
         table.add_row(row["parameter"], f"{row['start']:.6g}", f"{row['value']:.6g}",
                       f"{row['sigma']:.3g}", f"{pct:.3g}" if pct == pct else "—", row["unit"],
