@@ -12,6 +12,7 @@ of these landmarks.
 
 import json
 import math
+from types import SimpleNamespace
 
 import matplotlib.figure
 import numpy as np
@@ -19,7 +20,7 @@ import pytest
 
 from diffsusp import identify, measure
 from diffsusp.errors import InputError
-from diffsusp.identify import Params
+from diffsusp.identify import Params, tables
 from diffsusp.identify.report import IdentificationReport
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases
 
@@ -120,3 +121,91 @@ def test_the_measurement_conversions_name_what_is_missing(case):
     assert Params.bushing_centres(ref, ["bushing_A"]).units(ref) == ("mm",) * 3
     assert params.units(ref) == ("N/mm",) * 3 + ("N·mm/rad",) * 3 + ("N/mm",) * 3 + (
         "N·mm/rad",) * 3
+
+
+def test_the_bushing_selection_and_the_start_values(case):
+    """What `identify iterative|fit` select by default, named in the library (issue 11)."""
+    ref = case[0]
+    # Every part measured: every bushing (ground counts as measured). Only the front arm:
+    # bushing_B alone joins it to ground (A holds the rear arm, F the strut).
+    assert identify.measured_bushings(ref, case[1]) == ref.bushings.names
+    front = SimpleNamespace(parts=("front_arm",))
+    assert identify.measured_bushings(ref, front) == ("bushing_B",)
+    assert identify.measured_bushings(ref, front, ["bushing_F"]) == ("bushing_F",)
+    with pytest.raises(InputError, match="has no bushing 'nope'"):
+        identify.measured_bushings(ref, front, ["nope"])
+    with pytest.raises(InputError, match="connects measured parts only"):
+        identify.measured_bushings(ref, SimpleNamespace(parts=()))
+    # The thesis's start (spec stiffness §2.2): 1e4 N/mm and 1e4 N·mm/deg, the named only.
+    started = identify.with_start(ref, ["bushing_A"], 1e4)
+    a = ref.bushings.index("bushing_A")
+    others = [b for b in range(len(ref.bushings.names)) if b != a]
+    np.testing.assert_array_equal(np.asarray(started.bushings.k_trans)[a], 1e4)
+    np.testing.assert_allclose(np.asarray(started.bushings.k_rot)[a] * DEG, 1e4, rtol=1e-15)
+    for field in ("k_trans", "k_rot"):
+        np.testing.assert_array_equal(np.asarray(getattr(started.bushings, field))[others],
+                                      np.asarray(getattr(ref.bushings, field))[others])
+    assert identify.with_start(ref, ["bushing_A"], None) is ref
+    with pytest.raises(InputError, match="--start must be a positive stiffness"):
+        identify.with_start(ref, ["bushing_A"], 0.0)
+    # The fit's selection: a stiffness that is 0 in the model (bushing_F.Krz, a free
+    # direction) is left out with a note, unless a start value is given.
+    params, notes = identify.fit_selection(ref, ["bushing_F"], "Ktz, Krz", springs=True)
+    assert params.names == ("bushing_F.Ktz", "spring.k")
+    assert len(notes) == 1 and "bushing_F.Krz" in notes[0]
+    params, notes = identify.fit_selection(ref, ["bushing_F"], ("Ktz", "Krz"), start=1e4)
+    assert params.names == ("bushing_F.Ktz", "bushing_F.Krz") and not notes
+    np.testing.assert_allclose(np.asarray(params.start) * [1, DEG], 1e4, rtol=1e-15)
+    with pytest.raises(InputError, match="nothing to identify"):  # only the free Krz asked
+        identify.fit_selection(ref, ["bushing_F"], "Krz")
+
+
+def _in_thesis_units(name, value):
+    """Independent of `selection.display_value`: rotational stiffness per degree."""
+    return value * DEG if name[-3:] in ("Krx", "Kry", "Krz") else value
+
+
+def test_the_report_tables_in_the_thesis_units(case):
+    """The CSV rows of `identify iterative|fit` and the rows of an interrupted run
+    (`identify.tables`): per degree where rotational, in the order of the report."""
+    ref, _, params, truth, reports = case
+    it = reports["iterative"]
+    axes = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
+    names = [f"{b}.{a}" for b in it.bushings for a in axes]
+    rows = tables.iterative_rows(it)
+    assert [r["parameter"] for r in rows] == names
+    for row, k, k0, ok in zip(rows, it.stiffness.ravel(), it.start.ravel(),
+                              it.identified.ravel(), strict=True):
+        assert row["unit"] == ("N*mm/deg" if row["parameter"][-3:-1] == "Kr" else "N/mm")
+        assert row["value"] == pytest.approx(_in_thesis_units(row["parameter"], k), rel=1e-15)
+        assert row["start"] == pytest.approx(_in_thesis_units(row["parameter"], k0), rel=1e-15)
+        assert row["identified"] == bool(ok)
+    mech0 = params.apply(ref, 1.5 * params.start)  # the start model of the fixture
+    last = it.history[-1]
+    rows = tables.interrupted_iterative_rows(mech0, it.bushings, last)
+    assert [r["parameter"] for r in rows] == names
+    assert {r["status"] for r in rows} == {"interrupted"}
+    np.testing.assert_allclose([r["value"] for r in rows], [_in_thesis_units(
+        n, k) for n, k in zip(names, last.stiffness.ravel(), strict=True)], rtol=1e-15)
+    np.testing.assert_allclose([r["start"] for r in rows], [_in_thesis_units(
+        n, k) for n, k in zip(names, it.start.ravel(), strict=True)], rtol=1e-15)
+    assert tables.interrupted_iterative_rows(mech0, it.bushings, None) == []
+
+    fit = reports["least_squares"]
+    rows = tables.fit_rows(fit)
+    assert [r["parameter"] for r in rows] == list(fit.names)
+    for k, row in enumerate(rows):
+        name = row["parameter"]
+        assert row["value"] == pytest.approx(_in_thesis_units(name, fit.estimate[k]), rel=1e-15)
+        assert row["sigma"] == pytest.approx(_in_thesis_units(name, fit.sigma[k]), rel=1e-12)
+        assert row["start"] == pytest.approx(_in_thesis_units(name, fit.start[k]), rel=1e-15)
+        np.testing.assert_equal(row["sigma_pct"], fit.sigma_percent[k])
+        assert row["identifiable"] == bool(fit.identifiable[k])
+    step = fit.history[-1]
+    fit_params = params.with_start(1.5 * truth)
+    rows = tables.interrupted_fit_rows(fit_params, step)
+    assert [(r["parameter"], r["step"], r["status"]) for r in rows] == [
+        (n, step.step, "interrupted") for n in fit_params.names]
+    np.testing.assert_allclose([r["value"] for r in rows], [_in_thesis_units(
+        n, v) for n, v in zip(fit_params.names, step.estimate, strict=True)], rtol=1e-15)
+    assert tables.interrupted_fit_rows(fit_params, None) == []

@@ -13,6 +13,9 @@ ch. 2–3, guaranteed least squares):
 - `sensitivity` and `design_experiment`: exact ∂(K&C metric)/∂(parameter), and the choice of
   load cases that best determine chosen parameters.
 
+`measured_bushings`, `with_start` and `fit_selection` choose what to identify and where to start
+(the CLI's defaults); `tables` holds the report tables in the thesis's units and the figures.
+
 Each identification takes a mechanism and measurements and returns the identified mechanism and
 a report.
 """
@@ -52,6 +55,7 @@ from .least_squares import (
     whitened_residuals,
 )
 from .params import Params
+from .selection import fit_selection, measured_bushings, with_start
 from .sensitivity import DesignReport, SensitivityReport, design_experiment, sensitivity
 
 __all__ = [
@@ -61,6 +65,7 @@ __all__ = [
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
     "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
-    "iterative", "from_measurements", "least_squares", "least_squares_batch", "predict",
+    "iterative", "fit_selection", "from_measurements", "measured_bushings", "with_start",
+    "least_squares", "least_squares_batch", "predict",
     "sensitivity", "whitened_residuals",
 ]
