@@ -56,27 +56,31 @@ numbers computed with the mirrored law can differ in the second order of the def
 **Offsets.** Optional unknown offsets δ0 (spec §1.10, "Offsets", and §0: F = f(T − T0)) are
 identified as the constant force K·δ0 (+ the model's preload), linear like the spring's K·L0.
 
-**Size.** About 1 200 lines: selection, the system (exact rows from the solver's force laws),
-the noise whitening, the identifiability analysis and the write-back are one method sharing
-the `Parameter` description and the assembled `_Context`. The report (`DirectReport`) is in
-`identify.direct_report`, the errors-in-variables polish and `direct_batch` in
-`identify.direct_polish`; the report's common part is in `identify.report`.
+**Modules.** This module holds the selection of the unknowns (`Parameter`), the assembled
+system (`DirectSystem`, `direct_system`), the estimate and the write-back (`direct`); about
+770 lines, because these share the `Parameter` description and the assembled `_Context` and
+read as one method. The rows and the noise whitening are in `identify.direct_equations`, the
+measurement checks and pose covariance in `identify.direct_data`, the identifiability
+analysis in `identify.direct_analysis`, the report (`DirectReport`) in `identify.direct_report`,
+the errors-in-variables polish and `direct_batch` in `identify.direct_polish`; the report's
+common part is in `identify.report`.
 """
 
 import dataclasses
-import functools
 from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Float
 
 from ..errors import InputError, ModelError
 from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
+from .direct_analysis import _analyse, _structure
+from .direct_data import _check_measurements, _pose_covariance_jit
+from .direct_equations import _r_factor, _system_arrays, _whiteners
 from .direct_report import DEG, DirectReport
 from .params import Params, selected_entries
 from .report import (
@@ -300,227 +304,6 @@ def _selection(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
     return m
 
 
-def _scaling(mech: Mechanism) -> np.ndarray:
-    """Per coordinate: 1 for translations, 1/ℓ for the Gibbs coordinates (turns N·mm into N)."""
-    n_parts = len(mech.parts)
-    return np.tile(np.r_[np.ones(3), np.full(3, 1.0 / mech.length_scale)], n_parts)
-
-
-def _mechanism_at(eval_mech: Mechanism, selection, x):
-    """The evaluation model with the unknowns x (table units) put back into their fields: the
-    stiffnesses and constants added, each unknown K·L0 = c turned into the free length c/K
-    (the evaluation model has L0 = 0 there)."""
-    b, s = eval_mech.bushings, eval_mech.springs
-    n_b = len(b.names)
-    t = selection @ x
-    kb = t[: 12 * n_b].reshape(n_b, 12)
-    ks, cs = t[12 * n_b :: 2], t[12 * n_b + 1 :: 2]
-    k_spring = s.k + ks
-    free_length = s.free_length + cs / jnp.where(k_spring == 0, 1.0, k_spring)
-    return eqx.tree_at(
-        lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
-                    mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
-        eval_mech,
-        (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:6], b.preload_force + kb[:, 6:9],
-         b.preload_torque + kb[:, 9:], k_spring, free_length),
-    )
-
-
-def _element_geometry(mech: Mechanism, y):
-    """Solver coordinates of every element's two parts, z (E, 12), with the ground as a virtual
-    part at zero, and the markers' offsets from their parts' reference points."""
-    lay = mech.topology
-    yfull = jnp.concatenate([y, jnp.zeros(6, y.dtype)])
-    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
-    return lay, yfull, offset
-
-
-def _scatter_vectors(n_full, idx, values):
-    """Σ over elements of (E, 12, k) values into (n_full, k) at coordinate indices (E, 12)."""
-    out = jnp.zeros((n_full,) + values.shape[2:], values.dtype)
-    return out.at[np.asarray(idx)].add(values)
-
-
-def _bushing_unit_forces(mech: Mechanism, y):
-    """D of the bushings: ∂Q/∂θ (n, nb, 12) for θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and
-    N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
-    of the solver's own element force function (`statics.kernel.bushing_force`, Adams
-    convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
-    from ..statics.kernel import bushing_force
-
-    b = mech.bushings
-    lay, yfull, offset = _element_geometry(mech, y)
-    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
-    idx = lay.coords(i, j)
-    mk = mech.markers
-    zero3 = jnp.zeros(3, y.dtype)
-
-    def one(z, x0i, r0i, x0j, r0j, off_t, off_r):
-        def force(theta):
-            params = dict(k_trans=theta[:3], k_rot=theta[3:6], cubic_trans=zero3,
-                          cubic_rot=zero3, offset_trans=off_t, offset_rot=off_r,
-                          preload_force=theta[6:9], preload_torque=theta[9:])
-            return bushing_force(z, x0i, r0i, x0j, r0j, params, None)
-
-        return jax.jacfwd(force)(jnp.zeros(12, y.dtype))  # (12 coordinates, 12 unknowns)
-
-    gen = jax.vmap(one)(yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j],
-                        b.offset_trans, b.offset_rot)  # (nb, 12, 12)
-    full = jnp.zeros((yfull.shape[0], len(b.names), 12), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(gen)
-    return full[: y.shape[0]]
-
-
-def _spring_unit_forces(mech: Mechanism, y):
-    """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
-    model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
-    function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
-    from ..statics.kernel import line_force
-
-    s = mech.springs
-    lay, yfull, offset = _element_geometry(mech, y)
-    i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
-    idx = lay.coords(i, j)
-
-    def one(z, x0i, x0j, free_length):
-        def force(kc):
-            return line_force(z, x0i, x0j,
-                               lambda length: kc[0] * (length - free_length) - kc[1])
-
-        return jax.jacfwd(force)(jnp.zeros(2, y.dtype))  # (12, 2)
-
-    gen = jax.vmap(one)(yfull[idx], offset[i], offset[j], s.free_length)  # (ns, 12, 2)
-    full = jnp.zeros((yfull.shape[0], len(s.names), 2), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None], :].add(gen)
-    return full[: y.shape[0]]
-
-
-def _constraint_jacobian(mech: Mechanism, loads, y):
-    """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), from the
-    solver's own constraint rows (Adams definitions, spec stiffness §1.6)."""
-    from ..statics.kernel import constraint_jacobian
-
-    return constraint_jacobian(mech, loads, y)
-
-
-def _null_basis(eval_mech: Mechanism, loads, y, scale):
-    """Orthonormal basis L (n, n − m) of the null space of the scaled Φ_q at y (spec §1.9,
-    4.43–4.44), and the constraint Jacobian Φ_q (m, n) (unscaled)."""
-    lay = eval_mech.topology
-    n, m = lay.n, lay.m
-    if not m:
-        return jnp.eye(n, dtype=y.dtype), jnp.zeros((0, n), y.dtype)
-    phi_q = _constraint_jacobian(eval_mech, loads, y)
-    row_scale = jnp.asarray(np.where(lay.angular_live, eval_mech.length_scale, 1.0), y.dtype)
-    basis, _ = jnp.linalg.qr((phi_q * row_scale[:, None] * scale[None, :]).T, mode="complete")
-    return basis[:, m:], phi_q
-
-
-def _case_rows(eval_mech: Mechanism, selection, q, loads):
-    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N), and
-    the null-space basis L (n, r).
-
-    D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
-    onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
-    everything else: the loads, the elements and axes not identified, cubic terms."""
-    from ..statics.kernel import assemble, to_internal
-
-    lay = eval_mech.topology
-    n, m = lay.n, lay.m
-    y = to_internal(eval_mech, q)
-    known, _ = assemble(eval_mech, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
-    known = known[:n]
-    parts = []
-    if eval_mech.bushings.names:
-        parts.append(_bushing_unit_forces(eval_mech, y).reshape(n, -1))
-    if eval_mech.springs.names:
-        parts.append(_spring_unit_forces(eval_mech, y).reshape(n, -1))
-    columns = jnp.concatenate(parts, axis=1) @ selection
-    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
-    null, _ = _null_basis(eval_mech, loads, y, scale)
-    return null.T @ (columns * scale[:, None]), -null.T @ (known * scale), null
-
-
-def _elastic_stiffness(mech: Mechanism, y):
-    """Tangent stiffness −∂Q/∂y (n, n) of the bushings and linear springs of `mech` at y."""
-    from ..statics.kernel import bushing_force, bushing_params, line_force
-
-    lay, yfull, offset = _element_geometry(mech, y)
-    mk = mech.markers
-    full = jnp.zeros((yfull.shape[0], yfull.shape[0]), y.dtype)
-    b = mech.bushings
-    if b.names:
-        i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
-        idx = lay.coords(i, j)
-        params = {k: v for k, v in bushing_params(mech).items() if not k.startswith("spline")}
-        jac = jax.vmap(jax.jacfwd(functools.partial(bushing_force, spline_mask=None)))(
-            yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j], params)
-        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
-    s = mech.springs
-    if s.names:
-        i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
-        idx = lay.coords(i, j)
-
-        def spring(z, x0i, x0j, k, free_length):
-            return line_force(z, x0i, x0j, lambda length: k * (length - free_length))
-
-        jac = jax.vmap(jax.jacfwd(spring))(yfull[idx], offset[i], offset[j], s.k, s.free_length)
-        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
-    return full[: y.shape[0], : y.shape[0]]
-
-
-def _case_whitener(eval_mech: Mechanism, selection, q, null, x, pose_cov):
-    """Whitening matrix C⁻¹ (r, r) of one case: Σ_r = C Cᵀ is the covariance of the case's
-    equation residual caused by pose errors of covariance `pose_cov` (n, n, solver
-    coordinates), to first order, at the solution x.
-
-    A pose error dy moves the residual Lᵀ(Q + Φ_qᵀλ) by Lᵀ·K·dy with K the tangent stiffness.
-    Only the elastic part of K (bushings, springs at x) is kept: the geometric terms of the loads
-    and of the joint reactions are smaller by the ratio of a part's rotation error (≈ noise /
-    landmark spread) to the bushings' deformations, and the change of L itself multiplies the
-    small residual.
-    """
-    from ..statics.kernel import to_internal
-
-    y = to_internal(eval_mech, q)
-    mech_x = _mechanism_at(eval_mech, selection, x)
-    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
-    sens = null.T @ (scale[:, None] * _elastic_stiffness(mech_x, y))  # (r, n)
-    cov = sens @ pose_cov @ sens.T
-    r = cov.shape[0]
-    cov = cov + (1e-12 * jnp.trace(cov) / r + 1e-300) * jnp.eye(r, dtype=cov.dtype)
-    chol = jnp.linalg.cholesky(cov)
-    return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
-
-
-_QR_CHUNK = 1024
-
-
-@jax.jit
-def _r_factor(W, y):
-    """R-factor (positive diagonal) of [W, −y], by a tall-skinny QR: chunks of rows reduced
-    separately, then their R's (one tall QR is several times slower for 10⁵ rows)."""
-    from ..lsq import qr_r
-
-    m = jnp.concatenate([W, -y[:, None]], axis=1)
-    n, q = m.shape
-    if n > 2 * _QR_CHUNK:
-        k = -(-n // _QR_CHUNK)
-        m = jnp.concatenate([m, jnp.zeros((k * _QR_CHUNK - n, q), m.dtype)])
-        m = jax.vmap(lambda x: jnp.linalg.qr(x, mode="r"))(m.reshape(k, _QR_CHUNK, q))
-        m = m.reshape(-1, q)
-    return qr_r(m)
-
-
-@eqx.filter_jit
-def _system_arrays(eval_mech: Mechanism, selection, q, loads):
-    return jax.vmap(lambda q_, l_: _case_rows(eval_mech, selection, q_, l_))(q, loads)
-
-
-@eqx.filter_jit
-def _whiteners(eval_mech: Mechanism, selection, q, null, x, pose_cov):
-    return jax.vmap(lambda q_, n_, c_: _case_whitener(eval_mech, selection, q_, n_, x, c_))(
-        q, null, pose_cov)
 
 
 # ----------------------------------------------------------------------------- the system
@@ -578,140 +361,6 @@ def _prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
         else:
             out.append(float(s.k[p.element] * s.free_length[p.element]))
     return np.asarray(out, dtype=float)
-
-
-def _check_measurements(mech: Mechanism, meas: Measurements):
-    if not isinstance(meas, Measurements):
-        raise InputError(f"measurements must be a diffsusp.measure.Measurements; got "
-                         f"{type(meas).__name__}.")
-    if meas.rotation.ndim != 4:
-        raise InputError("measurements must have one leading case axis (a batch of measurement "
-                         "sets: identify each with its own call).")
-    loads = meas.loads
-    n_cases = meas.n_cases
-    if loads.force.shape[:1] != (n_cases,):
-        raise InputError(f"the measurements have {n_cases} cases but their loads have "
-                         f"{loads.force.shape[0] if loads.force.ndim == 3 else 'no'} cases.")
-    n_l, n_d = len(mech.load_points.names), len(mech.drivers.names)
-    if loads.force.shape[1:] != (n_l, 3) or loads.driver.shape[1:] != (n_d,):
-        raise InputError(
-            f"the loads are for {loads.force.shape[1]} load points and {loads.driver.shape[1]} "
-            f"drivers, but model '{mech.name}' has {n_l} load points "
-            f"({', '.join(mech.load_points.names) or 'none'}) and {n_d} drivers; build them with "
-            "mech.loads(...)."
-        )
-    _check_every_part_measured(mech, meas)
-    q = np.asarray(meas.coordinates(mech))
-    if not np.all(np.isfinite(q)):
-        c = int(np.argwhere(~np.isfinite(q))[0][0])
-        raise InputError(f"the pose of case {meas.cases[c] if meas.cases else c + 1} is not "
-                         "finite (NaN or inf).")
-    for field in ("force", "moment"):
-        value = np.asarray(getattr(loads, field))
-        if not np.all(np.isfinite(value)):
-            c = int(np.argwhere(~np.isfinite(value))[0][0])
-            raise InputError(f"the {field} of case {c + 1} is not finite (NaN or inf).")
-    return q
-
-
-def _check_every_part_measured(mech: Mechanism, meas: Measurements):
-    """Raise, saying why and what to do instead, when a moving part has no measured pose.
-
-    The equations are formed at the measured pose of every part (spec stiffness §1.1, §1.14):
-    the generalised forces D(q)·k need q whole. For an unmeasured part, the joints to the
-    measured parts fix some of its coordinates; the others (e.g. the pseudo-McPherson strut's
-    slide in the hub carrier) are set at each equilibrium by the balance of its elastic
-    elements, i.e. by the stiffnesses being identified: unknown × unknown, not a linear
-    system. The message counts them: 6 per part less the rows of the joints that hold it
-    (exact for independent rows, as in the thesis's models)."""
-    missing = [p for p in mech.parts if p not in meas.parts]
-    if not missing:
-        return
-    from ..model.mechanism import JOINT_ROWS
-
-    lay = mech.topology
-    part_of = [mech.parts[int(k)] if int(k) < len(mech.parts) else "ground"
-               for k in np.asarray(lay.marker_part)]
-    joints = [(n, kind) for n, kind, i, j in zip(mech.joints.names, mech.joints.kind,
-                                                 mech.joints.i_marker, mech.joints.j_marker,
-                                                 strict=True)
-              if part_of[i] in missing or part_of[j] in missing]
-    joints, free = [n for n, _ in joints], max(
-        6 * len(missing) - sum(JOINT_ROWS[k] for _, k in joints), 0)
-    names = ", ".join(map(repr, missing))
-    why = (f"its joints ({', '.join(joints) or 'none'}) leave it {free} free coordinate(s) "
-           "relative to the measured parts, set at every equilibrium by its elastic elements, "
-           "i.e. by the stiffnesses being identified: the equations would not be linear in "
-           "them" if free else
-           f"its joints ({', '.join(joints)}) fix its pose from the measured parts, but the "
-           "direct method does not complete poses from the joints")
-    raise InputError(
-        f"the measurements have no pose for part(s) {names} of model '{mech.name}' "
-        f"(measured: {', '.join(meas.parts) or 'none'}). The direct method writes the "
-        "equilibrium at the measured pose of every moving part (spec stiffness §1.1, §1.14); "
-        f"{why}. Instead: identify.least_squares(mech, measurements, params) fits the "
-        "landmarks of the measured parts through the model's own equilibrium (which places "
-        f"{names}), or identify.iterative; or measure its landmarks; or simplify the model "
-        "(the thesis replaced the unmeasurable strut by a point-on-line joint: spec stiffness "
-        "§1.13).")
-
-
-def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
-    """Covariance (cases, n, n) of the measured poses in the solver's coordinates (reference
-    point, Gibbs vector), for landmark noise of unit σ (mm) per coordinate: the first-order
-    covariance of a least-squares rigid registration (centroid translation σ²/k, rotation
-    σ²·(Σ_a |r_a|²I − r_a r_aᵀ)⁻¹ about the landmark centroid, uncorrelated). For poses given
-    without landmarks: unit σ on the reference point (mm) and on ℓ·rotation (mm).
-    Only the structure matters: `lsq` estimates the noise level from the residual."""
-    from ..geometry import gibbs_angular_jacobian, skew
-    lay = mech.topology
-    index = np.asarray([meas.parts.index(p) for p in mech.parts], dtype=int)
-    centre = jnp.asarray(lay.centre[:-1])
-    rot = meas.rotation[:, index]
-    eye = jnp.eye(3, dtype=rot.dtype)
-
-    if meas.landmarks is not None:
-        ref = meas.layout.position[index]  # (P, k, 3)
-        w = meas.weights[:, index]  # (C, P, k)
-
-        def part_cov(r, ref_p, w_p, c):
-            total = jnp.sum(w_p)
-            c0 = (w_p @ ref_p) / total
-            arm_l = (ref_p - c0) @ r.T  # landmarks about their centroid, current axes
-            inertia = jnp.einsum("k,kij->ij", w_p,
-                                 jnp.einsum("ki,ki->k", arm_l, arm_l)[:, None, None] * eye
-                                 - arm_l[:, :, None] * arm_l[:, None, :])
-            cov_t, cov_w = eye / total, jnp.linalg.inv(inertia)
-            arm = r @ (c - c0)
-            return cov_t, cov_w, arm
-
-        cov_t, cov_w, arm = jax.vmap(jax.vmap(part_cov, in_axes=(0, 0, 0, 0)),
-                                     in_axes=(0, None, 0, None))(rot, ref, w, centre)
-    else:
-        n_c, n_p = rot.shape[:2]
-        cov_t = jnp.broadcast_to(eye, (n_c, n_p, 3, 3))
-        cov_w = cov_t / mech.length_scale**2
-        arm = jnp.zeros((n_c, n_p, 3), rot.dtype)
-
-    def block(r, ct, cw, a):
-        # Gibbs vector b = vee(R − Rᵀ)/(1 + tr R) (the poses were checked by `coordinates`).
-        b = jnp.stack([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (
-            1.0 + jnp.trace(r))
-        g_inv = jnp.linalg.inv(gibbs_angular_jacobian(b))
-        top = jnp.concatenate([eye, -skew(a)], axis=1)
-        bottom = jnp.concatenate([jnp.zeros((3, 3), r.dtype), g_inv], axis=1)
-        t = jnp.concatenate([top, bottom], axis=0)
-        cov = jnp.zeros((6, 6), r.dtype).at[:3, :3].set(ct).at[3:, 3:].set(cw)
-        return t @ cov @ t.T
-
-    blocks = jax.vmap(jax.vmap(block))(rot, cov_t, cov_w, arm)  # (C, P, 6, 6)
-    n_c, n_p = blocks.shape[:2]
-    full = jnp.zeros((n_c, n_p, 6, n_p, 6), blocks.dtype)
-    full = full.at[:, np.arange(n_p), :, np.arange(n_p), :].set(jnp.moveaxis(blocks, 1, 0))
-    return full.reshape(n_c, 6 * n_p, 6 * n_p)
-
-
-_pose_covariance_jit = eqx.filter_jit(_pose_covariance)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -810,93 +459,6 @@ def _prior_sigma(prior: np.ndarray, params, prior_sigma) -> np.ndarray:
                                  f"{', '.join(names)}.")
             out[names.index(name)] = float(value)
     return out
-
-
-RELATION_TOL = 1e-3
-"""Terms of an identifiable combination whose coefficient is below this, on unit-norm columns,
-are dropped from the printed relation: columns dependent only up to the identifiability
-threshold regroup with tiny spurious coefficients on unrelated unknowns."""
-
-
-@dataclasses.dataclass(frozen=True)
-class _Structure:
-    """What the (unweighted) equations determine: the kept (base) unknowns, the unknowns
-    determined alone, and the combinations of several unknowns (kept index, coefficients)."""
-
-    kept: np.ndarray
-    alone: np.ndarray
-    relation_of: list
-    relations: tuple  # (kept index j, coefficient row g)
-
-
-def _structure(fit, negligible: np.ndarray) -> _Structure:
-    """Identifiability from an `lsq.Fit` of the unweighted equations, with the relations
-    cleaned of spurious terms (`RELATION_TOL`) and the no-effect unknowns left out."""
-    p = len(fit.names)
-    kept = np.asarray(fit.kept, bool) & ~negligible
-    scale = np.asarray(fit.scale, float)
-    gamma = np.asarray(fit.regrouping, float)
-    gamma_unit = gamma * scale[None, :] / np.where(scale > 0, scale, 1.0)[:, None]
-    clean = np.where((np.abs(gamma_unit) > RELATION_TOL) & ~negligible[None, :], gamma, 0.0)
-    relation_of = [None] * p
-    relations = []
-    for j in np.flatnonzero(kept):
-        others = [k for k in np.flatnonzero(clean[j]) if k != j]
-        if not others:
-            continue
-        for k in [j, *others]:
-            relation_of[k] = int(j)
-        relations.append((int(j), clean[j]))
-    alone = kept & np.array([relation_of[i] is None for i in range(p)], dtype=bool)
-    return _Structure(kept, alone, relation_of, tuple(relations))
-
-
-@dataclasses.dataclass(frozen=True)
-class _Analysis:
-    identifiable: np.ndarray  # (p,) determined alone (and not eliminated)
-    sigma: np.ndarray  # (p,)
-    sigma_pct: np.ndarray  # (p,)
-    relations: tuple  # (text, value, sigma)
-    status: tuple
-
-
-def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
-             hold) -> _Analysis:
-    """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations."""
-    from ..lsq import format_combination
-
-    p = len(fit.names)
-    x = np.asarray(fit.x, float)
-    cov = np.asarray(fit.covariance, float)
-    at_bound = np.asarray(fit.at_bound, bool)
-    identifiable = structure.alone & ~eliminated & ~at_bound
-    sigma = np.where(identifiable, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.nan)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        pct = np.where(identifiable, 100.0 * sigma / np.abs(x), np.nan)
-    texts = {}
-    relations = []
-    for j, g in structure.relations:
-        text = format_combination(g, fit.names, j)
-        texts[j] = text
-        relations.append((text, float(g @ x), float(np.sqrt(max(g @ cov @ g, 0.0)))))
-    status = []
-    for i in range(p):
-        if negligible[i]:
-            status.append("not identifiable: no effect on the equations")
-        elif eliminated[i]:
-            status.append("not determined: held at "
-                          + ("the model's value" if hold == "model" else "0"))
-        elif at_bound[i]:
-            status.append("at its bound (0)")
-        elif structure.relation_of[i] is not None:
-            status.append(f"not identifiable alone: in {texts[structure.relation_of[i]]}")
-        elif not identifiable[i]:
-            status.append("not identifiable")
-        elif np.nan_to_num(pct[i]) > max_sigma_pct:
-            status.append(f"not determined: sigma {pct[i]:.3g}% > {max_sigma_pct:g}%")
-        else:
-            status.append("identified")
-    return _Analysis(identifiable, sigma, pct, tuple(relations), tuple(status))
 
 
 def _derived(params, values, cov, mech, identified_mask):

@@ -1,0 +1,244 @@
+"""The equations of the direct identification (spec stiffness §1.9–1.10, 4.35–4.54): per
+measured case the rows Lᵀ D k = −Lᵀ (Q_ext + Q_known) in the solver's coordinates, and the
+whitening of each case by the pose noise (generalised least squares, errors in variables).
+
+D = ∂Q_int/∂k is `jax.jacfwd` of the solver's own element force functions, element by element
+(bushings: the generalised force of a unit −δ per axis; springs: K·ℓ − K·L0, linear in the
+unknowns (K, K·L0)); L an orthonormal basis of the null space of Φ_q; rotational coordinates
+scaled by the model's length scale so that every row is in N (spec §1.10). The selection of the
+unknowns and the analysis of the stacked system are in `identify.direct`.
+"""
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model.mechanism import Mechanism
+
+__all__: list[str] = []  # the assembly of `direct`; `direct` and `direct_system` are the API
+
+
+def _scaling(mech: Mechanism) -> np.ndarray:
+    """Per coordinate: 1 for translations, 1/ℓ for the Gibbs coordinates (turns N·mm into N)."""
+    n_parts = len(mech.parts)
+    return np.tile(np.r_[np.ones(3), np.full(3, 1.0 / mech.length_scale)], n_parts)
+
+
+def _mechanism_at(eval_mech: Mechanism, selection, x):
+    """The evaluation model with the unknowns x (table units) put back into their fields: the
+    stiffnesses and constants added, each unknown K·L0 = c turned into the free length c/K
+    (the evaluation model has L0 = 0 there)."""
+    b, s = eval_mech.bushings, eval_mech.springs
+    n_b = len(b.names)
+    t = selection @ x
+    kb = t[: 12 * n_b].reshape(n_b, 12)
+    ks, cs = t[12 * n_b :: 2], t[12 * n_b + 1 :: 2]
+    k_spring = s.k + ks
+    free_length = s.free_length + cs / jnp.where(k_spring == 0, 1.0, k_spring)
+    return eqx.tree_at(
+        lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
+                    mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
+        eval_mech,
+        (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:6], b.preload_force + kb[:, 6:9],
+         b.preload_torque + kb[:, 9:], k_spring, free_length),
+    )
+
+
+def _element_geometry(mech: Mechanism, y):
+    """Solver coordinates of every element's two parts, z (E, 12), with the ground as a virtual
+    part at zero, and the markers' offsets from their parts' reference points."""
+    lay = mech.topology
+    yfull = jnp.concatenate([y, jnp.zeros(6, y.dtype)])
+    offset = mech.markers.position - jnp.asarray(lay.centre[lay.marker_part])
+    return lay, yfull, offset
+
+
+def _scatter_vectors(n_full, idx, values):
+    """Σ over elements of (E, 12, k) values into (n_full, k) at coordinate indices (E, 12)."""
+    out = jnp.zeros((n_full,) + values.shape[2:], values.dtype)
+    return out.at[np.asarray(idx)].add(values)
+
+
+def _bushing_unit_forces(mech: Mechanism, y):
+    """D of the bushings: ∂Q/∂θ (n, nb, 12) for θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and
+    N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
+    of the solver's own element force function (`statics.kernel.bushing_force`, Adams
+    convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
+    from ..statics.kernel import bushing_force
+
+    b = mech.bushings
+    lay, yfull, offset = _element_geometry(mech, y)
+    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+    idx = lay.coords(i, j)
+    mk = mech.markers
+    zero3 = jnp.zeros(3, y.dtype)
+
+    def one(z, x0i, r0i, x0j, r0j, off_t, off_r):
+        def force(theta):
+            params = dict(k_trans=theta[:3], k_rot=theta[3:6], cubic_trans=zero3,
+                          cubic_rot=zero3, offset_trans=off_t, offset_rot=off_r,
+                          preload_force=theta[6:9], preload_torque=theta[9:])
+            return bushing_force(z, x0i, r0i, x0j, r0j, params, None)
+
+        return jax.jacfwd(force)(jnp.zeros(12, y.dtype))  # (12 coordinates, 12 unknowns)
+
+    gen = jax.vmap(one)(yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j],
+                        b.offset_trans, b.offset_rot)  # (nb, 12, 12)
+    full = jnp.zeros((yfull.shape[0], len(b.names), 12), y.dtype)
+    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(gen)
+    return full[: y.shape[0]]
+
+
+def _spring_unit_forces(mech: Mechanism, y):
+    """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
+    model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
+    function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
+    from ..statics.kernel import line_force
+
+    s = mech.springs
+    lay, yfull, offset = _element_geometry(mech, y)
+    i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
+    idx = lay.coords(i, j)
+
+    def one(z, x0i, x0j, free_length):
+        def force(kc):
+            return line_force(z, x0i, x0j,
+                               lambda length: kc[0] * (length - free_length) - kc[1])
+
+        return jax.jacfwd(force)(jnp.zeros(2, y.dtype))  # (12, 2)
+
+    gen = jax.vmap(one)(yfull[idx], offset[i], offset[j], s.free_length)  # (ns, 12, 2)
+    full = jnp.zeros((yfull.shape[0], len(s.names), 2), y.dtype)
+    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None], :].add(gen)
+    return full[: y.shape[0]]
+
+
+def _constraint_jacobian(mech: Mechanism, loads, y):
+    """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), from the
+    solver's own constraint rows (Adams definitions, spec stiffness §1.6)."""
+    from ..statics.kernel import constraint_jacobian
+
+    return constraint_jacobian(mech, loads, y)
+
+
+def _null_basis(eval_mech: Mechanism, loads, y, scale):
+    """Orthonormal basis L (n, n − m) of the null space of the scaled Φ_q at y (spec §1.9,
+    4.43–4.44), and the constraint Jacobian Φ_q (m, n) (unscaled)."""
+    lay = eval_mech.topology
+    n, m = lay.n, lay.m
+    if not m:
+        return jnp.eye(n, dtype=y.dtype), jnp.zeros((0, n), y.dtype)
+    phi_q = _constraint_jacobian(eval_mech, loads, y)
+    row_scale = jnp.asarray(np.where(lay.angular_live, eval_mech.length_scale, 1.0), y.dtype)
+    basis, _ = jnp.linalg.qr((phi_q * row_scale[:, None] * scale[None, :]).T, mode="complete")
+    return basis[:, m:], phi_q
+
+
+def _case_rows(eval_mech: Mechanism, selection, q, loads):
+    """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N), and
+    the null-space basis L (n, r).
+
+    D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
+    onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
+    everything else: the loads, the elements and axes not identified, cubic terms."""
+    from ..statics.kernel import assemble, to_internal
+
+    lay = eval_mech.topology
+    n, m = lay.n, lay.m
+    y = to_internal(eval_mech, q)
+    known, _ = assemble(eval_mech, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
+    known = known[:n]
+    parts = []
+    if eval_mech.bushings.names:
+        parts.append(_bushing_unit_forces(eval_mech, y).reshape(n, -1))
+    if eval_mech.springs.names:
+        parts.append(_spring_unit_forces(eval_mech, y).reshape(n, -1))
+    columns = jnp.concatenate(parts, axis=1) @ selection
+    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
+    null, _ = _null_basis(eval_mech, loads, y, scale)
+    return null.T @ (columns * scale[:, None]), -null.T @ (known * scale), null
+
+
+def _elastic_stiffness(mech: Mechanism, y):
+    """Tangent stiffness −∂Q/∂y (n, n) of the bushings and linear springs of `mech` at y."""
+    from ..statics.kernel import bushing_force, bushing_params, line_force
+
+    lay, yfull, offset = _element_geometry(mech, y)
+    mk = mech.markers
+    full = jnp.zeros((yfull.shape[0], yfull.shape[0]), y.dtype)
+    b = mech.bushings
+    if b.names:
+        i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+        idx = lay.coords(i, j)
+        params = {k: v for k, v in bushing_params(mech).items() if not k.startswith("spline")}
+        jac = jax.vmap(jax.jacfwd(functools.partial(bushing_force, spline_mask=None)))(
+            yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j], params)
+        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
+    s = mech.springs
+    if s.names:
+        i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
+        idx = lay.coords(i, j)
+
+        def spring(z, x0i, x0j, k, free_length):
+            return line_force(z, x0i, x0j, lambda length: k * (length - free_length))
+
+        jac = jax.vmap(jax.jacfwd(spring))(yfull[idx], offset[i], offset[j], s.k, s.free_length)
+        full = full.at[idx[:, :, None], idx[:, None, :]].add(jac)
+    return full[: y.shape[0], : y.shape[0]]
+
+
+def _case_whitener(eval_mech: Mechanism, selection, q, null, x, pose_cov):
+    """Whitening matrix C⁻¹ (r, r) of one case: Σ_r = C Cᵀ is the covariance of the case's
+    equation residual caused by pose errors of covariance `pose_cov` (n, n, solver
+    coordinates), to first order, at the solution x.
+
+    A pose error dy moves the residual Lᵀ(Q + Φ_qᵀλ) by Lᵀ·K·dy with K the tangent stiffness.
+    Only the elastic part of K (bushings, springs at x) is kept: the geometric terms of the loads
+    and of the joint reactions are smaller by the ratio of a part's rotation error (≈ noise /
+    landmark spread) to the bushings' deformations, and the change of L itself multiplies the
+    small residual.
+    """
+    from ..statics.kernel import to_internal
+
+    y = to_internal(eval_mech, q)
+    mech_x = _mechanism_at(eval_mech, selection, x)
+    scale = jnp.asarray(_scaling(eval_mech), y.dtype)
+    sens = null.T @ (scale[:, None] * _elastic_stiffness(mech_x, y))  # (r, n)
+    cov = sens @ pose_cov @ sens.T
+    r = cov.shape[0]
+    cov = cov + (1e-12 * jnp.trace(cov) / r + 1e-300) * jnp.eye(r, dtype=cov.dtype)
+    chol = jnp.linalg.cholesky(cov)
+    return jax.scipy.linalg.solve_triangular(chol, jnp.eye(r, dtype=cov.dtype), lower=True)
+
+
+_QR_CHUNK = 1024
+
+
+@jax.jit
+def _r_factor(W, y):
+    """R-factor (positive diagonal) of [W, −y], by a tall-skinny QR: chunks of rows reduced
+    separately, then their R's (one tall QR is several times slower for 10⁵ rows)."""
+    from ..lsq import qr_r
+
+    m = jnp.concatenate([W, -y[:, None]], axis=1)
+    n, q = m.shape
+    if n > 2 * _QR_CHUNK:
+        k = -(-n // _QR_CHUNK)
+        m = jnp.concatenate([m, jnp.zeros((k * _QR_CHUNK - n, q), m.dtype)])
+        m = jax.vmap(lambda x: jnp.linalg.qr(x, mode="r"))(m.reshape(k, _QR_CHUNK, q))
+        m = m.reshape(-1, q)
+    return qr_r(m)
+
+
+@eqx.filter_jit
+def _system_arrays(eval_mech: Mechanism, selection, q, loads):
+    return jax.vmap(lambda q_, l_: _case_rows(eval_mech, selection, q_, l_))(q, loads)
+
+
+@eqx.filter_jit
+def _whiteners(eval_mech: Mechanism, selection, q, null, x, pose_cov):
+    return jax.vmap(lambda q_, n_, c_: _case_whitener(eval_mech, selection, q_, n_, x, c_))(
+        q, null, pose_cov)
