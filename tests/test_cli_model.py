@@ -140,6 +140,26 @@ def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_pat
             np.testing.assert_array_equal(got[name], reference[name][order])
 
 
+def test_flagged_cases_lists_failures_and_converged_cases_with_a_false_flag():
+    """`statics.flagged_cases` (what `simulate` and `kc` warn about): not converged (status > 0,
+    not -1: not solved), and converged cases whose stable / law_valid flag is False."""
+    from diffsusp.statics import StaticSolution, flagged_cases
+
+    status = np.array([0, 0, 3, 0, -1, 1, 0])
+    stable = np.array([True, False, False, True, False, False, False])
+    law_valid = np.array([True, True, False, False, False, False, True])
+    zeros = np.zeros(status.size)
+    sol = StaticSolution(q=np.zeros((status.size, 6)), multipliers=np.zeros((status.size, 0)),
+                         status=status, iterations=zeros, residual=zeros,
+                         constraint_error=zeros, stable=stable, law_valid=law_valid)
+    flags = flagged_cases(sol)
+    assert {k: v.tolist() for k, v in flags.items()} == {
+        "failed": [2, 5], "unstable": [1, 6], "law_invalid": [3]}
+    unflagged = flagged_cases(StaticSolution(**{**vars(sol), "stable": None, "law_valid": None}))
+    assert unflagged["failed"].tolist() == [2, 5]
+    assert unflagged["unstable"].size == unflagged["law_invalid"].size == 0
+
+
 def test_chunked_solve_refuses_a_single_case_and_an_empty_chunk():
     """`solve_statics_chunks` (the loop `simulate` streams from) needs a case axis and a chunk
     of at least one case; both are refused before anything is traced."""

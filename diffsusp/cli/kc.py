@@ -129,18 +129,16 @@ def _flag_list(flag):
 
 def _flag_notes(ev) -> list[str]:
     """One warning per flag that some converged case fails (stable, law_valid)."""
-    import numpy as np
+    from diffsusp.statics import flagged_cases
 
-    sol = ev.solution
+    flags = flagged_cases(ev.solution)
     notes = []
-    for flag, what in (("stable", "an unstable equilibrium (the reduced tangent stiffness is "
-                        "not positive definite)"),
-                       ("law_valid", "a bushing beyond its law's validity (|AX|, |AY| < 15°, "
-                        "|AZ| < 90°)")):
-        value = getattr(sol, flag)
-        if value is None:
-            continue
-        cases = np.flatnonzero((np.asarray(sol.status) == 0) & ~np.asarray(value, dtype=bool))
+    for key, flag, what in (
+            ("unstable", "stable", "an unstable equilibrium (the reduced tangent stiffness is "
+             "not positive definite)"),
+            ("law_invalid", "law_valid", "a bushing beyond its law's validity (|AX|, |AY| < "
+             "15°, |AZ| < 90°)")):
+        cases = flags[key]
         if cases.size:
             shown = ", ".join(map(str, cases[:10])) + (
                 f" and {cases.size - 10} more" if cases.size > 10 else "")

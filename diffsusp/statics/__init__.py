@@ -4,6 +4,7 @@ from .kernel import to_internal, to_public
 from .linearize import Linearization, linearize, linearize_internal, residual, scaled_solve
 from .outputs import (
     bushing_states,
+    flagged_cases,
     joint_reactions,
     marker_poses,
     part_poses,
@@ -19,8 +20,8 @@ from .solve import (
 )
 
 __all__ = [
-    "STATUS_TEXT", "Linearization", "StaticSolution", "Status", "bushing_states", "joint_reactions",
-    "linearize", "linearize_internal", "marker_poses", "part_poses", "residual", "scaled_solve",
-    "solve_statics", "solve_statics_chunks", "solve_sweep", "spring_states", "to_internal",
-    "to_public",
+    "STATUS_TEXT", "Linearization", "StaticSolution", "Status", "bushing_states", "flagged_cases",
+    "joint_reactions", "linearize", "linearize_internal", "marker_poses", "part_poses",
+    "residual", "scaled_solve", "solve_statics", "solve_statics_chunks", "solve_sweep",
+    "spring_states", "to_internal", "to_public",
 ]

@@ -139,3 +139,29 @@ def _joint_reactions(mech: Mechanism, q, lam):
         force = force.at[g.members].set(f_i)
         moment = moment.at[g.members].set(react[:, 3:6] - jnp.cross(arm, f_i))
     return force, moment
+
+
+def flagged_cases(sol) -> dict[str, np.ndarray]:
+    """The cases of a solution that a check fails, as arrays of case indices.
+
+    spec: stiffness §0 (bushing law validity), §1.9 (KKT system); DESIGN.md "Static
+    equilibrium" (failures are reported per case). `sol` is a `StaticSolution` with a leading
+    case axis, or anything with its `status`, `stable` and `law_valid` arrays:
+
+    - 'failed': the cases that did not converge (status > 0; a negative status, a case that
+      was not solved, is in no list);
+    - 'unstable': converged cases whose `stable` flag is False;
+    - 'law_invalid': converged cases whose `law_valid` flag is False.
+
+    A flag that is None (a solution computed under a transformation) flags no case.
+    """
+    status = np.atleast_1d(np.asarray(sol.status))
+    converged = status == 0
+
+    def failing(flag):
+        if flag is None:
+            return np.zeros(0, dtype=int)
+        return np.flatnonzero(converged & ~np.atleast_1d(np.asarray(flag, dtype=bool)))
+
+    return {"failed": np.flatnonzero(status > 0), "unstable": failing(sol.stable),
+            "law_invalid": failing(sol.law_valid)}
