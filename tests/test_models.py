@@ -69,6 +69,31 @@ def test_zoo_is_covered():
     assert set(ZOO) == set(EXPECTED_STRUCTURE)
 
 
+def test_describe_is_plain_data_naming_every_element(zoo):
+    """`describe` lists the joints with their marker names, the element names and the corner
+    (side resolved, kingpin ends) of the pseudo-McPherson axle, as JSON-ready data."""
+    import json
+
+    mech = zoo["pseudo_mcpherson"]
+    d = diffsusp.model.describe(mech)
+    assert json.loads(json.dumps(d)) == d
+    assert d["name"] == mech.name and d["parts"] == list(mech.parts)
+    assert d["markers"] == len(mech.markers.names)
+    assert [(j["name"], j["kind"]) for j in d["joints"]] == [
+        ("tie_rod", "distance"), ("strut_slide", "translational"),
+        ("rear_ball_joint", "spherical"), ("front_ball_joint", "spherical")]
+    assert all((j["i"], j["j"]) == (j["name"] + ".i", j["name"] + ".j") for j in d["joints"])
+    assert sorted(d["bushings"]) == ["bushing_A", "bushing_B", "bushing_F"]
+    assert (d["springs"], d["stops"], d["drivers"]) == (["spring"], [], [])
+    assert sorted(d["load_points"]) == ["contact_patch", "wheel_centre"]
+    (corner,) = d["corners"]
+    assert (corner["side"], corner["frame"], corner["wheel_centre"], corner["contact_point"]) \
+        == ("left", "adams", "wheel_centre", "contact_patch")
+    top, bottom = corner["kingpin"]
+    assert top == "L4_strut_top" and bottom["part"] == "hub_carrier"
+    assert len(bottom["offset"]) == 3
+
+
 @pytest.mark.parametrize("name", list(EXPECTED_STRUCTURE))
 def test_structure(zoo, name):
     mech = zoo[name]

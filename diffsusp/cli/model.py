@@ -15,7 +15,7 @@ from rich import box
 from rich.table import Table as RichTable
 from rich.text import Text
 
-from ..model import parameter_leaves
+from ..model import describe, parameter_leaves
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
@@ -61,21 +61,11 @@ def info(
         mf = _load(model, check=False, side=side)
         mech = mf.mechanism
         report = validate(mech)
-    names = mech.markers.names
+    described = describe(mech)
     summary = dict(
-        name=mech.name,
+        name=described.pop("name"),
         source=model,
-        parts=list(mech.parts),
-        markers=len(names),
-        joints=[dict(name=n, kind=k, i=names[i], j=names[j]) for n, k, i, j in zip(
-            mech.joints.names, mech.joints.kind, mech.joints.i_marker, mech.joints.j_marker,
-            strict=True)],
-        bushings=list(mech.bushings.names),
-        springs=list(mech.springs.names),
-        stops=list(mech.stops.names),
-        drivers=list(mech.drivers.names),
-        load_points=list(mech.load_points.names),
-        corners=[_corner_summary(c, mech) for c in mech.corners],
+        **described,
         load_tables={k: dict(rows=t.n_rows, columns=list(t.names))
                      for k, t in mf.load_tables.items()},
         coordinates=report.n_coordinates,
@@ -93,7 +83,7 @@ def info(
     out = console(markup=False)
     out.print(Text(mech.name, style="bold") + Text(f" ({model})"), highlight=False)
     out.print(Text(f"parts ({len(mech.parts)}): {', '.join(mech.parts)}"), highlight=False)
-    out.print(f"markers: {len(names)}")
+    out.print(f"markers: {summary['markers']}")
     for label, items in (("bushings", summary["bushings"]), ("springs", summary["springs"]),
                          ("stops", summary["stops"]), ("drivers", summary["drivers"]),
                          ("load points", summary["load_points"])):
@@ -122,17 +112,6 @@ def info(
     for p in summary["parameters"]:
         table.add_row(p["path"], "×".join(map(str, p["shape"])), p["unit"])
     out.print(table)
-
-
-def _corner_summary(c, mech) -> dict:
-    """A corner as JSON: names, side (resolved), frame, radius (mm), design load (N or None)."""
-    return dict(prefix=c.prefix, wheel_centre=c.wheel_centre, contact_point=c.contact_point,
-                wheel_centre_load=c.wheel_centre_load,
-                kingpin=None if c.kingpin is None else [
-                    r if isinstance(r, str) else {"part": r[0], "offset": list(r[1])}
-                    for r in c.kingpin],
-                side=c.side_in(mech), frame=c.frame, loaded_radius=c.loaded_radius,
-                design_load=c.design_load)
 
 
 def _load_table(mf, loads: str):
@@ -244,13 +223,6 @@ def _results(mech, sol, table, start: int, stop: int, *, solved: bool = True):
     return results_table(mech, sol, part, first_case=start, bushings=bushings, springs=springs)
 
 
-def _flagged(status, flag) -> list[int]:
-    """Converged cases whose flag is False."""
-    import numpy as np
-
-    return [int(c) for c in np.flatnonzero((status == 0) & ~flag)]
-
-
 def _unsolved(mech, n):
     """A stand-in solution for cases not solved: NaN outputs, status -1, flags 0."""
     import types
@@ -288,6 +260,7 @@ def simulate(
 
     from ..io import loads_from_table
     from ..io.tables import RESULT_STATUS
+    from ..statics import flagged_cases
 
     # A bad output path fails before the model is read, let alone solved.
     check_output(out, suffixes=(".csv", ".txt", ".parquet", ".pq"), what="results table")
@@ -310,7 +283,8 @@ def simulate(
             run = _solve_and_write(mech, case_loads, table, out, max_steps, json_output)
     elapsed = time.perf_counter() - t0
     status = run.status
-    failed = np.flatnonzero((status != 0) & (status != -1))
+    flags = flagged_cases(run)
+    failed = flags["failed"]
     notes = sorted({str(w.message) for w in caught
                     if "cases did not converge" not in str(w.message)})
     finite = run.residual[np.isfinite(run.residual)]
@@ -323,8 +297,8 @@ def simulate(
         not_solved=int(np.sum(status == -1)),
         failed=[dict(case=int(c), status=RESULT_STATUS.get(int(status[c]), str(status[c])),
                      residual=float(run.residual[c])) for c in failed],
-        unstable=_flagged(status, run.stable),
-        law_invalid=_flagged(status, run.law_valid),
+        unstable=flags["unstable"].tolist(),
+        law_invalid=flags["law_invalid"].tolist(),
         max_residual=float(np.max(finite, initial=0.0)),
         max_constraint_error=float(np.nanmax(run.constraint_error, initial=0.0)),
         out=str(out),

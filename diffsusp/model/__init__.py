@@ -13,12 +13,13 @@ from .mechanism import (
     Mechanism,
     Springs,
     Stops,
+    describe,
     parameter_leaves,
 )
 from .validate import ValidationReport, validate
 
 __all__ = [
     "GROUND", "JOINT_ROWS", "Bushings", "Drivers", "Joints", "LoadPoints", "Loads", "Markers",
-    "Mechanism", "MechanismBuilder", "Springs", "Stops", "ValidationReport", "frame_from_axes",
-    "parameter_leaves", "validate",
+    "Mechanism", "MechanismBuilder", "Springs", "Stops", "ValidationReport", "describe",
+    "frame_from_axes", "parameter_leaves", "validate",
 ]

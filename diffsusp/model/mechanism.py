@@ -424,3 +424,40 @@ def parameter_leaves(mech: Mechanism) -> list[dict]:
                  shape=list(leaf.shape), unit=PARAMETER_UNITS.get(name, "?"))
             for path, leaf in jax.tree_util.tree_leaves_with_path(mech)
             if hasattr(leaf, "shape") and np.size(leaf) > 0]
+
+
+def describe(mech: Mechanism) -> dict:
+    """What `mech` is made of, as plain data (what `diffsusp info` prints; DESIGN.md
+    "Architecture"):
+    `name`, `parts` (names), `markers` (count), `joints` (`{"name", "kind", "i", "j"}` with
+    the marker names), the names of its `bushings`, `springs`, `stops`, `drivers` and
+    `load_points`, and its `corners` (`{"prefix", "wheel_centre", "contact_point",
+    "wheel_centre_load", "kingpin", "side", "frame", "loaded_radius", "design_load"}`: marker
+    and load point names, the kingpin's two ends as marker names or `{"part", "offset"}` (None
+    without a kingpin), the side resolved (`Corner.side_in`), the loaded radius in mm and the
+    design load in N, None when it is computed). Its parameters: `parameter_leaves`."""
+    names = mech.markers.names
+    joints = mech.joints
+    return dict(
+        name=mech.name,
+        parts=list(mech.parts),
+        markers=len(names),
+        joints=[dict(name=n, kind=k, i=names[i], j=names[j]) for n, k, i, j in zip(
+            joints.names, joints.kind, joints.i_marker, joints.j_marker, strict=True)],
+        bushings=list(mech.bushings.names),
+        springs=list(mech.springs.names),
+        stops=list(mech.stops.names),
+        drivers=list(mech.drivers.names),
+        load_points=list(mech.load_points.names),
+        corners=[_corner_summary(c, mech) for c in mech.corners],
+    )
+
+
+def _corner_summary(c, mech) -> dict:
+    return dict(prefix=c.prefix, wheel_centre=c.wheel_centre, contact_point=c.contact_point,
+                wheel_centre_load=c.wheel_centre_load,
+                kingpin=None if c.kingpin is None else [
+                    r if isinstance(r, str) else {"part": r[0], "offset": list(r[1])}
+                    for r in c.kingpin],
+                side=c.side_in(mech), frame=c.frame, loaded_radius=c.loaded_radius,
+                design_load=c.design_load)
