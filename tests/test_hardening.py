@@ -304,20 +304,19 @@ def test_measurement_tables_name_unknown_parts_and_absurd_numbers(tmp_path):
 
 
 def test_fit_default_selection_leaves_zero_stiffnesses_out_with_a_note():
-    from diffsusp.cli.identify import _fit_params
+    from diffsusp.identify import fit_selection
     from diffsusp.models import pseudo_mcpherson
 
     mech = pseudo_mcpherson()
     k = np.concatenate([np.asarray(mech.bushings.k_trans), np.asarray(mech.bushings.k_rot)], 1)
     assert (k == 0).any()  # the shipped model has free bushing directions
-    notes = []
-    params = _fit_params(mech, None, None, False, False, None, notes)
+    params, notes = fit_selection(mech, None, None)
     assert len(params) == int(np.sum(k > 0))
     assert "bushing_F.Krz" not in params.names
     assert notes and "bushing_F.Krz" in notes[0] and "--start" in notes[0]
     # With --start every selected stiffness is fitted from that value.
-    notes = []
-    assert len(_fit_params(mech, None, None, False, False, 1e4, notes)) == k.size
+    params, notes = fit_selection(mech, None, None, start=1e4)
+    assert len(params) == k.size
     assert not notes
 
 

@@ -223,17 +223,6 @@ def _save_figures(figures: dict, folder: Path) -> list:
     return [p for name, fig in figures.items() for p in plot.save(fig, folder / name)]
 
 
-def _fit_params(mech, bushings, axes, centres, springs, start, notes):
-    """`identify.selection.fit_selection` with its notes appended to `notes` (kept for
-    tests/test_hardening.py, which imports this name)."""
-    from ..identify.selection import fit_selection
-
-    params, more = fit_selection(mech, bushings, axes, centres=centres, springs=springs,
-                                 start=start)
-    notes.extend(more)
-    return params
-
-
 @contextlib.contextmanager
 def _save_on_interrupt(out, rows, what):
     """On SIGINT / SIGTERM, write the last estimate (`rows()`: the report rows of the last

@@ -56,7 +56,13 @@ from .least_squares import (
 )
 from .params import Params
 from .selection import fit_selection, measured_bushings, with_start
-from .sensitivity import DesignReport, SensitivityReport, design_experiment, sensitivity
+from .sensitivity import (
+    DesignReport,
+    SensitivityReport,
+    design_experiment,
+    sensitivity,
+    sensitivity_metrics,
+)
 
 __all__ = [
     "CorrectionReport", "GeometricJoint", "GeometricReport", "GeometryDesign", "JointEstimate",
@@ -67,5 +73,5 @@ __all__ = [
     "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
     "iterative", "fit_selection", "from_measurements", "measured_bushings", "with_start",
     "least_squares", "least_squares_batch", "predict",
-    "sensitivity", "whitened_residuals",
+    "sensitivity", "sensitivity_metrics", "whitened_residuals",
 ]
