@@ -20,6 +20,7 @@ CSV rows and figures `diffsusp.identify.tables`; this module parses, calls and f
 
 import contextlib
 import csv
+import enum
 import os
 from pathlib import Path
 from typing import Annotated
@@ -43,12 +44,13 @@ from .common import (
 identify_app = typer.Typer(add_completion=False, no_args_is_help=True,
                            help="Identify stiffnesses from measurements (spec stiffness ch. 4).")
 
-_CHOICES = {
-    "method": ("basic", "min_norm", "tsvd", "tikhonov", "nonneg"),
-    "hold": ("zero", "model"),
-    "weighting": ("noise", "none"),
-    "polish": ("auto", "on", "off"),
-}
+# The choices of the direct method's options (Typer checks them: exit code 2).
+Method = enum.StrEnum("Method", {v: v for v in ("basic", "min_norm", "tsvd", "tikhonov",
+                                                 "nonneg")})
+Hold = enum.StrEnum("Hold", {v: v for v in ("zero", "model")})
+Weighting = enum.StrEnum("Weighting", {v: v for v in ("noise", "none")})
+Polish = enum.StrEnum("Polish", {v: v for v in ("auto", "on", "off")})
+Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # identify.LOSSES
 
 
 # Options shared by the identify verbs.
@@ -66,27 +68,20 @@ ReorderOpt = Annotated[bool, typer.Option(
 JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable report.")]
 
 
-def _check_choice(name: str, value: str):
-    if value not in _CHOICES[name]:
-        raise fail(f"--{name} must be one of {', '.join(_CHOICES[name])}; got '{value}'.",
-                   EXIT_BAD_INPUT)
-
-
 def direct(
     model: ModelArg,
     measurements: MeasurementsOpt,
     side: SideOption = None,
     out: OutOpt = None,
     write_model: WriteModelOpt = None,
-    method: Annotated[str, typer.Option(
-        help="basic | min_norm | tsvd | tikhonov | nonneg.")] = "basic",
-    hold: Annotated[str, typer.Option(
-        help="Value of undetermined unknowns: zero | model.")] = "zero",
+    method: Annotated[Method, typer.Option(help="Estimator.")] = Method.basic,
+    hold: Annotated[Hold, typer.Option(
+        help="Value of undetermined unknowns.")] = Hold.zero,
     eliminate: Annotated[bool, typer.Option(
         help="Hold unknowns whose sigma% exceeds --max-sigma-pct one by one (noisy data: "
         "with --hold model).")] = False,
-    weighting: Annotated[str, typer.Option(
-        help="noise (GLS from landmark noise) | none.")] = "noise",
+    weighting: Annotated[Weighting, typer.Option(
+        help="noise: GLS from the landmark noise.")] = Weighting.noise,
     element: Annotated[list[str] | None, typer.Option(
         "--element", "-e", help="Identify only this bushing or spring (repeatable).")] = None,
     axisymmetric: Annotated[list[str] | None, typer.Option(
@@ -98,19 +93,18 @@ def direct(
         help="Largest sigma% still called identified.")] = 10.0,
     threshold: Annotated[float | None, typer.Option(
         help="Relative identifiability threshold (default 1e-5).")] = None,
-    polish: Annotated[str, typer.Option(
+    polish: Annotated[Polish, typer.Option(
         help="Refine the determined stiffnesses by least squares through the equilibrium "
-        "(errors in variables): auto (noisy data) | on | off (the thesis's linear "
-        "estimate).")] = "auto",
+        "(errors in variables): auto (noisy data), on, or off (the thesis's linear "
+        "estimate).")] = Polish.auto,
     json_output: JsonOpt = False,
 ):
     """Identify bushing and spring stiffnesses by the direct (linear) method.
 
     Units: N/mm and N·mm/deg (as the thesis's tables), spring K·L0 in N.
     """
-    for name, value in (("method", method), ("hold", hold), ("weighting", weighting),
-                        ("polish", polish)):
-        _check_choice(name, value)
+    method, hold, weighting, polish = (Method(method).value, Hold(hold).value,
+                                       Weighting(weighting).value, Polish(polish).value)
     _check_paths(out, write_model)
     enable_x64()
     from .. import identify, measure
@@ -399,7 +393,7 @@ def fit_command(
     = 0.05,
     sigma_rotation: Annotated[float, typer.Option(
         help="Pose rotation σ (deg), pose tables only.")] = 0.01,
-    loss: Annotated[str, typer.Option(help="linear | huber | cauchy.")] = "linear",
+    loss: Annotated[Loss, typer.Option(help="Robust loss of the residuals.")] = Loss.linear,
     max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 200,
     reorder: ReorderOpt = False,
     out: OutOpt = None,
@@ -411,12 +405,10 @@ def fit_command(
     model's landmarks or poses are fitted to the measured ones (Levenberg–Marquardt, exact
     derivatives), with σ, σ% and the combinations the data cannot see.
     """
-    from ..identify.least_squares import LOSSES
     from ..identify.tables import fit_rows
 
     _check_paths(out, write_model, figures)
-    if loss not in LOSSES:
-        raise fail(f"--loss must be one of {', '.join(LOSSES)}; got '{loss}'.", EXIT_BAD_INPUT)
+    loss = Loss(loss).value
     if not (sigma > 0 and sigma_rotation > 0):
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
     enable_x64()

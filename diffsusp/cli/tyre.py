@@ -24,6 +24,7 @@
 Exit codes as the other verbs: 2 bad input, 4 a model that cannot be evaluated.
 """
 
+import enum
 import json
 import math
 import warnings
@@ -54,6 +55,10 @@ app.add_typer(tyre_app, name="tyre")
 _MODES = {"pure_lateral", "pure_longitudinal", "pure_aligning", "combined_longitudinal",
           "combined_lateral", "pressure", "overturning", "mf1989_lateral", "mf1989_aligning",
           "mf1989_longitudinal"}
+# The choices of `tyre fit` (Typer checks them: exit code 2).
+FitModel = enum.StrEnum("FitModel", {v: v for v in ("mf61", "mf62", "mf52", "mf1989")})
+Mode = enum.StrEnum("Mode", {v: v for v in sorted(_MODES)})
+Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # tyre.fit.LOSSES
 
 
 def _load(path: Path):
@@ -294,13 +299,13 @@ def _suspension(name: str):
 def fit_command(
     data: Annotated[Path, typer.Argument(
         help="Bench data (.csv/.parquet): inputs and FX, FY, MZ.")],
-    model: Annotated[str, typer.Option(help="mf61 | mf62 | mf52 | mf1989.")] = "mf61",
+    model: Annotated[FitModel, typer.Option(help="Magic Formula version.")] = FitModel.mf61,
     start: Annotated[Path | None, typer.Option(help="Start .tir (MF 5.2/6.x).")] = None,
     out: Annotated[Path | None, typer.Option(help="Write the fitted .tir here.")] = None,
-    mode: Annotated[list[str] | None, typer.Option(
+    mode: Annotated[list[Mode] | None, typer.Option(
         help="Coefficient group(s), fitted in order (default: pure_lateral, pure_longitudinal, "
         "pure_aligning as the data allow; mf1989: mf1989_lateral).")] = None,
-    loss: Annotated[str, typer.Option(help="huber | cauchy | linear.")] = "huber",
+    loss: Annotated[Loss, typer.Option(help="Robust loss of the residuals.")] = Loss.huber,
     report: Annotated[Path | None, typer.Option(help="Write the reports (.json).")] = None,
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-fitted figures folder.")]
     = None,
@@ -309,13 +314,8 @@ def fit_command(
     from diffsusp.tyre import MagicFormula89
     from diffsusp.tyre import fit as F
 
-    if model not in ("mf61", "mf62", "mf52", "mf1989"):
-        raise fail(f"--model must be mf61, mf62, mf52 or mf1989; got '{model}'", EXIT_BAD_INPUT)
-    if loss not in F.LOSSES:
-        raise fail(f"--loss must be one of {', '.join(F.LOSSES)}; got '{loss}'", EXIT_BAD_INPUT)
-    for m in mode or ():
-        if m not in _MODES:
-            raise fail(f"--mode {m}: one of {', '.join(sorted(_MODES))}", EXIT_BAD_INPUT)
+    model, loss = FitModel(model).value, Loss(loss).value
+    mode = [Mode(m).value for m in mode] if mode else None
     if model != "mf1989" and start is None:
         raise fail("--start FILE.tir is needed for mf61/mf62/mf52 (the start values and the "
                    "file's other sections)", EXIT_BAD_INPUT)
