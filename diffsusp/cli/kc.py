@@ -88,43 +88,9 @@ def _run_event(mech, event, corner, travel, fz, force, torque, rack):
 
 
 def _json(ev, mech_name: str) -> dict:
-    import numpy as np
+    from diffsusp.kc.dispatch import event_json
 
-    from diffsusp import kc
-
-    def clean(a):
-        a = np.asarray(a, dtype=float)
-        return np.where(np.isfinite(a), a, np.nan).tolist()
-
-    x_scale = 1e-3 if ev.x_unit == "N·mm" else 1.0
-    out = {
-        "model": mech_name,
-        "event": ev.name,
-        "x": {"name": ev.x_name, "unit": "N·m" if ev.x_unit == "N·mm" else ev.x_unit,
-              "values": clean(np.asarray(ev.x) * x_scale)},
-        "held": ev.held,
-        "status": np.asarray(ev.solution.status).tolist(),
-        "iterations": np.asarray(ev.solution.iterations).tolist(),
-        "stable": _flag_list(ev.solution.stable),
-        "law_valid": _flag_list(ev.solution.law_valid),
-        "metrics": {name: {"unit": kc.display_unit(name), "values": clean(kc.display(name, v))}
-                    for name, v in sorted(ev.metrics.items())},
-    }
-    if ev.compliance:
-        out["compliance_matrix"] = {
-            "unit": "mm/N, mm/(N·mm), rad/N, rad/(N·mm); rows and columns x, y, z, rx, ry, rz "
-                    "(global) at the wheel centre",
-            "values": {prefix or "corner": clean(c) for prefix, c in ev.compliance.items()},
-        }
-    # NaN is not JSON: non-converged cases are null.
-    return _nan_to_none(out)
-
-
-def _flag_list(flag):
-    """Per-case flag as a list of booleans (None when the solution carries no flags)."""
-    import numpy as np
-
-    return None if flag is None else np.asarray(flag, dtype=bool).tolist()
+    return event_json(ev, mech_name)
 
 
 def _flag_notes(ev) -> list[str]:

@@ -344,13 +344,8 @@ def fit_command(
             m0 = MagicFormula89.from_values({"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0,
                                              "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
                                              "c3": -1.0, "c4": -10.0, "c9": 0.5})
-            groups = mode or ["mf1989_lateral"]
             tir = None
-        else:
-            groups = mode or [g for g, ch in (("pure_lateral", "FY"),
-                                              ("pure_longitudinal", "FX"),
-                                              ("pure_aligning", "MZ"))
-                              if ch in bench.channels]
+        groups = mode or F.default_groups(m0, bench.channels)
         reports = {}
         fitted = m0
         for g in groups:

@@ -258,36 +258,10 @@ def _load_table(mech, path):
 
 
 def _event_report(ev, model_name: str, caught) -> dict:
-    """The JSON of `diffsusp kc MODEL --json` (display units per metric) for an event."""
-    from .. import kc
+    """The JSON of `diffsusp kc MODEL --json` for an event, plus the warnings it raised."""
+    from ..kc.dispatch import event_json
 
-    def clean(a):
-        a = np.asarray(a, dtype=float)
-        return [None if not math.isfinite(v) else v for v in a.ravel().tolist()] \
-            if a.ndim <= 1 else [clean(r) for r in a]
-
-    def flags(value):
-        return None if value is None else np.asarray(value, dtype=bool).tolist()
-
-    x_scale = 1e-3 if ev.x_unit == "N·mm" else 1.0
-    out = {
-        "model": model_name, "event": ev.name,
-        "x": {"name": ev.x_name, "unit": "N·m" if ev.x_unit == "N·mm" else ev.x_unit,
-              "values": clean(np.asarray(ev.x) * x_scale)},
-        "held": ev.held,
-        "status": np.asarray(ev.solution.status).tolist(),
-        "iterations": np.asarray(ev.solution.iterations).tolist(),
-        "stable": flags(ev.solution.stable), "law_valid": flags(ev.solution.law_valid),
-        "metrics": {name: {"unit": kc.display_unit(name), "values": clean(kc.display(name, v))}
-                    for name, v in sorted(ev.metrics.items())},
-        "warnings": [str(w.message) for w in caught],
-    }
-    if ev.compliance:
-        out["compliance_matrix"] = {
-            "unit": "mm/N, mm/(N·mm), rad/N, rad/(N·mm); rows and columns x, y, z, rx, ry, rz "
-                    "(global) at the wheel centre",
-            "values": {prefix or "corner": clean(c) for prefix, c in ev.compliance.items()}}
-    return out
+    return event_json(ev, model_name) | {"warnings": [str(w.message) for w in caught]}
 
 
 class KC(Recipe):
@@ -393,16 +367,13 @@ class TyreFit(Recipe):
         return bench, tuple(str(w.message) for w in caught)
 
     def _groups(self, model, channels) -> list[str]:
-        from .. import tyre
+        from ..tyre.fit import default_groups
 
         if self.options.get("names"):
             return ["fit"]
         if self.options.get("groups"):
             return list(self.options["groups"])
-        if isinstance(model, tyre.MagicFormula89):
-            return ["mf1989_lateral"]
-        return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
-                                ("pure_aligning", "MZ")) if ch in channels]
+        return default_groups(model, channels)
 
     def run(self, models: list, data: list, deadline: float | None, mesh=None) -> list:
         import jax

@@ -156,5 +156,47 @@ def reference_case(ev) -> int:
     return int(np.argmin(np.abs(np.asarray(ev.x) - target)))
 
 
-__all__ = ["EVENTS", "corner_with", "default_fz_range", "mirrored_corner", "parse_range",
-           "reference_case", "run_event"]
+def event_json(ev, model_name: str) -> dict:
+    """The JSON of a K&C event (`diffsusp kc MODEL --json`, and each report of a K&C fleet):
+    model and event names, the swept quantity (N·m for torques), held inputs, per-case status,
+    iterations and flags, every metric in its display unit (`kc.display`), and the wheel-centre
+    compliance matrices when the event has them. A non-finite value (a case that did not
+    converge) is None (null)."""
+    import math
+
+    from .metrics import display, display_unit
+
+    def clean(a):
+        a = np.asarray(a, dtype=float)
+        if a.ndim == 0:
+            return float(a) if math.isfinite(a) else None
+        return [clean(r) for r in a]
+
+    def flags(value):
+        return None if value is None else np.asarray(value, dtype=bool).tolist()
+
+    x_scale = 1e-3 if ev.x_unit == "N·mm" else 1.0
+    out = {
+        "model": model_name,
+        "event": ev.name,
+        "x": {"name": ev.x_name, "unit": "N·m" if ev.x_unit == "N·mm" else ev.x_unit,
+              "values": clean(np.asarray(ev.x) * x_scale)},
+        "held": ev.held,
+        "status": np.asarray(ev.solution.status).tolist(),
+        "iterations": np.asarray(ev.solution.iterations).tolist(),
+        "stable": flags(ev.solution.stable),
+        "law_valid": flags(ev.solution.law_valid),
+        "metrics": {name: {"unit": display_unit(name), "values": clean(display(name, v))}
+                    for name, v in sorted(ev.metrics.items())},
+    }
+    if ev.compliance:
+        out["compliance_matrix"] = {
+            "unit": "mm/N, mm/(N·mm), rad/N, rad/(N·mm); rows and columns x, y, z, rx, ry, rz "
+                    "(global) at the wheel centre",
+            "values": {prefix or "corner": clean(c) for prefix, c in ev.compliance.items()},
+        }
+    return out
+
+
+__all__ = ["EVENTS", "corner_with", "default_fz_range", "event_json", "mirrored_corner",
+           "parse_range", "reference_case", "run_event"]

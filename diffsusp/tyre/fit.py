@@ -44,8 +44,8 @@ from .. import lsq
 from ..errors import InputError, ModelWarning
 from . import mf6, mf89
 
-__all__ = ["BenchData", "TyreFitReport", "bench_data", "read_bench", "read_bench_table",
-           "input_columns", "simulate", "fit", "fit_many", "GROUPS",
+__all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "read_bench",
+           "read_bench_table", "input_columns", "simulate", "fit", "fit_many", "GROUPS",
            "POSITIVE", "CHANNELS", "COLUMN_ALIASES", "check_constraints", "plot_fit"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
@@ -596,6 +596,18 @@ def fit(model, data: BenchData, names, *, noise: dict | None = None, loss: str =
     u0 = jnp.zeros(len(problem.names))
     x, steps, ok = _solve(problem, u0, max_steps, rtol, atol)
     return _report(problem, x, steps, ok, threshold)
+
+
+def default_groups(model, channels) -> list[str]:
+    """The coefficient groups fitted, in order, when none are named (`diffsusp tyre fit`, the
+    fleet's tyre fits): `mf1989_lateral` for a 1989 tyre (`MagicFormula89`), otherwise
+    pure_lateral, pure_longitudinal and pure_aligning as the bench data's `channels` allow."""
+    from .mf89 import MagicFormula89
+
+    if isinstance(model, MagicFormula89):
+        return ["mf1989_lateral"]
+    return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
+                            ("pure_aligning", "MZ")) if ch in channels]
 
 
 def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "huber",
