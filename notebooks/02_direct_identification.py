@@ -178,7 +178,7 @@ for k, name in enumerate(names):
 # ## From files, and from the command line
 #
 # Measurements are exchanged as a table — one row per case and landmark (or per case and part
-# for poses), with the loads of the case on its rows (`diffsusp.measure.table` documents the
+# for poses), with the loads of the case on its rows (`diffsusp.io.measurements` documents the
 # columns). The same identification from the shell:
 #
 # ```

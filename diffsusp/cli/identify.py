@@ -7,9 +7,9 @@ hardpoint) identification from measured equilibria.
 - `fit`: least squares through the equilibrium (spec stiffness §3, §6 item 8); any subset of
   the parts, with σ, identifiability and the combinations the data cannot see.
 
-MODEL is anything `diffsusp.io.load_model` reads (a `.toml`, `.adm`, `.json` file or a built-in
+MODEL is anything `diffsusp.load_model` reads (a `.toml`, `.adm`, `.json` file or a built-in
 name). TABLE is a landmark or pose table with the loads, CSV or Parquet (format in
-`diffsusp.measure.table`). The report goes to the terminal (or `--json`), optionally to `--out`
+`diffsusp.io.measurements`). The report goes to the terminal (or `--json`), optionally to `--out`
 (.csv: one row per unknown; .json: the whole report), the identified model to `--write-model`
 (.toml native file; .adm: the stiffnesses written into the Adams dataset the model came from,
 or a complete dataset), and for `iterative` and `fit` the figures to `--figures`.
