@@ -6,6 +6,13 @@ generated pages cover what the code has, and every Python code block of its page
   reference names but the code lost, or a failing generator fails the suite; then the built
   metric reference has one row per entry of `diffsusp.kc.metrics.METRICS` and the built CLI
   reference a section per verb of the Typer app (the generated pages are complete).
+  The notebooks have pages (`notebooks/NN_*/`: their executed copies from
+  `tests/test_notebooks.py` when a run saved them, else their sources without outputs, saying
+  so) and every K&C metric a small figure (`reference/figures/metrics/<metric>.png`, computed
+  by docs/hooks.py from one event per kind, each slope checked against its curve).
+- `test_notebook_page_shows_outputs_or_says_why_not`: the page notebook docs/hooks.py makes of a
+  notebook source: without a saved run, and with a stale one, the source without outputs under
+  a note saying so; with a current saved run, its outputs, which the rendered page contains.
 - `test_code_blocks_run[page]`: every ```python block of every page under docs/, in page
   order, in one namespace per page, from the repository root (the pages read
   `tests/data/...`), in this process: the pages share the compiled programs (small models:
@@ -15,6 +22,7 @@ generated pages cover what the code has, and every Python code block of its page
 """
 
 import html
+import importlib.util
 import os
 import pathlib
 import re
@@ -41,6 +49,13 @@ def _text(path: pathlib.Path) -> str:
     page = path.read_text(encoding="utf-8")
     page = page[page.find("<article"):page.find("</article>")]
     return html.unescape(re.sub(r"<[^>]+>", " ", page))
+
+
+def _hooks():
+    spec = importlib.util.spec_from_file_location("diffsusp_docs_hooks", DOCS / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.fixture(scope="module")
@@ -79,6 +94,56 @@ def test_site_builds_strict(site):
 
     api = _text(site / "reference/api/kc/index.html")
     assert "parallel_travel" in api and "Parallel wheel travel" in api  # docstrings rendered
+
+    page = (site / "reference/metrics/index.html").read_text(encoding="utf-8")
+    for name in METRICS:  # a small figure per metric, in its row
+        png = site / "reference/figures/metrics" / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert f'src="../figures/metrics/{name}.png"' in page, name
+
+    hooks = _hooks()
+    for source in sorted((ROOT / "notebooks").glob("[0-9]*.py")):  # a page per notebook
+        text = _text(site / "notebooks" / source.stem / "index.html")
+        title = re.search(r"^# # (.+)$", source.read_text(encoding="utf-8"), re.M).group(1)
+        assert title.strip() in text, source.name
+        saved = hooks.EXECUTED / f"{source.stem}.ipynb"
+        current = saved.is_file() and hooks.saved_source_hash(saved) == hooks.source_hash(source)
+        assert ("Executed by the test suite" in text) == current, source.name
+        assert ("This page shows the notebook without its outputs" in text) != current
+
+
+def test_notebook_page_shows_outputs_or_says_why_not(tmp_path, monkeypatch):
+    import nbformat
+
+    hooks = _hooks()
+    monkeypatch.setattr(hooks, "EXECUTED", tmp_path / "executed")
+    source = tmp_path / "00_example.py"
+    source.write_text("# %% [markdown]\n# # 00 — An example\n\n# %%\nprint(\"ab\" * 3)\n",
+                      encoding="utf-8")
+
+    page, executed = hooks.notebook_page(source, tmp_path / "pages")  # never run
+    assert not executed
+    text = hooks.html_text(hooks.render_notebook(page))
+    assert "without its outputs" in text and "not been executed" in text
+    assert "00 — An example" in text and 'print("ab" * 3)' in text and "ababab" not in text
+
+    import jupytext
+
+    nb = jupytext.read(source)
+    nb.cells[1].outputs = [nbformat.v4.new_output("stream", name="stdout", text="ababab\n")]
+    saved = hooks.save_executed(nb, source)
+    assert saved == tmp_path / "executed" / "00_example.ipynb"
+    page, executed = hooks.notebook_page(source, tmp_path / "pages")  # a current run
+    assert executed
+    text = hooks.html_text(hooks.render_notebook(page))
+    assert "Executed by the test suite" in text and "ababab" in text
+    assert "without its outputs" not in text
+
+    source.write_text(source.read_text(encoding="utf-8") + "print(1)\n", encoding="utf-8")
+    page, executed = hooks.notebook_page(source, tmp_path / "pages")  # the source changed
+    assert not executed
+    text = hooks.html_text(hooks.render_notebook(page))
+    assert "older than its source" in text and "print(1)" in text and "ababab" not in text
 
 
 def test_pages_with_code_are_found():
