@@ -4,14 +4,16 @@ Flat Trac table (spec: tyre §3.3–3.8; issue 16 item 8).
 DATA (.csv/.parquet) has the columns of `diffsusp.tyre.bench.REQUIRED`: `t` [s], `segment`,
 `steer`, `camber` [rad], `speed` [mm/s], `omega` [rad/s], `FZ`, `FX`, `FY` [N], `MZ` [N·mm]
 (a unit in the header, e.g. `speed [km/h]`, `MZ [N·m]`, `steer [deg]`, is converted).
-`--structure apriori|just-necessary` (Tables 5 / 10); the report goes to the terminal (and
-`--report` .json), the identified polynomial models to `--out` (.json), measured-vs-model
-figures to `--figures`; `--to-mf FILE.json` converts the polynomials to the Magic Formula 1989
-set (§3.8, conversion radius `--radius`). Exit codes: 2 bad input (missing channels,
-non-monotonic time, a rate too low for the filter), 4 an unstable identified model
-(∂Fy_pneu/∂δ′ ≥ 0 on the data) unless `--allow-unstable`.
+`--structure apriori|just-necessary` (Tables 5 / 10), the structure search's F-test level
+`--significance` and σ % threshold `--sigma-pct` (`bench.identify`); the report goes to the
+terminal (and `--report` .json), the identified polynomial models to `--out` (.json),
+measured-vs-model figures to `--figures`; `--to-mf FILE.json` converts the polynomials to
+the Magic Formula 1989 set (§3.8, conversion radius `--radius`). Exit codes: 2 bad input
+(missing channels, non-monotonic time, a rate too low for the filter, an unknown structure),
+4 an unstable identified model (∂Fy_pneu/∂δ′ ≥ 0 on the data) unless `--allow-unstable`.
 """
 
+import enum
 import json
 from pathlib import Path
 from typing import Annotated
@@ -57,13 +59,25 @@ def _columns(table) -> dict:
     return out
 
 
+# the library's structures (diffsusp.tyre.poly.STRUCTURES), a Typer choice (exit code 2)
+Structure = enum.StrEnum("Structure", {v: v for v in ("apriori", "just-necessary")})
+
+
 def register(tyre_app: typer.Typer) -> None:
     tyre_app.command("identify")(identify_command)
 
 
 def identify_command(
     data: Annotated[Path, typer.Argument(help="Flat Trac table (.csv/.parquet).")],
-    structure: Annotated[str, typer.Option(help="apriori | just-necessary.")] = "just-necessary",
+    structure: Annotated[Structure, typer.Option(
+        help="Degrees: Table 5 (apriori) or Table 10 (just-necessary).")]
+    = Structure["just-necessary"],
+    significance: Annotated[float, typer.Option(
+        help="Structure search: the F-test level; a term whose removal raises the residual "
+             "beyond the noise at this level is kept.", min=1e-12, max=0.5)] = 1e-3,
+    sigma_pct: Annotated[float, typer.Option(
+        "--sigma-pct", help="Structure search: remove terms with sigma % above this (unless "
+                            "the F-test keeps them).", min=0.0)] = 10.0,
     out: Annotated[Path | None, typer.Option(help="Write the polynomial models (.json).")]
     = None,
     report: Annotated[Path | None, typer.Option(help="Write the report (.json).")] = None,
@@ -78,9 +92,7 @@ def identify_command(
     = False,
 ):
     """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
-    if structure not in ("apriori", "just-necessary"):
-        raise fail(f"--structure must be apriori or just-necessary; got '{structure}'",
-                   EXIT_BAD_INPUT)
+    structure = Structure(structure).value
     for path, suffixes, what in ((out, (".json",), "polynomial models"),
                                  (report, (".json",), "report"),
                                  (to_mf, (".json",), "Magic Formula set")):
@@ -94,7 +106,8 @@ def identify_command(
 
         table = _columns(read_table(data))
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
-                             rolling_radius=rolling_radius)
+                             rolling_radius=rolling_radius, significance=significance,
+                             sigma_pct_threshold=sigma_pct)
         c.print(rep.table())
         if report is not None:
             report.write_text(json.dumps(rep.to_dict(), indent=2) + "\n")
