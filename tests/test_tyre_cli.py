@@ -6,6 +6,7 @@ import math
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from diffsusp.cli import app
@@ -120,3 +121,53 @@ def test_rig_bad_inputs_exit_2():
     assert r.exit_code == 2 and "longitudinal_at must be" in _text(r), r.output
     r = _run("rig", TIR, "--fz", "-5")
     assert r.exit_code == 2 and "fz must be a positive" in _text(r), r.output
+
+
+def test_identify_bad_input_and_options(tmp_path):
+    """`tyre identify` (issue 16 item 8): bad input exits 2 before anything compiles
+    (missing channel, an unknown --structure or an out-of-range --significance: Typer
+    choices); --significance and --sigma-pct reach the structure search (its removal
+    reasons quote them); the report says why camber powers are not determined; the
+    measured-vs-model figures are written."""
+    import pathlib
+
+    from diffsusp.io.tables import write_table
+
+    t = np.arange(60) / 200.0
+    cols = {"t": t, "segment": np.zeros(60), "steer": np.zeros(60), "camber": np.zeros(60),
+            "speed": np.full(60, 2e4), "omega": np.full(60, 70.0), "FZ": np.full(60, 4e3),
+            "FX": np.zeros(60), "FY": np.zeros(60)}  # no MZ
+    bad = tmp_path / "bad.csv"
+    write_table(bad, cols)
+    r = _run("identify", bad)
+    assert r.exit_code == 2 and "missing channel(s) MZ" in _text(r)
+    r = _run("identify", bad, "--structure", "cubic")
+    assert r.exit_code == 2 and "'cubic' is not one of" in _text(r)
+    assert "'just-necessary'" in _text(r)
+    r = _run("identify", bad, "--significance", "2")
+    assert r.exit_code == 2 and "--significance" in _text(r)
+    # the shipped noise-free campaign (tests/test_tyre_bench.py) with the bench's noise
+    z = np.load(pathlib.Path(__file__).parent / "data" / "tyre_flat_trac_campaign.npz")
+    table = {c: np.asarray(z[c], float) for c in z.files}
+    n_seg, n = 24, len(table["FY"]) // 24
+    table["t"] = np.tile(np.arange(n) / 200.0, n_seg)
+    table["segment"] = np.repeat(np.arange(n_seg, dtype=float), n)
+    rng = np.random.default_rng(7)
+    table["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(t := table["FY"]))
+    table["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(t))
+    data = tmp_path / "bench.csv"
+    write_table(data, table)
+    rep = tmp_path / "report.json"
+    r = _run("identify", data, "--structure", "just-necessary", "--significance", "1e-4",
+             "--sigma-pct", "20", "--report", rep, "--figures", tmp_path / "fig")
+    assert r.exit_code == 0, r.output
+    out = json.loads(rep.read_text())
+    crit = "15.1"  # χ²₁ quantile of 10⁻⁴ (10⁻³, the default: 10.8)
+    for o in ("Fy", "Mz"):
+        reasons = [w for w in out["outputs"][o]["removed"].values() if "sigma%" in w]
+        assert reasons and all("> 20 (" in w and f"< {crit}" in w for w in reasons), reasons
+    assert any("gamma^2..gamma^5 are not determined" in note and "(0°, 1.5°)" in note
+               for note in out["notes"]), out["notes"]
+    assert out["outputs"]["Fy"]["stiffness"] == pytest.approx(157_381, rel=2e-3)
+    for o in ("fy", "mz"):
+        assert (tmp_path / "fig" / f"{o}_measured_vs_model.png").exists()
