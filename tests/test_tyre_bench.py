@@ -279,10 +279,22 @@ def test_identify_structure_search_and_flags(campaign, conditioned):
     slow["t"] = np.tile(np.arange(50) / 50.0, SEGMENTS.n)
     with pytest.raises(InputError, match="too low for the 25 Hz"):
         bench.condition(slow)
-    # an identified model past its grip peak on the data is flagged, not hidden
-    bad = poly.PolynomialModel.create("Fy", {"delta": 1}, values={"b_Fy_delta_1_1": 3e4})
-    margin = np.asarray(relaxation.stability_margin(bad, cond.inputs))
-    assert np.all(margin > 0)
+    # an identified model past its grip peak on the data is flagged, not hidden (the check
+    # `identify` reports in `flags` and `stable`, the CLI's exit code 4): the campaign's F_y
+    # with its sign flipped (a force growing with δ′), the structure found above
+    stable, margin, flag = bench.stability(rep.model, cond.inputs)
+    assert stable and margin < 0 and flag is None
+    flipped = _noisy(table, 0)
+    flipped["FY"] = -flipped["FY"]
+    cond_flipped = bench.condition(flipped)
+    names = poly.regressor_model("Fy", DEGREES, ly=True).names
+    bad = bench.identify_output(cond_flipped, "Fy", DEGREES, search=False,
+                                fixed=[n for n in names if n not in rep.reduced.names])
+    stable, margin, flag = bench.stability(bad.model, cond_flipped.inputs)
+    assert not stable and margin > 0
+    assert flag.startswith("unstable identified model: dFy_pneu/ddelta' =")
+    assert margin == pytest.approx(float(np.max(relaxation.stability_margin(
+        bad.model, cond_flipped.inputs))))
 
 
 @pytest.fixture(scope="module")

@@ -87,7 +87,8 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "segment_inputs",
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
-           "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT", "eliminate_r"]
+           "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT", "eliminate_r",
+           "stability", "camber_levels"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -926,16 +927,26 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
                          "positive: the relaxation is not excited enough (no slip transient).")
     stable, margin = True, float("nan")
     if "Fy" in reports:
-        m = np.asarray(relaxation.stability_margin(reports["Fy"].model, cond.inputs))
-        margin = float(np.max(m))
-        stable = bool(margin < 0)
-        if not stable:
-            k = int(np.argmax(m))
-            flags.append(f"unstable identified model: dFy_pneu/ddelta' = {margin:.4g} N/m >= 0 "
-                         f"at F_z = {cond.inputs['fz'][k]:.3g} kN, delta' = "
-                         f"{1e3 * cond.inputs['delta'][k]:.3g} mm (beyond the grip peak; the "
-                         "simulation model (3-82) would diverge there).")
+        stable, margin, flag = stability(reports["Fy"].model, cond.inputs)
+        if flag:
+            flags.append(flag)
     return BenchReport(reports, stable, margin, flags, notes, structure, len(cond.fy), cond.rate)
+
+
+def stability(model: PolynomialModel, inputs: Mapping) -> tuple[bool, float, str | None]:
+    """The stability check of an identified F_y model on the data (spec §3.4.3, (3-82…3-87)):
+    ∂Fy_pneu/∂δ′ < 0 on every sample of `inputs` (the conditioned inputs: fz [kN], delta [m],
+    …). Returns (stable, the largest ∂Fy_pneu/∂δ′ [N/m], the flag in words or None)."""
+    m = np.asarray(relaxation.stability_margin(model, inputs))
+    margin = float(np.max(m))
+    if margin < 0:
+        return True, margin, None
+    k = int(np.argmax(m))
+    return False, margin, (
+        f"unstable identified model: dFy_pneu/ddelta' = {margin:.4g} N/m >= 0 at F_z = "
+        f"{np.asarray(inputs['fz'])[k]:.3g} kN, delta' = "
+        f"{1e3 * np.asarray(inputs['delta'])[k]:.3g} mm (beyond the grip peak; the "
+        "simulation model (3-82) would diverge there).")
 
 
 # --------------------------------------------------------------------------------------------
