@@ -411,13 +411,25 @@ def test_structure_search_finds_the_table10_degrees():
     """Data generated from a model of the just-necessary degrees of Table 10 (the Dunlop R16
     at 2.5 bar, (3-79): degree 5 in δ′ and in φ′) on a steering-feel campaign with three loads
     and three cambers: the search from the a-priori structure of Table 5 (degree 7 in δ′ and
-    φ′, 5 in γ, π(γ,β̇); 96 columns with the relaxation terms) finds exactly the true
-    F_pneu terms: degrees 5 in δ′ and φ′ (φ′ odd, as the thesis found), γ of degree 1 as the
-    model (three camber levels could not hold more), π(γ,β̇) gone; K_y within its σ."""
+    φ′, 5 in γ, π(γ,β̇); 96 columns with the relaxation terms) plus the camber/slip coupling
+    γ²·δ′ of (3-53) finds exactly the true F_pneu terms: degrees 5 in δ′ and φ′ (φ′ odd, as
+    the thesis found), γ of degree 1 as the model (three camber levels could not hold more:
+    γ³…γ⁵ reported as such), π(γ,β̇) and the coupling gone; K_y within its σ."""
+    from diffsusp.lsq import algebra
+
     fy = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.5, "Fy")
     table = _load("tyre_flat_trac_table10.npz", SEGMENTS_25)
     cond = bench.condition(_noisy(table, 1))
-    rep = bench.identify_output(cond, "Fy", poly.APRIORI["Fy"])
+    # the thesis's camber/slip coupling test (3-53): K_δ = P_Fz1·γ² + P_Fz2, the columns
+    # γ²·δ′·F_z^j searched with the others (the slip sines run at every camber level)
+    g2 = algebra.LinearModel(("g2",), ("gamma",), lambda u: (u["gamma"] ** 2)[..., None])
+    coupling = g2.product(algebra.monomials("delta", (1,))).product(
+        algebra.monomials("fz", (1, 2, 3)))
+    coupling = coupling.rename(dict(zip(coupling.names, [
+        f"b_Fy_gamma2delta_1_{j}" for j in (1, 2, 3)], strict=True)))
+    rep = bench.identify_output(cond, "Fy", poly.APRIORI["Fy"], extra=coupling)
+    # P_Fz1 removed, as the thesis found on every tyre and pressure (§3.4.4)
+    assert all(n in rep.removed and "F " in rep.removed[n] for n in coupling.names)
     truth = {n for n, v in fy.values().items() if v}
     found = {n for n, v in rep.model.values().items() if v}
     assert found == truth

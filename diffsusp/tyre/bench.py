@@ -224,7 +224,8 @@ class OutputReport:
     of the output channel estimated from the residual, N or N·m), `removed` (name → reason),
     `not_identifiable` (name → why), `fydot_hat` (the instrument's Ḟ_y/ω, (segments, samples),
     F_y only), `excused` (behaviour faults the search left because every removal that mends
-    them is significant: ("sign", block, i), ("concave",), ("extrema",))."""
+    them is significant: ("sign", block, i), ("concave",), ("extrema",)), `extra` (the
+    additional columns searched, `identify_output`)."""
 
     output: str
     fit: lsq.Fit | None
@@ -238,6 +239,7 @@ class OutputReport:
     not_identifiable: dict
     fydot_hat: np.ndarray | None = None
     excused: list = dataclasses.field(default_factory=list)
+    extra: object = None
 
     @property
     def stiffness(self) -> float:
@@ -256,6 +258,8 @@ class OutputReport:
 
         lip = regressor_model(self.output, dict(self.model.degrees), ly=True,
                               p2=(self.output == "Mz"))
+        if self.extra is not None:
+            lip = lip + self.extra
         x = np.array([dict(zip(self.reduced.names, self.reduced.x, strict=True)).get(n, 0.0)
                       for n in lip.names])
         y = cond.fy if self.output == "Fy" else cond.mz
@@ -530,7 +534,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                     significance: float = 1e-3, ic_threshold: float = 0.0, fixed=None,
                     rolling_radius: float = 0.294,
                     fy_report: "OutputReport | None" = None,
-                    final_pass: bool = True) -> OutputReport:
+                    final_pass: bool = True, extra=None) -> OutputReport:
     """Two-step identification of one output ("Fy" or "Mz") on conditioned data (spec §3.3):
     step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77);
     every structure estimated by `two_step` (instrumental variables, noise-model σ).
@@ -576,11 +580,22 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     steady camber levels cannot determine are reported in `not_identifiable` with the reason
     (`_camber_powers`).
 
+    `extra` (a `lsq.algebra.LinearModel`, optional): more F_pneu columns to search with the
+    others, named b_<F>_<block>_<i>_<j> (e.g. the camber/slip coupling γ²·δ′·F_z^j of the
+    thesis's test (3-53), or ω-dependent terms (3-54)); their δ′-derivative enters the
+    relaxation gain of step 2; their estimates are in `reduced`, not in `model` (the
+    polynomial of `degrees`).
+
     For M_z, `fy_report` (the F_y identification) supplies the instrument of Ḟ_y and its noise
     level; without it the M_z relaxation terms are least squares (biased toward 0 by the F_y
     noise)."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
+    own = set(lip.names)
+    if extra is not None:
+        for n in extra.names:
+            parse_name(n)  # b_<F>_<block>_<i>_<j>, else a clear error
+        lip = lip + extra
     names = lip.names
     X, L, Dp = (np.asarray(a) for a in _parts_program(lip)(cond.samples))
     fydot = np.asarray(cond.samples["fydot_w"])
@@ -657,11 +672,11 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     is_pneu = _masks(act)[1]
     reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
     model = PolynomialModel.create(output, degrees, values={
-        n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k})
+        n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k and n in own})
     return OutputReport(output, fit, reduced, model, float(res["compliance"]),
                         float(res["compliance_sigma"]), float(res["sigma_step2"]),
                         float(res["noise_sigma"]), removed, not_ident,
-                        res["fydot_hat"] if output == "Fy" else None, excused)
+                        res["fydot_hat"] if output == "Fy" else None, excused, extra)
 
 
 def camber_levels(gamma) -> np.ndarray | None:
