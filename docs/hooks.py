@@ -6,9 +6,18 @@ A page containing one of the markers below gets the generated Markdown in its pl
   `diffsusp.kc.metrics.METRICS` (name, description and sign, internal and display unit, kind,
   the events whose default figures show it);
 - `<!-- generated: cli -->`: the reference of the `diffsusp` command, from its Typer app
-  (`typer.cli.get_docs_for_click`, the generator behind `typer ... utils docs`).
+  (`typer.cli.get_docs_for_click`, the generator behind `typer ... utils docs`);
+- `<!-- generated: tyre_inputs|tyre_outputs|tyre_spec|tyre_vertical|tyre_poly_inputs|
+  tyre_onboard -->`: the tyre quantities of the registries `tyre.evaluate`'s signature,
+  `tyre.TyreForces`, `tyre.spec.SPEC_UNITS` (with the values of the shipped MF 6.1 example),
+  `tyre.vertical.VerticalState`, `tyre.poly.INPUT_UNITS`, `tyre.onboard.QUANTITIES`, with the
+  descriptions below (`TYRE_*`): a name a registry gains without one fails the build.
 
-Nothing of these is written to disk: the documentation cannot go stale against the code.
+Figures, computed at build time and added to the site as files (`on_files`): one small figure
+per K&C metric (`reference/figures/metrics/<metric>.png`: the curve the metric is read from,
+the metric marked; six events of two small models, `_metric_events`, ~10 s of CPU), and the
+tyre reference's (`reference/figures/tyre/`). Nothing of these is written to the repository:
+the documentation cannot go stale against the code.
 
 The notebooks (`notebooks/NN_*.py`, jupytext percent format) are pages of their own, under
 `notebooks/` in the site, rendered by mkdocs-jupyter without executing them (`execute: false`):
@@ -257,6 +266,345 @@ def _figures() -> dict:
     return _FIGURE_CACHE["png"]
 
 
+# -- the tyre quantities ------------------------------------------------------------------------
+# Descriptions (definition; sign) of the quantities that registries in diffsusp.tyre enumerate:
+# the tables are generated from the registries, and a name a registry gains without a
+# description here fails the build.
+
+TYRE_INPUTS = {  # the parameters of diffsusp.tyre.evaluate (the options are left out)
+    "fz": ("F_z", "vertical load, the road's force on the tyre along +z (up); F_z < 0 is set to "
+           "0 with limits on", "N"),
+    "kappa": ("κ", "longitudinal slip ratio (Ω·R_e − V_x)/V_x; driving (wheel faster than "
+              "the road) positive", "-"),
+    "alpha": ("α", "slip angle, about +z from the wheel heading to the wheel's velocity over "
+              "the road; a positive α pushes the tyre to its right (F_y < 0)", "rad"),
+    "gamma": ("γ", "inclination: rotation of the wheel plane about the heading, top of the "
+              "wheel to the right of the heading positive", "rad"),
+    "vx": ("V_x", "forward speed of the wheel centre over the road (default LONGVL), > 0", "mm/s"),
+    "pressure": ("p_i", "inflation pressure (default INFLPRES); dp_i = (p_i − NOMPRES)/NOMPRES "
+                 "in the formulas", "Pa"),
+    "turn_slip": ("φ_t", "path curvature −ψ̇/V_c (turn slip, MF 6.1/6.2); None: no turn slip, "
+                  "every ζ = 1", "1/mm"),
+    "omega": ("Ω", "wheel spin used by turn slip (default from V_x, κ and R_e)", "rad/s"),
+}
+_TYRE_OPTIONS = ("model", "combined", "limits", "alpha_star", "outputs")
+TYRE_OUTPUTS = {  # diffsusp.tyre.TyreForces
+    "fx": ("F_x", "longitudinal force along the heading (x); driving positive", "N"),
+    "fy": ("F_y", "lateral force along y (to the left of the heading)", "N"),
+    "mx": ("M_x", "overturning moment about x (the heading)", "N·mm"),
+    "my": ("M_y", "rolling resistance moment about y; negative when rolling forward", "N·mm"),
+    "mz": ("M_z", "aligning (self-aligning) moment about z (up); positive for a positive α "
+           "below the peak: it turns the wheel towards its velocity", "N·mm"),
+}
+TYRE_SPEC = {  # diffsusp.tyre.spec.SPEC_UNITS: the columns of tyre.specification
+    "fz": "the load they are computed at",
+    "cornering_stiffness": "K_yα = ∂F_y/∂α at α = κ = γ = 0 (exact derivative); negative in "
+                           "ISO-W",
+    "slip_stiffness": "K_xκ = ∂F_x/∂κ at κ = α = γ = 0; positive",
+    "aligning_stiffness": "K_zα = ∂M_z/∂α at zero slip and camber; positive in ISO-W",
+    "pneumatic_trail": "t = −K_zα/K_yα: distance behind the contact point at which F_y acts "
+                       "at small slip; positive for a usual tyre (the thesis's D_t of (2-122) "
+                       "is its negative, in its units)",
+    "camber_stiffness": "K_yγ = ∂F_y/∂γ at zero slip and camber (camber thrust)",
+    "camber_torque_stiffness": "K_zγ = ∂M_z/∂γ at zero slip and camber",
+    "fy_at_zero": "F_y at α = κ = γ = 0: the conicity and ply-steer pull",
+    "mz_at_zero": "M_z at α = κ = γ = 0: the residual aligning torque",
+    "fx_at_zero": "F_x at zero slip: rolling resistance",
+    "fy_peak": "the F_y extremum for α in (0, 0.35 rad] on the side of the slope (NaN: no "
+               "peak inside, e.g. the thesis's sets with C = 1)",
+    "alpha_at_fy_peak": "the slip angle of that extremum",
+    "mz_peak": "the M_z extremum on the same side (the thesis's \"minimum M_z\" in PSA signs)",
+    "alpha_at_mz_peak": "the slip angle of that extremum",
+}
+TYRE_VERTICAL = {  # diffsusp.tyre.vertical.VerticalState (tyre.vertical.loaded_radius)
+    "rl": ("R_l", "loaded radius: wheel centre to the road along the wheel plane", "mm"),
+    "deflection": ("ρ", "vertical deflection R_Ω − R_l (MF 6.2: ρ_z, camber included)", "mm"),
+    "stiffness": ("C_z", "tangent vertical stiffness −∂F_z/∂R_l", "N/mm"),
+    "secant": ("F_z/ρ", "secant vertical stiffness (MFeval's C_z output)", "N/mm"),
+    "re": ("R_e", "effective rolling radius V_x/Ω at free rolling (Besselink (7))", "mm"),
+    "romega": ("R_Ω", "free radius, grown by the centrifugal term", "mm"),
+    "omega": ("Ω", "wheel spin", "rad/s"),
+    "converged": ("—", "the load is reached (MF 6.2 may have no root at large camber)", "bool"),
+}
+TYRE_POLY = {  # diffsusp.tyre.poly.INPUT_UNITS: inputs of the polynomial models
+    "fz": ("F_z", "vertical load (the load polynomials' variable)"),
+    "kappa": ("κ′", "longitudinal deformation V_x/ω − R_r seen by the contact patch "
+              "(2-92); κ′ = R_r(1/(κ + 1) − 1) (2-101): negative when driving"),
+    "delta": ("δ′", "lateral deformation V_y/ω (2-93); δ′ = −R_r·tan δ (2-102): a positive "
+              "slip angle δ is a negative δ′"),
+    "phi": ("φ′", "torsion (pseudo-torsion) β̇/ω (2-94); φ′ = −R_r·φ (2-104), φ the path "
+            "curvature at the wheel carrier"),
+    "gamma": ("γ", "camber between the rim plane and the ground plane"),
+    "pi_gamma_vx": ("π(γ, V_x)", "γ·V_x/ω (2-95)"),
+    "pi_gamma_bdot": ("π(γ, β̇)", "γ·β̇/ω"),
+    "pi_gamma2_bdot": ("π(γ², β̇)", "γ²·β̇/ω"),
+    "fydot_w": ("Ḟ_y/ω", "rate of the lateral force per wheel spin: the relaxation columns "
+                "(3-61, 3-62)"),
+    "fy": ("F_y", "lateral force (the coupling column −F_y·F_x of M_z, 3-69)"),
+    "fx": ("F_x", "longitudinal force (the same coupling column)"),
+}
+TYRE_ONBOARD = {  # diffsusp.tyre.onboard.QUANTITIES (onboard.quantities)
+    "K_delta_front": ("K_δ(F_z,front)", "cornering stiffness in δ′ at the front load: "
+                      "b_delta_2·F_z² + b_delta_1·F_z + b_delta_0 (4-17)", "N/m"),
+    "K_delta_rear": ("K_δ(F_z,rear)", "the same at the rear load", "N/m"),
+    "K_phi": ("K_φ", "torsion stiffness b_phi_1·F_z (4-18), at the first load", "N/rad"),
+    "L_R": ("L_R", "relaxation coefficient of F_y = Fy_pneu + L_R·Ḟ_y/ω (4-16), "
+            "b_L_2·F_z² + b_L_1·F_z + b_L_0, at the first load", "-"),
+    "K_gamma": ("K_γ", "camber stiffness b_gamma_1·F_z (4-18), at the first load; negative "
+                "(the naive pipeline of the thesis found it positive)", "N/rad"),
+}
+
+
+def _check_described(what, registry, described):
+    missing = [k for k in registry if k not in described]
+    stale = [k for k in described if k not in registry]
+    if missing or stale:
+        raise ValueError(f"docs/hooks.py: {what}: no description for {missing}, described but "
+                         f"gone from the code: {stale}")
+
+
+def tyre_inputs() -> str:
+    import inspect
+
+    from diffsusp.tyre import evaluate
+
+    params = [p for p in inspect.signature(evaluate).parameters if p not in _TYRE_OPTIONS]
+    _check_described("tyre.evaluate's inputs", params, TYRE_INPUTS)
+    rows = ["| argument | symbol | definition; sign (ISO-W) | unit |", "|---|---|---|---|"]
+    for p in params:
+        sym, text, unit = TYRE_INPUTS[p]
+        rows.append(f"| `{p}` | {sym} | {_cell(text)} | {unit} |")
+    return "\n".join(rows) + "\n"
+
+
+def tyre_outputs() -> str:
+    from diffsusp.tyre import TyreForces
+
+    _check_described("tyre.TyreForces", TyreForces._fields, TYRE_OUTPUTS)
+    rows = ["| field | symbol | definition; sign (ISO-W) | unit |", "|---|---|---|---|"]
+    for f in TyreForces._fields:
+        sym, text, unit = TYRE_OUTPUTS[f]
+        rows.append(f"| `{f}` | {sym} | {_cell(text)} | {unit} |")
+    return "\n".join(rows) + "\n"
+
+
+def tyre_spec() -> str:
+    """The specification columns (registry `tyre.spec.SPEC_UNITS`) with their values for the
+    shipped MF 6.1 example at 3 kN and at FNOMIN (computed here, in one compiled call)."""
+    import math
+
+    import numpy as np
+
+    from diffsusp.tyre.spec import SPEC_UNITS
+
+    _check_described("tyre.spec.SPEC_UNITS", SPEC_UNITS, TYRE_SPEC)
+    values = _tyre_example()["spec"]
+    rows = ["| column | definition; sign | unit | MF 6.1 example, 3 kN | at FNOMIN |",
+            "|---|---|---|---|---|"]
+    for k, unit in SPEC_UNITS.items():
+        v = np.asarray(values[k], dtype=float)
+        shown = [f"{x:.4g}" for x in v]
+        if unit == "rad":
+            shown = [f"{x:.4g} ({math.degrees(x):.3g}°)" for x in v]
+        rows.append(f"| `{k}` | {_cell(TYRE_SPEC[k])} | {unit} | {shown[0]} | {shown[1]} |")
+    return "\n".join(rows) + "\n"
+
+
+def tyre_vertical() -> str:
+    from diffsusp.tyre.vertical import VerticalState
+
+    _check_described("tyre.vertical.VerticalState", VerticalState._fields, TYRE_VERTICAL)
+    rows = ["| field | symbol | definition | unit |", "|---|---|---|---|"]
+    for f in VerticalState._fields:
+        sym, text, unit = TYRE_VERTICAL[f]
+        rows.append(f"| `{f}` | {sym} | {_cell(text)} | {unit} |")
+    return "\n".join(rows) + "\n"
+
+
+def tyre_poly_inputs() -> str:
+    from diffsusp.tyre.poly import INPUT_UNITS
+
+    _check_described("tyre.poly.INPUT_UNITS", INPUT_UNITS, TYRE_POLY)
+    rows = ["| key | symbol | definition; sign (PSA) | unit |", "|---|---|---|---|"]
+    for k, unit in INPUT_UNITS.items():
+        sym, text = TYRE_POLY[k]
+        rows.append(f"| `{k}` | {sym} | {_cell(text)} | {unit} |")
+    return "\n".join(rows) + "\n"
+
+
+def tyre_onboard() -> str:
+    from diffsusp.tyre.onboard import NAMES, QUANTITIES
+
+    _check_described("tyre.onboard.QUANTITIES", QUANTITIES, TYRE_ONBOARD)
+    rows = ["| quantity | symbol | definition; sign | unit |", "|---|---|---|---|"]
+    for q in QUANTITIES:
+        sym, text, unit = TYRE_ONBOARD[q]
+        rows.append(f"| `{q}` | {sym} | {_cell(text)} | {unit} |")
+    rows.append("")
+    rows.append("Coefficients (`onboard.NAMES`): " + ", ".join(f"`{n}`" for n in NAMES) + ".")
+    return "\n".join(rows) + "\n"
+
+
+TYRE_FIGURES = "figures/tyre"  # relative to reference/tyre.md
+
+
+def _tyre_example() -> dict:
+    """The shipped MF 6.1 example (`tyre.example_path("mf61")`) at 3 kN and FNOMIN: its
+    specification quantities (one compiled call) and the figures of the tyre reference."""
+    if "tyre" in _FIGURE_CACHE:
+        return _FIGURE_CACHE["tyre"]
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import numpy as np
+
+    from diffsusp import tyre
+    from diffsusp.io.tir import read_tir
+
+    model = tyre.MagicFormula6.from_tir(read_tir(tyre.example_path("mf61")))
+    fnom = float(model["FNOMIN"])
+    spec = {k: np.asarray(v) for k, v in tyre.specification(model, jnp.array([3000.0, fnom])
+                                                             ).items()}
+    alpha = np.radians(np.linspace(-15.0, 15.0, 121))
+    kappa = np.linspace(-0.3, 0.3, 121)
+    gamma = np.radians(np.linspace(-6.0, 6.0, 61))
+    pure = tyre.evaluate(model, fnom, 0.0, jnp.asarray(alpha), combined=False)
+    longi = tyre.evaluate(model, fnom, jnp.asarray(kappa), 0.0, combined=False)
+    camber = tyre.evaluate(model, fnom, 0.0, 0.0, jnp.asarray(gamma), combined=False)
+    i = 1  # FNOMIN
+    png = {}
+    deg = 180.0 / np.pi
+    fy, mz = np.asarray(pure.fy), np.asarray(pure.mz) / 1e3
+    y0 = float(spec["fy_at_zero"][i])
+    k = float(spec["cornering_stiffness"][i])
+    png["fy_alpha"] = _small_plot(
+        alpha * deg, fy, "slip angle α (deg)", "F_y (N)",
+        f"K_yα = {k / deg:.4g} N/deg; peak {float(spec['fy_peak'][i]):.4g} N",
+        tangent=(0.0, y0, k / deg),
+        mark=(float(spec["alpha_at_fy_peak"][i]) * deg, float(spec["fy_peak"][i])))
+    kz = float(spec["aligning_stiffness"][i]) / 1e3
+    png["mz_alpha"] = _small_plot(
+        alpha * deg, mz, "slip angle α (deg)", "M_z (N·m)",
+        f"K_zα = {kz / deg:.4g} N·m/deg; trail {float(spec['pneumatic_trail'][i]):.3g} mm",
+        tangent=(0.0, float(spec["mz_at_zero"][i]) / 1e3, kz / deg),
+        mark=(float(spec["alpha_at_mz_peak"][i]) * deg, float(spec["mz_peak"][i]) / 1e3))
+    kx = float(spec["slip_stiffness"][i])
+    png["fx_kappa"] = _small_plot(
+        kappa, np.asarray(longi.fx), "slip ratio κ (-)", "F_x (N)", f"K_xκ = {kx:.4g} N",
+        tangent=(0.0, float(spec["fx_at_zero"][i]), kx))
+    kg = float(spec["camber_stiffness"][i])
+    png["fy_gamma"] = _small_plot(
+        gamma * deg, np.asarray(camber.fy), "inclination γ (deg)", "F_y (N)",
+        f"K_yγ = {kg / deg:.4g} N/deg", tangent=(0.0, y0, kg / deg))
+    png["mx_my"] = _small_plot(
+        alpha * deg, np.asarray(pure.mx) / 1e3, "slip angle α (deg)", "moment (N·m)",
+        "M_x (solid), M_y (dashed)", second=np.asarray(pure.my) / 1e3 + 0 * alpha)
+    png["iso_w"] = _iso_w_sketch()
+    png["poly_delta"] = _poly_figure()
+    _FIGURE_CACHE["tyre"] = {"spec": spec, "png": png}
+    return _FIGURE_CACHE["tyre"]
+
+
+def _small_plot(x, y, xlabel, ylabel, title, *, tangent=None, mark=None, second=None):
+    import io
+
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3.6, 2.5), dpi=100, layout="constrained")
+    ax = fig.add_subplot()
+    ax.tick_params(labelsize=7)
+    ax.plot(x, y, "-", color="0.3", lw=1.2)
+    if second is not None:
+        ax.plot(x, second, "--", color="0.3", lw=1.2)
+    if tangent is not None:
+        x0, y0, slope = tangent
+        span = min(0.25 * (np.max(x) - np.min(x)),  # short: the curve stays readable
+                   0.3 * (np.max(y) - np.min(y)) / max(abs(slope), 1e-300))
+        tx = np.array([x0 - span, x0 + span])
+        ax.plot(tx, y0 + slope * (tx - x0), "-", color="C3", lw=1.5)
+    if mark is not None and np.all(np.isfinite(mark)):
+        ax.plot([mark[0]], [mark[1]], "o", color="C3", ms=4)
+    ax.axhline(0.0, color="0.7", lw=0.6)
+    ax.axvline(0.0, color="0.7", lw=0.6)
+    ax.set_title(title, fontsize=7, color="C3")
+    ax.set_xlabel(xlabel, fontsize=7)
+    ax.set_ylabel(ylabel, fontsize=7)
+    ax.grid(True, lw=0.3)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def _iso_w_sketch():
+    """Top view of a tyre in ISO-W: heading x, y to the left, the wheel's velocity at a
+    positive slip angle α, and the lateral force it produces (to the right: F_y < 0)."""
+    import io
+
+    import numpy as np
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    fig = Figure(figsize=(3.4, 3.0), dpi=100, layout="constrained")
+    ax = fig.add_subplot()
+    ax.add_patch(Rectangle((-1.0, -0.35), 2.0, 0.7, fc="0.85", ec="0.3"))
+    kw = dict(head_width=0.08, length_includes_head=True)
+    ax.arrow(0, 0, 1.6, 0, color="k", **kw)
+    ax.text(1.62, -0.05, "x (heading)", fontsize=7, va="top")
+    ax.arrow(0, 0, 0, 1.3, color="k", **kw)
+    ax.text(0.05, 1.3, "y (left)", fontsize=7)
+    a = np.radians(25.0)
+    ax.arrow(0, 0, 1.4 * np.cos(a), 1.4 * np.sin(a), color="C0", **kw)
+    ax.text(1.3 * np.cos(a), 1.3 * np.sin(a) + 0.08, "V (wheel over road)", fontsize=7,
+            color="C0", ha="right")
+    t = np.linspace(0, a, 20)
+    ax.plot(0.7 * np.cos(t), 0.7 * np.sin(t), color="C0", lw=0.8)
+    ax.text(0.75, 0.12, "α > 0", fontsize=7, color="C0")
+    ax.arrow(0.0, 0.0, 0.0, -1.0, color="C3", width=0.02, **kw)
+    ax.text(0.08, -0.95, "F_y < 0", fontsize=7, color="C3")
+    ax.text(-1.15, -0.55, "z up, out of the page\nM_z > 0 turns x towards V", fontsize=7,
+            va="top")
+    ax.set_xlim(-1.2, 2.4)
+    ax.set_ylim(-1.2, 1.6)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def _poly_figure():
+    """F_y of the thesis's Dunlop R16 polynomial (Annex G, 2 bar) against δ′ at three loads,
+    with the slip angle δ = −atan(δ′/R_r) on the top axis (R_r = 0.294 m)."""
+    import io
+
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from diffsusp.tyre import poly
+
+    fy = poly.PolynomialModel.from_annex_g("dunlop_r16", 2.0, "Fy")
+    dp = np.linspace(-0.02, 0.02, 81)
+    fig = Figure(figsize=(3.6, 2.7), dpi=100, layout="constrained")
+    ax = fig.add_subplot()
+    ax.tick_params(labelsize=7)
+    for load in (3.0, 4.5, 6.0):
+        ax.plot(1e3 * dp, np.asarray(fy({"fz": np.full_like(dp, load), "delta": dp})), lw=1.1,
+                label=f"{load} kN")
+    ax.set_xlabel("δ′ (mm)", fontsize=7)
+    ax.set_ylabel("F_y (N)", fontsize=7)
+    ax.legend(fontsize=6)
+    ax.grid(True, lw=0.3)
+    top = ax.secondary_xaxis("top", functions=(lambda d: -np.degrees(np.arctan(d / 294.0)),
+                                               lambda a: -294.0 * np.tan(np.radians(a))))
+    top.set_xlabel("δ (deg, PSA)", fontsize=7)
+    top.tick_params(labelsize=7)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
 def cli_reference() -> str:
     """Markdown reference of every verb of `diffsusp`, from the Typer app."""
     import typer
@@ -271,7 +619,10 @@ def cli_reference() -> str:
     return re.sub(r"\A# .*\n", "", text.lstrip())
 
 
-GENERATORS = {"metrics": metrics_table, "cli": cli_reference}
+GENERATORS = {"metrics": metrics_table, "cli": cli_reference, "tyre_inputs": tyre_inputs,
+              "tyre_outputs": tyre_outputs, "tyre_spec": tyre_spec,
+              "tyre_vertical": tyre_vertical, "tyre_poly_inputs": tyre_poly_inputs,
+              "tyre_onboard": tyre_onboard}
 
 
 # -- notebooks ----------------------------------------------------------------------------------
@@ -368,6 +719,8 @@ def on_files(files, config):
                           use_directory_urls=config["use_directory_urls"]))
     for name, png in _figures().items():
         files.append(File.generated(config, f"reference/{FIGURES}/{name}.png", content=png))
+    for name, png in _tyre_example()["png"].items():
+        files.append(File.generated(config, f"reference/{TYRE_FIGURES}/{name}.png", content=png))
     return files
 
 

@@ -9,7 +9,8 @@ generated pages cover what the code has, and every Python code block of its page
   The notebooks have pages (`notebooks/NN_*/`: their executed copies from
   `tests/test_notebooks.py` when a run saved them, else their sources without outputs, saying
   so) and every K&C metric a small figure (`reference/figures/metrics/<metric>.png`, computed
-  by docs/hooks.py from one event per kind, each slope checked against its curve).
+  by docs/hooks.py from one event per kind, each slope checked against its curve); the tyre
+  reference lists every quantity of the tyre registries, with its figures.
 - `test_notebook_page_shows_outputs_or_says_why_not`: the page notebook docs/hooks.py makes of a
   notebook source: without a saved run, and with a stale one, the source without outputs under
   a note saying so; with a current saved run, its outputs, which the rendered page contains.
@@ -102,6 +103,22 @@ def test_site_builds_strict(site):
         assert f'src="../figures/metrics/{name}.png"' in page, name
 
     hooks = _hooks()
+    tyre = _text(site / "reference/tyre/index.html")  # every tyre quantity of the registries
+    from diffsusp.tyre import TyreForces
+    from diffsusp.tyre.onboard import QUANTITIES
+    from diffsusp.tyre.poly import INPUT_UNITS
+    from diffsusp.tyre.spec import SPEC_UNITS
+    from diffsusp.tyre.vertical import VerticalState
+
+    for names in (TyreForces._fields, SPEC_UNITS, VerticalState._fields, INPUT_UNITS,
+                  QUANTITIES, hooks.TYRE_INPUTS):
+        for name in names:
+            assert re.search(rf"^\s*{re.escape(name)}\s*$", tyre, re.M), name
+    page = (site / "reference/tyre/index.html").read_text(encoding="utf-8")
+    for src in re.findall(r'src="(\.\./figures/tyre/[a-z_]+\.png)"', page):
+        assert (site / "reference/tyre" / src).resolve().is_file(), src
+    assert len(re.findall(r'src="\.\./figures/tyre/', page)) == 7
+
     for source in sorted((ROOT / "notebooks").glob("[0-9]*.py")):  # a page per notebook
         text = _text(site / "notebooks" / source.stem / "index.html")
         title = re.search(r"^# # (.+)$", source.read_text(encoding="utf-8"), re.M).group(1)
