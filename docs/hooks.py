@@ -307,9 +307,10 @@ TYRE_SPEC = {  # diffsusp.tyre.spec.SPEC_UNITS: the columns of tyre.specificatio
                        "is its negative, in its units)",
     "camber_stiffness": "K_yγ = ∂F_y/∂γ at zero slip and camber (camber thrust)",
     "camber_torque_stiffness": "K_zγ = ∂M_z/∂γ at zero slip and camber",
-    "fy_at_zero": "F_y at α = κ = γ = 0: the conicity and ply-steer pull",
+    "fy_at_zero": "F_y at α = κ = γ = 0: the pull of the shifts S_Hy, S_Vy (conicity, ply "
+                  "steer)",
     "mz_at_zero": "M_z at α = κ = γ = 0: the residual aligning torque",
-    "fx_at_zero": "F_x at zero slip: rolling resistance",
+    "fx_at_zero": "F_x at α = κ = γ = 0 (the shifts S_Hx, S_Vx)",
     "fy_peak": "the F_y extremum for α in (0, 0.35 rad] on the side of the slope (NaN: no "
                "peak inside, e.g. the thesis's sets with C = 1)",
     "alpha_at_fy_peak": "the slip angle of that extremum",
