@@ -74,6 +74,7 @@ from .bench_condition import (  # noqa: F401  (re-exported; tests reach the priv
 )
 from .bench_synthetic import (  # noqa: F401  (re-exported)
     Segments,
+    active_safety_segments,
     deformation_from_psa,
     make_segments,
     psa_from_deformation,
@@ -83,7 +84,8 @@ from .bench_synthetic import (  # noqa: F401  (re-exported)
 )
 from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model, table6_domains
 
-__all__ = ["REQUIRED", "Segments", "steering_feel_segments", "segment_inputs",
+__all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segments",
+           "segment_inputs",
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",

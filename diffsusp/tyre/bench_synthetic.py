@@ -1,5 +1,6 @@
-"""Synthetic Flat Trac campaign (spec tyre §4.3 A, §1.6): the PSA ↔ deformation conversions,
-the steering-feel test sequences (`steering_feel_segments`, `Segments`) and their simulation
+"""Synthetic Flat Trac campaign (spec tyre §4.3, §1.6): the PSA ↔ deformation conversions,
+the steering-feel test sequences (`steering_feel_segments`, `Segments`), the active-safety
+ones with camber varied within runs (`active_safety_segments`) and their simulation
 through the state-space model from a known polynomial model and K_y (`synthetic_flat_trac`).
 Every public name is importable from `diffsusp.tyre.bench`.
 """
@@ -46,7 +47,10 @@ class Segments(eqx.Module):
     """Stacked steady states with their excitation (one entry per segment), thesis-like units:
     `speed` [km/h], `fz0`, `fz_amp` [kN], `fz_freq` [Hz], `camber` [deg], `slip0`, `sine_amp`
     [deg], `sine_freq` [Hz], `step_amp` [deg], `step_period` [s], `ramp_amp` [deg],
-    `ramp_period` [s], `sequence` (1–5, §4.3 A)."""
+    `ramp_period` [s], `sequence` (1–5, §4.3 A; 6–8, §4.3 B), and the camber excitation of
+    the active-safety sequences (§4.3 B): `camber_amp` [deg] smoothed camber steps of period
+    `camber_period` [s] around `camber`, `camber_slip` [deg/deg] a camber proportional to the
+    slip (B.3: an axle's camber-with-steer law)."""
 
     speed: jax.Array
     fz0: jax.Array
@@ -61,6 +65,9 @@ class Segments(eqx.Module):
     ramp_amp: jax.Array
     ramp_period: jax.Array
     sequence: jax.Array
+    camber_amp: jax.Array
+    camber_period: jax.Array
+    camber_slip: jax.Array
 
     @property
     def n(self) -> int:
@@ -100,11 +107,38 @@ def steering_feel_segments(speeds=(40.0, 80.0, 120.0, 160.0), *, sequences=(1, 2
     return make_segments(rows)
 
 
+def active_safety_segments(loads=(3.0, 4.5, 6.0), *, speed: float = 80.0,
+                           slip_amp: float = 1.0, camber_amp: float = 1.5,
+                           camber_laws=(-0.3, 0.5), ramp_amp: float = 3.0) -> Segments:
+    """The active-safety sequences of §4.3 B (seed 001 §3.2.3.2) at a constant `speed`
+    [km/h] (80 km/h in the thesis), at steady `loads` [kN]: the camber varies within runs.
+
+    6. small slip steps ±`slip_amp` [deg] at zero camber (B.1);
+    7. camber steps ±`camber_amp` [deg] at zero slip (B.2);
+    8. slip ramps ±`ramp_amp` [deg] with steps, the camber proportional to the slip along each
+       law of `camber_laws` [deg/deg] (B.3: a standard axle and a twist-beam axle).
+
+    The procedure is confidential: the thesis gives neither the amplitudes nor the laws (and
+    runs the slip up to 12°, beyond the grip peak where the simulation model (3-82) is
+    unstable); the defaults are chosen, in the steering-feel range. The thesis does not use
+    these sequences for its identification (seed 001 §3.2.3.2: the tyre changes during them);
+    they are what determines the camber powers γ² … γ⁵ that the steady cambers of §4.3 A
+    cannot (`bench.identify_output` reports those as not identifiable)."""
+    rows = []
+    for f in loads:
+        rows.append(dict(speed=speed, fz0=f, step_amp=slip_amp, step_period=1.0, sequence=6))
+        rows.append(dict(speed=speed, fz0=f, camber_amp=camber_amp, camber_period=1.0,
+                         sequence=7))
+        rows += [dict(speed=speed, fz0=f, ramp_amp=ramp_amp, ramp_period=2.0, step_amp=1.0,
+                      step_period=1.0, camber_slip=k, sequence=8) for k in camber_laws]
+    return make_segments(rows)
+
+
 def make_segments(rows) -> Segments:
     """Segments from a list of dicts (missing fields: 0, periods 1 s)."""
     fields = [f.name for f in dataclasses.fields(Segments)]
     default = {f: 0.0 for f in fields}
-    default.update(step_period=1.0, ramp_period=1.0)
+    default.update(step_period=1.0, ramp_period=1.0, camber_period=1.0)
     cols = {f: jnp.asarray([float(r.get(f, default[f])) for r in rows]) for f in fields}
     return Segments(**cols)
 
@@ -125,8 +159,10 @@ def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
     d, ddot = jax.jvp(slip, (jnp.asarray(t, dtype=float),), (jnp.ones_like(t, dtype=float),))
     v = seg.speed / 3.6
     omega = v * jnp.cos(d) / rolling_radius
+    gamma = (deg * (seg.camber + seg.camber_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.camber_period))
+                    / math.tanh(3.0)) + seg.camber_slip * d)
     return {"slip": d, "fz": seg.fz0 + seg.fz_amp * jnp.sin(w * seg.fz_freq * t),
-            "gamma": seg.camber * deg, "speed": v, "omega": omega,
+            "gamma": gamma, "speed": v, "omega": omega,
             "delta": -v * jnp.sin(d) / omega, "phi": ddot / omega,
             "kappa": v * jnp.cos(d) / omega - rolling_radius}
 
