@@ -18,8 +18,11 @@ units (kN, m, N, N·m) at this edge.
 
 **Identification** (`identify`, `identify_output`): the two-step procedure (3-40…3-46) on F_y
 and on M_z: step 1 the LIP model [W_pneu | W_Ly (| W_P2)] with the structure search by the
-guaranteed least squares (`lsq.eliminate`: σ % > 10 %, and the behaviour rules of §7 item 19
-as `check=` rules, `structure_rules`); the final structure and step 2, K_y⁻¹ from
+guaranteed least squares (σ % > 10 % unless an F-test against the noise keeps the term, and
+the behaviour rules of §7 item 19, `structure_rules`), then the same rules under the final
+estimator's σ (`identify_output`); terms the data cannot determine are reported with the
+reason (camber powers on steady camber levels: `camber_levels`); the final structure and
+step 2, K_y⁻¹ from
 F − F̂_pneu = ((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) K_y⁻¹ (3-76, 3-77), by `two_step`:
 instrumental variables (Ḟ_y/ω, taken from the noisy F_y, is an error in the variables, which
 biased the least squares by one σ), and σ from the noise model of the filtered data (the
@@ -28,16 +31,18 @@ seeds (tests/test_tyre_bench.py). The σ of K_y⁻¹ is that of the linearised j
 F = W_pneu·b + c·D(b) (the thesis's step-2 σ ignores step 1's uncertainty and understates
 the spread 1.5×).
 
-**Synthetic Flat Trac** (`steering_feel_segments`, `synthetic_flat_trac`): the steering-feel
-sequences of §4.3 A (straight line, small slip steps ±1°, load sine ±500 N at 3 and 6 Hz, slip
-sines ±1° at 3, 4.5, 6 Hz, medium slip profiles ±4°) at 40–160 km/h, simulated through the
+**Synthetic Flat Trac** (`steering_feel_segments`, `active_safety_segments`,
+`synthetic_flat_trac`): the steering-feel sequences of §4.3 A (straight line, small slip steps
+±1°, load sine ±500 N at 3 and 6 Hz, slip sines ±1° at 3, 4.5, 6 Hz, medium slip profiles ±4°)
+at 40–160 km/h, and the active-safety ones of §4.3 B (camber varied within runs), simulated
+through the
 state-space model (3-82…3-87, `relaxation.simulate`) from a known polynomial model and K_y,
 plus the bench's noise.
 
 **Modules.** The conditioning is in `diffsusp.tyre.bench_condition`, the synthetic campaign in
 `diffsusp.tyre.bench_synthetic`; this module holds the structure rules, the two-step
 identification, its Monte-Carlo and `eliminate_r`, and re-exports every public name of the
-three. **Size.** About 970 lines: the two-step procedure, its instrumental-variable σ, the
+three. **Size.** About 1 100 lines: the two-step procedure, its instrumental-variable σ, the
 structure search and its Monte-Carlo check are one method (3-40…3-46, 3-76, 3-77) read
 together with the thesis's chapter 3.
 """
