@@ -123,10 +123,13 @@ def test_site_builds_strict(site):
         text = _text(site / "notebooks" / source.stem / "index.html")
         title = re.search(r"^# # (.+)$", source.read_text(encoding="utf-8"), re.M).group(1)
         assert title.strip() in text, source.name
-        saved = hooks.EXECUTED / f"{source.stem}.ipynb"
-        current = saved.is_file() and hooks.saved_source_hash(saved) == hooks.source_hash(source)
-        assert ("Executed by the test suite" in text) == current, source.name
-        assert ("This page shows the notebook without its outputs" in text) != current
+        # with its saved run's outputs, or without outputs saying so (the notebook tests may
+        # save a run while the site builds: which one is checked by the test below)
+        executed = "Executed by the test suite" in text
+        assert executed != ("This page shows the notebook without its outputs" in text)
+        if executed:
+            saved = hooks.EXECUTED / f"{source.stem}.ipynb"
+            assert hooks.saved_source_hash(saved) == hooks.source_hash(source), source.name
 
 
 def test_notebook_page_shows_outputs_or_says_why_not(tmp_path, monkeypatch):
