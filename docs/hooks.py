@@ -293,8 +293,9 @@ TYRE_OUTPUTS = {  # diffsusp.tyre.TyreForces
     "fy": ("F_y", "lateral force along y (to the left of the heading)", "N"),
     "mx": ("M_x", "overturning moment about x (the heading)", "N·mm"),
     "my": ("M_y", "rolling resistance moment about y; negative when rolling forward", "N·mm"),
-    "mz": ("M_z", "aligning (self-aligning) moment about z (up); positive for a positive α "
-           "below the peak: it turns the wheel towards its velocity", "N·mm"),
+    "mz": ("M_z", "aligning (self-aligning) moment about z (up); positive for a small "
+           "positive α: it turns the heading towards the wheel's velocity (it peaks at a few "
+           "degrees and fades at large slip)", "N·mm"),
 }
 TYRE_SPEC = {  # diffsusp.tyre.spec.SPEC_UNITS: the columns of tyre.specification
     "fz": "the load they are computed at",
