@@ -469,7 +469,7 @@ def _tyre_example() -> dict:
     spec = {k: np.asarray(v) for k, v in tyre.specification(model, jnp.array([3000.0, fnom])
                                                              ).items()}
     alpha = np.radians(np.linspace(-15.0, 15.0, 121))
-    kappa = np.linspace(-0.3, 0.3, 121)
+    kappa = np.linspace(-0.15, 0.15, 121)
     gamma = np.radians(np.linspace(-6.0, 6.0, 61))
     pure = tyre.evaluate(model, fnom, 0.0, jnp.asarray(alpha), combined=False)
     longi = tyre.evaluate(model, fnom, jnp.asarray(kappa), 0.0, combined=False)
@@ -565,7 +565,7 @@ def _iso_w_sketch():
     ax.text(0.75, 0.12, "α > 0", fontsize=7, color="C0")
     ax.arrow(0.0, 0.0, 0.0, -1.0, color="C3", width=0.02, **kw)
     ax.text(0.08, -0.95, "F_y < 0", fontsize=7, color="C3")
-    ax.text(-1.15, -0.55, "z up, out of the page\nM_z > 0 turns x towards V", fontsize=7,
+    ax.text(0.45, -0.55, "z up, out of the page\nM_z > 0 turns x towards V", fontsize=7,
             va="top")
     ax.set_xlim(-1.2, 2.4)
     ax.set_ylim(-1.2, 1.6)
