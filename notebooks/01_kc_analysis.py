@@ -19,6 +19,7 @@
 # positive, camber top-out positive); `diffsusp.kc.metrics` documents every definition.
 
 # %%
+# %matplotlib inline
 import jax
 
 jax.config.update("jax_enable_x64", True)

@@ -24,6 +24,7 @@
 # Units: mm, N, N·mm, rad inside; tables print stiffnesses as the thesis does.
 
 # %%
+# %matplotlib inline
 import jax
 
 jax.config.update("jax_enable_x64", True)
