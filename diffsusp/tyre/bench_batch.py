@@ -1,0 +1,545 @@
+"""The bench identification of a campaign of many tyres in one compiled program (issue 16;
+spec: tyre §3.3–3.5, §8 items 4 and 8).
+
+`identify_many` runs, for every data set (a Flat Trac table of one tyre at one pressure, or
+its `bench.condition`), the identification of `bench.identify_output` — the conditioning, the
+structure search and the two-step estimate of K_y — traced in JAX and mapped over the stacked
+data sets with `lax.map`, so a campaign of 4 tyres × 3 pressures is one program.
+
+**Why `lax.map` and not `jax.vmap`:** the search is vmappable (fixed shapes, `while_loop`s),
+but under `jax.vmap` jaxlib 0.10's CPU LAPACK kernels (QR, triangular solves) run batched and
+fan out over XLA's intra-op thread pool from inside a pool thread: on the 2-core machine the
+vmapped program deadlocked (every pool thread parked in `jax::ParallelBatchMap`, no CPU used;
+seen twice in three runs). Under `vmap` the noise-model update and the phase branch (`lax.cond`)
+also become selects that evaluate both branches for every set at every step (2.8× the CPU in
+the run that finished). `lax.map` runs one set at a time inside the program: one set's
+memory, real branches, unbatched LAPACK.
+
+**The structure search** is the library's (`bench._structure_search`), step by step: the
+guaranteed least squares decide what the data determine (the kept columns by the pivoted
+selection of `lsq` on the R-factor of [W, −y], refitted after every removal); a coefficient is
+removed when its σ % > `sigma_pct_threshold` **and** the F-test says its removal does not raise
+the residual beyond the noise: (x_i/σ_i)² < χ²₁ quantile of `significance`, σ the sandwich of
+the least squares under the filtered noise model (`bench._NoiseGram`, S = Wᵀ·Σ·W recomputed when
+the relaxation gain moves by > 5 %, the noise level of the data from above the cut-off); the
+largest σ % first. Each refit is the masked QR of the scaled R-factor (the removed columns
+pinned by identity rows, `lsq.core._masked_solve`): fixed shapes, no host round trip. When the
+library's search has its final pass under the instrumental-variable estimator
+(`identify_output(final_pass=...)`, when present), the traced search runs it too (its σ from
+`bench.two_step`, step 1 at the data's noise level).
+
+**The behaviour rules** (`bench.structure_rules`: load polynomials keep their sign, concave
+stiffness, extremum counts) are Python checks on the coefficient values; they run on the host
+after the program, on the state at which the library would run them (the end of each phase):
+a set for which a rule would remove a coefficient (one of the coefficients that mend the fault
+fails the F-test) is sent through the library's exact search (`bench.identify_output`), and its
+report is the library's; for the other sets every fault is excused (the data support it), as
+the library finds, and the traced result stands. So every set's structure is the library's.
+
+**Step 2** (K_y⁻¹ by `bench.two_step`: instrumental variables, σ of the joint model under the
+noise model) runs in the same program on the final structure, the removed columns held at zero
+(`two_step` on all p columns with a pseudo-inverse that leaves the exactly-null rows and
+columns of its p×p normal matrices alone: `_MASKED_JNP`).
+
+The reports are `bench.OutputReport`s (`fit` None: no `lsq.Fit` object is built per set; the
+log is in `removed`, name → reason, in the library's words), one per data set, in
+`CampaignResult.reports`.
+"""
+
+import dataclasses
+import inspect
+import types
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.stats
+
+from ..errors import InputError
+from ..lsq import core
+from . import bench
+from .poly import STRUCTURES, PolynomialModel, regressor_model
+
+__all__ = ["identify_many", "CampaignResult", "search_program"]
+
+
+# `two_step` traced on all p columns with the removed ones at zero: its normal matrices
+# (ZᵀW, p×p) then have exactly-null rows and columns; their inverse is taken with those
+# pinned to the identity, which leaves the estimate of the others unchanged and the removed
+# coefficients at 0 (with σ 0).
+def _masked_inv(A):
+    null = jnp.all(A == 0, axis=0) & jnp.all(A == 0, axis=1)
+    return jnp.linalg.inv(A + jnp.diag(null.astype(A.dtype)))
+
+
+class _MaskedNumpy(types.SimpleNamespace):
+    def __getattr__(self, name):
+        return getattr(jnp, name)
+
+
+_MASKED_JNP = _MaskedNumpy(linalg=types.SimpleNamespace(inv=_masked_inv))
+
+
+def _final_pass_default():
+    """The library's default final pass of the search (None when it has none)."""
+    p = inspect.signature(bench.identify_output).parameters.get("final_pass")
+    return None if p is None else p.default
+
+
+@dataclasses.dataclass
+class CampaignResult:
+    """`identify_many`'s result: `reports` (one `bench.OutputReport` per data set, in order),
+    `exact` (index → why the set went through the library's exact search), `kept` (sets × p
+    bool: the final structure, over `names`), `names` (the LIP model's coefficients),
+    `search_steps` (removals per set in the traced search), `program_seconds` (wall time of
+    the compiled program's run, compile included on the first call), `mz_reports` (M_z's
+    `bench.OutputReport`s with `mz=True`, else None)."""
+
+    reports: list
+    exact: dict
+    kept: np.ndarray
+    names: tuple
+    search_steps: np.ndarray
+    program_seconds: float
+    mz_reports: list | None = None
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        return np.array([r.stiffness for r in self.reports])
+
+    @property
+    def compliance_sigma(self) -> np.ndarray:
+        return np.array([r.compliance_sigma for r in self.reports])
+
+
+# --------------------------------------------------------------------------------------------
+# The traced search (one data set)
+
+
+def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, crit, threshold,
+            var, final_pass, with_aliases):
+    """The structure search of `bench._structure_search` without the behaviour rules, traced
+    (one data set; fixed shapes). Returns a dict of arrays (see `search_program`)."""
+    n, p = W.shape
+    masks = bench._masks(names)
+    dtype = W.dtype
+    R = core.qr_r(core.augmented(W, y))
+    A_sel, _, tol = core._scaled(R, jnp.asarray(n, dtype), jnp.asarray(0.0, dtype))
+    sc = jnp.linalg.norm(W, axis=0)
+    sc = jnp.where(sc > 0, sc, 1.0)
+    Rw, z = R[:p, :p] / sc, -R[:p, p]
+    zeros = jnp.zeros(p, dtype)
+    s = X.shape[0]
+    y_seg = y.reshape(s, -1)
+
+    def two_step(active, **kw):
+        m = active.astype(dtype)
+        return bench.two_step(_MASKED_JNP, X * m, L * m, Dp * m, fydot, y_seg, H, Dm, omega,
+                              dt, is_ly=masks[0], is_pneu=masks[1], is_p2=masks[2], **kw)
+
+    def least_squares(active, S, g_ref, have_S):
+        xs, cov_unit, _ = core._masked_solve(Rw, z, active, zeros)  # cov_unit: G_A⁻¹
+        b = jnp.where(active, xs / sc, 0.0)
+        g = gram.gain(b)
+        moved = jnp.linalg.norm(g - g_ref) > 0.05 * jnp.linalg.norm(g_ref)
+        S, g_ref = jax.lax.cond(~have_S | moved, lambda: (gram(b) / jnp.outer(sc, sc), g),
+                                lambda: (S, g_ref))
+        cov = cov_unit @ S @ cov_unit
+        sig = jnp.where(active, jnp.sqrt(jnp.abs(jnp.diag(cov))) / sc, 0.0)
+        return b, sig, S, g_ref
+
+    def iv(active):
+        res = two_step(active, noise_var=var, step2=False)
+        return jnp.where(active, res["x"], 0.0), jnp.where(active, res["sigma"], 0.0)
+
+    def stats(b, sig, active):
+        with jax.numpy_dtype_promotion("standard"):
+            pct = jnp.nan_to_num(100.0 * sig / jnp.abs(b), nan=jnp.inf, posinf=jnp.inf)
+            stat = jnp.nan_to_num((b / sig) ** 2, nan=0.0)
+        return jnp.where(active, pct, 0.0), jnp.where(active, stat, 0.0)
+
+    def select(fixed):
+        return core.select(A_sel, ~fixed, tol, True)
+
+    def aliases(fixed, before):
+        """`bench._aliases`: the columns a removal brought back (kept after, dropped for rank
+        before), held at 0 with it when that drops the number of estimable ones by one."""
+        n_active = jnp.sum(before)
+
+        def more(c):
+            return ~c[3] & (jnp.sum(c[2]) >= n_active)
+
+        def chain(c):
+            trial, found, after, _ = c
+            back = after & ~before & ~trial
+            none = ~jnp.any(back)
+            new_after = select(trial | back)
+            return (jnp.where(none, trial, trial | back), jnp.where(none, found, found | back),
+                    jnp.where(none, after, new_after), none)
+
+        _, found, after, stop = jax.lax.while_loop(
+            more, chain, (fixed, jnp.zeros_like(fixed), select(fixed), jnp.asarray(False)))
+        return found & ~stop & (jnp.sum(after) == n_active - 1)
+
+    g0 = gram.gain(zeros)
+    state0 = dict(fixed=jnp.asarray(fixed0), go=jnp.asarray(True), steps=jnp.asarray(0),
+                  phase=jnp.asarray(0),
+                  S=jnp.zeros((p, p), dtype), g_ref=g0, have_S=jnp.asarray(False),
+                  order=jnp.full(p, -1), order_pct=jnp.zeros(p, dtype),
+                  order_stat=jnp.zeros(p, dtype), order_phase=jnp.zeros(p, int),
+                  alias_step=jnp.full(p, -1),
+                  x=zeros, sigma=zeros, stat=zeros, active=jnp.zeros(p, bool),
+                  ls_x=zeros, ls_stat=zeros, ls_active=jnp.zeros(p, bool),
+                  ls_done=jnp.asarray(False))
+
+    def body(st):
+        st = dict(st)
+        active = select(st["fixed"])
+        if final_pass is None:
+            b, sig, S, g_ref = least_squares(active, st["S"], st["g_ref"], st["have_S"])
+        else:
+            def ls_branch():
+                return least_squares(active, st["S"], st["g_ref"], st["have_S"])
+
+            def iv_branch():
+                return (*iv(active), st["S"], st["g_ref"])
+            b, sig, S, g_ref = jax.lax.cond(st["phase"] == 0, ls_branch, iv_branch)
+        st.update(S=S, g_ref=g_ref, have_S=st["have_S"] | (st["phase"] == 0))
+        pct, stat = stats(b, sig, active)
+        removable = active & (stat < crit) & (pct > threshold)
+        k = jnp.argmax(jnp.where(removable, pct, -jnp.inf))
+        hit = jnp.any(removable)
+        st["order"] = st["order"].at[st["steps"]].set(jnp.where(hit, k, -1))
+        st["order_pct"] = st["order_pct"].at[st["steps"]].set(pct[k])
+        st["order_stat"] = st["order_stat"].at[st["steps"]].set(stat[k])
+        st["order_phase"] = st["order_phase"].at[st["steps"]].set(st["phase"])
+        fixed = st["fixed"].at[k].set(st["fixed"][k] | hit)
+        if with_aliases:
+            al = aliases(fixed, active) & hit
+            st["alias_step"] = jnp.where(al, st["steps"], st["alias_step"])
+            fixed = fixed | al
+        st["fixed"] = fixed
+        st["steps"] = st["steps"] + hit
+        st.update(x=b, sigma=sig, stat=stat, active=active)
+        # the end of a phase: the least-squares phase hands over to the final one
+        to_iv = ~hit & (st["phase"] == 0) & (final_pass is not None)
+        st["ls_x"] = jnp.where(~hit & (st["phase"] == 0), b, st["ls_x"])
+        st["ls_stat"] = jnp.where(~hit & (st["phase"] == 0), stat, st["ls_stat"])
+        st["ls_active"] = jnp.where(~hit & (st["phase"] == 0), active, st["ls_active"])
+        st["ls_done"] = st["ls_done"] | (~hit & (st["phase"] == 0))
+        st["phase"] = jnp.where(to_iv, 1, st["phase"])
+        st["go"] = (hit | to_iv) & jnp.any(active)
+        return st
+
+    st = jax.lax.while_loop(lambda st: st["go"] & (st["steps"] < p), body, state0)
+    res = two_step(st["active"])
+    out = {k: st[k] for k in ("fixed", "active", "order", "order_pct", "order_stat",
+                              "order_phase", "alias_step", "x", "sigma", "stat", "ls_x", "ls_stat",
+                              "ls_active", "ls_done", "steps")}
+    out["kept"] = select(st["fixed"])
+    out["diag"] = jnp.abs(jnp.diagonal(R)[:p])
+    out.update(final_x=res["x"], final_sigma=res["sigma"], compliance=res["compliance"],
+               compliance_sigma=res["compliance_sigma"], sigma_step2=res["sigma_step2"],
+               noise_sigma=res["noise_sigma"], fydot_hat=res["fydot_hat"])
+    return out
+
+
+def _condition_traced(cols, H, Dm, E, rolling_radius, rows):
+    """`bench.condition` of one data set, traced: the deformation inputs (full rate), the
+    filtered F_y and M_z at the kept rows, their white-noise levels from above the cut-off."""
+    samples = bench._kinematics(cols, Dm, rolling_radius)
+    s = cols["FY"].shape[0]
+    tr = jnp.sum(E * E)
+    noise = {c: jnp.sqrt(jnp.sum((cols[c] @ E.T) ** 2) / (s * tr)) * u
+             for c, u in (("FY", 1.0), ("MZ", 1e-3))}
+    fz = samples["fz"][:, rows]
+    return samples, (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3, noise, \
+        jnp.stack([jnp.min(fz), jnp.max(fz)])
+
+
+def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, fixed=(),
+                   batch="map", from_tables=True):
+    """The traced F_y identification of many data sets as one function (jit it): from stacked
+    bench channels (`from_tables`: dict channel → (sets, segments, samples), then the filter's
+    rows H, the difference matrix Dm, E = I − F) or stacked conditioned data (samples dict
+    (sets, segments, samples), y (sets, n), M_z (sets, n), noise (sets, 2): FY, MZ; F_z range
+    (sets, 2), then H, Dm), and last `params` = [σ % threshold (inf: none), χ²₁ critical
+    value]. `batch`: "map" (`lax.map`, one set at a time in the program: the memory of one
+    set, the noise-model update a real branch; see the module docstring for `jax.vmap`) or
+    "loop" (the one-set function, to call per set).
+
+    Per set: the search's final mask `fixed`, `active`, `kept`, the removal order `order`
+    (index, −1 padded) with the σ % and F statistic at removal (`order_pct`, `order_stat`,
+    `order_phase` 0 least squares, 1 final pass; `alias_step`: the step that held an alias),
+    the last step's `x`, `sigma`, `stat`, those at the end of the least-squares phase
+    (`ls_x`, `ls_stat`, `ls_active`), and the two-step estimate on the final structure
+    (`final_x`, `final_sigma`, `compliance`, `compliance_sigma`, `sigma_step2`,
+    `noise_sigma`, `fydot_hat`); with the noise levels (FY, MZ) and the F_z range."""
+    lip = regressor_model("Fy", degrees, ly=True)
+    names = lip.names
+    parts = bench._parts_fn(lip)
+    fixed0 = np.zeros(len(names), bool)
+    for nm in fixed:
+        if nm not in names:
+            raise InputError(f"fixed: {nm!r} is not a coefficient of the Fy model")
+        fixed0[names.index(nm)] = True
+
+    def identify(samples, y, noise, H, Dm, params):
+        X, L, Dp = parts(samples)
+        fydot = samples["fydot_w"]
+        W = jnp.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
+        var = noise[0] ** 2
+        gram = bench._NoiseGram(W, L, bench._masks(names)[0], H, Dm, samples["omega"], var)
+        return _search(W, y, gram, H, X, L, Dp, fydot, samples["omega"], Dm, dt, names=names,
+                       fixed0=fixed0, crit=params[1], threshold=params[0], var=var,
+                       final_pass=final_pass, with_aliases=hasattr(bench, "_aliases"))
+
+    def one_table(cols, H, Dm, E, params):
+        samples, fy, _, noise, fz_range = _condition_traced(cols, H, Dm, E, rolling_radius,
+                                                            rows)
+        noise = jnp.stack([noise["FY"], noise["MZ"]])
+        return identify(samples, fy, noise, H, Dm, params), noise, fz_range
+
+    def one_cond(samples, fy, noise, fz_range, H, Dm, params):
+        return identify(samples, fy, noise, H, Dm, params), noise, fz_range
+
+    one = one_table if from_tables else one_cond
+    n_shared = 4 if from_tables else 3  # (H, Dm[, E], params): the same for every set
+    if batch == "loop":
+        return one
+    if batch == "map":
+        def run(*args):
+            shared = args[-n_shared:]
+            return jax.lax.map(lambda d: one(*d, *shared), args[:-n_shared])
+        return run
+    raise InputError(f"batch {batch!r}: 'map' or 'loop'")
+
+
+# --------------------------------------------------------------------------------------------
+# The campaign (host side)
+
+
+_COMPILED: dict = {}
+
+
+def _compiled(key, make, optimize):
+    """One compiled program per configuration. `optimize` False: XLA's backend optimisation
+    off (as `bench._quick_jit`: the program compiles in a third of the time and runs a little
+    slower; the right trade for one campaign), True: the default level (the benchmark)."""
+    key = key + (optimize,)
+    if key not in _COMPILED:
+        options = {}
+        if not optimize:
+            from ..compilation import CPU_OPTIONS
+
+            options = {"xla_backend_optimization_level": 0}
+            if jax.default_backend() == "cpu":
+                options.update(CPU_OPTIONS)
+        _COMPILED[key] = jax.jit(make(), compiler_options=options or None)
+    return _COMPILED[key]
+
+
+def _behaviour_removal(behaviour, names, active, x, stat, crit):
+    """What the library's search does with the behaviour rules on a state where no
+    coefficient fails the statistical test (`bench._structure_search`): returns (the
+    coefficient a rule removes and the rule's key, or None; the faults excused)."""
+    values = {names[i]: float(x[i]) for i in np.flatnonzero(active)}
+    f_of = {names[i]: float(stat[i]) for i in np.flatnonzero(active)}
+    excused: set = set()
+    while True:
+        found = behaviour(values, frozenset(excused))
+        if found is None:
+            return None, sorted(excused)
+        first, group, key = found
+        options = [first] + sorted((n for n in group if n in f_of and n != first),
+                                   key=lambda n: f_of[n])
+        ok = [n for n in options if n in f_of and f_of[n] < crit]
+        if ok:
+            return (ok[0], key), sorted(excused)
+        excused.add(key)
+
+
+def _stack_tables(tables, cutoff, decimate):
+    checked = [bench._check_table(t, cutoff) for t in tables]
+    shapes = {(n, m, round(rate, 9)) for _, n, m, rate in checked}
+    if len(shapes) != 1:
+        raise InputError(f"identify_many: the data sets differ in shape (segments, samples, "
+                         f"rate) {sorted(shapes)}; a batch needs equal ones (group them).")
+    _, n_seg, m, rate = checked[0]
+    cols = {c: np.stack([c_[c] for c_, *_ in checked]) for c in bench.REQUIRED
+            if c not in ("t", "segment")}
+    return cols, n_seg, m, rate
+
+
+def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=None,
+                  cutoff: float = 25.0, rolling_radius: float = 294.0,
+                  decimate: int | None = None, sigma_pct_threshold: float | None = 10.0,
+                  significance: float = 1e-3, ic_threshold: float = 0.0, rules: bool = True,
+                  final_pass="library", fixed=(), mz: bool = False, batch: str = "map",
+                  optimize: bool = True) -> CampaignResult:
+    """Identify F_y and K_{Fy,y} on many data sets (a campaign: tyres × pressures) in one
+    compiled program, with the library's structure search and two-step estimate (see the
+    module docstring; spec: tyre §3.3–3.5).
+
+    **Arguments:** `data`: bench tables (column → array, `bench.REQUIRED`; conditioned in the
+    program) or `bench.Conditioned` (from `bench.condition`), all of one shape (segments,
+    samples, rate); `structure` ("just-necessary", "apriori") or `degrees` (F_y's);
+    `cutoff`, `rolling_radius` [mm], `decimate` as `bench.condition` (tables only);
+    `sigma_pct_threshold`, `significance`, `rules`, `fixed` (names held at 0) as
+    `bench.identify_output`; `ic_threshold` > 0 (an IC rule: not traced) sends every set
+    through the exact search; `final_pass`: the search's final pass under the instrumental-
+    variable estimator ("library": `bench.identify_output`'s default, when it has one; True,
+    False); `mz`: also identify M_z, set by set by the library (`bench.identify_output` with
+    the batched F_y report as its instrument; its M_z-specific search is not traced);
+    `batch`: "map" (`lax.map`, default), "loop" (the one-set program called per set: the
+    reference); `optimize`: XLA's backend optimisation (default: 4× faster to run, 3×
+    slower to compile; False for one-off runs and the tests).
+
+    **Returns:** `CampaignResult`: per set a `bench.OutputReport` of F_y (the structure, x and
+    σ of the final estimate, K_y and its σ, the removal log in `removed`), `exact` (the sets
+    a behaviour rule sent through `bench.identify_output`, with the rule), `mz_reports`."""
+    import time
+
+    if structure not in STRUCTURES:
+        raise InputError(f"structure {structure!r}: one of {', '.join(STRUCTURES)}")
+    data = list(data)
+    if not data:
+        raise InputError("identify_many: no data sets")
+    degrees = dict(degrees if degrees is not None else STRUCTURES[structure]["Fy"])
+    fixed = tuple(fixed or ())
+    if final_pass == "library":
+        final_pass = _final_pass_default()
+    if final_pass not in (None, False, True):
+        raise InputError(f"final_pass {final_pass!r}: 'library', True or False")
+    final_pass = "after" if final_pass else None
+    r_m = rolling_radius * 1e-3
+    crit = float(scipy.stats.chi2.isf(significance, 1))
+    conditioned = all(isinstance(d, bench.Conditioned) for d in data)
+    if conditioned:
+        c0 = data[0]
+        if any(d.samples["fz"].shape != c0.samples["fz"].shape or d.dt != c0.dt
+               or not np.array_equal(d.operator, c0.operator) for d in data):
+            raise InputError("identify_many: the conditioned data sets differ in shape or "
+                             "filter; a batch needs equal ones (group them).")
+        rows, dt = np.asarray(c0.rows), c0.dt
+        args = ({k: np.stack([np.asarray(d.samples[k]) for d in data]) for k in c0.samples},
+                np.stack([d.fy for d in data]),
+                np.array([[d.noise["FY"], d.noise["MZ"]] for d in data]),
+                np.array([[d.inputs["fz"].min(), d.inputs["fz"].max()] for d in data]),
+                c0.operator, c0.difference)
+    elif any(isinstance(d, bench.Conditioned) for d in data):
+        raise InputError("identify_many: give tables or conditioned data, not both")
+    else:
+        cols, n_seg, m, rate = _stack_tables(data, cutoff, decimate)
+        rows, _ = bench._rows(m, rate, cutoff, decimate, None)
+        F = bench.filter_matrix(float(cutoff), float(rate), m, 4)
+        dt = 1.0 / rate
+        args = (cols, F[rows], bench.difference_matrix(m, dt), np.eye(m) - F)
+    params = np.array([np.inf if sigma_pct_threshold is None else sigma_pct_threshold, crit])
+    args = args + (params,)
+    n_shared = 3 if conditioned else 4
+    key = (tuple(sorted(degrees.items())), r_m, tuple(rows.tolist()), dt, final_pass, fixed,
+           batch, conditioned)
+
+    def make():
+        return search_program(degrees, rolling_radius=r_m, rows=rows, dt=dt,
+                              final_pass=final_pass, fixed=fixed, batch=batch,
+                              from_tables=not conditioned)
+    program = _compiled(key, make, optimize)
+    t0 = time.perf_counter()
+    if batch == "loop":
+        pieces = [program(*jax.tree_util.tree_map(lambda a, i=i: a[i], args[:-n_shared]),
+                          *args[-n_shared:]) for i in range(len(data))]
+        raw = jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(v) for v in a]), *pieces)
+    else:
+        raw = jax.tree_util.tree_map(np.asarray, program(*args))
+    seconds = time.perf_counter() - t0
+    result, _, fz_range = raw
+    # the host side: reports, the behaviour rules, the exact path for the sets they change
+    names = regressor_model("Fy", degrees, ly=True).names
+    reports, exact, conds = [], {}, {}
+
+    def cond_of(i):
+        if i not in conds:
+            conds[i] = data[i] if conditioned else bench.condition(
+                data[i], cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate)
+        return conds[i]
+
+    def gamma_of(i):  # the camber at the kept rows (`Conditioned.inputs["gamma"]`)
+        return data[i].inputs["gamma"] if conditioned else cols["camber"][i][:, rows].ravel()
+
+    options = {} if _final_pass_default() is None else {"final_pass": final_pass is not None}
+    for i in range(len(data)):
+        r = {k: v[i] for k, v in result.items()}
+        if not r["active"].any():
+            raise InputError(f"data set {i}: the structure search removed every coefficient "
+                             "of Fy: the data do not determine this output (no excitation?)")
+        why, excused = None, []
+        if ic_threshold > 0:
+            why = f"ic_threshold {ic_threshold:g} (the IC rule is not traced)"
+        elif rules:
+            behaviour = bench._behaviour("Fy", (float(fz_range[i][0]), float(fz_range[i][1])),
+                                         rolling_radius=r_m)
+            phases = [("x", "stat", "active")]
+            if final_pass is not None:  # the rules at the end of each phase, as the library
+                phases.insert(0, ("ls_x", "ls_stat", "ls_active"))
+            for xk, sk, ak in phases:
+                found, excused = _behaviour_removal(behaviour, names, r[ak], r[xk], r[sk], crit)
+                if found is not None:
+                    why = (f"behaviour rule {found[1][0]!r} removes {found[0]} "
+                           f"({'least-squares' if xk == 'ls_x' else 'final'} phase)")
+                    break
+        if why is None:
+            reports.append(_report("Fy", degrees, names, r, excused, sigma_pct_threshold,
+                                   crit, gamma_of(i)))
+        else:
+            exact[i] = why
+            reports.append(bench.identify_output(
+                cond_of(i), "Fy", degrees, sigma_pct_threshold=sigma_pct_threshold,
+                significance=significance, ic_threshold=ic_threshold, fixed=list(fixed) or None,
+                rolling_radius=r_m, rules=rules, **options))
+    mz_reports = None
+    if mz:
+        mz_reports = [bench.identify_output(
+            cond_of(i), "Mz", STRUCTURES[structure]["Mz"],
+            sigma_pct_threshold=sigma_pct_threshold, significance=significance,
+            ic_threshold=ic_threshold, rolling_radius=r_m, rules=rules, fy_report=reports[i],
+            **options) for i in range(len(data))]
+    kept = np.array([[n in r.reduced.names for n in names] for r in reports])
+    return CampaignResult(reports, exact, kept, names, np.asarray(result["steps"]), seconds,
+                          mz_reports)
+
+
+def _report(output, degrees, names, r, excused, threshold, crit, gamma):
+    """A `bench.OutputReport` from one set's traced result."""
+    active = np.flatnonzero(r["active"])
+    act = [names[i] for i in active]
+    is_pneu = bench._masks(act)[1]
+    reduced = bench.Coefficients(tuple(act), np.asarray(r["final_x"])[active],
+                                 np.asarray(r["final_sigma"])[active])
+    model = PolynomialModel.create(output, degrees, values={
+        n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k})
+    removed = {}
+    for t in range(int(r["steps"])):
+        how = "instrumental variables" if r["order_phase"][t] == 1 else "noise model"
+        candidate = names[int(r["order"][t])]
+        reason = (f"sigma% {r['order_pct'][t]:.3g} > {threshold:g} ({how}), "
+                  f"F {r['order_stat'][t]:.3g} < {crit:.3g}")
+        removed[candidate] = reason
+        for j in np.flatnonzero(r["alias_step"] == t):
+            removed[names[j]] = (f"with {candidate}: the same direction on these data (a "
+                                 f"combination of it and the kept columns; {reason})")
+    not_ident = {n: ("not identifiable: no effect on the data" if r["diag"][i] == 0
+                     else "not identifiable")
+                 for i, n in enumerate(names) if not r["kept"][i] and not r["fixed"][i]}
+    if hasattr(bench, "_camber_powers"):  # as `identify_output`: powers of held camber levels
+        for n, why in bench._camber_powers(names, gamma).items():
+            if n not in act:
+                removed.pop(n, None)
+                not_ident[n] = why
+    return bench.OutputReport(output, None, reduced, model, float(r["compliance"]),
+                              float(r["compliance_sigma"]), float(r["sigma_step2"]),
+                              float(r["noise_sigma"]), removed, not_ident,
+                              np.asarray(r["fydot_hat"]) if output == "Fy" else None,
+                              list(excused))

@@ -1,0 +1,110 @@
+"""The batched bench identification (`diffsusp.tyre.bench_batch.identify_many`, issue 16; spec:
+tyre §3.3–3.5): one compiled program for many data sets runs the library's structure search
+(σ % under the noise-model sandwich σ, F-test) and two-step estimate; the reference is the
+library's NumPy search set by set (`bench.identify_output`)."""
+
+import pathlib
+
+import numpy as np
+import pytest
+
+from diffsusp.tyre import bench, bench_batch, poly
+
+DATA = pathlib.Path(__file__).parent / "data"
+FY = poly.JUST_NECESSARY["Fy"]
+MZ = poly.JUST_NECESSARY["Mz"]
+
+
+def _table10():
+    """The shipped noise-free Dunlop R16 2.5 bar campaign (tests/test_tyre_bench.py
+    `_generate_campaign_25`: slip sines at three loads and cambers, load sines, medium slip
+    ramps, 2 speeds, 54 segments of 1 s at 200 Hz), time and segment columns rebuilt."""
+    z = np.load(DATA / "tyre_flat_trac_table10.npz")
+    table = {c: np.asarray(z[c], dtype=float) for c in z.files}
+    n_seg = len(table["FY"]) // 200
+    table["t"] = np.tile(np.arange(200) / 200.0, n_seg)
+    table["segment"] = np.repeat(np.arange(n_seg, dtype=float), 200)
+    return table
+
+
+def _noisy(table, seed, fy_noise=6.0):
+    """A tyre of the campaign: the bench's white noise on F_y, M_z (σ 6 N, 0.6 N·m)."""
+    rng = np.random.default_rng(seed)
+    out = dict(table)
+    out["FY"] = table["FY"] + fy_noise * rng.standard_normal(len(table["FY"]))
+    out["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(table["FY"]))
+    return out
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    """Three data sets of one shape (three noise draws; one with 3× the F_y noise), their
+    library F_y identification set by set, and the batched identification of the three in
+    one program (`lax.map`)."""
+    base = _table10()
+    tables = [_noisy(base, 0), _noisy(base, 1), _noisy(base, 2, fy_noise=18.0)]
+    conds = [bench.condition(t) for t in tables]
+    fy = [bench.identify_output(c, "Fy", FY) for c in conds]
+    batched = bench_batch.identify_many(tables, degrees=FY, optimize=False)
+    return tables, conds, fy, batched
+
+
+def _agree(batch, lib, rtol):
+    """The batched report is the library's: the same kept, removed and not identifiable
+    coefficients, the same excused faults, x, σ, K_y and its σ within `rtol`."""
+    assert sorted(batch.reduced.names) == sorted(lib.reduced.names)
+    assert set(batch.removed) == set(lib.removed)
+    assert set(batch.not_identifiable) == set(lib.not_identifiable)
+    assert batch.excused == lib.excused
+    order = [batch.reduced.names.index(n) for n in lib.reduced.names]
+    np.testing.assert_allclose(batch.reduced.x[order], lib.reduced.x, rtol=rtol)
+    np.testing.assert_allclose(batch.reduced.sigma[order], lib.reduced.sigma, rtol=rtol)
+    for f in ("compliance", "compliance_sigma", "compliance_sigma_step2", "noise_sigma"):
+        assert getattr(batch, f) == pytest.approx(getattr(lib, f), rel=rtol), f
+
+
+def test_batched_search_is_the_library_search(campaign):
+    """Three sets in one program (`lax.map`): the structure, coefficients, σ and K_y of the
+    library's NumPy search set by set. Measured: x within 1e-9, σ and K_y within 1e-11
+    relative (rounding: e.g. the instrumental-variable normal matrix is inverted by LU in the
+    program, through a QR in NumPy)."""
+    _, _, fy, res = campaign
+    assert res.exact == {}  # no behaviour rule removes anything: every fault is excused
+    for b, lib in zip(res.reports, fy, strict=True):
+        _agree(b, lib, 1e-8)
+        assert b.fit is None and lib.fit is not None  # traced: no lsq.Fit per set
+    np.testing.assert_array_equal(res.kept.sum(axis=1), [len(r.reduced.names) for r in fy])
+    np.testing.assert_allclose(res.stiffness, [r.stiffness for r in fy], rtol=1e-10)
+    # the search is per set: the noisier third set keeps another structure
+    assert sorted(fy[2].reduced.names) != sorted(fy[0].reduced.names)
+
+
+def test_loop_over_sets_equals_the_map(campaign):
+    """The one-set program called per set (the loop over sets), from the conditioned data
+    (the other entry point), gives the mapped program's result (`lax.map`: the same
+    operations, one set at a time inside one program): the same removals in the same order,
+    the numbers to rounding (measured 8e-10 relative on x: another compiled program, and
+    the conditioning in NumPy instead of the program)."""
+    conds, ref = campaign[1][:2], campaign[3]
+    res = bench_batch.identify_many(conds, degrees=FY, batch="loop", optimize=False)
+    for b, r in zip(res.reports, ref.reports, strict=False):
+        assert b.removed == r.removed  # the same removals in the same order
+        _agree(b, r, 1e-8)
+
+
+def test_behaviour_fault_goes_through_the_exact_search(campaign):
+    """Without the σ % rule (`sigma_pct_threshold=None`) only the behaviour rules remove
+    coefficients (with σ % ≤ 10 % every kept coefficient passes the F-test: F ≥ 100 > 10.8,
+    so the rules can only excuse a fault): a set on which a rule removes a coefficient goes
+    through the library's exact search, whose report it returns."""
+    conds = campaign[1][:2]
+    res = bench_batch.identify_many(conds, degrees=FY, batch="loop", optimize=False,
+                                    sigma_pct_threshold=None)
+    assert res.exact, "no behaviour fault on this campaign"
+    for i, why in res.exact.items():
+        assert why.startswith("behaviour rule")
+        assert any(r.startswith("behaviour") for r in res.reports[i].removed.values())
+        assert res.reports[i].fit is not None  # the library's report (its lsq.Fit)
+    for i in set(range(2)) - set(res.exact):
+        _agree(res.reports[i], bench.identify_output(conds[i], "Fy", FY,
+                                                     sigma_pct_threshold=None), 1e-8)
