@@ -7,6 +7,7 @@ Equilibria come from the library's solver (R1, the pseudo-McPherson) or from the
 NumPy oracle (R2, R3: tests/oracle.py), so that the identification is also checked against data
 it did not produce itself."""
 
+import dataclasses
 import math
 import pathlib
 
@@ -166,6 +167,15 @@ def test_polish_returns_the_model_it_judges(bushing_cases):
     err = (report.values[:6] - np.array([100.0] * 3 + [1e4] * 3)) / report.sigma[:6]
     assert np.all(np.abs(err[ok]) < 4.0), err
     assert "held at the model's value" in report.table()
+    # Verdicts that agree: the same linear estimate with a σ claimed 10× below the noise is
+    # inconsistent with the data, and no status (table, rows) then says "identified".
+    _, lie = identify.direct(mech, dataclasses.replace(noisy, sigma=0.001), where=where,
+                             polish=False)
+    assert lie.consistent is False and lie.determined.all()
+    assert set(lie.status) == {identify.direct_report.INCONSISTENT_STATUS}
+    assert not any(row["identified"] for row in lie.rows())
+    statuses = [line for line in lie.table().splitlines() if line.startswith("bush.")]
+    assert len(statuses) == 12 and not any(line.endswith(" identified") for line in statuses)
 
 
 # ----------------------------------------------------------------------------- R2

@@ -106,7 +106,12 @@ def test_r5_noiseless_recovers_every_identifiable_stiffness_and_names_the_rest(m
     np.testing.assert_array_equal(np.asarray(Params.bushing_stiffness(fitted, A_B).start),
                                   report.estimate)
     table = report.table()
-    assert "bushing_A.Krx" in table and "*" in table and "not seen by the data" in table
+    rows = {line.split()[0]: line for line in table.splitlines()[1:1 + len(report.names)]}
+    for name, verdict in zip(report.names, report.verdicts, strict=True):
+        seen = name not in report.unidentifiable
+        assert rows[name].endswith("not determined: not seen by the data") != seen
+        assert rows[name].endswith(" identified") == (verdict == "identified")
+    assert "not seen by the data (σ of the combination)" in table
 
 
 def test_r5_trial_steps_without_equilibrium_are_rejected(mcpherson, r5):

@@ -10,6 +10,7 @@ least-squares equilibria); new are only the direct system of this selection and 
 of these landmarks.
 """
 
+import dataclasses
 import json
 import math
 from types import SimpleNamespace
@@ -201,6 +202,17 @@ def test_the_report_tables_in_the_thesis_units(case):
         assert row["start"] == pytest.approx(_in_thesis_units(name, fit.start[k]), rel=1e-15)
         np.testing.assert_equal(row["sigma_pct"], fit.sigma_percent[k])
         assert row["identifiable"] == bool(fit.identifiable[k])
+        assert row["identified"] == bool(fit.is_identified[k])
+        assert (row["status"] == "identified") == (fit.verdicts[k] == "identified")
+    # The table's status is the verdict: a parameter seen by the data but above the σ% bar
+    # reads "not determined" in the table as in `verdicts` (a `*` for "not seen" disagreed).
+    strict = dataclasses.replace(fit, max_sigma_pct=0.0)
+    seen = np.flatnonzero(strict.identifiable)
+    assert seen.size and all(strict.verdicts[k] == "not determined by the data" for k in seen)
+    table = strict.table()
+    for k in seen:
+        line = next(t for t in table.splitlines() if t.startswith(fit.names[k] + " "))
+        assert "not determined: σ%" in line and line.endswith("at the start values"), line
     step = fit.history[-1]
     fit_params = params.with_start(1.5 * truth)
     rows = tables.interrupted_fit_rows(fit_params, step)

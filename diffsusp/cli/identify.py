@@ -394,6 +394,8 @@ def fit_command(
     sigma_rotation: Annotated[float, typer.Option(
         help="Pose rotation σ (deg), pose tables only.")] = 0.01,
     loss: Annotated[Loss, typer.Option(help="Robust loss of the residuals.")] = Loss.linear,
+    max_sigma_pct: Annotated[float, typer.Option(
+        help="Largest sigma% (at the start values) still called identified.")] = 10.0,
     max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 200,
     reorder: ReorderOpt = False,
     out: OutOpt = None,
@@ -438,7 +440,7 @@ def fit_command(
                                 f"{record.trial_loss:.4g}")
 
             fitted, report = least_squares(mech, data, params, loss=loss, max_steps=max_steps,
-                                           callback=step)
+                                           max_sigma_pct=max_sigma_pct, callback=step)
         if out is not None:
             if out.suffix.lower() == ".json":
                 import json
@@ -476,7 +478,7 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=
         pct = row["sigma_pct"]
         table.add_row(row["parameter"], f"{row['start']:.6g}", f"{row['value']:.6g}",
                       f"{row['sigma']:.3g}", f"{pct:.3g}" if pct == pct else "—", row["unit"],
-                      "identified" if row["identifiable"] else "not identifiable")
+                      row["status"])
     con.print(table)
     if report.null_space:
         con.print("combinations the data cannot see (internal coordinates: log K, mm):")
@@ -485,6 +487,8 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=
     state = "converged" if report.converged else "NOT converged"
     con.print(f"{state} in {report.steps} steps ({report.accepted_steps} accepted); chi2/dof "
               f"{report.chi2 / max(report.dof, 1):.3g}.", highlight=False)
+    if report.consistency is not None:
+        con.print(f"model vs data: {report.consistency.verdict}", highlight=False)
     for note in notes:
         con.print(f"note: {note}", highlight=False)
     outliers = report.outliers(threshold=5.0)

@@ -649,7 +649,8 @@ def direct(
       least-squares gate (σ% at the model's values, `FitReport.determined`).
     - `check`: re-solve the identified model at the measured cases and compare with the
       measurements in units of their σ (`report.consistency`; a determined value of an
-      inconsistent model is not reported as identified).
+      inconsistent model is not reported as identified: its status reads "determined, but
+      not identified: the model is inconsistent with the data", `DirectReport.judged`).
 
     **Returns:** `(mech', report)`: the model with the identified values (N/mm, N·mm/rad inside;
     unknowns the data do not determine keep the model's values, except with "tikhonov" whose
@@ -738,7 +739,7 @@ def direct(
     noisy = consistency.chi2 > POLISH_CHI2 * consistency.dof
     if polish is True or (polish == "auto" and noisy):
         fitted, report = polish_linear(fitted, report, params, data, max_sigma_pct, mech)
-    return fitted, report
+    return fitted, report.judged()
 
 
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,

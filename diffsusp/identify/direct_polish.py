@@ -156,7 +156,7 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
         status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
         consistency=fit.consistency, derived=derived)
-    return model, report
+    return model, report.judged()
 
 
 def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Parameter, ...], data,

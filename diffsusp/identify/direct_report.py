@@ -14,6 +14,10 @@ from .report import Consistency, IdentificationReport, MeasurementResiduals
 
 __all__ = ["DirectReport"]
 
+INCONSISTENT_STATUS = "determined, but not identified: the model is inconsistent with the data"
+"""The status of an unknown the data determine when the identified model does not reproduce
+the measurements (`Consistency.verdict`: "no value is reported as identified")."""
+
 DEG = math.pi / 180.0
 
 
@@ -130,7 +134,8 @@ class DirectReport(IdentificationReport):
         for name, (v, s, unit) in self.derived.items():
             out.append(dict(parameter=name, value=_nan_none(v), sigma=_nan_none(s),
                             sigma_pct=_nan_none(100 * s / abs(v)) if v else None, unit=unit,
-                            identified=bool(np.isfinite(v)), prior=None, status="derived"))
+                            identified=bool(np.isfinite(v)) and self.consistent is not False,
+                            prior=None, status="derived"))
         return out
 
     def to_dict(self) -> dict:
@@ -184,6 +189,18 @@ class DirectReport(IdentificationReport):
 
     def __str__(self) -> str:
         return self.table()
+
+    def judged(self) -> "DirectReport":
+        """This report with every 'identified…' status replaced by `INCONSISTENT_STATUS` when
+        the consistency check failed: the per-unknown statuses (`table()`, `rows()`, the CLI)
+        then say what `verdicts` and the "model vs data" line say. `direct` returns its
+        reports judged."""
+        if self.consistent is not False:
+            return self
+        status = tuple(INCONSISTENT_STATUS + (" (polished through the equilibrium)"
+                                               if "polished" in st else "")
+                       if st.startswith("identified") else st for st in self.status)
+        return dataclasses.replace(self, status=status)
 
     def plot(self, axes=None):
         """Identified values against the model's (prior) values with ±σ bars, and the residual

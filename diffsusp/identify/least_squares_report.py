@@ -160,19 +160,45 @@ class FitReport(IdentificationReport):
                 out.append((name, idx, float(res.whitened[idx])))
         return out
 
+    def statuses(self) -> tuple[str, ...]:
+        """Per parameter, the verdict `table()` prints, the same as `verdicts` with its
+        reason: "identified"; "not determined: not seen by the data" (`identifiable` False,
+        σ from the data > 100 %); "not determined: σ% N > 10 at the start values" (seen, but
+        above `max_sigma_pct` where `determined` judges it); "determined, but not identified:
+        the model is inconsistent with the data"."""
+        det, out = self.determined, []
+        gate = self.sigma_percent if self.gate_sigma_pct is None else self.gate_sigma_pct
+        where = "the estimate" if self.gate_sigma_pct is None else "the start values"
+        for k in range(len(self.names)):
+            if not self.identifiable[k]:
+                out.append("not determined: not seen by the data")
+            elif not det[k]:
+                out.append(f"not determined: σ% {gate[k]:.3g} > {self.max_sigma_pct:g} at "
+                           f"{where}")
+            elif self.consistent is False:
+                out.append("determined, but not identified: the model is inconsistent with "
+                           "the data")
+            else:
+                out.append("identified")
+        return tuple(out)
+
     def table(self) -> str:
-        """Estimates with σ and σ %; `*` marks parameters the data do not determine."""
+        """Estimates with σ and σ %, and per parameter its verdict (`statuses()`: identified,
+        or why not — the verdict of `verdicts` and `is_identified`); the fit's state, χ², the
+        model-vs-data verdict and the combinations the data cannot see."""
         width = max(len(n) for n in self.names) + 2
-        lines = [f"{'parameter':<{width}}{'start':>14}{'estimate':>14}{'sigma':>12}{'sigma %':>9}"]
-        for k, name in enumerate(self.names):
-            mark = " " if self.identifiable[k] else "*"
+        lines = [f"{'parameter':<{width}}{'start':>14}{'estimate':>14}{'sigma':>12}{'sigma %':>9}"
+                 "  status"]
+        for k, (name, status) in enumerate(zip(self.names, self.statuses(), strict=True)):
             pct = self.sigma_percent[k]
-            pct = f"{pct:>8.3g}" if np.isfinite(pct) else f"{'-':>8}"
+            pct = f"{pct:>9.3g}" if np.isfinite(pct) else f"{'-':>9}"
             lines.append(f"{name:<{width}}{self.start[k]:>14.6g}{self.estimate[k]:>14.6g}"
-                         f"{self.sigma[k]:>12.3g}{pct}{mark}")
+                         f"{self.sigma[k]:>12.3g}{pct}  {status}")
         state = "converged" if self.converged else "NOT converged"
         lines.append(f"{state} in {self.steps} steps ({self.accepted_steps} accepted), loss "
                      f"{self.loss_name}; chi2 {self.chi2:.4g} for {self.n_residuals} residuals.")
+        if self.consistency is not None:
+            lines.append(f"model vs data: {self.consistency.verdict}")
         if self.null_space:
             lines.append("not seen by the data (σ of the combination):")
             lines += [f"  {d.text}  (σ {d.sigma:.3g})" for d in self.null_space]
@@ -186,6 +212,7 @@ class FitReport(IdentificationReport):
             "gate_sigma_percent": None if self.gate_sigma_pct is None else
             [None if not np.isfinite(v) else float(v) for v in self.gate_sigma_pct],
             "identifiable": self.identifiable.tolist(),
+            "identified": self.is_identified.tolist(), "status": list(self.statuses()),
             "singular_values": self.singular_values.tolist(),
             "null_space": [d.text for d in self.null_space],
             "chi2": self.chi2, "n_residuals": self.n_residuals, "converged": self.converged,

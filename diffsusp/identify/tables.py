@@ -57,15 +57,19 @@ def interrupted_iterative_rows(mech0: Mechanism, names: Sequence[str],
 
 def fit_rows(report: FitReport) -> list[dict]:
     """One row per parameter: parameter, value, sigma, sigma_pct, unit, start, identifiable
-    (values and σ in the thesis's units, `display_value`)."""
+    (the data see it), identified (`FitReport.is_identified`: determined and the model
+    consistent) and status (`FitReport.statuses`: the verdict with its reason); values and σ
+    in the thesis's units, `display_value`."""
     rows = []
+    identified, statuses = report.is_identified, report.statuses()
     for k, name in enumerate(report.names):
         value, unit = display_value(name, report.estimate[k])
         scale = value / report.estimate[k] if report.estimate[k] else 1.0
         rows.append(dict(parameter=name, value=float(value), sigma=float(report.sigma[k] * scale),
                          sigma_pct=float(report.sigma_percent[k]), unit=unit,
                          start=float(display_value(name, report.start[k])[0]),
-                         identifiable=bool(report.identifiable[k])))
+                         identifiable=bool(report.identifiable[k]),
+                         identified=bool(identified[k]), status=statuses[k]))
     return rows
 
 
