@@ -1,6 +1,7 @@
 """Sensitivities of K&C metrics (exact, second order through the equilibrium where needed) and
 experiment design. spec: stiffness §2.7, §3; guaranteed_least_squares §3.8."""
 
+import dataclasses
 import json
 
 import equinox as eqx
@@ -148,6 +149,22 @@ def test_experiment_design_picks_one_case_per_direction_with_closed_form_sigma()
     # By the σ criterion, the same three.
     rep = design_experiment(mech, candidates, params, 3, criterion="sigma")
     assert sorted(rep.chosen) == [3, 4, 5]
+    # The table shows the targets' full names (cut at 12 characters, they read alike), and
+    # continues a plan: one row per case, the given ones first, also when n == len(start).
+    names = ("lca_bushing.Ktx", "lca_bushing.Kty", "lca_bushing.Krz")
+    table = dataclasses.replace(rep, targets=names).table()
+    assert table.splitlines()[0].split()[4:] == list(names)
+    for start, n in (((3, 4, 5), 3), ((0,), 3)):
+        plan = design_experiment(mech, candidates, params, n, start=start, criterion="sigma")
+        assert plan.chosen[:len(start)] == start and len(plan.chosen) == n
+        assert plan.sigma.shape == (n, 3) and plan.logdet.shape == (n,)
+        rows = plan.table().splitlines()
+        assert len(rows) == n + 2 and rows[1].split()[0] == "1*"
+    np.testing.assert_allclose(plan.sigma[0][[1, 2]], np.inf)  # case 0 alone: axis 0 only
+    np.testing.assert_allclose(plan.sigma[-1], rep.sigma[-1] * np.array([3.0, 1.0, 1.0]),
+                               rtol=1e-9)  # 100 N along axis 0 instead of 300 N: σ × 3
+    with pytest.raises(ds.InputError, match="counts the start cases"):
+        design_experiment(mech, candidates, params, 1, start=(3, 4))
     with pytest.raises(ds.InputError, match="criterion"):
         design_experiment(mech, candidates, params, 3, criterion="A")
 

@@ -230,12 +230,14 @@ def landmark_model(mech: Mechanism) -> Callable:
 class DesignReport:
     """Greedy experiment design.
 
-    - `chosen`: candidate indices in the order they were added.
-    - `logdet`: log det of the information matrix (target block) after each addition.
-    - `sigma`: `(steps, t)` standard deviations of the target parameters after each addition:
-      relative (σ/θ, so ×100 is σ%) for positive parameters, in their unit otherwise; inf while
-      a parameter is not yet determined.
+    - `chosen`: candidate indices in the order they were added (the `start` cases first).
+    - `logdet`: log det of the information matrix (target block) with the cases up to each one
+      of `chosen` (one row per case of the plan, the `start` cases included).
+    - `sigma`: `(len(chosen), t)` standard deviations of the target parameters with the cases
+      up to each one of `chosen`: relative (σ/θ, so ×100 is σ%) for positive parameters, in
+      their unit otherwise; inf while a parameter is not yet determined.
     - `targets`: names of the target parameters; `relative`: which σ are relative.
+    - `n_start`: how many of `chosen` were given (`start`), not chosen by the design.
     """
 
     chosen: tuple[int, ...]
@@ -243,16 +245,25 @@ class DesignReport:
     sigma: np.ndarray
     targets: tuple[str, ...]
     relative: np.ndarray
+    n_start: int = 0
 
     def table(self) -> str:
-        head = f"{'step':>4} {'case':>5} {'log det':>10} " + " ".join(f"{t[:12]:>12}"
-                                                                      for t in self.targets)
+        """One row per case of the plan: step (`*` for a given `start` case), candidate index,
+        log det and the σ of each target (σ% for relative ones, `—` while undetermined); each
+        column as wide as its target's full name."""
+        widths = [max(12, len(t)) for t in self.targets]
+        head = f"{'step':>5} {'case':>5} {'log det':>10} " + " ".join(
+            f"{t:>{w}}" for t, w in zip(self.targets, widths, strict=True))
         lines = [head]
         for s, c in enumerate(self.chosen):
             cells = " ".join(
-                (f"{100 * v:>11.3g}%" if rel else f"{v:>12.3g}") if np.isfinite(v) else f"{'—':>12}"
-                for v, rel in zip(self.sigma[s], self.relative, strict=True))
-            lines.append(f"{s + 1:>4} {c:>5} {self.logdet[s]:>10.4g} {cells}")
+                (f"{f'{100 * v:.3g}%':>{w}}" if rel else f"{v:>{w}.3g}") if np.isfinite(v)
+                else f"{'—':>{w}}"
+                for v, rel, w in zip(self.sigma[s], self.relative, widths, strict=True))
+            step = f"{s + 1}{'*' if s < self.n_start else ''}"
+            lines.append(f"{step:>5} {c:>5} {self.logdet[s]:>10.4g} {cells}")
+        if self.n_start:
+            lines.append("* given (start), not chosen by the design")
         return "\n".join(lines)
 
 
@@ -299,6 +310,8 @@ def design_experiment(
     - `sigma`: measurement standard deviation per coordinate (mm; default 0.05 mm, the
       portable arm of spec geometry §3.3).
     - `observe(mech, q) -> (k,)`: what is measured per case (default `landmark_model(mech)`).
+    - `start`: candidate indices already in the plan (counted in `n`; their rows come first in
+      the report, marked `*` in its table).
     - `criterion`: "D" (maximise log det of the targets' information, Schur complement of the
       nuisances) or "sigma" (minimise the largest σ of the targets).
 
@@ -341,9 +354,25 @@ def design_experiment(
             return (rank, logdet)
         return (rank, -float(np.max(_sigmas(t, ridge))))
 
-    chosen = list(start)
-    total = infos[chosen].sum(axis=0) if chosen else np.zeros(infos.shape[1:])
+    chosen = [int(c) for c in start]
+    if len(set(chosen)) != len(chosen) or any(not 0 <= c < len(infos) for c in chosen):
+        raise InputError(f"start must be distinct candidate indices (0 to {len(infos) - 1}); "
+                         f"got {list(start)}.")
+    if len(chosen) > n:
+        raise InputError(f"n ({n}) counts the start cases: it must be at least len(start) "
+                         f"({len(chosen)}).")
     log, sig = [], []
+
+    def record(total):
+        t = target_info(total)
+        sign, logdet = np.linalg.slogdet(t)
+        log.append(logdet if sign > 0 else -np.inf)
+        sig.append(_sigmas(t, ridge))
+
+    total = np.zeros(infos.shape[1:])
+    for c in chosen:  # the plan so far: one row each, as for the chosen cases
+        total = total + infos[c]
+        record(total)
     ok = status == Status.CONVERGED
     while len(chosen) < n:
         best, best_score = None, None
@@ -357,12 +386,12 @@ def design_experiment(
             raise InputError("no converged candidate case is left to choose.")
         chosen.append(best)
         total = total + infos[best]
-        t = target_info(total)
-        log.append(np.linalg.slogdet(t)[1] if np.linalg.slogdet(t)[0] > 0 else -np.inf)
-        sig.append(_sigmas(t, ridge))
+        record(total)
     relative = np.asarray(params.log_scaled)[tgt]
-    return DesignReport(chosen=tuple(chosen), logdet=np.asarray(log), sigma=np.asarray(sig),
-                        targets=tuple(names[j] for j in tgt), relative=relative)
+    return DesignReport(chosen=tuple(chosen), logdet=np.asarray(log),
+                        sigma=np.asarray(sig).reshape(len(chosen), len(tgt)),
+                        targets=tuple(names[j] for j in tgt), relative=relative,
+                        n_start=len(start))
 
 
 __all__ = ["PARAMETER_SETS", "DesignReport", "SensitivityReport", "design_experiment",
