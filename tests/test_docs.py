@@ -11,6 +11,12 @@ generated pages cover what the code has, and every Python code block of its page
   so) and every K&C metric a small figure (`reference/figures/metrics/<metric>.png`, computed
   by docs/hooks.py from one event per kind, each slope checked against its curve); the tyre
   reference lists every quantity of the tyre registries, with its figures.
+- `test_api_reference_is_complete`: every public name of every public package and module of
+  `diffsusp` (walked with pkgutil: its `__all__`; a top-level module without one, its
+  functions and classes; `diffsusp.cli` is the CLI reference's) has an entry in the built API
+  pages (`reference/api/`): an element id `<module>.<name>` that mkdocstrings gives the heading,
+  whose module's `<name>` is the same object (a re-export is documented where it is defined).
+  A new public name without an entry fails here; the pages show no private name.
 - `test_notebook_page_shows_outputs_or_says_why_not`: the page notebook docs/hooks.py makes of a
   notebook source: without a saved run, and with a stale one, the source without outputs under
   a note saying so; with a current saved run, its outputs, which the rendered page contains.
@@ -23,9 +29,11 @@ generated pages cover what the code has, and every Python code block of its page
 """
 
 import html
+import importlib
 import importlib.util
 import os
 import pathlib
+import pkgutil
 import re
 import subprocess
 import sys
@@ -130,6 +138,63 @@ def test_site_builds_strict(site):
         if executed:
             saved = hooks.EXECUTED / f"{source.stem}.ipynb"
             assert hooks.saved_source_hash(saved) == hooks.source_hash(source), source.name
+
+
+def _public_names():
+    """{module: [public name]} for every public package and module of `diffsusp` (see the module
+    docstring): `__all__` where a module declares it; a top-level module without one (`plot`,
+    `compilation`), the functions and classes it defines. A submodule without `__all__` is the
+    implementation of its package, whose `__all__` is its public face."""
+    import diffsusp
+
+    found = [("diffsusp", True)] + [(m.name, m.ispkg) for m in
+                                    pkgutil.walk_packages(diffsusp.__path__, "diffsusp.")]
+    public = {}
+    for name, ispkg in found:
+        if any(part.startswith("_") for part in name.split(".")) or name.startswith("diffsusp.cli"):
+            continue
+        module = importlib.import_module(name)
+        names = getattr(module, "__all__", None)
+        if names is None:
+            if ispkg or name.count(".") != 1:
+                continue
+            names = [n for n, obj in vars(module).items() if not n.startswith("_")
+                     and (isinstance(obj, type) or callable(obj))
+                     and getattr(obj, "__module__", None) == name]
+        public[name] = list(names)
+    return public
+
+
+def test_api_reference_is_complete(site):
+    ids = set()
+    for page in (site / "reference/api").rglob("index.html"):
+        ids |= set(re.findall(r'id="(diffsusp(?:\.\w+)*)"', page.read_text(encoding="utf-8")))
+    assert not [i for i in ids if "._" in i]  # no private name rendered
+    documented = {}  # name → the objects documented under it
+    for ident in ids:
+        module, _, name = ident.rpartition(".")
+        if not module:
+            continue
+        try:
+            obj = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError):  # a module's own heading: checked below by its id
+            continue
+        documented.setdefault(name, []).append(obj)
+    public = _public_names()
+    assert {"diffsusp.fleet", "diffsusp.lsq", "diffsusp.measure", "diffsusp.geometry",
+            "diffsusp.mdh", "diffsusp.plot", "diffsusp.compilation"} <= set(public)
+    assert sum(map(len, public.values())) > 600
+    missing = []
+    for module, names in public.items():
+        for name in names:
+            obj = getattr(importlib.import_module(module), name)
+            if type(obj).__name__ == "module":
+                if obj.__name__ not in ids:
+                    missing.append(obj.__name__)
+            elif not any(obj is other for other in documented.get(name, ())):
+                missing.append(f"{module}.{name}")
+    assert not missing, ("public names without an entry in docs/reference/api/*.md (add them to "
+                         f"the page of the module that defines them): {missing}")
 
 
 def test_notebook_page_shows_outputs_or_says_why_not(tmp_path, monkeypatch):
