@@ -323,6 +323,19 @@ def test_small_model_fit_recovers_the_generating_parameters(arm):
     assert set(report.residuals) == {"landmarks", "poses", "deformations", "arm_travel"}
     assert report.residuals["poses"].raw.shape == (4, 1, 6)
     assert report.n_residuals == 4 * (9 + 6 + 6 + 3) - 3
+    # The fit starts from the values of the mechanism it is given, not from those of the one
+    # `params` was built from: at the generating values it has nothing left to do.
+    start = params.apply(c.mech, jnp.asarray(c.theta_other))
+    _, again = least_squares(start, c.data, params)
+    np.testing.assert_array_equal(again.start, c.theta_other)
+    assert again.converged and again.accepted_steps <= 1 and again.chi2 < 1e-10
+    # Values set with with_start are the exception: they win over the mechanism's.
+    given = params.with_start({"bush.Ktx": 123.0})
+    chosen = np.asarray(given.starting_from(start).start)
+    assert chosen[0] == 123.0 and np.array_equal(chosen[1:], c.theta_other[1:])
+    more = (Params.bushing_stiffness(c.mech).with_start({"bush.Ktx": 123.0})
+            + Params.bushing_centres(c.mech, ("bush",)))  # `+` keeps what was given
+    np.testing.assert_array_equal(more.starting_from(start).start, chosen)
 
 
 # ----------------------------------------------------------------------------- parts

@@ -346,7 +346,9 @@ def _as_params(mech, params, where=None) -> Params:
         raise InputError("give the selection once: params or where=, not both.")
     params = where if params is None else params
     if isinstance(params, Params):
-        return params
+        # `mech`'s values, unless set with with_start; `given` cleared once resolved, so that
+        # a selection with or without given starts compiles to the same programs.
+        return dataclasses.replace(params.starting_from(mech), given=())
     if callable(params):
         return Params.leaves(mech, params)
     raise InputError("params must be a Params or a `where` function selecting leaves of the "
@@ -604,7 +606,9 @@ def least_squares(
     """Identify parameters of `mech` by nonlinear least squares through the equilibrium.
 
     **Arguments:**
-    - `mech`: the model, holding the start values and every parameter not identified.
+    - `mech`: the model, holding the start values and every parameter not identified. The fit
+      starts from `mech`'s values even when `params` was built from another model
+      (`Params.starting_from`); only values set with `params.with_start(...)` override them.
     - `data`: one measurement or several (`Landmarks`, `Poses`, `Deformations`, `Channel`, or
       a `measure.Measurements`: its landmarks, or its poses, whitened by its own σ), each with
       its own load table; one data set each (see `least_squares_batch` for many).

@@ -103,7 +103,16 @@ class Params(eqx.Module):
     `Params.bushing_centres`, and combine with `+`.
 
     **Fields:** `names` (one per parameter, e.g. `'bushing_A.Ktx'`, `'spring.k'`,
-    `'bushing_A.x'`), `start` (physical values θ0), `lower`, `upper` (bounds, ±inf when none).
+    `'bushing_A.x'`), `start` (physical values θ0), `lower`, `upper` (bounds, ±inf when none),
+    `given` (per parameter: its start was set by `with_start`; empty: none was).
+
+    **Start values.** A `Params` is a *selection*: built from a mechanism it copies that
+    mechanism's values as `start`, but a fit (`least_squares(mech, data, params)`) starts from
+    the values of the `mech` it is given (`starting_from`), as its docstring says — building
+    the selection on the model and fitting a modified copy (`start = eqx.tree_at(...)`) starts
+    from the copy, not silently from the model the selection was built on. Only values set
+    explicitly with `with_start` (the CLI's `--start`, the polish's linear estimates) override
+    the mechanism's.
     """
 
     start: Float[Array, " p"]
@@ -111,6 +120,7 @@ class Params(eqx.Module):
     upper: Float[Array, " p"]
     targets: tuple[_Target, ...]
     names: tuple[str, ...] = eqx.field(static=True)
+    given: tuple[bool, ...] = eqx.field(static=True, default=())
 
     def __check_init__(self):
         p = len(self.names)
@@ -261,10 +271,16 @@ class Params(eqx.Module):
         moved = tuple(_Target(offset=t.offset, path=t.path, leaf_index=t.leaf_index,
                               param_index=tuple(i + shift for i in t.param_index))
                       for t in other.targets)
+        given = self._given + other._given
         return Params(start=jnp.concatenate([self.start, other.start]),
                       lower=jnp.concatenate([self.lower, other.lower]),
                       upper=jnp.concatenate([self.upper, other.upper]),
-                      targets=self.targets + moved, names=self.names + other.names)
+                      targets=self.targets + moved, names=self.names + other.names,
+                      given=given if any(given) else ())
+
+    @property
+    def _given(self) -> tuple[bool, ...]:
+        return self.given or (False,) * len(self)
 
     def _reorder(self, order: Sequence[int]) -> "Params":
         order = np.asarray(order, dtype=int)
@@ -273,8 +289,9 @@ class Params(eqx.Module):
         targets = tuple(_Target(offset=t.offset, path=t.path, leaf_index=t.leaf_index,
                                 param_index=tuple(int(inverse[i]) for i in t.param_index))
                         for t in self.targets)
+        given = tuple(self._given[i] for i in order) if self.given else ()
         return Params(start=self.start[order], lower=self.lower[order], upper=self.upper[order],
-                      targets=targets, names=tuple(self.names[i] for i in order))
+                      targets=targets, names=tuple(self.names[i] for i in order), given=given)
 
     def with_bounds(self, bounds: Mapping[str, tuple[float | None, float | None]]) -> "Params":
         """A copy with `bounds` {name: (lower, upper)} (None = unbounded on that side), e.g.
@@ -291,18 +308,38 @@ class Params(eqx.Module):
 
     def with_start(self, values) -> "Params":
         """A copy starting from `values`: a `(p,)` array, a mapping name → value (others kept),
-        or a Mechanism to read them from."""
+        or a Mechanism to read them from. These start values are *given*: a fit starts from
+        them whatever the values of the mechanism it is handed (see `starting_from`)."""
         start = np.array(self.start)
+        given = list(self._given)
         if isinstance(values, Mechanism):
             start = np.asarray(self.values(values))
+            given = [True] * len(self)
         elif isinstance(values, Mapping):
             for name, v in values.items():
                 start[self.index(name)] = float(v)
+                given[self.index(name)] = True
         else:
             start = np.asarray(values, dtype=float)
             if start.shape != (len(self),):
                 raise InputError(f"start values must have shape ({len(self)},); got "
                                  f"{start.shape}.")
+            given = [True] * len(self)
+        params = dataclasses.replace(self, start=jnp.asarray(start), given=tuple(given))
+        params._check_start()
+        return params
+
+    def starting_from(self, mech: Mechanism) -> "Params":
+        """The selection with the start values a fit of `mech` uses: `mech`'s values
+        (`values(mech)`), except those set with `with_start`. `least_squares` and
+        `least_squares_batch` call it, so `least_squares(start, data, params)` starts from
+        `start` even when `params` was built from another mechanism (see the class
+        docstring). Raises `InputError` when a value of `mech` is not a valid start (a
+        stiffness ≤ 0, outside the bounds): give one with `with_start`."""
+        theta = np.asarray(self.values(mech), dtype=float)
+        start = np.where(np.asarray(self._given, bool), np.asarray(self.start), theta)
+        if np.array_equal(start, np.asarray(self.start)):
+            return self
         params = dataclasses.replace(self, start=jnp.asarray(start))
         params._check_start()
         return params
