@@ -8,7 +8,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from diffsusp.tyre import bench, bench_batch, poly
+from diffsusp.tyre import annex_g, bench, bench_batch, poly
 
 DATA = pathlib.Path(__file__).parent / "data"
 FY = poly.JUST_NECESSARY["Fy"]
@@ -90,21 +90,27 @@ def test_loop_over_sets_equals_the_map(campaign):
     for b, r in zip(res.reports, ref.reports, strict=False):
         assert b.removed == r.removed  # the same removals in the same order
         _agree(b, r, 1e-8)
+    # M_z (`mz=True`): the library's M_z identification per set, instrumented by the batched
+    # F_y; K_{Mz,y} of the Dunlop R16 at 2.5 bar (G.2) within its σ
+    res = bench_batch.identify_many(conds[:1], degrees=FY, batch="loop", optimize=False,
+                                    mz=True)
+    rep = res.mz_reports[0]
+    assert rep.output == "Mz" and rep.fit is not None
+    k_mz = annex_g.lateral_stiffness("dunlop_r16", 2.5, "Mz")
+    assert abs(rep.compliance - 1 / k_mz) < 3 * rep.compliance_sigma
 
 
 def test_behaviour_fault_goes_through_the_exact_search(campaign):
     """Without the σ % rule (`sigma_pct_threshold=None`) only the behaviour rules remove
     coefficients (with σ % ≤ 10 % every kept coefficient passes the F-test: F ≥ 100 > 10.8,
-    so the rules can only excuse a fault): a set on which a rule removes a coefficient goes
-    through the library's exact search, whose report it returns."""
-    conds = campaign[1][:2]
-    res = bench_batch.identify_many(conds, degrees=FY, batch="loop", optimize=False,
+    so the rules can only excuse a fault): a set on which a rule removes a coefficient (here
+    the load-sign rule) goes through the library's exact search, whose report it returns."""
+    cond = campaign[1][0]
+    res = bench_batch.identify_many([cond], degrees=FY, batch="loop", optimize=False,
                                     sigma_pct_threshold=None)
-    assert res.exact, "no behaviour fault on this campaign"
-    for i, why in res.exact.items():
-        assert why.startswith("behaviour rule")
-        assert any(r.startswith("behaviour") for r in res.reports[i].removed.values())
-        assert res.reports[i].fit is not None  # the library's report (its lsq.Fit)
-    for i in set(range(2)) - set(res.exact):
-        _agree(res.reports[i], bench.identify_output(conds[i], "Fy", FY,
-                                                     sigma_pct_threshold=None), 1e-8)
+    assert list(res.exact) == [0]
+    assert res.exact[0].startswith("behaviour rule 'sign'")
+    rep = res.reports[0]
+    assert rep.fit is not None  # the library's report (its lsq.Fit)
+    assert any(r.startswith("behaviour: sign rule") for r in rep.removed.values())
+    np.testing.assert_array_equal(res.kept[0], [n in rep.reduced.names for n in res.names])

@@ -92,16 +92,19 @@ class CampaignResult:
     """`identify_many`'s result: `reports` (one `bench.OutputReport` per data set, in order),
     `exact` (index → why the set went through the library's exact search), `kept` (sets × p
     bool: the final structure, over `names`), `names` (the LIP model's coefficients),
-    `search_steps` (removals per set in the traced search), `program_seconds` (wall time of
-    the compiled program's run, compile included on the first call), `mz_reports` (M_z's
-    `bench.OutputReport`s with `mz=True`, else None)."""
+    `search_steps` (removals per set in the traced search), `gram_updates` (the noise-model
+    Gram S recomputed, per set), `program_seconds`, `program_cpu_seconds`
+    (wall and CPU time of the compiled program's run, compile included on the first call),
+    `mz_reports` (M_z's `bench.OutputReport`s with `mz=True`, else None)."""
 
     reports: list
     exact: dict
     kept: np.ndarray
     names: tuple
     search_steps: np.ndarray
+    gram_updates: np.ndarray
     program_seconds: float
+    program_cpu_seconds: float
     mz_reports: list | None = None
 
     @property
@@ -143,11 +146,12 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         b = jnp.where(active, xs / sc, 0.0)
         g = gram.gain(b)
         moved = jnp.linalg.norm(g - g_ref) > 0.05 * jnp.linalg.norm(g_ref)
-        S, g_ref = jax.lax.cond(~have_S | moved, lambda: (gram(b) / jnp.outer(sc, sc), g),
+        update = ~have_S | moved
+        S, g_ref = jax.lax.cond(update, lambda: (gram(b) / jnp.outer(sc, sc), g),
                                 lambda: (S, g_ref))
         cov = cov_unit @ S @ cov_unit
         sig = jnp.where(active, jnp.sqrt(jnp.abs(jnp.diag(cov))) / sc, 0.0)
-        return b, sig, S, g_ref
+        return b, sig, S, g_ref, update
 
     def iv(active):
         res = two_step(active, noise_var=var, step2=False)
@@ -178,9 +182,12 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
             return (jnp.where(none, trial, trial | back), jnp.where(none, found, found | back),
                     jnp.where(none, after, new_after), none)
 
+        first = select(fixed)
         _, found, after, stop = jax.lax.while_loop(
-            more, chain, (fixed, jnp.zeros_like(fixed), select(fixed), jnp.asarray(False)))
-        return found & ~stop & (jnp.sum(after) == n_active - 1)
+            more, chain, (fixed, jnp.zeros_like(fixed), first, jnp.asarray(False)))
+        ok = ~stop & (jnp.sum(after) == n_active - 1)
+        # (the aliases; the kept columns of the next step, which need no second selection)
+        return found & ok, jnp.where(ok, after, first)
 
     g0 = gram.gain(zeros)
     state0 = dict(fixed=jnp.asarray(fixed0), go=jnp.asarray(True), steps=jnp.asarray(0),
@@ -191,21 +198,24 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                   alias_step=jnp.full(p, -1),
                   x=zeros, sigma=zeros, stat=zeros, active=jnp.zeros(p, bool),
                   ls_x=zeros, ls_stat=zeros, ls_active=jnp.zeros(p, bool),
-                  ls_done=jnp.asarray(False))
+                  ls_done=jnp.asarray(False), next=select(jnp.asarray(fixed0)),
+                  gram_updates=jnp.asarray(0))
 
     def body(st):
         st = dict(st)
-        active = select(st["fixed"])
+        active = st["next"]
         if final_pass is None:
-            b, sig, S, g_ref = least_squares(active, st["S"], st["g_ref"], st["have_S"])
+            b, sig, S, g_ref, update = least_squares(active, st["S"], st["g_ref"],
+                                                     st["have_S"])
         else:
             def ls_branch():
                 return least_squares(active, st["S"], st["g_ref"], st["have_S"])
 
             def iv_branch():
-                return (*iv(active), st["S"], st["g_ref"])
-            b, sig, S, g_ref = jax.lax.cond(st["phase"] == 0, ls_branch, iv_branch)
-        st.update(S=S, g_ref=g_ref, have_S=st["have_S"] | (st["phase"] == 0))
+                return (*iv(active), st["S"], st["g_ref"], jnp.asarray(False))
+            b, sig, S, g_ref, update = jax.lax.cond(st["phase"] == 0, ls_branch, iv_branch)
+        st.update(S=S, g_ref=g_ref, have_S=st["have_S"] | (st["phase"] == 0),
+                  gram_updates=st["gram_updates"] + update)
         pct, stat = stats(b, sig, active)
         removable = active & (stat < crit) & (pct > threshold)
         k = jnp.argmax(jnp.where(removable, pct, -jnp.inf))
@@ -216,9 +226,11 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         st["order_phase"] = st["order_phase"].at[st["steps"]].set(st["phase"])
         fixed = st["fixed"].at[k].set(st["fixed"][k] | hit)
         if with_aliases:
-            al = aliases(fixed, active) & hit
+            al, st["next"] = aliases(fixed, active)
             st["alias_step"] = jnp.where(al, st["steps"], st["alias_step"])
             fixed = fixed | al
+        else:
+            st["next"] = select(fixed)
         st["fixed"] = fixed
         st["steps"] = st["steps"] + hit
         st.update(x=b, sigma=sig, stat=stat, active=active)
@@ -236,7 +248,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     res = two_step(st["active"])
     out = {k: st[k] for k in ("fixed", "active", "order", "order_pct", "order_stat",
                               "order_phase", "alias_step", "x", "sigma", "stat", "ls_x", "ls_stat",
-                              "ls_active", "ls_done", "steps")}
+                              "ls_active", "ls_done", "steps", "gram_updates")}
     out["kept"] = select(st["fixed"])
     out["diag"] = jnp.abs(jnp.diagonal(R)[:p])
     out.update(final_x=res["x"], final_sigma=res["sigma"], compliance=res["compliance"],
@@ -447,14 +459,14 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
                               final_pass=final_pass, fixed=fixed, batch=batch,
                               from_tables=not conditioned)
     program = _compiled(key, make, optimize)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if batch == "loop":
         pieces = [program(*jax.tree_util.tree_map(lambda a, i=i: a[i], args[:-n_shared]),
                           *args[-n_shared:]) for i in range(len(data))]
         raw = jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(v) for v in a]), *pieces)
     else:
         raw = jax.tree_util.tree_map(np.asarray, program(*args))
-    seconds = time.perf_counter() - t0
+    seconds = (time.perf_counter() - t0, time.process_time() - c0)
     result, _, fz_range = raw
     # the host side: reports, the behaviour rules, the exact path for the sets they change
     names = regressor_model("Fy", degrees, ly=True).names
@@ -482,7 +494,12 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
             behaviour = bench._behaviour("Fy", (float(fz_range[i][0]), float(fz_range[i][1])),
                                          rolling_radius=r_m)
             phases = [("x", "stat", "active")]
-            if final_pass is not None:  # the rules at the end of each phase, as the library
+            # the rules at the end of each phase, as the library; with σ % ≤ 100/√crit
+            # (30.4 % at 10⁻³) every coefficient a phase keeps passes the F-test (F =
+            # (100/σ %)² ≥ crit, or it was kept for F ≥ crit): no rule can remove one, they
+            # only excuse, and the final phase's excused faults are the report's
+            if final_pass is not None and not (sigma_pct_threshold is not None
+                                               and sigma_pct_threshold <= 100 / crit**0.5):
                 phases.insert(0, ("ls_x", "ls_stat", "ls_active"))
             for xk, sk, ak in phases:
                 found, excused = _behaviour_removal(behaviour, names, r[ak], r[xk], r[sk], crit)
@@ -507,8 +524,8 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
             ic_threshold=ic_threshold, rolling_radius=r_m, rules=rules, fy_report=reports[i],
             **options) for i in range(len(data))]
     kept = np.array([[n in r.reduced.names for n in names] for r in reports])
-    return CampaignResult(reports, exact, kept, names, np.asarray(result["steps"]), seconds,
-                          mz_reports)
+    return CampaignResult(reports, exact, kept, names, np.asarray(result["steps"]),
+                          np.asarray(result["gram_updates"]), *seconds, mz_reports)
 
 
 def _report(output, degrees, names, r, excused, threshold, crit, gamma):
