@@ -575,3 +575,36 @@ def test_non_converging_case_raises_or_gives_nan(dw, dw_vertical):
     assert np.isnan(ev.metrics["toe"][4]) and np.isnan(ev.metrics["bump_steer"][4])
     assert np.isnan(kc.compliance_matrix(ev)[4]).all()
     np.testing.assert_allclose(ev.metrics["toe"][5], dw_vertical.metrics["toe"][6], atol=1e-12)
+
+
+def test_corner_loads_per_side_table_without_an_event(pm, axle):
+    """`kc.corner_loads`: a per-side (vertical, lateral, longitudinal) table as Loads, no
+    event run. Adams/Car left wheel (x rearward): exactly the thesis's load cases; the ISO
+    frame's left wheel (x forward, the Chrono strut): (−F_long, −F_lat, F_vert), the guides'
+    hand-made vectors; a mirrored right wheel: lateral inboard is −y; load_table applies the
+    same loads."""
+    from diffsusp.io import load_model
+    from diffsusp.models import thesis_load_cases
+    from diffsusp.models.loadcases import TABLE_5_1
+
+    got = kc.corner_loads(pm, TABLE_5_1)
+    ref = thesis_load_cases(pm)
+    np.testing.assert_array_equal(got.force, ref.force)
+    np.testing.assert_array_equal(got.moment, ref.moment)
+    f_vert, f_lat, f_long = TABLE_5_1.T
+    strut = load_model("docs/data/MacPhersonStrut_bushings.json")
+    iso = kc.corner_loads(strut, vertical=f_vert, lateral=f_lat, longitudinal=f_long)
+    cp = strut.load_points.names.index("contact_patch")
+    np.testing.assert_allclose(iso.force[:, cp], np.stack([-f_long, -f_lat, f_vert], 1),
+                               rtol=0, atol=1e-9)
+    assert float(jnp.abs(iso.force).sum()) == pytest.approx(float(np.abs(TABLE_5_1).sum()))
+    both = kc.corner_loads(axle, vertical=4000.0, lateral=[1000.0, -500.0], aligning=2e4)
+    left, right = (axle.load_points.names.index(f"{s}/contact_patch") for s in ("left", "right"))
+    np.testing.assert_allclose(both.force[:, right], both.force[:, left] * np.array([1, -1, 1]),
+                               atol=1e-9)
+    assert both.force.shape[0] == 2 and float(both.force[0, left, 2]) == 4000.0
+    np.testing.assert_allclose(both.moment[:, right, 2], -both.moment[:, left, 2], atol=1e-9)
+    with pytest.raises(InputError, match="table must be"):
+        kc.corner_loads(pm, TABLE_5_1[:, :2])
+    with pytest.raises(InputError, match="one length"):
+        kc.corner_loads(pm, vertical=[1.0, 2.0], lateral=[1.0, 2.0, 3.0])

@@ -7,6 +7,7 @@ ev.metrics["toe"], ev.metrics["bump_steer"]        # rad, rad/mm (internal units
 kc.derivative_metrics(ev)                          # the derivative subset
 fz = kc.vertical_force(mech, fz=[3000.0, 4500.0, 6000.0])
 kc.compliance_matrix(fz)                           # (cases, 6, 6) at the wheel centre
+loads = kc.corner_loads(mech, kc.TABLES["table_5_1"])  # per-side table -> Loads, no event
 ```
 
 Definitions and signs (Adams/Car, per side): `diffsusp.kc.metrics`. Which markers are the wheel:
@@ -22,6 +23,7 @@ from .events import (
     anti_pitch,
     braking,
     compliance_matrix,
+    corner_loads,
     derivative_metrics,
     evaluate,
     force_rig,
@@ -50,7 +52,7 @@ from .rig import add_driver, remove_drivers, with_rack
 __all__ = [
     "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric",
     "ResolvedCorner", "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking",
-    "compliance_matrix", "corner_geometry", "corners_of", "default_corner", "default_plots",
+    "compliance_matrix", "corner_geometry", "corner_loads", "corners_of", "default_corner", "default_plots",
     "derivative_metrics", "display", "display_unit", "evaluate", "flagged", "force_rig",
     "lateral_force", "load_table", "longitudinal_force", "opposite_travel", "parallel_travel",
     "remove_drivers", "steering", "traction", "travel_rig", "vertical_force", "with_rack",

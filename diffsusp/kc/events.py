@@ -430,6 +430,57 @@ def _loads(rig: Rig, n: int, *, vertical=0.0, lateral=0.0, longitudinal=0.0, ali
     return Loads(force=jnp.asarray(force), moment=jnp.asarray(moment), driver=jnp.asarray(driver))
 
 
+def corner_loads(mech: Mechanism, table=None, *, vertical=0.0, lateral=0.0,
+                 longitudinal=0.0, aligning=0.0, corner=None,
+                 at: str = "contact_patch") -> Loads:
+    """Per-side wheel loads as the `Loads` of `mech`, without running an event: what
+    `load_table` and the force events apply, for a user's own solves, measurements or fleets.
+
+    The components are given per side, as a K&C bench states them, and turned into global
+    vectors at every corner by its own axes (`ResolvedCorner.load_vectors`, spec kc §1:
+    vertical up, lateral inboard, longitudinal rearward = braking, aligning torque toe-out),
+    so the same table loads a left or a right wheel, in the Adams/Car frame (x rearward) or
+    the ISO frame (x forward) alike — no sign to work out by hand.
+
+    **Arguments:**
+    - `table`: `(cases, 3)` rows (F_vert, F_lat, F_long) in N, e.g. `kc.TABLES['table_5_1']`;
+      or give the components one by one: `vertical`, `lateral`, `longitudinal` (N) and
+      `aligning` (N·mm), scalars or `(cases,)` arrays (broadcast together).
+    - `corner`: a `Corner`, a dict of them, or None (every corner of the model, each loaded
+      with the same per-side components).
+    - `at`: where the lateral and longitudinal forces act: 'contact_patch' (default) or
+      'wheel_centre' (the corner's `wheel_centre_load` point); vertical force and aligning
+      torque act at the contact point.
+
+    **Returns:** `Loads` of `mech` with a leading case axis (drivers at 0). A driver on a
+    loaded wheel would carry the vertical load: apply them to a model whose wheels are free
+    (`kc.force_rig(mech).mech` removes those drivers, as the force events do)."""
+    if table is not None:
+        arr = np.asarray(table, dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)):
+            raise InputError(f"table must be a finite (cases, 3) array of (F_vert, F_lat, "
+                             f"F_long) in N; got shape {arr.shape}.")
+        vertical, lateral, longitudinal = arr.T
+    if at not in ("contact_patch", "wheel_centre"):
+        raise InputError(f"at must be 'contact_patch' or 'wheel_centre'; got '{at}'.")
+    values = [np.asarray(v, dtype=float) for v in (vertical, lateral, longitudinal, aligning)]
+    try:
+        shape = np.broadcast_shapes(*(v.shape for v in values))
+    except ValueError:
+        raise InputError("vertical, lateral, longitudinal and aligning must be scalars or "
+                         "(cases,) arrays of one length; got shapes "
+                         f"{[v.shape for v in values]}.") from None
+    if len(shape) > 1 or not all(np.all(np.isfinite(v)) for v in values):
+        raise InputError(f"the load components must be finite scalars or (cases,) arrays; "
+                         f"got shape {shape}.")
+    corners = _resolve(mech, corner)
+    rig = Rig(mech=mech, pattern=jnp.ones(len(corners)), corners=corners, mode="force",
+              travel_drivers=tuple(-1 for _ in corners))
+    n = shape[0] if shape else 1
+    return _loads(rig, n, vertical=values[0], lateral=values[1], longitudinal=values[2],
+                  aligning=values[3], at=at)
+
+
 def _run(name, rig, loads, x, x_name, x_unit, held, q0=None, throw=True, label=None,
          **solver) -> KCEvent:
     sol, metrics, compliance = evaluate(rig, loads, q0=q0, **solver)
@@ -587,7 +638,8 @@ def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw:
     """A table of (F_vert, F_lat, F_long) load cases (N) at the contact point, per side
     (vertical up, lateral inboard, longitudinal rearward = braking), e.g. `TABLES['table_5_1']`
     (13 cases) or `TABLES['table_4_4']` (17). On the pseudo-McPherson (Adams/Car frame, left
-    wheel) this is exactly `diffsusp.models.thesis_load_cases`. x = case number (1-based)."""
+    wheel) this is exactly `diffsusp.models.thesis_load_cases`. x = case number (1-based).
+    The loads alone, without the event: `corner_loads(mech, table)`."""
     table = np.asarray(table, dtype=float)
     if table.ndim != 2 or table.shape[1] != 3 or not np.all(np.isfinite(table)):
         raise InputError(
@@ -595,8 +647,7 @@ def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw:
             f"shape {table.shape}."
         )
     rig = force_rig(mech, corner)
-    loads = _loads(rig, table.shape[0], vertical=table[:, 0], lateral=table[:, 1],
-                   longitudinal=table[:, 2])
+    loads = corner_loads(rig.mech, table, corner=corner)
     x = np.arange(1.0, table.shape[0] + 1)
     return _run("load_table", rig, loads, x, "case", "", "vertical load", q0, throw, label,
                 **solver)
