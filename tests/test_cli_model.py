@@ -290,3 +290,23 @@ def test_every_parameter_leaf_has_a_unit():
     paths = {jax.tree_util.keystr(p).lstrip(".")
              for p, _ in jax.tree_util.tree_leaves_with_path(mech)}
     assert paths == set(PARAMETER_UNITS)
+
+
+def test_info_prints_the_computed_design_load_with_its_sign():
+    """A file that states no wheel load (the Chrono strut): `info` prints the load that holds
+    the design position (`kc.corner.equilibrium_load`, −11.6 kN) and what its sign means (the
+    spring in tension at design), and gives its value in the JSON."""
+    from diffsusp import load_model
+    from diffsusp.kc.corner import equilibrium_load
+
+    path = pathlib.Path(__file__).parent / "data" / "chrono" / "MacPhersonStrut.json"
+    result = invoke("info", path)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stdout.split())
+    assert "design load computed: -11.6 kN" in text and "spring is in tension" in text, text
+    info = json.loads(invoke("info", path, "--json").stdout)
+    (corner,) = info["corners"]
+    assert corner["design_load"] is None
+    expected = equilibrium_load(load_model(str(path)), "contact_patch")
+    assert corner["design_load_value"] == pytest.approx(expected, rel=1e-12)
+    assert -11700.0 < expected < -11500.0

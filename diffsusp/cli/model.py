@@ -77,6 +77,8 @@ def info(
         max_assembly_error=report.max_assembly_error,
         parameters=parameter_leaves(mech),
     )
+    for c, corner in zip(summary["corners"], mech.corners, strict=True):
+        c["design_load_value"] = _design_load(mech, corner)
     if json_output:
         print_json(summary)
         return
@@ -90,7 +92,8 @@ def info(
         out.print(Text(f"{label} ({len(items)}): {', '.join(items) or '-'}"), highlight=False)
     for c in summary["corners"]:
         kingpin = " – ".join(map(str, c["kingpin"])) if c["kingpin"] else "none"
-        load = "computed" if c["design_load"] is None else f"{c['design_load']:g} N"
+        load = (f"{c['design_load']:g} N" if c["design_load"] is not None else
+                _design_load_text(c["design_load_value"]))
         out.print(Text(
             f"corner {c['prefix'] or ''}: {c['side']} side, {c['frame']} frame, wheel centre "
             f"{c['wheel_centre']}, contact point {c['contact_point']}, loaded radius "
@@ -112,6 +115,34 @@ def info(
     for p in summary["parameters"]:
         table.add_row(p["path"], "×".join(map(str, p["shape"])), p["unit"])
     out.print(table)
+
+
+def _design_load(mech, corner) -> float | None:
+    """The corner's design load (N, vertical up at its contact point): the stated one, or the
+    load that holds the design position (`kc.corner.equilibrium_load`, what `Corner.resolve`
+    computes when the model states none); None when the corner cannot be resolved."""
+    if corner.design_load is not None:
+        return float(corner.design_load)
+    try:
+        return float(corner.resolve(mech).design_load)
+    except Exception:  # noqa: BLE001 - `info` describes broken models too; validate says why
+        return None
+
+
+def _design_load_text(value: float | None) -> str:
+    """'computed: -11.6 kN (...)' with what the sign means for the model at design."""
+    if value is None or value != value:
+        return "computed (not available: the corner does not resolve)"
+    if abs(value) < 1e-6:
+        meaning = "none: the design position is the unloaded one"
+    elif value > 0:
+        meaning = ("upward on the wheel: the springs carry the wheel load at design, as on "
+                   "the road")
+    else:
+        meaning = ("DOWNWARD: the design position holds only if the wheel is pulled down, so "
+                   "the spring is in tension at design (check its free length or preload)")
+    return (f"computed: {value / 1000:.3g} kN, the vertical contact load that holds the design "
+            f"position ({meaning})")
 
 
 def _load_table(mf, loads: str):
