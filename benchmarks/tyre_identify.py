@@ -5,17 +5,17 @@ Data: for each of the 12 Annex G F_y tables (Tables 34–45) with its G.2 stiffn
 Flat Trac campaign through the simulation model (slip sines ±1° at 3/4.5/6 Hz, load sines,
 small slip steps; 40 and 120 km/h; 200 Hz; 6 N noise); generation is not timed.
 
-Timed pipeline, per data set, all 12 in one compiled program (`lax.map` over the sets):
-zero-phase 25 Hz filtering (the scan form of the long records) and
-five-point differences (Ḟ_y from the raw F_y, filtered with the regressor), the deformation
-inputs, the just-necessary regressor with its
-relaxation columns (69 columns) filtered in parallel, thinning, the R-factor, the structure
-search (σ % > 10 % eliminated one at a time from R, `bench.eliminate_r`), step 2 (K_y⁻¹).
-Baseline in the same run: the same pipeline in NumPy/SciPy (`scipy.signal.sosfiltfilt`,
-`numpy.linalg.qr`, the elimination loop with `numpy.linalg` on the R-factor), one data set
-after the other. Then the library's own identification set by set (`bench.condition`,
-`bench.identify_output`: the structure search with the F-test against the noise level on the
-noise-model σ, the instrumental-variable estimate), timed and checked against the truth.
+Timed, all 12 sets in one compiled program (`diffsusp.tyre.bench_batch.identify_many`,
+`lax.map` over the sets), per data set: the conditioning (the zero-phase 25 Hz filter and the
+five-point differences as matrices, the deformation inputs, the noise level above the cut-off),
+the just-necessary regressor with its relaxation columns (69 columns) filtered in parallel,
+the R-factor, the library's structure search (σ % > 10 % under the noise-model sandwich σ and
+the F-test at 10⁻³, refitted from R after every removal, aliases held with their removal, the
+final pass under the instrumental-variable estimator) and step 2 (`bench.two_step`: K_y⁻¹ by
+instrumental variables, σ of the joint model); then on the host the reports, the behaviour
+rules, and the library's exact search for the sets a rule changes. Baseline in the same run:
+the same pipeline in NumPy/SciPy, the library set by set (`bench.condition`,
+`bench.identify_output`), timed and compared (structure, K_y) set by set.
 
     python benchmarks/tyre_identify.py [--quick]
 """
@@ -29,12 +29,9 @@ import jax
 from _common import save_results, timed_cpu
 
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import scipy.signal  # noqa: E402
 
-from diffsusp import lsq  # noqa: E402
-from diffsusp.tyre import annex_g, bench, poly  # noqa: E402
+from diffsusp.tyre import annex_g, bench, bench_batch, poly  # noqa: E402
 
 QUICK = "--quick" in sys.argv
 SETS = [(t, p) for t in annex_g.TYRES for p in (2.0, 2.5, 3.0)]
@@ -82,143 +79,64 @@ def main():
     total = 12 * n_seg * m
     print(f"{len(SETS)} data sets × {n_seg} segments × {m} samples = {total} samples "
           f"(generated in {gen:.1f} s)")
-    lip = poly.regressor_model("Fy", DEGREES, ly=True)
-    names = lip.names
+    names = poly.regressor_model("Fy", DEGREES, ly=True).names
     p = len(names)
-    sos = jnp.asarray(bench.butterworth(25.0, 200.0, 4))
-    trim, k = 16, 4
-    rows = jnp.arange(trim, m - trim, k)
-    cols = {c: jnp.stack([jnp.asarray(tb[c].reshape(n_seg, m)) for tb in tables])
-            for c in bench.REQUIRED if c not in ("t", "segment")}
-    pneu = np.array([i for i, n in enumerate(names) if poly.parse_name(n)[1] != "Ly"])
-    ly_of = np.array([names.index(f"b_Fy_Ly_{poly.parse_name(names[i])[2] - 1}_"
-                                  f"{poly.parse_name(names[i])[3]}")
-                      if poly.parse_name(names[i])[1] == "delta" else -1 for i in pneu])
-
-    def one(c):
-        samples, fy_f, _ = bench._condition_block(c, sos, 1.0 / 200.0, 0.294)
-        W = bench._filtered_regressor(lip, samples, sos, rows)
-        y = fy_f[:, rows].ravel()
-        R = lsq.qr_r(jnp.concatenate([W, -y[:, None]], axis=1))
-        fixed, x, sigma = bench.eliminate_r(R, y.shape[0])
-        b = x[pneu]
-        D = jnp.where(ly_of[None, :] >= 0, W[:, np.maximum(ly_of, 0)], 0.0)
-        d = D @ b
-        r = y - W[:, pneu] @ b
-        return fixed, x, sigma, d @ r / (d @ d)
-
-    # one program for the 12 sets: `lax.map` (a loop inside the program) holds one set's
-    # filtered regressor in memory at a time; `vmap` needs 12× that (several GB here).
-    program = jax.jit(lambda c: jax.lax.map(one, c))
-    c0 = time.process_time()
-    t0 = time.perf_counter()
-    jax.block_until_ready(program(cols))
-    compile_wall, compile_cpu = time.perf_counter() - t0, time.process_time() - c0
-    wall, cpu, out = timed_cpu(lambda: program(cols), 3)
-    fixed, x, sigma, comp = (np.asarray(a) for a in out)
-    K = 1.0 / comp
     K_true = np.array([annex_g.lateral_stiffness(t, pr, "Fy") for t, pr in SETS])
-    kept = (~fixed).sum(axis=1)
-    print(f"JAX: {wall:.3f} s wall, {cpu:.3f} s CPU after compile ({compile_wall:.1f} s wall, "
-          f"{compile_cpu:.1f} s CPU to compile); kept {kept.min()}–{kept.max()} of {p}; "
+
+    # ---- JAX: the 12 sets in one compiled program (`bench_batch.identify_many`, `lax.map`):
+    # conditioning, regressor, the library's structure search (σ % and F-test under the
+    # noise-model sandwich σ, its final pass under the IV estimator), step 2; then on the host
+    # the reports, the behaviour rules, and the exact search for the sets a rule changes
+    def batched():
+        return bench_batch.identify_many(tables, degrees=DEGREES, optimize=True)
+
+    c0, t0 = time.process_time(), time.perf_counter()
+    batched()
+    first_wall, first_cpu = time.perf_counter() - t0, time.process_time() - c0
+    wall, cpu, res = timed_cpu(batched, 3)
+    program, program_cpu = res.program_seconds, res.program_cpu_seconds
+    compile_wall, compile_cpu = first_wall - wall, first_cpu - cpu
+    K = res.stiffness
+    kept = res.kept.sum(axis=1)
+    print(f"JAX (identify_many): {wall:.3f} s wall, {cpu:.3f} s CPU after compile (program "
+          f"{program:.3f} s wall, {program_cpu:.3f} s CPU; {res.search_steps.sum()} removals, "
+          f"{res.gram_updates.sum()} noise-Gram updates; compile {compile_wall:.1f} s wall, "
+          f"{compile_cpu:.1f} s CPU); "
+          f"kept {kept.min()}-{kept.max()} of {p}; exact path for {len(res.exact)} sets; "
           f"K_y error {100 * np.max(np.abs(K / K_true - 1)):.3f} % max")
 
-    # ---- NumPy/SciPy baseline, one set after the other
-    sos_np = np.array(sos)  # writable (scipy's sosfilt needs it)
-
-    def numpy_one(tb):
-        c = {k2: np.array(tb[k2]).reshape(n_seg, m) for k2 in bench.REQUIRED
-             if k2 not in ("t", "segment")}
-        dt = 1 / 200.0
-
-        def deriv(v):
-            out = np.empty_like(v)
-            out[..., 2:-2] = (-v[..., 4:] + 8 * v[..., 3:-1] - 8 * v[..., 1:-3]
-                              + v[..., :-4]) / (12 * dt)
-            out[..., :2] = out[..., 2:3]
-            out[..., -2:] = out[..., -3:-2]
-            return out
-        speed, steer, omega = c["speed"] * 1e-3, c["steer"], c["omega"]
-        fy_f = scipy.signal.sosfiltfilt(sos_np, c["FY"], axis=-1)
-        u = {"fz": c["FZ"] * 1e-3, "delta": -speed * np.sin(steer) / omega,
-             "phi": deriv(steer) / omega, "gamma": c["camber"],
-             "fydot_w": deriv(c["FY"]) / omega}  # raw F_y: the columns are filtered
-        cols_np = []
-        for name in names:
-            _, block, i, j = poly.parse_name(name)
-            if block == "Ly":
-                col = u["fydot_w"] * (i + 1) * u["delta"] ** i * u["fz"] ** j
-            elif block == "one":
-                col = u["fz"] ** j
-            else:
-                col = u[block] ** i * u["fz"] ** j
-            cols_np.append(col)
-        W = scipy.signal.sosfiltfilt(sos_np, np.stack(cols_np, axis=-1), axis=1)
-        r_idx = np.asarray(rows)
-        W = W[:, r_idx, :].reshape(-1, p)
-        y = fy_f[:, r_idx].ravel()
-        R = np.linalg.qr(np.concatenate([W, -y[:, None]], axis=1), mode="r")
-        Rw, B = R[:p, :p], -R[:p, p]
-        scale = 1 / np.linalg.norm(Rw, axis=0)
-        A = Rw * scale
-        keep = np.ones(p, bool)
-        n_rows = len(y)
-        while True:
-            # rank-revealing choice as in lsq: pivoted QR on the kept columns
-            idx = np.flatnonzero(keep)
-            q, rr, piv = scipy.linalg.qr(A[:, idx], mode="economic", pivoting=True)
-            tol = max(n_rows, p + 1) * np.finfo(float).eps
-            rank = int(np.sum(np.abs(np.diag(rr)) > tol * np.abs(rr[0, 0])))
-            cols_k = idx[np.sort(piv[:rank])]
-            xs, *_ = np.linalg.lstsq(A[:, cols_k], B, rcond=None)
-            res = np.sum((A[:, cols_k] @ xs - B) ** 2) + R[p, p] ** 2
-            s2 = res / (n_rows - rank)
-            cov = s2 * np.linalg.inv(A[:, cols_k].T @ A[:, cols_k])
-            rel = 100 * np.sqrt(np.diag(cov)) / np.abs(xs)
-            if np.max(rel) <= 10.0:
-                break
-            keep[cols_k[np.argmax(rel)]] = False
-        x = np.zeros(p)
-        x[cols_k] = xs * scale[cols_k]
-        b = x[pneu]
-        D = np.where(ly_of[None, :] >= 0, W[:, np.maximum(ly_of, 0)], 0.0)
-        d = D @ b
-        return d @ (y - W[:, pneu] @ b) / (d @ d)
-
-    t0, c0 = time.perf_counter(), time.process_time()
-    comp_np = np.array([numpy_one(tb) for tb in tables])
-    np_wall, np_cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f"NumPy/SciPy: {np_wall:.3f} s wall, {np_cpu:.3f} s CPU; K_y error "
-          f"{100 * np.max(np.abs(1 / comp_np / K_true - 1)):.3f} % max")
-    print(f"ratio NumPy/JAX: {np_wall / wall:.2f}× wall, {np_cpu / cpu:.2f}× CPU")
-
-    # ---- the library's identification, set by set (`bench.condition` + `identify_output`:
-    # the structure search with the F-test on the noise-model σ, the instrumental-variable
-    # estimate and its sandwich σ); a first set untimed (compiles its programs)
+    # ---- baseline: the same pipeline in NumPy/SciPy, the library set by set
+    # (`bench.condition` + `bench.identify_output`; its identifiability calls are the lsq
+    # JAX programs); a first set untimed (compiles those programs)
     bench.identify_output(bench.condition(tables[0]), "Fy", DEGREES)
     t0, c0 = time.perf_counter(), time.process_time()
     reps = [bench.identify_output(bench.condition(tb), "Fy", DEGREES) for tb in tables]
     lib_wall, lib_cpu = time.perf_counter() - t0, time.process_time() - c0
     K_lib = np.array([r.stiffness for r in reps])
-    within = np.abs(K_lib - K_true) / (np.array([r.compliance_sigma for r in reps])
-                                       * K_true**2)
+    within = np.abs(K_lib - K_true) / (np.array([r.compliance_sigma for r in reps]) * K_true**2)
     kept_lib = np.array([len(r.reduced.names) for r in reps])
-    misfit = np.array([r.noise_sigma / 6.0 for r in reps])
-    print(f"library (search with the F-test, IV): {lib_wall:.3f} s wall, {lib_cpu:.3f} s CPU; "
-          f"kept {kept_lib.min()}–{kept_lib.max()}; K_y error "
-          f"{100 * np.max(np.abs(K_lib / K_true - 1)):.3f} % max, {within.max():.2f} σ max; "
-          f"residual noise / injected {misfit.min():.2f}–{misfit.max():.2f}")
+    same = [sorted(a.reduced.names) == sorted(b.reduced.names)
+            for a, b in zip(res.reports, reps, strict=True)]
+    dK = np.abs(K / K_lib - 1)
+    print(f"NumPy/SciPy (library, set by set): {lib_wall:.3f} s wall, {lib_cpu:.3f} s CPU; "
+          f"kept {kept_lib.min()}-{kept_lib.max()}; K_y error "
+          f"{100 * np.max(np.abs(K_lib / K_true - 1)):.3f} % max, {within.max():.2f} sigma max")
+    print(f"same structure as the library on {sum(same)} of {len(same)} sets; K_y JAX vs "
+          f"library: {dK[np.array(same)].max() if any(same) else float('nan'):.2e} max relative "
+          f"where the structure is the same, {dK.max():.2e} over all")
+    print(f"ratio NumPy/JAX: {lib_wall / wall:.2f}x wall, {lib_cpu / cpu:.2f}x CPU")
     results = {"samples": int(total), "data_sets": len(SETS), "columns": p,
-               "jax_wall_s": wall, "jax_cpu_s": cpu, "compile_wall_s": compile_wall,
-               "compile_cpu_s": compile_cpu, "numpy_wall_s": np_wall, "numpy_cpu_s": np_cpu,
-               "kept_min": int(kept.min()), "kept_max": int(kept.max()),
+               "jax_wall_s": wall, "jax_cpu_s": cpu, "jax_program_wall_s": program,
+               "jax_program_cpu_s": program_cpu, "removals": int(res.search_steps.sum()),
+               "compile_wall_s": compile_wall, "compile_cpu_s": compile_cpu,
+               "numpy_wall_s": lib_wall, "numpy_cpu_s": lib_cpu,
+               "kept": kept.tolist(), "kept_library": kept_lib.tolist(),
+               "exact_path_sets": sorted(res.exact), "same_structure": int(sum(same)),
                "K_error_pct_max": float(100 * np.max(np.abs(K / K_true - 1))),
-               "K_error_pct_max_numpy": float(100 * np.max(np.abs(1 / comp_np / K_true - 1))),
-               "library_wall_s": lib_wall, "library_cpu_s": lib_cpu,
-               "library_kept_min": int(kept_lib.min()), "library_kept_max": int(kept_lib.max()),
                "K_error_pct_max_library": float(100 * np.max(np.abs(K_lib / K_true - 1))),
                "K_error_sigma_max_library": float(within.max()),
-               "library_residual_over_noise_max": float(misfit.max())}
+               "K_rel_diff_same_structure": float(dK[np.array(same)].max()) if any(same)
+               else None, "K_rel_diff_max": float(dK.max())}
     print(save_results("tyre_identify", results, QUICK))
 
 
