@@ -142,10 +142,14 @@ def test_identify_iterative_recovers_the_stiffnesses(tables, tmp_path):
     np.testing.assert_allclose(load_model(model).bushings.k_trans, 100.0, rtol=1e-8)
     for stem in ("iterative_convergence", "iterative_cases"):
         assert (figs / f"{stem}.png").stat().st_size > 0 and (figs / f"{stem}.svg").exists()
+    # --polish: the loop's result polished by least squares (the report's recommendation).
     report = json.loads(_invoke("iterative", "isolated_bushing", "-m", tables["marks"],
-                                "--start", "1e4", "--json").output)
+                                "--start", "1e4", "--polish", "--json").output)
     assert report["converged"] and all(all(row) for row in report["identified"])
     np.testing.assert_allclose(report["stiffness"][0][:3], 100.0, rtol=1e-6)
+    polished = report["polished"]
+    assert polished["converged"] and polished["names"][:3] == ["bush.Ktx", "bush.Kty", "bush.Ktz"]
+    np.testing.assert_allclose(polished["estimate"][:3], 100.0, rtol=1e-6)
 
 
 def test_identify_fit_from_landmarks(tables, tmp_path):

@@ -273,6 +273,10 @@ def iterative_command(
         help="Measurement resolution 'mm,deg': a direction whose deformation varies less is "
         "not identified ('none': no such gate).")] = "0.001,0.01",
     max_iterations: Annotated[int, typer.Option(help="Bound on the loop.")] = 100,
+    polish: Annotated[bool, typer.Option(
+        "--polish/--no-polish", help="Then polish the loop's stiffnesses by least squares "
+        "through the equilibrium (what the report recommends when the loop's model does not "
+        "reproduce the data); the model written is the polished one.")] = False,
     reorder: ReorderOpt = False,
     out: OutOpt = None,
     write_model: WriteModelOpt = None,
@@ -323,7 +327,7 @@ def iterative_command(
             fitted, report = iterative(
                 mech0, meas.loads, measured, bushings=names,
                 axisymmetric=tuple(axisymmetric or ()), r_min=r_min, resolution=res, eps=eps,
-                max_iterations=max_iterations, callback=step)
+                max_iterations=max_iterations, callback=step, polish=polish)
         if out is not None:
             _write_iterative(report, out)
         if write_model is not None:
@@ -332,12 +336,17 @@ def iterative_command(
         if figures is not None:
             paths = _save_figures(iterative_figures(report, mech0, fitted, meas), figures)
     if json_output:
-        print_json(report.to_dict())
+        print_json(dict(report.to_dict(), polished=None if report.polished is None
+                        else report.polished.to_dict()))
     else:
         con = console(markup=False)
         con.print(f"{mech.name}: iterative identification from {measurements.name} "
                   f"({meas.n_cases} cases)", highlight=False)
         con.print(report.table(), highlight=False)
+        if report.polished is not None:
+            con.print("polished by least squares through the equilibrium (the model written):",
+                      highlight=False)
+            con.print(report.polished.table(), highlight=False)
         for label, path in (("report", out), ("identified model", write_model)):
             if path is not None:
                 con.print(f"{label} written to {path}", highlight=False)

@@ -207,10 +207,14 @@ class IterativeReport(IdentificationReport):
                      "kept), = equalised with the other radial direction (axisymmetric).")
         if self.consistency is not None:
             lines.append(f"model vs data: {self.consistency.verdict}")
-            if not self.consistency.consistent:
+            if self.polished is not None:
+                lines.append("polished by least squares through the equilibrium: "
+                             "report.polished (its own model vs data verdict).")
+            elif not self.consistency.consistent:
                 lines.append("the loop's fixed point need not be the truth (spec stiffness "
                              "§2.7): polish it by least squares through the equilibrium "
-                             "(report.polish(), or iterative(..., polish=True)).")
+                             "(report.polish(), iterative(..., polish=True), or "
+                             "`diffsusp identify iterative --polish`).")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
