@@ -7,6 +7,8 @@ heights" are the vertical loads 1500–7500 N (wheel travel from about −138 to
 rack positions −20, −10, 0, 10, 20 mm; four landmarks per measured part (front arm, rear arm,
 tie rod, hub carrier; the strut and rack are not measured)."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -327,8 +329,9 @@ def test_correction_reproduces_measured_poses_and_improves_toe(solved, data):
             v = rng.normal(size=3)
             pos[i] += v / np.linalg.norm(v) * rng.uniform(0.5, 1.0)
     perturbed = eqx.tree_at(lambda m: m.markers.position, truth, jnp.asarray(pos))
-    corrected, report = correct_geometry(perturbed, meas, case=REFERENCE, tol=1e-4)
-    assert report.converged and report.pose_errors[-1] < 1e-3
+    # the default stop (tol=None): below 1e-4 mm on these exact poses, as the former tol
+    corrected, report = correct_geometry(perturbed, meas, case=REFERENCE)
+    assert report.converged and report.pose_errors[-1] < 1e-4 and not report.notes
     assert report.pose_errors[0] > 1.0 and report.pose_errors[1] > 1e-3  # one pass: not exact
     assert report.iterations <= 8
     assert "bushing_A.i" in report.moves and 0.4 < report.moves["bushing_A.i"] < 1.2
@@ -352,6 +355,24 @@ def test_correction_reproduces_measured_poses_and_improves_toe(solved, data):
     toe_truth = _toe(truth, rot)[RACK_ZERO]
     rms = {k: float(np.sqrt(np.mean((v - toe_truth) ** 2))) for k, v in toe.items()}
     assert rms["corrected"] < 0.1 * rms["perturbed"], rms
+    # Noisy landmarks (σ = 0.05 mm) on every part, the strut too: its ideal joints cannot
+    # match noisy poses of all four, so 1e-4 mm is out of reach. By default the correction
+    # stops when a pass no longer lowers the error (the noise floor), converged, and says so;
+    # an absolute tol keeps correcting noise and reports NOT converged.
+    parts = MEASURED + ("strut",)
+    index = [truth.parts.index(p) for p in parts]
+    every = place_landmarks(truth, 4, parts=parts, seed=0)
+    marks = np.einsum("cpij,pkj->cpki", rot[:, index], np.asarray(every.position)) + np.asarray(
+        solved[3])[:, index, None]
+    noise = np.random.default_rng(7).normal(scale=0.05, size=marks.shape)
+    noisy = dataclasses.replace(from_landmarks(every, marks + noise, loads), sigma=0.05)
+    _, rep = correct_geometry(perturbed, noisy, case=REFERENCE, max_iterations=8)
+    err = rep.pose_errors
+    assert rep.converged and rep.iterations < 8 and 1e-4 < err[-1] < 10 * 0.05 < err[0], err
+    assert err[-2] - err[-1] < 0.1 * 0.05 and "noise floor" in rep.notes[0], rep
+    _, strict = correct_geometry(perturbed, noisy, case=REFERENCE, tol=1e-4,
+                                 max_iterations=rep.iterations)
+    assert not strict.converged and "tol 0.0001 mm" in strict.notes[0]
 
 
 def test_correction_bad_input(solved, data):
@@ -399,7 +420,6 @@ def test_joint_files_and_figure(solved, steering, tmp_path):
     """`write_joints` (CSV and JSON), `read_joints` (the joint list round trip and its errors)
     and `GeometricReport.plot` on the located joints of the steering cases."""
     import csv
-    import dataclasses
     import json
 
     from diffsusp.errors import ModelFileError

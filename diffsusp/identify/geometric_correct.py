@@ -12,6 +12,17 @@ import numpy as np
 from ..errors import InputError
 
 
+TOL_FLOOR = 1e-4
+"""mm: `correct_geometry`'s default stop on noise-free data (the pose error below it)."""
+STALL_RATIO = 0.5
+STALL_SIGMA = 0.1
+NOISE_FLOOR = 10.0
+"""`correct_geometry`'s default stop on noisy data: a correction that lowers the pose error by
+less than `STALL_SIGMA`·σ and by less than a factor 1/`STALL_RATIO` has reached what the data
+allow (σ: the measurements' noise, mm); converged when the error is then within `NOISE_FLOOR`·σ
+(the largest distance over many noisy points is a few σ)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class CorrectionReport:
     """Result of `correct_geometry`.
@@ -19,7 +30,8 @@ class CorrectionReport:
     **Fields:** `pose_errors`: per equilibrium solved, the largest distance (mm) between a
     marker or landmark of a measured part at the model's equilibrium and at the measured pose
     (the first is the uncorrected model's, the last the final one's); `converged` (the last is
-    below `tol`); `moves`: marker name → total displacement of its design position (mm);
+    below `tol`, or, by default, below 1e-4 mm or at the noise floor: see `correct_geometry`);
+    `moves`: marker name → total displacement of its design position (mm);
     `elements`: the joints and bushings whose I (or J) marker was moved; `case_errors`: the
     final model's pose error at every measured case (mm: how it does away from the reference
     case); `notes`.
@@ -117,7 +129,7 @@ def correct_geometry(
     loads=None,
     elements: Sequence[str] | None = None,
     side: str | dict = "i",
-    tol: float = 1e-4,
+    tol: float | None = None,
     max_iterations: int = 20,
     **solve_options,
 ):
@@ -146,7 +158,14 @@ def correct_geometry(
     - `elements`: joints and bushings to correct (default: all); `side`: which marker moves,
       `'i'` (the Adams I marker: the inner sleeve, bolted, in the thesis's convention) or
       `'j'`, or a dict name → side.
-    - `tol` (mm), `max_iterations`; `**solve_options` for `solve_statics`.
+    - `tol` (mm): stop when the pose error is below it. Default None: relative to the noise —
+      stop when the error is below `TOL_FLOOR` (1e-4 mm: noise-free data, as before) or when a
+      correction no longer lowers it (by less than `STALL_SIGMA`·σ and less than a factor
+      2, σ = `measurements.sigma`): the remaining error is the measured poses' own noise, which
+      no geometry removes (an absolute 1e-4 mm is out of reach of noisy data and said "NOT
+      converged" for a correction that was done). It is then converged if within
+      `NOISE_FLOOR`·σ; a note gives the error against σ.
+    - `max_iterations`; `**solve_options` for `solve_statics`.
 
     **Returns:** `(corrected mechanism, CorrectionReport)`.
     """
@@ -195,6 +214,17 @@ def correct_geometry(
 
     original = np.asarray(mech.markers.position)
     followers = _followers(mech, measured_index)
+    sigma = float(measurements.sigma)
+
+    def stalled():
+        if tol is not None or len(errors) < 2:
+            return False
+        gain = errors[-2] - errors[-1]
+        return gain < STALL_SIGMA * sigma and errors[-1] > STALL_RATIO * errors[-2]
+
+    def done():
+        return errors[-1] < (TOL_FLOOR if tol is None else tol) or stalled()
+
     errors, q0, current = [], None, mech
     for _ in range(max_iterations + 1):
         # every measured case at once (one batched solve); the reference case drives the
@@ -204,7 +234,7 @@ def correct_geometry(
         rot_eq_all, trans_eq_all = (np.asarray(a) for a in part_poses(current, q_all))
         case_errors = pose_errors(rot_eq_all, trans_eq_all)
         errors.append(float(case_errors[case]))
-        if errors[-1] < tol or len(errors) > max_iterations:
+        if done() or len(errors) > max_iterations:
             break
         q = q_all[case]
         rot, trans = _part_pose_table(rot_eq_all[case], trans_eq_all[case], rot_m, trans_m,
@@ -229,11 +259,19 @@ def correct_geometry(
     final = np.asarray(current.markers.position)
     moves = {current.markers.names[mi]: float(np.linalg.norm(final[mi] - original[mi]))
              for _, (mi, _) in pairs}
+    limit = TOL_FLOOR if tol is None else tol
+    converged = errors[-1] < limit or (stalled() and errors[-1] <= NOISE_FLOOR * sigma)
     notes = ()
-    if errors[-1] >= tol:
+    if errors[-1] >= limit and converged:
+        notes = (f"stopped at the noise floor: pose error {errors[-1]:.3g} mm "
+                 f"({errors[-1] / sigma:.2g} σ of the measurements, σ = {sigma:g} mm) no longer "
+                 "falls: the rest is the measured poses' noise",)
+    elif not converged:
+        why = (f"tol {tol:g} mm" if tol is not None else
+               f"still falling, or above {NOISE_FLOOR:g} σ = {NOISE_FLOOR * sigma:g} mm")
         notes = (f"not converged: pose error {errors[-1]:.3g} mm after {len(errors) - 1} "
-                 f"corrections (tol {tol:g} mm)",)
-    return current, CorrectionReport(tuple(errors), errors[-1] < tol, moves,
+                 f"corrections ({why})",)
+    return current, CorrectionReport(tuple(errors), bool(converged), moves,
                                      tuple(n for n, _ in pairs), tuple(case_errors), notes)
 
 
