@@ -165,9 +165,17 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         sig = jnp.where(active, jnp.sqrt(jnp.abs(jnp.diag(cov))) / sc, 0.0)
         return b, sig, S, g_ref, update
 
+    final_keys = ("x", "sigma", "compliance", "compliance_sigma", "sigma_step2", "noise_sigma",
+                  "fydot_hat")
+
     def iv(active):
-        res = two_step(active, noise_var=var, step2=False)
-        return jnp.where(active, res["x"], 0.0), jnp.where(active, res["sigma"], 0.0)
+        """The final pass's estimate: `two_step` (steps 1 and 2, the σ from the residual's
+        noise level: the report's) and its step-1 σ at the data's noise level (the search's:
+        F_y's noise model has one source, so σ scales with the noise σ)."""
+        res = two_step(active)
+        ratio = jnp.sqrt(var) / jnp.where(res["noise_sigma"] > 0, res["noise_sigma"], 1.0)
+        return (jnp.where(active, res["x"], 0.0), jnp.where(active, res["sigma"] * ratio, 0.0),
+                {k: res[k] for k in final_keys})
 
     def stats(b, sig, active):
         with jax.numpy_dtype_promotion("standard"):
@@ -211,7 +219,10 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                   x=zeros, sigma=zeros, stat=zeros, active=jnp.zeros(p, bool),
                   ls_x=zeros, ls_stat=zeros, ls_active=jnp.zeros(p, bool),
                   ls_done=jnp.asarray(False), next=select(jnp.asarray(fixed0)),
-                  gram_updates=jnp.asarray(0))
+                  gram_updates=jnp.asarray(0),
+                  final=dict(x=zeros, sigma=zeros, compliance=zeros[0], compliance_sigma=zeros[0],
+                             sigma_step2=zeros[0], noise_sigma=zeros[0],
+                             fydot_hat=jnp.zeros_like(fydot)))
 
     def body(st):
         st = dict(st)
@@ -224,8 +235,13 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                 return least_squares(active, st["S"], st["g_ref"], st["have_S"])
 
             def iv_branch():
-                return (*iv(active), st["S"], st["g_ref"], jnp.asarray(False))
-            b, sig, S, g_ref, update = jax.lax.cond(st["phase"] == 0, ls_branch, iv_branch)
+                b, sig, fin = iv(active)
+                return b, sig, st["S"], st["g_ref"], jnp.asarray(False), fin
+
+            def ls_final():
+                return (*ls_branch(), st["final"])
+            b, sig, S, g_ref, update, st["final"] = jax.lax.cond(st["phase"] == 0, ls_final,
+                                                                 iv_branch)
         st.update(S=S, g_ref=g_ref, have_S=st["have_S"] | (st["phase"] == 0),
                   gram_updates=st["gram_updates"] + update)
         pct, stat = stats(b, sig, active)
@@ -257,7 +273,8 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         return st
 
     st = jax.lax.while_loop(lambda st: st["go"] & (st["steps"] < p), body, state0)
-    res = two_step(st["active"])
+    # the final estimate: the final pass's last one (on the final structure), or step 2 now
+    res = st["final"] if final_pass is not None else two_step(st["active"])
     out = {k: st[k] for k in ("fixed", "active", "order", "order_pct", "order_stat",
                               "order_phase", "alias_step", "x", "sigma", "stat", "ls_x", "ls_stat",
                               "ls_active", "ls_done", "steps", "gram_updates")}
