@@ -71,7 +71,7 @@ class Cell:
 
     @property
     def name(self) -> str:
-        """The parameter name used by `diffsusp.tyre.poly`: b_<output>_<block>_<i>_<j>."""
+        """The parameter name used by `diffsusp.tyre.poly`: `b_<output>_<block>_<i>_<j>`."""
         return f"b_{self.output}_{self.block}_{self.i}_{self.j}"
 
 
