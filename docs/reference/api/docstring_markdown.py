@@ -1,5 +1,5 @@
-"""A Griffe extension for the API reference (mkdocs.yml, mkdocstrings `extensions:`): lists that
-follow a paragraph line directly.
+"""A Griffe extension for the API reference (mkdocs.yml, mkdocstrings `extensions:`): the
+docstrings' Markdown as their authors read it.
 
 The docstrings are Markdown whose lists open right under their heading line, as in
 
@@ -11,6 +11,10 @@ would print "- `mech`: ..." inside the paragraph. Before a docstring is rendered
 the blank line before a list item ("- ", "* ", "1. ") whose previous line is a paragraph line
 (not blank, not indented, not itself an item), outside fenced code. The docstrings in the source
 stay as they are (read as text, in `help()`, they are right).
+
+Square brackets are notation in these docstrings, never links (`[A_S2][A_J/S2] D_eq`,
+`[vᵀ; wᵀ]((R^c − I) C + T^c)`: Markdown would read a link, and the strict build fails on it): a
+bracket pair followed by `(` or `[` is escaped, outside code.
 """
 
 import re
@@ -19,6 +23,8 @@ import griffe
 
 _ITEM = re.compile(r"^\s*(?:[-*]|\d+\.)\s+\S")
 _FENCE = re.compile(r"^\s*(```|~~~)")
+_CODE = re.compile(r"(```.*?```|~~~.*?~~~|(`+).+?\2)", re.S)  # fenced blocks, code spans
+_LINKLIKE = re.compile(r"\[([^\[\]\n]*)\](?=[(\[])")
 
 
 def loosen_lists(text: str) -> str:
@@ -34,9 +40,21 @@ def loosen_lists(text: str) -> str:
     return "\n".join(out)
 
 
-class MarkdownLists(griffe.Extension):
-    """Applies `loosen_lists` to the docstring of every object Griffe loads."""
+def literal_brackets(text: str) -> str:
+    """`text` with every `[...]` that Markdown would read as a link's text escaped, outside code."""
+    out, i = [], 0
+    for m in _CODE.finditer(text):
+        out.append(_LINKLIKE.sub(r"\\[\1]", text[i:m.start()]))
+        out.append(m.group(0))
+        i = m.end()
+    out.append(_LINKLIKE.sub(r"\\[\1]", text[i:]))
+    return "".join(out)
+
+
+class DocstringMarkdown(griffe.Extension):
+    """Applies `loosen_lists` and `literal_brackets` to the docstring of every object Griffe
+    loads."""
 
     def on_instance(self, *, obj, **kwargs):  # noqa: ARG002 (Griffe's hook signature)
         if obj.docstring is not None:
-            obj.docstring.value = loosen_lists(obj.docstring.value)
+            obj.docstring.value = literal_brackets(loosen_lists(obj.docstring.value))
