@@ -120,7 +120,8 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
       measured part (translational or cylindrical joint: the McPherson strut):
       `'ball_unknown_slide'` from the model's position.
 
-    **Returns:** `(joints, notes)`: the list, and one sentence per element left out.
+    **Returns:** `(joints, notes)`: the list, and one sentence per element left out (and per
+    cylindrical joint located as a revolute).
     """
     table = element_table(mech)
     measured = {mech.part_index(p) for p in parts if p != GROUND}
@@ -152,6 +153,10 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
         elif kind in ("revolute", "cylindrical") and known(pi) and known(pj):
             joints.append(GeometricJoint(name, "revolute", (name_of[pi], name_of[pj]),
                                          prior=at, elements=(name,)))
+            if kind == "cylindrical":
+                notes.append(f"'{name}' (cylindrical) is located as a revolute, whose equations "
+                             "assume the parts do not slide: if they do, its report says it "
+                             "is not observable (lack of fit)")
         elif kind in ("spherical", "universal", "bushing") and (known(pi) != known(pj)):
             inner, outer = (pj, pi) if known(pi) else (pi, pj)  # inner: the unmeasured one
             moved = False
