@@ -34,7 +34,7 @@ jax.config.update("jax_enable_x64", True)
 import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 
-from diffsusp import kc  # noqa: E402
+from diffsusp import compilation, kc  # noqa: E402
 from diffsusp.models import TABLE_5_1, pseudo_mcpherson  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
@@ -107,7 +107,7 @@ def bench_designs(pm, n_designs, baseline_designs, rng):
         return eqx.tree_at(lambda r: (r.mech.bushings.k_trans, r.mech.bushings.k_rot,
                                       r.mech.springs.k), rig, (kt, kr, ks))
 
-    @eqx.filter_jit
+    @compilation.filter_jit  # the library's compile options (classic emitters, no YNNPACK)
     def run(kt, kr, ks):
         return jax.vmap(lambda a, b, c: kc.evaluate(design(a, b, c), loads,
                                                    max_steps=20))(kt, kr, ks)
