@@ -11,7 +11,6 @@ import numpy as np
 
 from ..errors import InputError
 
-
 TOL_FLOOR = 1e-4
 """mm: `correct_geometry`'s default stop on noise-free data (the pose error below it)."""
 STALL_RATIO = 0.5

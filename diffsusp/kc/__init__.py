@@ -50,9 +50,9 @@ from .metrics import (
 from .rig import add_driver, remove_drivers, with_rack
 
 __all__ = [
-    "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric",
-    "ResolvedCorner", "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking",
-    "compliance_matrix", "corner_geometry", "corner_loads", "corners_of", "default_corner", "default_plots",
+    "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric", "ResolvedCorner",
+    "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking", "compliance_matrix",
+    "corner_geometry", "corner_loads", "corners_of", "default_corner", "default_plots",
     "derivative_metrics", "display", "display_unit", "evaluate", "flagged", "force_rig",
     "lateral_force", "load_table", "longitudinal_force", "opposite_travel", "parallel_travel",
     "remove_drivers", "steering", "traction", "travel_rig", "vertical_force", "with_rack",
