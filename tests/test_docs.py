@@ -17,6 +17,8 @@ generated pages cover what the code has, and every Python code block of its page
   pages (`reference/api/`): an element id `<module>.<name>` that mkdocstrings gives the heading,
   whose module's `<name>` is the same object (a re-export is documented where it is defined).
   A new public name without an entry fails here; the pages show no private name.
+  `test_docstring_markdown`: the Griffe extension that renders the docstrings' lists and
+  brackets as their authors meant them.
 - `test_notebook_page_shows_outputs_or_says_why_not`: the page notebook docs/hooks.py makes of a
   notebook source: without a saved run, and with a stale one, the source without outputs under
   a note saying so; with a current saved run, its outputs, which the rendered page contains.
@@ -195,6 +197,25 @@ def test_api_reference_is_complete(site):
                 missing.append(f"{module}.{name}")
     assert not missing, ("public names without an entry in docs/reference/api/*.md (add them to "
                          f"the page of the module that defines them): {missing}")
+
+
+def test_docstring_markdown():
+    """The Griffe extension of the API reference (docs/reference/api/docstring_markdown.py): a
+    list right under a paragraph line gets its blank line, brackets before '(' or '[' are
+    escaped; lists, code spans and fenced code stay as written."""
+    spec = importlib.util.spec_from_file_location(
+        "diffsusp_docstring_markdown", DOCS / "reference/api/docstring_markdown.py")
+    ext = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ext)
+
+    text = "**Arguments:**\n- `a`: one\n  more\n- `b`: two\n\nText\n1. first\n"
+    assert ext.loosen_lists(text) == (
+        "**Arguments:**\n\n- `a`: one\n  more\n- `b`: two\n\nText\n\n1. first\n")
+    fenced = "```\nx\n- y\n```"
+    assert ext.loosen_lists(fenced) == fenced
+    assert ext.literal_brackets("[A_S2][A_J/S2] D, [vᵀ; wᵀ]((R − I) C), [mm] `a[i](j)`") == (
+        "\\[A_S2][A_J/S2] D, \\[vᵀ; wᵀ]((R − I) C), [mm] `a[i](j)`")
+    assert ext.literal_brackets("```\nf[i](x)\n```") == "```\nf[i](x)\n```"
 
 
 def test_notebook_page_shows_outputs_or_says_why_not(tmp_path, monkeypatch):
