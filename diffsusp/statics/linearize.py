@@ -2,7 +2,7 @@
 need to differentiate through it without re-running Newton.
 
 spec: stiffness §1.9 (KKT system), DESIGN.md "Static equilibrium" (implicit differentiation).
-At a solution y* = (q*, λ*) of r(y; θ) = 0 the implicit function theorem gives, for a tangent
+At a solution `y* = (q*, λ*)` of `r(y; θ) = 0` the implicit function theorem gives, for a tangent
 dθ of any float leaf of the mechanism or the loads, dy = −J⁻¹·∂r/∂θ·dθ with J = ∂r/∂y the KKT
 Jacobian: one linear solve, the same (equilibrated) one `solve_statics` uses in its own JVP rule.
 Solver coordinates: each part's reference point P (mm) and Gibbs vector b (see `kernel`);
