@@ -140,7 +140,7 @@ def _rack(mech: Mechanism, rack: str, required: bool) -> int:
 def travel_rig(mech: Mechanism, corner=None, *, drive: str = "wheel_centre",
                pattern=None, rack: str = "rack_travel", require_rack: bool = False) -> Rig:
     """The model with each wheel's height driven (a vertical driver on the wheel centre, or on
-    the contact point with `drive='contact_patch'`), named '<prefix>wheel_travel'. Drivers the
+    the contact point with `drive='contact_patch'`), named `<prefix>wheel_travel`. Drivers the
     model already had on those markers are replaced. `pattern`: per corner sign of the travel
     (default all +1, parallel travel). A driver named `rack` (see `with_rack`) is the rig's
     steering input (held at the load case's value, and differentiated: steer gain)."""
