@@ -50,7 +50,10 @@ class Segments(eqx.Module):
     `ramp_period` [s], `sequence` (1–5, §4.3 A; 6–8, §4.3 B), and the camber excitation of
     the active-safety sequences (§4.3 B): `camber_amp` [deg] smoothed camber steps of period
     `camber_period` [s] around `camber`, `camber_slip` [deg/deg] a camber proportional to the
-    slip (B.3: an axle's camber-with-steer law)."""
+    slip (B.3: an axle's camber-with-steer law); and a driving/braking excitation that the
+    thesis's procedures do not have: `kappa_amp` [mm] smoothed steps of the longitudinal
+    deformation κ′ = V_x/ω − R_r (> 0 braking) of period `kappa_period` [s] (F_x then varies
+    independently of F_z, which separates the −F_y·F_x coupling of M_z, (3-69))."""
 
     speed: jax.Array
     fz0: jax.Array
@@ -68,6 +71,8 @@ class Segments(eqx.Module):
     camber_amp: jax.Array
     camber_period: jax.Array
     camber_slip: jax.Array
+    kappa_amp: jax.Array
+    kappa_period: jax.Array
 
     @property
     def n(self) -> int:
@@ -138,14 +143,15 @@ def make_segments(rows) -> Segments:
     """Segments from a list of dicts (missing fields: 0, periods 1 s)."""
     fields = [f.name for f in dataclasses.fields(Segments)]
     default = {f: 0.0 for f in fields}
-    default.update(step_period=1.0, ramp_period=1.0, camber_period=1.0)
+    default.update(step_period=1.0, ramp_period=1.0, camber_period=1.0, kappa_period=1.0)
     cols = {f: jnp.asarray([float(r.get(f, default[f])) for r in rows]) for f in fields}
     return Segments(**cols)
 
 
 def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
     """The inputs of one segment at time t [s]: the PSA slip δ [rad], `fz` [kN], `gamma` [rad],
-    `speed` [m/s], `omega` [rad/s] (free rolling, ω = V·cos δ/R_r: κ′ = 0), `delta` δ′ [m],
+    `speed` [m/s], `omega` [rad/s] (ω = V·cos δ/(R_r + κ′): free rolling, κ′ = 0, unless
+    `kappa_amp`), `delta` δ′ [m],
     `phi` φ′ = δ̇/ω [rad], `kappa` [m]."""
     deg = math.pi / 180.0
     w = 2.0 * math.pi
@@ -158,7 +164,9 @@ def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
 
     d, ddot = jax.jvp(slip, (jnp.asarray(t, dtype=float),), (jnp.ones_like(t, dtype=float),))
     v = seg.speed / 3.6
-    omega = v * jnp.cos(d) / rolling_radius
+    kap = (1e-3 * seg.kappa_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.kappa_period))
+           / math.tanh(3.0))
+    omega = v * jnp.cos(d) / (rolling_radius + kap)
     gamma = (deg * (seg.camber + seg.camber_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.camber_period))
                     / math.tanh(3.0)) + seg.camber_slip * d)
     return {"slip": d, "fz": seg.fz0 + seg.fz_amp * jnp.sin(w * seg.fz_freq * t),
