@@ -21,7 +21,8 @@ and on M_z: step 1 the LIP model [W_pneu | W_Ly (| W_P2)] with the structure sea
 guaranteed least squares (σ % > 10 % unless an F-test against the noise keeps the term, and
 the behaviour rules of §7 item 19, `structure_rules`), then the same rules under the final
 estimator's σ (`identify_output`); terms the data cannot determine are reported with the
-reason (camber powers on steady camber levels: `camber_levels`); the final structure and
+reason (camber powers on steady camber levels: `camber_levels`; M_z's coupling −F_y·F_x,
+held at 0 when F_x is a function of F_z, spec §8.4); the final structure and
 step 2, K_y⁻¹ from
 F − F̂_pneu = ((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) K_y⁻¹ (3-76, 3-77), by `two_step`:
 instrumental variables (Ḟ_y/ω, taken from the noisy F_y, is an error in the variables, which
@@ -579,8 +580,9 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
        removal, so every kept coefficient has σ % ≤ `sigma_pct_threshold` or passes the
        F-test under the estimator reported. On the shipped campaign (seed 0) M_z kept 24
        coefficients with σ % up to 268 % (b_Mz_gamma_1_3; 52.9 % b_Mz_P2_0_0, 69.6 %
-       b_Mz_one_1_3) and now 22 up to 18 % (F 30); F_y 20 up to 52 % (b_Fy_Ly_4_*), now 15 up
-       to 12 %. Judging with the IV σ from the first step found the same 22 for 4× the CPU.
+       b_Mz_one_1_3) and now 22 up to 18 % (F 30), 21 up to 16 % with the coupling held at 0
+       (below); F_y 20 up to 52 % (b_Fy_Ly_4_*), now 15 up to 12 %. Judging with the IV σ
+       from the first step found the same 22 for 4× the CPU.
 
     A removal that leaves the number of estimable coefficients unchanged (a column that was a
     combination of the removed one and the kept ones takes its place: γ³ for γ on constant
