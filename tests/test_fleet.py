@@ -75,9 +75,14 @@ def in_process(items, mech, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def client():
-    from diffsusp.fleet.engine import worker_environment
+    import dask
 
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+    from diffsusp.fleet.engine import LOST_WORKER_TIMEOUT, worker_environment
+
+    # the worker restarted past its time limit must not be given up for lost while it imports
+    # JAX on a loaded machine (Dask's default: its nanny closed after 15 s)
+    with dask.config.set({"distributed.deploy.lost-worker-timeout": LOST_WORKER_TIMEOUT}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0", env=worker_environment()) as cluster:
         with distributed.Client(cluster) as c:
             yield c

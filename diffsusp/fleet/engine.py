@@ -18,7 +18,11 @@ occupies a worker longer than its limit + `HARD_GRACE` + the restart (a few seco
 driver's polling (≤ 1 s). Not guaranteed: a worker run without a nanny (`dask worker
 --no-nanny`) cannot be restarted (the task is still reported `timeout`, but its worker stays
 busy until the call returns); the other tasks queued on a restarted worker are rescheduled
-(they are not lost, and not counted against `allowed-failures`). The clock of a task includes
+(they are not lost, and not counted against `allowed-failures`). A cluster of your own should
+give a restarted worker time to come back: Dask's `distributed.deploy.lost-worker-timeout`
+(15 s by default) closes the nanny of a worker that has not, and a worker importing JAX on a
+loaded machine can take longer (the cluster a `DaskEngine` starts uses
+`LOST_WORKER_TIMEOUT`). The clock of a task includes
 its reading and compiling (the first batch of a shape on a worker).
 
 **Why Dask.** The unit of work is independent (one batch of data sets → their reports), so a
@@ -38,7 +42,14 @@ import time
 
 from .recipes import ItemTimeout
 
-__all__ = ["HARD_GRACE", "DaskEngine", "Engine", "InProcessEngine", "engine_for"]
+__all__ = ["HARD_GRACE", "LOST_WORKER_TIMEOUT", "DaskEngine", "Engine", "InProcessEngine",
+           "engine_for"]
+
+LOST_WORKER_TIMEOUT = "300s"
+"""How long the `LocalCluster` a `DaskEngine` starts waits for a restarted worker before it
+closes the worker's nanny (Dask's `distributed.deploy.lost-worker-timeout`, 15 s by default):
+a worker restarted past its time limit imports JAX and the library again, which takes longer
+than 15 s on a loaded machine, and the cluster then lost the worker for good."""
 
 HARD_GRACE = 2.0
 """Seconds past a task's time limit before `DaskEngine` restarts its worker (so that a recipe's
@@ -114,10 +125,16 @@ class DaskEngine(Engine):
                 client = distributed.Client(scheduler)
             else:
                 n = int(workers or 1)
+                import dask
+
+                # for the cluster's life (its callbacks read the global config when a worker
+                # goes): restored by `close`
+                config = dask.config.set(
+                    {"distributed.deploy.lost-worker-timeout": LOST_WORKER_TIMEOUT})
                 cluster = distributed.LocalCluster(
                     n_workers=n, threads_per_worker=1, processes=True,
                     dashboard_address=":0", env=dict(env or {}))
-                self._owned.append(cluster)
+                self._owned += [cluster, _Exit(config)]
                 client = distributed.Client(cluster)
             self._owned.insert(0, client)
         self.client = client
@@ -187,6 +204,16 @@ class DaskEngine(Engine):
 
     def describe(self) -> str:
         return f"dask ({self.workers} workers, scheduler {self.client.scheduler.address})"
+
+
+class _Exit:
+    """`close()` exits a context (a `dask.config.set` held for an engine's life)."""
+
+    def __init__(self, context):
+        self.context = context
+
+    def close(self):
+        self.context.__exit__(None, None, None)
 
 
 def _result(future):
