@@ -546,35 +546,3 @@ def test_structure_search_finds_the_table10_degrees():
     for n in truth:
         i = rep.reduced.names.index(n)
         assert abs(rep.reduced.x[i] - fy.values()[n]) < 3 * rep.reduced.sigma[i], n
-
-
-def test_batched_elimination_matches_lsq_eliminate(campaign):
-    """`bench.eliminate_r` (traced, vmappable: the benchmark's batched structure search) makes
-    the same removals as `lsq.eliminate` with the σ % rule, on two noisy copies of the
-    campaign (the structure of the search test: its least-squares programs are shared)."""
-    import jax
-
-    from diffsusp import lsq
-
-    _, _, table = campaign
-    lip = poly.regressor_model("Fy", DEGREES, ly=True)
-    W, Y = [], []
-    for _ in range(2):
-        noisy = dict(table)
-        noisy["FY"] = table["FY"] + 6.0 * RNG.standard_normal(len(table["FY"]))
-        cond = bench.condition(noisy)
-        W.append(cond.regressor(lip))
-        Y.append(cond.fy)
-    n = len(Y[0])
-
-    def search(w, y):  # as the benchmark's program: R-factor, then the traced search
-        r = lsq.qr_r(jnp.concatenate([w, -y[:, None]], axis=1))
-        return bench.eliminate_r(r, n, sigma_pct_threshold=10.0)
-
-    fixed, xb, _ = bench._quick_jit(jax.vmap(search))(jnp.asarray(np.stack(W)),
-                                                      jnp.asarray(np.stack(Y)))
-    for k in range(2):
-        fit, _ = lsq.eliminate(W[k], Y[k], names=lip.names, sigma_pct_threshold=10.0,
-                               ic_threshold=0.0)
-        np.testing.assert_array_equal(np.asarray(fixed[k]), fit.fixed)
-        np.testing.assert_allclose(np.asarray(xb[k]), fit.x, rtol=1e-8, atol=1e-12)

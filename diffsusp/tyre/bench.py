@@ -42,8 +42,9 @@ plus the bench's noise.
 
 **Modules.** The conditioning is in `diffsusp.tyre.bench_condition`, the synthetic campaign in
 `diffsusp.tyre.bench_synthetic`; this module holds the structure rules, the two-step
-identification, its Monte-Carlo and `eliminate_r`, and re-exports every public name of the
-three. **Size.** About 1 100 lines: the two-step procedure, its instrumental-variable σ, the
+identification and its Monte-Carlo, and re-exports every public name of the three (the
+batched identification of many data sets is `diffsusp.tyre.bench_batch`). **Size.** About
+1 100 lines: the two-step procedure, its instrumental-variable σ, the
 structure search and its Monte-Carlo check are one method (3-40…3-46, 3-76, 3-77) read
 together with the thesis's chapter 3.
 """
@@ -95,7 +96,7 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
-           "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT", "eliminate_r",
+           "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT",
            "stability", "camber_levels"]
 
 
@@ -1151,49 +1152,3 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
     result["fy"] = as_dict(fy_struct, out[1])
     result["noise_fy"] = np.asarray(out[2])
     return result
-
-# --------------------------------------------------------------------------------------------
-# Batched structure search (many tyres in one program)
-
-
-def eliminate_r(R, n, *, sigma_pct_threshold: float = 10.0, max_steps: int | None = None):
-    """The white-σ % elimination loop (`lsq.eliminate` with the σ % rule: what
-    `identify_output` ran before its F-test against the noise level; no behaviour rules), traced:
-    from the augmented R-factor of one data set (`lsq.qr_r` of [W, −y]), repeatedly hold at 0
-    the kept coefficient whose combination has the largest σ % above `sigma_pct_threshold`,
-    refitting from R alone (spec: guaranteed_least_squares §3.9), until none is left.
-    `jax.vmap` it over stacked R-factors (4 tyres × 3 pressures: one program).
-
-    **Returns:** (fixed mask, x, σ) of the final fit (x = 0 where fixed or not kept)."""
-    from ..lsq import core
-
-    p = R.shape[-1] - 1
-    dtype = R.dtype
-    thr = jnp.asarray(0.0, dtype)
-    prior, prior_sigma, lower, upper, _ = core.fill_defaults(p, dtype, "basic", None, None,
-                                                             None, None, None)
-    n = jnp.asarray(n, dtype)
-    ident = core._identifiability(R, n, thr, True)
-
-    def solve(fixed):
-        return core._solve_r(R, n, prior, prior_sigma, lower, upper, fixed, thr, ident,
-                             method="basic", pivot=True, dof="n-rank")
-
-    def worst(sol, fixed):
-        rel = 100.0 * jnp.abs(sol.relation_sigma / sol.relation_values)
-        bad = sol.kept & ~fixed & (jnp.nan_to_num(rel) > sigma_pct_threshold)
-        score = jnp.where(bad, jnp.nan_to_num(rel), -jnp.inf)
-        return jnp.any(bad), jnp.argmax(score)
-
-    def cond(state):
-        fixed, go, k = state
-        return go & (k < (max_steps if max_steps is not None else p))
-
-    def body(state):
-        fixed, _, k = state
-        any_bad, i = worst(solve(fixed), fixed)
-        return jnp.where(any_bad, fixed.at[i].set(True), fixed), any_bad, k + 1
-
-    fixed, _, _ = jax.lax.while_loop(cond, body, (jnp.zeros(p, bool), jnp.asarray(True), 0))
-    sol = solve(fixed)
-    return fixed, sol.x, sol.sigma
