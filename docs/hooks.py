@@ -365,29 +365,32 @@ def _check_described(what, registry, described):
                          f"gone from the code: {stale}")
 
 
+def _quantity_table(what, keys, described, first, sign="") -> str:
+    """A Markdown table of `keys` (the code's registry, checked complete against `described`:
+    key → (symbol, definition, unit))."""
+    _check_described(what, keys, described)
+    rows = [f"| {first} | symbol | definition{sign} | unit |", "|---|---|---|---|"]
+    for k in keys:
+        sym, text, unit = described[k]
+        rows.append(f"| `{k}` | {sym} | {_cell(text)} | {unit} |")
+    return "\n".join(rows) + "\n"
+
+
 def tyre_inputs() -> str:
     import inspect
 
     from diffsusp.tyre import evaluate
 
     params = [p for p in inspect.signature(evaluate).parameters if p not in _TYRE_OPTIONS]
-    _check_described("tyre.evaluate's inputs", params, TYRE_INPUTS)
-    rows = ["| argument | symbol | definition; sign (ISO-W) | unit |", "|---|---|---|---|"]
-    for p in params:
-        sym, text, unit = TYRE_INPUTS[p]
-        rows.append(f"| `{p}` | {sym} | {_cell(text)} | {unit} |")
-    return "\n".join(rows) + "\n"
+    return _quantity_table("tyre.evaluate's inputs", params, TYRE_INPUTS, "argument",
+                           "; sign (ISO-W)")
 
 
 def tyre_outputs() -> str:
     from diffsusp.tyre import TyreForces
 
-    _check_described("tyre.TyreForces", TyreForces._fields, TYRE_OUTPUTS)
-    rows = ["| field | symbol | definition; sign (ISO-W) | unit |", "|---|---|---|---|"]
-    for f in TyreForces._fields:
-        sym, text, unit = TYRE_OUTPUTS[f]
-        rows.append(f"| `{f}` | {sym} | {_cell(text)} | {unit} |")
-    return "\n".join(rows) + "\n"
+    return _quantity_table("tyre.TyreForces", TyreForces._fields, TYRE_OUTPUTS, "field",
+                           "; sign (ISO-W)")
 
 
 def tyre_spec() -> str:
@@ -415,12 +418,8 @@ def tyre_spec() -> str:
 def tyre_vertical() -> str:
     from diffsusp.tyre.vertical import VerticalState
 
-    _check_described("tyre.vertical.VerticalState", VerticalState._fields, TYRE_VERTICAL)
-    rows = ["| field | symbol | definition | unit |", "|---|---|---|---|"]
-    for f in VerticalState._fields:
-        sym, text, unit = TYRE_VERTICAL[f]
-        rows.append(f"| `{f}` | {sym} | {_cell(text)} | {unit} |")
-    return "\n".join(rows) + "\n"
+    return _quantity_table("tyre.vertical.VerticalState", VerticalState._fields, TYRE_VERTICAL,
+                           "field")
 
 
 def tyre_poly_inputs() -> str:
