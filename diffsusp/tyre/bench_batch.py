@@ -24,9 +24,9 @@ the residual beyond the noise: (x_i/σ_i)² < χ²₁ quantile of `significance`
 the least squares under the filtered noise model (`bench._NoiseGram`, S = Wᵀ·Σ·W recomputed when
 the relaxation gain moves by > 5 %, the noise level of the data from above the cut-off); the
 largest σ % first. Each refit is the masked QR of the scaled R-factor (the removed columns
-pinned by identity rows, `lsq.core._masked_solve`): fixed shapes, no host round trip. When the
-library's search has its final pass under the instrumental-variable estimator
-(`identify_output(final_pass=...)`, when present), the traced search runs it too (its σ from
+pinned by identity rows, `lsq.core._masked_solve`): fixed shapes, no host round trip. With the
+library's final pass under the instrumental-variable estimator
+(`identify_output(final_pass=True)`, the default), the traced search runs it too (its σ from
 `bench.two_step`, step 1 at the data's noise level).
 
 **The behaviour rules** (`bench.structure_rules`: load polynomials keep their sign, concave
@@ -59,7 +59,6 @@ coupling-term treatment of M_z, not traced here.
 """
 
 import dataclasses
-import inspect
 import types
 from collections.abc import Sequence
 
@@ -91,12 +90,6 @@ class _MaskedNumpy(types.SimpleNamespace):
 
 
 _MASKED_JNP = _MaskedNumpy(linalg=types.SimpleNamespace(inv=_masked_inv))
-
-
-def _final_pass_default():
-    """The library's default final pass of the search (None when it has none)."""
-    p = inspect.signature(bench.identify_output).parameters.get("final_pass")
-    return None if p is None else p.default
 
 
 @dataclasses.dataclass
@@ -133,7 +126,7 @@ class CampaignResult:
 
 
 def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, crit, threshold,
-            var, final_pass, with_aliases):
+            var, final_pass):
     """The structure search of `bench._structure_search` without the behaviour rules, traced
     (one data set; fixed shapes). Returns a dict of arrays (see `search_program`)."""
     n, p = W.shape
@@ -253,12 +246,9 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         st["order_stat"] = st["order_stat"].at[st["steps"]].set(stat[k])
         st["order_phase"] = st["order_phase"].at[st["steps"]].set(st["phase"])
         fixed = st["fixed"].at[k].set(st["fixed"][k] | hit)
-        if with_aliases:
-            al, st["next"] = aliases(fixed, active)
-            st["alias_step"] = jnp.where(al, st["steps"], st["alias_step"])
-            fixed = fixed | al
-        else:
-            st["next"] = select(fixed)
+        al, st["next"] = aliases(fixed, active)
+        st["alias_step"] = jnp.where(al, st["steps"], st["alias_step"])
+        fixed = fixed | al
         st["fixed"] = fixed
         st["steps"] = st["steps"] + hit
         st.update(x=b, sigma=sig, stat=stat, active=active)
@@ -334,7 +324,7 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
         gram = bench._NoiseGram(W, L, bench._masks(names)[0], H, Dm, samples["omega"], var)
         return _search(W, y, gram, H, X, L, Dp, fydot, samples["omega"], Dm, dt, names=names,
                        fixed0=fixed0, crit=params[1], threshold=params[0], var=var,
-                       final_pass=final_pass, with_aliases=hasattr(bench, "_aliases"))
+                       final_pass=final_pass)
 
     def one_table(cols, H, Dm, E, params):
         samples, fy, _, noise, fz_range = _condition_traced(cols, H, Dm, E, rolling_radius,
@@ -417,7 +407,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
                   cutoff: float = 25.0, rolling_radius: float = 294.0,
                   decimate: int | None = None, sigma_pct_threshold: float | None = 10.0,
                   significance: float = 1e-3, ic_threshold: float = 0.0, rules: bool = True,
-                  final_pass="library", fixed=(), mz: bool = False, batch: str = "map",
+                  final_pass: bool = True, fixed=(), mz: bool = False, batch: str = "map",
                   optimize: bool = True) -> CampaignResult:
     """Identify F_y and K_{Fy,y} on many data sets (a campaign: tyres × pressures) in one
     compiled program, with the library's structure search and two-step estimate (see the
@@ -430,9 +420,9 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
     `sigma_pct_threshold`, `significance`, `rules`, `fixed` (names held at 0) as
     `bench.identify_output`; `ic_threshold` > 0 (an IC rule: not traced) sends every set
     through the exact search; `final_pass`: the search's final pass under the instrumental-
-    variable estimator ("library": `bench.identify_output`'s default, when it has one; True,
-    False); `mz`: also identify M_z, set by set by the library (`bench.identify_output` with
-    the batched F_y report as its instrument; its M_z-specific search is not traced);
+    variable estimator (as `bench.identify_output`'s, default on); `mz`: also identify M_z,
+    set by set by the library (`bench.identify_output` with the batched F_y report as its
+    instrument; its M_z-specific search is not traced);
     `batch`: "map" (`lax.map`, default), "loop" (the one-set program called per set: the
     reference); `optimize`: XLA's backend optimisation (default; measured on 3 sets: 3.6×
     faster to run, 3.5× slower to compile; False for one-off runs and the tests).
@@ -449,10 +439,6 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         raise InputError("identify_many: no data sets")
     degrees = dict(degrees if degrees is not None else STRUCTURES[structure]["Fy"])
     fixed = tuple(fixed or ())
-    if final_pass == "library":
-        final_pass = _final_pass_default()
-    if final_pass not in (None, False, True):
-        raise InputError(f"final_pass {final_pass!r}: 'library', True or False")
     final_pass = "after" if final_pass else None
     r_m = rolling_radius * 1e-3
     crit = float(scipy.stats.chi2.isf(significance, 1))
@@ -510,7 +496,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
     def gamma_of(i):  # the camber at the kept rows (`Conditioned.inputs["gamma"]`)
         return data[i].inputs["gamma"] if conditioned else cols["camber"][i][:, rows].ravel()
 
-    options = {} if _final_pass_default() is None else {"final_pass": final_pass is not None}
+    options = {"final_pass": final_pass is not None}
     for i in range(len(data)):
         r = {k: v[i] for k, v in result.items()}
         if not r["active"].any():
