@@ -773,6 +773,26 @@ def _camber_powers(names, gamma) -> dict:
     return out
 
 
+def _behaviour_removal(behaviour, values, f_of, crit, excused):
+    """The behaviour rules' step of the structure search, on a state where no coefficient
+    fails the statistical test: the first fault a rule finds (not in `excused`) names its
+    preferred removal and the other monomials that mend it; the least significant of them
+    with F < `crit` is removed — returns (its name, the rule's key). A fault whose every
+    removal is significant is added to `excused` (the data support it) and the next fault is
+    looked at. None: no fault left."""
+    while True:
+        found = behaviour(values, frozenset(excused))
+        if found is None:
+            return None
+        first, group, key = found
+        options = [first] + sorted((n for n in group if n in f_of and n != first),
+                                   key=lambda n: f_of[n])
+        ok = [n for n in options if n in f_of and f_of[n] < crit]
+        if ok:
+            return ok[0], key
+        excused.add(key)
+
+
 def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_threshold,
                       ic_threshold, significance, final=None, separable=None):
     """The structure search of `identify_output`. The guaranteed least squares (`lsq`, one
@@ -884,20 +904,11 @@ def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_th
         elif behaviour is not None:
             values = {names[i]: v for i, v in zip(active, x, strict=True)}
             f_of = {names[i]: stat[k] for k, i in enumerate(active)}
-            while candidate is None:
-                found = behaviour(values, frozenset(excused))
-                if found is None:
-                    break
-                first, group, key = found
-                options = [first] + sorted((n for n in group if n in f_of and n != first),
-                                           key=lambda n: f_of[n])
-                ok = [n for n in options if n in f_of and f_of[n] < crit]
-                if ok:
-                    candidate = ok[0]
-                    reason = (f"behaviour: {key[0]} rule, F {f_of[candidate]:.3g} < "
-                              f"{crit:.3g} ({how})")
-                else:
-                    excused.add(key)
+            found = _behaviour_removal(behaviour, values, f_of, crit, excused)
+            if found is not None:
+                candidate, key = found
+                reason = (f"behaviour: {key[0]} rule, F {f_of[candidate]:.3g} < "
+                          f"{crit:.3g} ({how})")
         if candidate is None:
             if phase == "ls" and final is not None:
                 # the same rules under the final estimator's σ (a fault the least squares

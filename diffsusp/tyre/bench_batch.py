@@ -378,17 +378,8 @@ def _behaviour_removal(behaviour, names, active, x, stat, crit):
     values = {names[i]: float(x[i]) for i in np.flatnonzero(active)}
     f_of = {names[i]: float(stat[i]) for i in np.flatnonzero(active)}
     excused: set = set()
-    while True:
-        found = behaviour(values, frozenset(excused))
-        if found is None:
-            return None, sorted(excused)
-        first, group, key = found
-        options = [first] + sorted((n for n in group if n in f_of and n != first),
-                                   key=lambda n: f_of[n])
-        ok = [n for n in options if n in f_of and f_of[n] < crit]
-        if ok:
-            return (ok[0], key), sorted(excused)
-        excused.add(key)
+    found = bench._behaviour_removal(behaviour, values, f_of, crit, excused)
+    return found, sorted(excused)
 
 
 def _stack_tables(tables, cutoff, decimate):
