@@ -357,9 +357,17 @@ def _relax(xp, P, G, omega, dt):
 def _iv(xp, Ws, Zs, y):
     """Instrumental-variable estimate b = (ZᵀW)⁻¹Zᵀy (Z = W: the least squares); returns
     (b, Q, M) with b = M·Qᵀy: Q the orthogonal factor of Z and M = (QᵀW)⁻¹ in NumPy (robust),
-    Q = Z and M = (ZᵀW)⁻¹ when traced (one LU: the Monte-Carlo program compiles faster)."""
-    Q = np.linalg.qr(Zs)[0] if xp is np else Zs
-    M = xp.linalg.inv(Q.T @ Ws)
+    Q = Z and M = (ZᵀW)⁻¹ when traced (one LU: the Monte-Carlo program compiles faster). Traced,
+    columns held at zero (`tyre.bench_batch`: all p columns, the removed ones zeroed: fixed
+    shapes) leave exactly-null rows and columns in ZᵀW, pinned to the identity in the inverse:
+    the others' estimate is unchanged, the held coefficients stay 0 (σ 0)."""
+    if xp is np:
+        Q = np.linalg.qr(Zs)[0]
+        M = np.linalg.inv(Q.T @ Ws)
+    else:
+        Q, A = Zs, Zs.T @ Ws
+        null = xp.all(A == 0, axis=0) & xp.all(A == 0, axis=1)
+        M = xp.linalg.inv(A + xp.diag(null.astype(A.dtype)))
     return M @ (Q.T @ y), Q, M
 
 

@@ -47,8 +47,8 @@ K_y agrees to 1e-12.
 
 **Step 2** (K_y⁻¹ by `bench.two_step`: instrumental variables, σ of the joint model under the
 noise model) runs in the same program on the final structure, the removed columns held at zero
-(`two_step` on all p columns with a pseudo-inverse that leaves the exactly-null rows and
-columns of its p×p normal matrices alone: `_MASKED_JNP`).
+(`two_step` on all p columns; its traced inverse leaves the exactly-null rows and columns of
+its p×p normal matrices alone).
 
 The reports are `bench.OutputReport`s (`fit` None: no `lsq.Fit` object is built per set; the
 log is in `removed`, name → reason, in the library's words; `not_identifiable` names the same
@@ -59,7 +59,6 @@ coupling-term treatment of M_z, not traced here.
 """
 
 import dataclasses
-import types
 from collections.abc import Sequence
 
 import jax
@@ -73,23 +72,6 @@ from . import bench
 from .poly import STRUCTURES, PolynomialModel, regressor_model
 
 __all__ = ["identify_many", "CampaignResult", "search_program"]
-
-
-# `two_step` traced on all p columns with the removed ones at zero: its normal matrices
-# (ZᵀW, p×p) then have exactly-null rows and columns; their inverse is taken with those
-# pinned to the identity, which leaves the estimate of the others unchanged and the removed
-# coefficients at 0 (with σ 0).
-def _masked_inv(A):
-    null = jnp.all(A == 0, axis=0) & jnp.all(A == 0, axis=1)
-    return jnp.linalg.inv(A + jnp.diag(null.astype(A.dtype)))
-
-
-class _MaskedNumpy(types.SimpleNamespace):
-    def __getattr__(self, name):
-        return getattr(jnp, name)
-
-
-_MASKED_JNP = _MaskedNumpy(linalg=types.SimpleNamespace(inv=_masked_inv))
 
 
 @dataclasses.dataclass
@@ -143,7 +125,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
 
     def two_step(active, **kw):
         m = active.astype(dtype)
-        return bench.two_step(_MASKED_JNP, X * m, L * m, Dp * m, fydot, y_seg, H, Dm, omega,
+        return bench.two_step(jnp, X * m, L * m, Dp * m, fydot, y_seg, H, Dm, omega,
                               dt, is_ly=masks[0], is_pneu=masks[1], is_p2=masks[2], **kw)
 
     def least_squares(active, S, g_ref, have_S):
