@@ -22,6 +22,14 @@ class InputError(ModelError):
     bad_input = True
 
 
+def index_of(names, name: str, what: str = "parameter") -> int:
+    """The position of `name` in `names`; an `InputError` naming the known ones if absent."""
+    try:
+        return list(names).index(name)
+    except ValueError:
+        raise InputError(f"unknown {what} {name!r}; known: {', '.join(names)}.") from None
+
+
 class ModelFileError(InputError):
     """A model, load-case or table file that cannot be read: the message names the file, the line
     (1-based; None when the format has no lines) and the field, and says what is expected."""

@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import index_of
 from .report import Consistency, IdentificationReport, MeasurementResiduals
 
 __all__ = ["DirectReport"]
@@ -112,11 +112,7 @@ class DirectReport(IdentificationReport):
         return float(self.values[self._index(name)])
 
     def _index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise InputError(f"unknown parameter {name!r}; the report has "
-                             f"{', '.join(self.names)}.") from None
+        return index_of(self.names, name)
 
     @property
     def combinations(self) -> list[str]:

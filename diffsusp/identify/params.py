@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..errors import InputError
+from ..errors import InputError, index_of
 from ..model.mechanism import Mechanism, field_unit
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
@@ -345,11 +345,7 @@ class Params(eqx.Module):
         return params
 
     def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise InputError(f"unknown parameter '{name}'; the parameters are: "
-                             f"{', '.join(self.names)}.") from None
+        return index_of(self.names, name)
 
     def _check_start(self):
         if isinstance(self.start, jax.core.Tracer):

@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, index_of
 from . import core
 
 # --------------------------------------------------------------------------------------------
@@ -129,11 +129,7 @@ class Fit:
         return float(self.x[self._index(name)])
 
     def _index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise InputError(f"unknown parameter {name!r}; the fit has {list(self.names)}") \
-                from None
+        return index_of(self.names, name)
 
     def combination(self, name: str) -> str:
         """The printed combination estimated by the kept parameter `name` (itself if alone)."""
