@@ -58,6 +58,13 @@ import numpy as np
 
 from .. import lsq
 from ..errors import InputError
+from ..identify.report import (
+    CONSISTENCY_ALPHA,
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    consistency_from_residuals,
+)
 from . import relaxation
 from .bench_condition import (  # noqa: F401  (re-exported; tests reach the private helpers)
     _PROGRAMS,
@@ -78,6 +85,9 @@ from .bench_condition import (  # noqa: F401  (re-exported; tests reach the priv
     difference_matrix,
     filter_matrix,
     filtfilt,
+    noise_band,
+    noise_dof,
+    noise_model,
 )
 from .bench_synthetic import (  # noqa: F401  (re-exported)
     Segments,
@@ -222,8 +232,42 @@ class Coefficients:
             return 100.0 * self.sigma / np.abs(self.x)
 
 
+def coefficient_unit(name: str) -> str:
+    """The unit of a polynomial coefficient b_<F>_<X>_<i>_<j> (spec tyre §3.2: F in N or
+    N·m, the inputs in `poly.INPUT_UNITS`, F_z in kN): F/(X^i·kN^j); a relaxation term
+    b_<F>_Ly multiplies Ḟ_y/ω [N] too, the coupling b_Mz_P2_0_0 (−F_y·F_x) is K_y⁻¹ [m/N]."""
+    from .poly import INPUT_UNITS
+
+    out, block, i, j = parse_name(name)
+    top = "N·m" if out == "Mz" else "N"
+    if block == "P2":
+        return "m/N"
+    if block == "Ly":
+        top = "m" if out == "Mz" else "1"
+        block, i = "delta", i
+    parts = []
+    if block != "one" and i > 0:
+        u = INPUT_UNITS[block]
+        parts.append(u if i == 1 else f"{u}^{i}")
+    if j > 0:
+        parts.append("kN" if j == 1 else f"kN^{j}")
+    if not parts:
+        return top
+    return f"{top}/({'·'.join(parts)})" if len(parts) > 1 else f"{top}/{parts[0]}"
+
+
+def _reason_of_removal(why: str) -> str:
+    """The report's reason for a coefficient the structure search removed (its log line)."""
+    if why.startswith("with "):
+        other = why[5:].split(":", 1)[0]
+        return f"alias of {other} (removed with it): {why}"
+    if why.startswith("behaviour"):
+        return f"removed by the behaviour rules (spec §3.3): {why}"
+    return f"removed by the F-test (its removal does not raise the residual beyond the noise): {why}"
+
+
 @dataclasses.dataclass
-class OutputReport:
+class OutputReport(IdentificationReport):
     """One output's identification: `fit` (step 1 by the guaranteed least squares with the structure
     search, the `lsq.Fit` and its log: the structure; None without the search), `reduced` (the
     final structure's coefficients by the instrumental-variable estimate, with their σ from the
@@ -249,6 +293,122 @@ class OutputReport:
     fydot_hat: np.ndarray | None = None
     excused: list = dataclasses.field(default_factory=list)
     extra: object = None
+    candidates: tuple = ()
+    held_names: tuple = ()
+    consistency: Consistency | None = None
+    residual: np.ndarray | None = None
+    whitened: np.ndarray | None = None
+    crit: float = 10.83
+    threshold: float | None = 10.0
+
+    family = "bench"
+
+    # ---- the shared report (`diffsusp.identify.report.IdentificationReport`) ----------------
+    # One row per candidate coefficient of the searched LIP model (F_pneu, relaxation and
+    # coupling columns), in the polynomial's units, then K_y [N/mm]. Kept coefficients carry
+    # the final estimate and its σ; removed, aliased and unseparable ones are 0 (held by the
+    # search) with σ NaN and the reason; columns the data do not excite have σ inf (not seen).
+
+    @property
+    def stiffness_name(self) -> str:
+        return f"K_{self.output}_y"
+
+    def _table(self):
+        kept = dict(zip(self.reduced.names, zip(self.reduced.x, self.reduced.sigma,
+                                                strict=True), strict=True))
+        order = list(self.candidates) or (list(self.reduced.names) + list(self.removed)
+                                          + list(self.not_identifiable)
+                                          + list(self.held_names))
+        seen = set()
+        order = [n for n in order if not (n in seen or seen.add(n))]
+        rows = []
+        for n in order:
+            if n in kept:
+                x, sg = (float(v) for v in kept[n])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    pct = 100.0 * sg / abs(x) if x != 0 else np.inf
+                    stat = (x / sg) ** 2 if sg > 0 else (np.inf if x != 0 else 0.0)
+                ok = bool(np.isfinite(sg) and sg > 0 and (
+                    stat >= self.crit or (self.threshold is not None
+                                          and pct <= self.threshold)))
+                why = "" if ok else (
+                    f"not determined by the data: sigma% {pct:.3g}"
+                    + (f" > {self.threshold:g}" if self.threshold is not None else "")
+                    + f" and |x|/sigma {np.sqrt(stat):.2g} < {np.sqrt(self.crit):.2g}")
+                rows.append((n, x, sg, ok, False, why))
+            elif n in self.held_names:
+                rows.append((n, 0.0, np.nan, False, True, "held at 0 (fixed by the user)"))
+            elif n in self.removed:
+                rows.append((n, 0.0, np.nan, False, False,
+                             _reason_of_removal(self.removed[n])))
+            elif n in self.not_identifiable:
+                why = self.not_identifiable[n]
+                unseen = ("no effect on the data" in why or "0° throughout" in why
+                          or "not excited" in why)
+                if "not separable" in why:
+                    why = "held at 0: not separable — " + why
+                elif unseen and "not excited" not in why:
+                    why = "not excited by the data — " + why
+                rows.append((n, 0.0, np.inf if unseen else np.nan, False, False, why))
+        c, sc = self.compliance, self.compliance_sigma
+        k = 1e-3 / c if c != 0 else np.nan
+        sk = 1e-3 * sc / c**2 if c != 0 else np.nan
+        ok = bool(np.isfinite(sc) and sc > 0 and c > 0 and (c / sc) ** 2 >= self.crit)
+        why = "" if ok else (
+            "not determined: the identified compliance K_y^-1 is not positive (the relaxation "
+            "is not excited: no slip transient)" if not c > 0 else
+            f"not determined: K_y^-1 = {c:.3g} ± {sc:.2g} m/N is not significantly above 0")
+        rows.append((self.stiffness_name, k, sk, ok, False, why))
+        return rows
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(r[0] for r in self._table())
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return np.array([r[1] for r in self._table()])
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return np.array([r[2] for r in self._table()])
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        x, sg = self.estimates, self.sigmas
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(x != 0, 100.0 * sg / np.abs(x), np.nan)
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple("N/mm" if n == self.stiffness_name else coefficient_unit(n)
+                     for n in self.names)
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        return np.array([r[3] for r in self._table()], bool)
+
+    @property
+    def held(self) -> np.ndarray:
+        return np.array([r[4] for r in self._table()], bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        return tuple(r[5] for r in self._table())
+
+    @property
+    def combinations(self) -> tuple[str, ...]:
+        if self.fit is None:
+            return ()
+        return tuple(f"{t} = {v:.6g}" for t, v in zip(self.fit.relations,
+                                                      self.fit.relation_values, strict=True))
+
+    @property
+    def residuals(self) -> dict:
+        if self.residual is None or self.whitened is None:
+            return {}
+        return {self.output: MeasurementResiduals(np.asarray(self.residual),
+                                                  np.asarray(self.whitened))}
 
     @property
     def stiffness(self) -> float:
@@ -289,11 +449,17 @@ class OutputReport:
 
 
 @dataclasses.dataclass
-class BenchReport:
+class BenchReport(IdentificationReport):
     """The result of `identify`: `outputs` ("Fy", "Mz" → `OutputReport`), `stable` (the
     identified F_y model has ∂Fy_pneu/∂δ′ < 0 on every conditioned sample), `min_margin`
     (max ∂Fy_pneu/∂δ′ over the data, N/m), `flags` (warnings in words), `notes` (what is not
-    identifiable and why), `structure`, `n_rows`, `rate`."""
+    identifiable and why), `structure`, `n_rows`, `rate`.
+
+    As the shared report (`IdentificationReport`): the outputs' parameters one after the
+    other (F_y's coefficients and K_Fy_y, then M_z's), and one consistency verdict for the
+    identification: the first output whose fit is inconsistent with the data (its χ² names
+    it; M_z's identification uses F_y's, so no value of either is called identified), else
+    the outputs' χ² together."""
 
     outputs: dict
     stable: bool
@@ -303,6 +469,75 @@ class BenchReport:
     structure: str
     n_rows: int
     rate: float
+
+    family = "bench"
+
+    def _cat(self, attr, dtype=float):
+        return np.concatenate([np.asarray(getattr(r, attr), dtype)
+                               for r in self.outputs.values()])
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(n for r in self.outputs.values() for n in r.names)
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return self._cat("estimates")
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return self._cat("sigmas")
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        return self._cat("sigma_pct")
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple(u for r in self.outputs.values() for u in r.estimate_units)
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        return self._cat("identifiable", bool)
+
+    @property
+    def held(self) -> np.ndarray:
+        return self._cat("held", bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        return tuple(w for r in self.outputs.values() for w in r.reasons)
+
+    @property
+    def combinations(self) -> tuple[str, ...]:
+        return tuple(c for r in self.outputs.values() for c in r.combinations)
+
+    @property
+    def residuals(self) -> dict:
+        out = {}
+        for r in self.outputs.values():
+            out.update(r.residuals)
+        return out
+
+    @property
+    def consistency(self) -> Consistency | None:
+        cons = [r.consistency for r in self.outputs.values()]
+        if any(c is None for c in cons):
+            return None
+        bad = [c for c in cons if not c.consistent]
+        if bad:
+            return bad[0]
+        if len(cons) == 1:
+            return cons[0]
+        white = [np.asarray(r.whitened) for r in self.outputs.values()]
+        joint = consistency_from_residuals(
+            white, [w.size for w in white], sum(c.n_parameters for c in cons), cons[0].cases,
+            measurements=tuple(self.outputs), alpha=cons[0].alpha,
+            note="; ".join(f"{o}: {c.verdict}" for o, c in zip(self.outputs, cons,
+                                                               strict=True)))
+        # each output passed its own test (F law against its measured noise level)
+        return dataclasses.replace(joint, critical=sum(c.critical for c in cons),
+                                   consistent=True)
 
     def table(self) -> str:
         lines = [f"bench identification ({self.structure} structure): {self.n_rows} rows at "
@@ -407,7 +642,7 @@ def _sandwich(xp, Q, M, Ws, e, sources, s, r):
 
 def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
              instrument=None, sigma_fy=0.0, passes: int = 2, noise_var=None,
-             step2: bool = True) -> dict:
+             step2: bool = True, profile=None, profile_fy=None, check_var=None) -> dict:
     """The two-step identification (3-40…3-46, 3-76, 3-77) of one output on conditioned
     segments, with NumPy (`xp = np`) or traced (`xp = jax.numpy`, vmappable) arrays.
 
@@ -436,7 +671,15 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     noise model, its variance estimated from the residual with the filter's and the
     difference's correlations accounted for (`_sandwich`), or `noise_var` (the output's white
     noise variance per sample, known: the structure search gives the level of the data, which
-    does not depend on the structure). `step2=False`: step 1 only (x, σ).
+    does not depend on the structure). `step2=False`: step 1 only (x, σ). Noise that grows
+    with the force: `profile` (segments, samples) the relative σ_t of the output's noise
+    (`bench_condition.noise_model`; `profile_fy` F_y's, for M_z), each noise source then
+    A·diag(σ_t) (the sandwich of heteroscedastic noise: with a white model the slip terms'
+    σ were 2.5–2.9× short of their spread at σ = 2 N + 1 %·|F_y|).
+
+    **Consistency** (`check_var`, the output's noise variance measured above the cut-off):
+    the residual of the joint model F − W_pneu·b − c·d(b) whitened by its noise model per
+    segment (Cholesky of Σ_k v_k·A_k·A_kᵀ), `whitened` (segments, rows).
 
     **Step 2** K_y⁻¹ = c from F − F̂_pneu = c·((∂F̂_pneu/∂δ′)·Ḟ_y/ω (− F_y·F_x)) (3-76, 3-77),
     instrumented likewise; its σ is that of the linearised joint model F = W_pneu·b + c·d(b)
@@ -491,10 +734,13 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     bs, Q, M = _iv(xp, Ws, instrumented(fh), yv)
     b = bs / sc
 
-    def sources(g):
+    def weighted(A, w):
+        return A if w is None else (A if A.ndim == 3 else A[None]) * w[:, None, :]
+
+    def sources(g, var=noise_var):
         if own:
-            return [(H[None] - lag(g), noise_var)]
-        return [(H, noise_var), (-lag(g), sigma_fy**2)]
+            return [(weighted(H[None] - lag(g), profile), var)]
+        return [(weighted(H, profile), var), (weighted(-lag(g), profile_fy), sigma_fy**2)]
 
     sig, var = _sandwich(xp, Q, M, Ws, yv - Ws @ bs, sources(gain(b)), s, r)
     if not step2:
@@ -514,8 +760,23 @@ def two_step(xp, X, L, Dp, fydot, y, H, Dm, omega, dt, *, is_ly, is_pneu, is_p2,
     scj = scale(J)
     _, Qj, Mj = _iv(xp, J / scj, Jz / scj, yv)
     sj, _ = _sandwich(xp, Qj, Mj, J / scj, r2 - c * d, sources(c * gd), s, r)
-    return {"x": b, "sigma": sig / sc, "compliance": c, "compliance_sigma": sj[-1] / scj[-1],
-            "sigma_step2": sig2, "noise_sigma": xp.sqrt(var), "fydot_hat": fh}
+    out = {"x": b, "sigma": sig / sc, "compliance": c, "compliance_sigma": sj[-1] / scj[-1],
+           "sigma_step2": sig2, "noise_sigma": xp.sqrt(var), "fydot_hat": fh,
+           "residual": r2 - c * d}
+    if check_var is not None:
+        out["whitened"] = _whiten(xp, (r2 - c * d).reshape(s, r), sources(c * gd, check_var))
+    return out
+
+
+def _whiten(xp, e, sources):
+    """e (segments, rows) whitened by the covariance Σ_k v_k·A_k·A_kᵀ of each segment (A_k
+    (rows, samples) shared or (segments, rows, samples))."""
+    cov = 0.0
+    for A, var in sources:
+        cov = cov + var * (A @ xp.swapaxes(A, -1, -2))
+    cov = cov * xp.ones((e.shape[0], 1, 1))
+    chol = xp.linalg.cholesky(cov)
+    return xp.linalg.solve(chol, e[..., None])[..., 0]
 
 
 def _masks(names):
@@ -645,13 +906,16 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             instrument = fydot
     s = X.shape[0]
     omega = np.asarray(cond.samples["omega"])
+    channel = "FY" if output == "Fy" else "MZ"
+    prof = cond.noise_profile or {}
+    profile, profile_fy = prof.get(channel), (None if output == "Fy" else prof.get("FY"))
 
     def estimate(active, **kw):
         is_ly, is_pneu, is_p2 = _masks([names[i] for i in active])
         return two_step(np, X[..., active], L[..., active], Dp[..., active], fydot,
                         y.reshape(s, -1), H, cond.difference, omega, cond.dt, is_ly=is_ly,
                         is_pneu=is_pneu, is_p2=is_p2, instrument=instrument,
-                        sigma_fy=sigma_fy, **kw)
+                        sigma_fy=sigma_fy, profile=profile, profile_fy=profile_fy, **kw)
 
     removed, not_ident, excused = {}, {}, []
     if search:
@@ -665,7 +929,8 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
         # residual is overfitted).
         var = cond.noise["FY" if output == "Fy" else "MZ"] ** 2
         gram = _NoiseGram(W, L, _masks(names)[0], H, cond.difference, omega, var,
-                          None if output == "Fy" else cond.noise["FY"] ** 2)
+                          None if output == "Fy" else cond.noise["FY"] ** 2, profile,
+                          profile_fy)
         def final(active):  # the final estimator's (x, σ) at the data's noise level
             res = estimate(active, noise_var=var, step2=False)
             return res["x"], res["sigma"]
@@ -683,7 +948,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             sigma_pct_threshold=sigma_pct_threshold, ic_threshold=ic_threshold,
             significance=significance, final=final if final_pass else None,
             separable=separable)
-        res = estimate(active)
+        res = estimate(active, check_var=cond.noise[channel] ** 2)
         for i, n in enumerate(names):
             # dropped for rank (neither kept nor removed by the search): no effect, or a
             # combination of others
@@ -715,16 +980,63 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                              "columns are combinations of others; run the structure search "
                              "(search=True) or hold more coefficients fixed.")
         fit = None
-        res = estimate(active)
+        res = estimate(active, check_var=cond.noise[channel] ** 2)
     act = [names[i] for i in active]
     is_pneu = _masks(act)[1]
     reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
     model = PolynomialModel.create(output, degrees, values={
         n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k and n in own})
+    held = tuple(n for n in (fixed or ()) if n not in removed and n not in not_ident)
+    residual = np.asarray(res["residual"]).reshape(s, -1)
+    white = np.asarray(res["whitened"])
+    consistency = bench_consistency(
+        white, int(np.sum(_masks(act)[1])) + 1, cond, channel, output)
     return OutputReport(output, fit, reduced, model, float(res["compliance"]),
                         float(res["compliance_sigma"]), float(res["sigma_step2"]),
                         float(res["noise_sigma"]), removed, not_ident,
-                        res["fydot_hat"] if output == "Fy" else None, excused, extra)
+                        res["fydot_hat"] if output == "Fy" else None, excused, extra,
+                        candidates=tuple(names), held_names=held, consistency=consistency,
+                        residual=residual, whitened=white,
+                        crit=_crit(significance), threshold=sigma_pct_threshold)
+
+
+def _crit(significance: float) -> float:
+    import scipy.stats
+
+    return float(scipy.stats.chi2.isf(significance, 1))
+
+
+def bench_consistency(whitened, n_parameters: int, cond: "Conditioned | None", channel: str,
+                      output: str, *, noise_dof: float | None = None,
+                      alpha: float = CONSISTENCY_ALPHA) -> Consistency:
+    """The consistency of one output's fit (spec tyre §3.3: the residual against the bench
+    noise): χ² of the joint model's residual F − W_pneu·b − K_y⁻¹·d(b) at the kept rows,
+    whitened per segment by its noise model (`two_step`'s `whitened`) at the noise level
+    measured above the cut-off — a level the fit does not see, so a structure that leaves a
+    misfit (terms the data need removed, periodic disturbances, a wrong model) shows as
+    χ²/dof > 1. That level is itself estimated (`noise_dof` degrees of freedom, about
+    10 000 on a campaign): χ²/dof follows Fisher's F(dof, noise_dof) law, whose upper
+    `alpha` quantile is the critical value (not the χ² law's, which would call a correct
+    model inconsistent whenever the noise level is measured a little low). `whitened`
+    (segments, rows); `n_parameters` the estimated F_pneu terms and K_y⁻¹."""
+    import scipy.stats
+
+    white = np.asarray(whitened, float)
+    n_seg = white.shape[0]
+    if noise_dof is None:
+        noise_dof = (cond.noise_dof or {}).get(channel) if cond is not None else None
+    con = consistency_from_residuals(
+        [white], [white.size], n_parameters, tuple(f"segment {k + 1}" for k in range(n_seg)),
+        measurements=(output,), alpha=alpha,
+        note=(f"{output}: the joint model's residual at the kept rows, whitened by the "
+              "filtered noise model at the noise level measured above the cut-off"
+              + (f" ({noise_dof:.0f} dof: F law)" if noise_dof else " (χ² law)")))
+    if noise_dof:
+        critical = con.dof * float(scipy.stats.f.isf(alpha, con.dof, noise_dof))
+        con = dataclasses.replace(con, critical=critical,
+                                  consistent=bool(np.isfinite(con.chi2)
+                                                  and con.chi2 <= critical))
+    return con
 
 
 def _coupling_reason(cond: Conditioned, why: str) -> str:
@@ -973,11 +1285,13 @@ class _NoiseGram:
     ε = H·(I − diag(g/ω)·D)·e_F (F_y), or H·e_M − H·diag(g/ω)·D·e_Fy (M_z), g the relaxation
     gain Σ_k L_k·b_k, e white of the variances `var` (output) and `var_fy`."""
 
-    def __init__(self, W, L, is_ly, H, Dm, omega, var, var_fy=None):
+    def __init__(self, W, L, is_ly, H, Dm, omega, var, var_fy=None, profile=None,
+                 profile_fy=None):
         s, r = omega.shape[0], H.shape[0]
         self.L, self.is_ly, self.omega, self.Dm = L, is_ly, omega, Dm
         self.C = np.swapaxes(W.reshape(s, r, -1), 1, 2) @ H  # W_sᵀ·H, (s, p, m)
         self.var, self.var_fy = var, var_fy
+        self.w, self.w_fy = profile, profile_fy  # relative noise σ per sample (s, m)
 
     def gain(self, b):
         return self.L[..., self.is_ly] @ b[self.is_ly]
@@ -986,12 +1300,14 @@ class _NoiseGram:
         C = self.C
         Bl = (C * (self.gain(b) / self.omega)[:, None, :]) @ self.Dm
 
-        def gram(B):
+        def gram(B, w=None):
+            if w is not None:
+                B = B * w[:, None, :]
             B = np.swapaxes(B, 0, 1).reshape(B.shape[1], -1)
             return B @ B.T
         if self.var_fy is None:
-            return self.var * gram(C - Bl)
-        return self.var * gram(C) + self.var_fy * gram(Bl)
+            return self.var * gram(C - Bl, self.w)
+        return self.var * gram(C, self.w) + self.var_fy * gram(Bl, self.w_fy)
 
 
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,

@@ -108,7 +108,7 @@ class CampaignResult:
 
 
 def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, crit, threshold,
-            var, final_pass):
+            var, final_pass, profile=None):
     """The structure search of `bench._structure_search` without the behaviour rules, traced
     (one data set; fixed shapes). Returns a dict of arrays (see `search_program`)."""
     n, p = W.shape
@@ -126,7 +126,8 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     def two_step(active, **kw):
         m = active.astype(dtype)
         return bench.two_step(jnp, X * m, L * m, Dp * m, fydot, y_seg, H, Dm, omega,
-                              dt, is_ly=masks[0], is_pneu=masks[1], is_p2=masks[2], **kw)
+                              dt, is_ly=masks[0], is_pneu=masks[1], is_p2=masks[2],
+                              profile=profile, check_var=var, **kw)
 
     def least_squares(active, S, g_ref, have_S):
         xs, cov_unit, _ = core._masked_solve(Rw, z, active, zeros)  # cov_unit: G_A⁻¹
@@ -141,7 +142,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         return b, sig, S, g_ref, update
 
     final_keys = ("x", "sigma", "compliance", "compliance_sigma", "sigma_step2", "noise_sigma",
-                  "fydot_hat")
+                  "fydot_hat", "residual", "whitened")
 
     def iv(active):
         """The final pass's estimate: `two_step` (steps 1 and 2, the σ from the residual's
@@ -197,7 +198,8 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                   gram_updates=jnp.asarray(0),
                   final=dict(x=zeros, sigma=zeros, compliance=zeros[0], compliance_sigma=zeros[0],
                              sigma_step2=zeros[0], noise_sigma=zeros[0],
-                             fydot_hat=jnp.zeros_like(fydot)))
+                             fydot_hat=jnp.zeros_like(fydot), residual=jnp.zeros_like(y),
+                             whitened=jnp.zeros_like(y_seg)))
 
     def body(st):
         st = dict(st)
@@ -254,18 +256,28 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     out["diag"] = jnp.abs(jnp.diagonal(R)[:p])
     out.update(final_x=res["x"], final_sigma=res["sigma"], compliance=res["compliance"],
                compliance_sigma=res["compliance_sigma"], sigma_step2=res["sigma_step2"],
-               noise_sigma=res["noise_sigma"], fydot_hat=res["fydot_hat"])
+               noise_sigma=res["noise_sigma"], fydot_hat=res["fydot_hat"],
+               residual=res["residual"], whitened=res["whitened"])
     return out
 
 
-def _condition_traced(cols, H, Dm, E, rolling_radius, rows):
+def _condition_traced(cols, H, Dm, E, E_noise, rolling_radius, rows):
     """`bench.condition` of one data set, traced: the deformation inputs (full rate), the
-    filtered F_y and M_z at the kept rows, their white-noise levels from above the cut-off."""
+    filtered F_y and M_z at the kept rows, their noise levels from above the cut-off, F_y's
+    relative noise profile (`noise_w_fy`) and outliers replaced (`bench.noise_model`)."""
+    cols = dict(cols)
+    m = E.shape[0]
+    inner = np.zeros(m, bool)
+    inner[int(rows[0]):int(rows[-1]) + 1] = True
+    Fm = jnp.eye(m) - E
+    noise, profile = {}, {}
+    for c, u in (("FY", 1.0), ("MZ", 1e-3)):
+        cols[c], level, profile[c], _, _ = bench.noise_model(cols[c], E, Fm, inner,
+                                                              E_noise=E_noise,
+                                                              margin=int(rows[0]) // 2)
+        noise[c] = level * u
     samples = bench._kinematics(cols, Dm, rolling_radius)
-    s = cols["FY"].shape[0]
-    tr = jnp.sum(E * E)
-    noise = {c: jnp.sqrt(jnp.sum((cols[c] @ E.T) ** 2) / (s * tr)) * u
-             for c, u in (("FY", 1.0), ("MZ", 1e-3))}
+    samples["noise_w_fy"] = profile["FY"]
     fz = samples["fz"][:, rows]
     return samples, (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3, noise, \
         jnp.stack([jnp.min(fz), jnp.max(fz)])
@@ -275,7 +287,7 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
                    batch="map", from_tables=True):
     """The traced F_y identification of many data sets as one function (jit it): from stacked
     bench channels (`from_tables`: dict channel → (sets, segments, samples), then the filter's
-    rows H, the difference matrix Dm, E = I − F) or stacked conditioned data (samples dict
+    rows H, the difference matrix Dm, E = [I − F, `bench.noise_band`] (2, m, m)) or stacked conditioned data (samples dict
     (sets, segments, samples), y (sets, n), M_z (sets, n), noise (sets, 2): FY, MZ; F_z range
     (sets, 2), then H, Dm), and last `params` = [σ % threshold (inf: none), χ²₁ critical
     value]. `batch`: "map" (`lax.map`, one set at a time in the program: the memory of one
@@ -303,13 +315,16 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
         fydot = samples["fydot_w"]
         W = jnp.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
         var = noise[0] ** 2
-        gram = bench._NoiseGram(W, L, bench._masks(names)[0], H, Dm, samples["omega"], var)
+        profile = samples.get("noise_w_fy")
+        gram = bench._NoiseGram(W, L, bench._masks(names)[0], H, Dm, samples["omega"], var,
+                                profile=profile)
         return _search(W, y, gram, H, X, L, Dp, fydot, samples["omega"], Dm, dt, names=names,
                        fixed0=fixed0, crit=params[1], threshold=params[0], var=var,
-                       final_pass=final_pass)
+                       final_pass=final_pass, profile=profile)
 
     def one_table(cols, H, Dm, E, params):
-        samples, fy, _, noise, fz_range = _condition_traced(cols, H, Dm, E, rolling_radius,
+        samples, fy, _, noise, fz_range = _condition_traced(cols, H, Dm, E[0], E[1],
+                                                            rolling_radius,
                                                             rows)
         noise = jnp.stack([noise["FY"], noise["MZ"]])
         return identify(samples, fy, noise, H, Dm, params), noise, fz_range
@@ -423,7 +438,11 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
             raise InputError("identify_many: the conditioned data sets differ in shape or "
                              "filter; a batch needs equal ones (group them).")
         rows, dt = np.asarray(c0.rows), c0.dt
-        args = ({k: np.stack([np.asarray(d.samples[k]) for d in data]) for k in c0.samples},
+        samples = {k: np.stack([np.asarray(d.samples[k]) for d in data]) for k in c0.samples}
+        samples["noise_w_fy"] = np.stack([
+            np.asarray((d.noise_profile or {}).get("FY", np.ones(d.samples["fz"].shape)))
+            for d in data])
+        args = (samples,
                 np.stack([d.fy for d in data]),
                 np.array([[d.noise["FY"], d.noise["MZ"]] for d in data]),
                 np.array([[d.inputs["fz"].min(), d.inputs["fz"].max()] for d in data]),
@@ -435,7 +454,8 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         rows, _ = bench._rows(m, rate, cutoff, decimate, None)
         F = bench.filter_matrix(float(cutoff), float(rate), m, 4)
         dt = 1.0 / rate
-        args = (cols, F[rows], bench.difference_matrix(m, dt), np.eye(m) - F)
+        E_noise = bench.noise_band(rate, cutoff, m, 4)
+        args = (cols, F[rows], bench.difference_matrix(m, dt), np.stack([np.eye(m) - F, E_noise]))
     params = np.array([np.inf if sigma_pct_threshold is None else sigma_pct_threshold, crit])
     args = args + (params,)
     n_shared = 3 if conditioned else 4
@@ -470,6 +490,13 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         return data[i].inputs["gamma"] if conditioned else cols["camber"][i][:, rows].ravel()
 
     options = {"final_pass": final_pass is not None}
+
+    def dof_of(i):  # the degrees of freedom of the noise level (the consistency's F law)
+        if conditioned:
+            return (data[i].noise_dof or {}).get("FY")
+        inner = np.zeros(m, bool)
+        inner[rows[0]:rows[-1] + 1] = True
+        return bench.noise_dof(E_noise[inner], n_seg)
     for i in range(len(data)):
         r = {k: v[i] for k, v in result.items()}
         if not r["active"].any():
@@ -497,7 +524,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
                     break
         if why is None:
             reports.append(_report("Fy", degrees, names, r, excused, sigma_pct_threshold,
-                                   crit, gamma_of(i)))
+                                   crit, gamma_of(i), dof_of(i), fixed))
         else:
             exact[i] = why
             reports.append(bench.identify_output(
@@ -516,8 +543,10 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
                           np.asarray(result["gram_updates"]), *seconds, mz_reports)
 
 
-def _report(output, degrees, names, r, excused, threshold, crit, gamma):
-    """A `bench.OutputReport` from one set's traced result."""
+def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_dof=None,
+            fixed=()):
+    """A `bench.OutputReport` from one set's traced result, with its consistency verdict
+    (`bench.bench_consistency`)."""
     active = np.flatnonzero(r["active"])
     act = [names[i] for i in active]
     is_pneu = bench._masks(act)[1]
@@ -543,8 +572,18 @@ def _report(output, degrees, names, r, excused, threshold, crit, gamma):
             if n not in act:
                 removed.pop(n, None)
                 not_ident[n] = why
+    white = np.asarray(r["whitened"])
+    n_par = int(np.sum(bench._masks(act)[1])) + 1
+    consistency = bench.bench_consistency(white, n_par, None, "FY", output,
+                                          noise_dof=noise_dof)
+    held = tuple(n for n in fixed if n not in removed and n not in not_ident)
     return bench.OutputReport(output, None, reduced, model, float(r["compliance"]),
                               float(r["compliance_sigma"]), float(r["sigma_step2"]),
                               float(r["noise_sigma"]), removed, not_ident,
                               np.asarray(r["fydot_hat"]) if output == "Fy" else None,
-                              list(excused))
+                              list(excused), candidates=tuple(names), held_names=held,
+                              consistency=consistency,
+                              residual=np.asarray(r["residual"]).reshape(white.shape),
+                              whitened=white, crit=crit,
+                              threshold=None if not np.isfinite(threshold or np.inf)
+                              else threshold)
