@@ -69,9 +69,9 @@ import scipy.stats
 from ..errors import InputError
 from ..lsq import core
 from . import bench
-from .poly import STRUCTURES, PolynomialModel, regressor_model
+from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model
 
-__all__ = ["identify_many", "CampaignResult", "search_program"]
+__all__ = ["identify_many", "CampaignResult", "search_program", "BenchScenario"]
 
 
 @dataclasses.dataclass
@@ -186,6 +186,10 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         return found & ok, jnp.where(ok, after, first)
 
     g0 = gram.gain(zeros)
+    # the model of every column the data can estimate, before any removal (`bench`'s `full`)
+    active0 = select(jnp.asarray(fixed0))
+    full_x, full_sigma, *_ = least_squares(active0, jnp.zeros((p, p), dtype), g0,
+                                           jnp.asarray(False))
     state0 = dict(fixed=jnp.asarray(fixed0), go=jnp.asarray(True), steps=jnp.asarray(0),
                   phase=jnp.asarray(0),
                   S=jnp.zeros((p, p), dtype), g_ref=g0, have_S=jnp.asarray(False),
@@ -257,7 +261,8 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     out.update(final_x=res["x"], final_sigma=res["sigma"], compliance=res["compliance"],
                compliance_sigma=res["compliance_sigma"], sigma_step2=res["sigma_step2"],
                noise_sigma=res["noise_sigma"], fydot_hat=res["fydot_hat"],
-               residual=res["residual"], whitened=res["whitened"])
+               residual=res["residual"], whitened=res["whitened"], full_x=full_x,
+               full_sigma=full_sigma, full_active=active0)
     return out
 
 
@@ -585,5 +590,149 @@ def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_do
                               consistency=consistency,
                               residual=np.asarray(r["residual"]).reshape(white.shape),
                               whitened=white, crit=crit,
+                              full={names[i]: (float(r["full_x"][i]), float(r["full_sigma"][i]))
+                                    for i in np.flatnonzero(r["full_active"])},
                               threshold=None if not np.isfinite(threshold or np.inf)
                               else threshold)
+
+
+# --------------------------------------------------------------------------------------------
+# Rehearsal of a bench campaign (the user's experiment, random truths)
+
+
+@dataclasses.dataclass
+class BenchScenario:
+    """A rehearsal scenario of the bench identification (`diffsusp.identify.rehearse`'s
+    contract; spec: tyre §3.3–3.5, §4.3): random tyres around the user's start model, the
+    user's bench programme simulated through the state-space model (3-82…3-87,
+    `bench.synthetic_flat_trac`), the bench's noise added, and the F_y identification run
+    batched (`identify_many`: structure search, two-step K_y), one report per tyre.
+
+    **Fields:** `fy`, `mz` the start polynomial models (`poly.PolynomialModel`, F_pneu; M_z
+    only to simulate M_z), `k_fy`, `k_mz` [N/m] the start lateral stiffnesses; `segments`
+    (`bench.Segments`: the programme), `duration` [s] per segment, `rate` [Hz]; the noise:
+    `noise` channel → (a, b) with σ = a + b·|channel| (table units: N, N·mm; FX, FZ plain σ in
+    N), `outliers` the fraction of F_y samples hit by a spike of ± `outlier_size` σ; the
+    spread of the truths: every non-zero F_pneu coefficient × U(1 − `spread`, 1 + `spread`)
+    (default ±20 %), K_y × log-uniform in `k_range` (default 0.5–2); a draw whose F_y is past
+    its grip peak somewhere on the programme (∂Fy_pneu/∂δ′ ≥ 0: the simulation model is
+    unstable) is drawn again; `degrees` the structure searched (default Table 10's),
+    `significance`, `sigma_pct_threshold` as `identify_many`; `optimize` its compile option.
+
+    `names`: every candidate coefficient of the searched F_y model (those absent from the
+    truth are 0; the relaxation terms b_Fy_Ly_(i−1)_j = b_Fy_delta_i_j/K_y, (3-62)) and
+    `K_Fy_y` [N/mm], as the reports name them."""
+
+    fy: PolynomialModel
+    mz: PolynomialModel
+    k_fy: float
+    k_mz: float
+    segments: object
+    duration: float = 1.0
+    rate: float = 200.0
+    noise: dict = dataclasses.field(default_factory=lambda: {
+        "FY": (6.0, 0.0), "MZ": (600.0, 0.0), "FX": 3.0, "FZ": 3.0})
+    outliers: float = 0.0
+    outlier_size: float = 20.0
+    spread: float = 0.2
+    k_range: tuple = (0.5, 2.0)
+    degrees: dict | None = None
+    significance: float = 1e-3
+    sigma_pct_threshold: float | None = 10.0
+    optimize: bool = False
+
+    method = "bench"
+
+    def __post_init__(self):
+        if self.degrees is None:
+            self.degrees = dict(STRUCTURES["just-necessary"]["Fy"])
+        if not 0 < self.spread < 1:
+            raise InputError(f"spread {self.spread:g}: a relative spread in (0, 1)")
+        lo, hi = self.k_range
+        if not 0 < lo <= hi:
+            raise InputError(f"k_range {self.k_range}: 0 < low <= high")
+        unknown = [n for n, v in self.fy.values().items() if v and n not in self._lip.names]
+        if unknown:
+            raise InputError(f"the start model has terms {unknown} outside the searched "
+                             f"degrees {self.degrees}; widen the degrees")
+
+    @property
+    def _lip(self):
+        return regressor_model("Fy", self.degrees, ly=True)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self._lip.names + ("K_Fy_y",)
+
+    def _inputs(self):
+        from .bench_synthetic import segment_inputs
+
+        t = jnp.arange(int(round(self.duration * self.rate))) / self.rate
+        u = jax.vmap(lambda s: jax.vmap(lambda tt: segment_inputs(s, tt))(t))(self.segments)
+        return {k: np.asarray(v).ravel() for k, v in u.items()}
+
+    def _model(self, row):
+        values = {n: float(v) for n, v in zip(self.names, row, strict=True)
+                  if n.startswith("b_Fy_") and "_Ly_" not in n and v != 0}
+        return PolynomialModel.create("Fy", self.degrees, values=values)
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """(n, p) random truths (see the class docstring), in the reports' units."""
+        from . import relaxation
+
+        if n < 1:
+            raise InputError(f"n = {n}: at least one truth")
+        start = {k: v for k, v in self.fy.values().items() if v}
+        u = self._inputs()
+        lo, hi = np.log(self.k_range[0]), np.log(self.k_range[1])
+        out = []
+        tries = 0
+        while len(out) < n:
+            tries += 1
+            if tries > 50 * n:
+                raise InputError("the spread puts nearly every draw past the grip peak on "
+                                 "this programme; lower the spread or the slip amplitudes")
+            coef = {k: v * rng.uniform(1 - self.spread, 1 + self.spread)
+                    for k, v in start.items()}
+            k = self.k_fy * float(np.exp(rng.uniform(lo, hi)))
+            row = np.zeros(len(self.names))
+            for name, v in coef.items():
+                row[self.names.index(name)] = v
+                _, block, i, j = parse_name(name)
+                if block == "delta" and i > 1:
+                    row[self.names.index(f"b_Fy_Ly_{i - 1}_{j}")] = v / k
+                elif block == "delta" and i == 1:
+                    row[self.names.index(f"b_Fy_Ly_0_{j}")] = v / k
+            row[-1] = k * 1e-3
+            if np.max(np.asarray(relaxation.stability_margin(self._model(row), u))) < 0:
+                out.append(row)
+        return np.array(out)
+
+    def simulate(self, truth, rng: np.random.Generator) -> dict:
+        """The bench table of one truth (`bench.synthetic_flat_trac`, noise-free), with the
+        scenario's noise and outliers."""
+        from .bench_synthetic import synthetic_flat_trac
+
+        table = synthetic_flat_trac(
+            self._model(truth), self.mz, k_fy=float(truth[-1]) * 1e3, k_mz=self.k_mz,
+            segments=self.segments, duration=self.duration, rate=self.rate,
+            noise={"FY": 0.0, "MZ": 0.0, "FX": 0.0, "FZ": 0.0})
+        for c in ("FY", "MZ", "FX", "FZ"):
+            spec = self.noise.get(c, 0.0)
+            a, b = spec if isinstance(spec, tuple | list) else (spec, 0.0)
+            sigma = a + b * np.abs(table[c])
+            table[c] = table[c] + sigma * rng.standard_normal(table[c].shape)
+            if c == "FY" and self.outliers > 0:
+                hit = rng.random(table[c].shape) < self.outliers
+                table[c] = table[c] + hit * rng.choice([-1.0, 1.0], table[c].shape) \
+                    * self.outlier_size * sigma
+        return table
+
+    def identify(self, truths, rng: np.random.Generator) -> list:
+        """One `bench.OutputReport` of F_y per truth: the tables simulated, then
+        `identify_many` on all of them (one compiled program)."""
+        tables = [self.simulate(t, rng) for t in np.atleast_2d(truths)]
+        res = identify_many(tables, degrees=self.degrees, significance=self.significance,
+                            sigma_pct_threshold=self.sigma_pct_threshold,
+                            optimize=self.optimize)
+        return res.reports
