@@ -6,7 +6,9 @@ DATA (.csv/.parquet) has the columns of `diffsusp.tyre.bench.REQUIRED`: `t` [s],
 (a unit in the header, e.g. `speed [km/h]`, `MZ [N·m]`, `steer [deg]`, is converted).
 `--structure apriori|just-necessary` (Tables 5 / 10), the structure search's F-test level
 `--significance` and σ % threshold `--sigma-pct` (`bench.identify`); the report goes to the
-terminal (and `--report` .json), the identified polynomial models to `--out` (.json),
+terminal and to `--report` (.json, .csv, .html: one report object, `bench.BenchReport`, per
+parameter value, σ, σ %, status and reason, the consistency verdict; `--hold NAME` holds a
+coefficient at 0), the identified polynomial models to `--out` (.json),
 measured-vs-model figures to `--figures`; `--to-mf FILE.json` converts the polynomials to
 the Magic Formula 1989 set (§3.8, conversion radius `--radius`). Exit codes: 2 bad input
 (missing channels, non-monotonic time, a rate too low for the filter, an unknown structure),
@@ -59,6 +61,59 @@ def _columns(table) -> dict:
     return out
 
 
+# --------------------------------------------------------------------------------------------
+# One report, three renderings (table, CSV, JSON): every one reads `bench.report_rows`
+
+
+def write_reports(path: Path, reports, labels=None, extra: dict | None = None) -> None:
+    """Write one or more reports by the suffix of `path`: .csv (`report_rows`, one line per
+    parameter, a `report` column when several), .json (each report's `summary()` with the
+    status and reason per parameter; `extra` merged at the top), .html (the shared report's
+    writer, where the base provides one)."""
+    import csv
+
+    from diffsusp.tyre.bench import report_rows
+
+    labels = list(labels) if labels is not None else [None] * len(reports)
+    if path.suffix == ".csv":
+        rows = [r for rep, lab in zip(reports, labels, strict=True)
+                for r in report_rows(rep, lab if len(reports) > 1 else None)]
+        with path.open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    elif path.suffix == ".json":
+        out = []
+        for rep, lab in zip(reports, labels, strict=True):
+            summ = rep.summary()
+            summ["parameters"] = report_rows(rep)
+            if lab is not None:
+                summ["report"] = lab
+            out.append(summ)
+        doc = out[0] if len(out) == 1 and labels[0] is None else {"reports": out}
+        doc.update(extra or {})
+        path.write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
+    elif path.suffix == ".html":
+        from diffsusp.identify import report as base
+
+        if not hasattr(base, "write_report") or len(reports) != 1:
+            raise fail(f"{path}: HTML needs the shared report writer (one report); write "
+                       ".csv or .json", EXIT_BAD_INPUT)
+        base.write_report(reports[0], path)
+    else:
+        raise fail(f"{path}: the report is written as .csv, .json or .html", EXIT_BAD_INPUT)
+
+
+def _json_default(v):
+    if isinstance(v, np.generic):
+        v = v.item()
+        return v if not isinstance(v, float) or np.isfinite(v) else None
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    raise TypeError(f"{type(v).__name__} is not JSON serialisable")
+
+
 # the library's structures (diffsusp.tyre.poly.STRUCTURES), a Typer choice (exit code 2)
 Structure = enum.StrEnum("Structure", {v: v for v in ("apriori", "just-necessary")})
 
@@ -80,13 +135,17 @@ def identify_command(
                             "the F-test keeps them).", min=0.0)] = 10.0,
     out: Annotated[Path | None, typer.Option(help="Write the polynomial models (.json).")]
     = None,
-    report: Annotated[Path | None, typer.Option(help="Write the report (.json).")] = None,
+    report: Annotated[Path | None, typer.Option(
+        help="Write the report: .json (everything), .csv (one line per parameter), .html.")]
+    = None,
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-model figures folder.")]
     = None,
     to_mf: Annotated[Path | None, typer.Option(
         "--to-mf", help="Convert to the Magic Formula 1989 set (.json).")] = None,
     radius: Annotated[float, typer.Option(help="Conversion radius for --to-mf [m].")] = 0.33,
     rolling_radius: Annotated[float, typer.Option(help="Rolling radius R_r [mm].")] = 294.0,
+    hold: Annotated[list[str] | None, typer.Option(
+        "--hold", help="Hold a coefficient at 0 (repeatable), e.g. b_Fy_one_1_0.")] = None,
     cutoff: Annotated[float, typer.Option(help="Low-pass cut-off [Hz].")] = 25.0,
     allow_unstable: Annotated[bool, typer.Option(help="Report an unstable model, exit 0.")]
     = False,
@@ -94,7 +153,7 @@ def identify_command(
     """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
     structure = Structure(structure).value
     for path, suffixes, what in ((out, (".json",), "polynomial models"),
-                                 (report, (".json",), "report"),
+                                 (report, (".json", ".csv", ".html"), "report"),
                                  (to_mf, (".json",), "Magic Formula set")):
         check_output(path, suffixes=suffixes, what=what)
     check_output(figures, what="figures folder", directory=True)
@@ -107,10 +166,10 @@ def identify_command(
         table = _columns(read_table(data))
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
                              rolling_radius=rolling_radius, significance=significance,
-                             sigma_pct_threshold=sigma_pct)
+                             sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()))
         c.print(rep.table())
         if report is not None:
-            report.write_text(json.dumps(rep.to_dict(), indent=2) + "\n")
+            write_reports(report, [rep])
         if out is not None:
             out.write_text(json.dumps({o: {"degrees": dict(r.model.degrees),
                                            "coefficients": r.model.values(),

@@ -6,7 +6,8 @@ DATA is a .npz archive with the channels of `diffsusp.tyre.onboard.CHANNELS` (SI
 per grouping and camber choice, as the thesis's Tables 32/33 (value and σ % per coefficient);
 the Correvit delay is estimated and removed unless `--delay` gives it (`--delay 0` and
 `--no-estimate-delay` is the thesis's naive pipeline). `--json` machine-readable, `--figures
-DIR` measured vs model F_y. Exit code 2 for bad input (missing channels, non-finite values
+DIR` measured vs model F_y, `--report FILE.csv|.json` the reports (per parameter value, σ, σ %,
+status and reason, each fit's consistency verdict), the same objects the table prints. Exit code 2 for bad input (missing channels, non-finite values
 outside the lasers, a window longer than the record).
 """
 
@@ -45,11 +46,15 @@ def register(tyre_app: typer.Typer) -> None:
         json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
         figures: Annotated[Path | None, typer.Option(
             help="Folder for measured-vs-model figures.")] = None,
+        report: Annotated[Path | None, typer.Option(
+            help="Write the reports: .json or .csv (one line per parameter and report).")]
+        = None,
     ):
         """Identify the reduced lateral tyre model (4-16…4-18) from on-board measurements."""
         from diffsusp.tyre import onboard
 
         check_output(figures, what="figures folder", directory=True)
+        check_output(report, suffixes=(".json", ".csv"), what="report")
         with cli_errors():
             enable_x64()
             record = _load(data)
@@ -58,11 +63,19 @@ def register(tyre_app: typer.Typer) -> None:
                                    delay=delay, estimate_delay=estimate_delay,
                                    options=onboard.Options(window=window,
                                                            window_time=window_time))
+        from diffsusp.tyre.bench import format_report, report_rows
+
+        from .tyre_identify import write_reports
+
+        labels = [f"{r.grouping}{'' if r.camber else ', gamma = 0'}" for r in out["reports"]]
         if figures is not None:
             _figures(out, figures)
+        if report is not None:
+            write_reports(report, out["reports"], labels, extra={"delay_s": out["delay"]})
         if json_out:
             print_json({"delay_s": out["delay"],
-                        "reports": [r.to_dict() for r in out["reports"]]})
+                        "reports": [r.to_dict() | {"parameters": report_rows(r)}
+                                    for r in out["reports"]]})
             return
         con = console(markup=False)
         con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} ms; "
@@ -74,9 +87,12 @@ def register(tyre_app: typer.Typer) -> None:
         for i, name in enumerate(onboard.NAMES):
             cells = []
             for r in out["reports"]:
-                x, s = r.fit.x[i], r.fit.sigma_pct[i]
+                x, s = r.estimates[i], r.sigma_pct[i]
                 cells.append(("0" if x == 0 else f"{x:.5g} ({s:.2g}%)").rjust(max(width, 22)))
             con.print(name.ljust(14) + "".join(cells))
+        for r, label in zip(out["reports"], labels, strict=True):
+            con.print("")
+            con.print(format_report(r, label=f"== {label}"))
 
 
 def _figures(out, folder: Path) -> None:

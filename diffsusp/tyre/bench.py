@@ -107,7 +107,8 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
            "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT",
-           "stability", "camber_levels"]
+           "stability", "camber_levels", "report_rows", "format_report", "statuses",
+           "coefficient_unit", "bench_consistency", "noise_model", "noise_band", "noise_dof"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -301,6 +302,7 @@ class OutputReport(IdentificationReport):
     crit: float = 10.83
     threshold: float | None = 10.0
     full: dict | None = None
+    unexcited: dict | None = None
 
     family = "bench"
 
@@ -324,6 +326,12 @@ class OutputReport(IdentificationReport):
         order = [n for n in order if not (n in seen or seen.add(n))]
         rows = []
         for n in order:
+            block = parse_name(n)[1] if n.startswith("b_") else ""
+            if block in (self.unexcited or {}) and n not in self.held_names:
+                rows.append((n, 0.0 if n not in kept else float(kept[n][0]), np.inf, False,
+                             False, f"not excited by the data: {block} has a standard "
+                                    f"deviation of {self.unexcited[block]:.2g} on them"))
+                continue
             if n in kept:
                 x, sg = (float(v) for v in kept[n])
                 with np.errstate(divide="ignore", invalid="ignore"):
@@ -358,6 +366,9 @@ class OutputReport(IdentificationReport):
                              _reason_of_removal(self.removed[n])))
             elif n in self.not_identifiable:
                 why = self.not_identifiable[n]
+                if why.startswith("not identifiable: in "):
+                    why = ("not identifiable: a combination of other columns on these data "
+                           "(an alias; the combinations the data determine are listed)")
                 unseen = ("no effect on the data" in why or "0° throughout" in why
                           or "not excited" in why)
                 if "not separable" in why:
@@ -563,21 +574,31 @@ class BenchReport(IdentificationReport):
                                    consistent=True)
 
     def table(self) -> str:
+        """The report as text: the structure and rows, per output K_y and the number of terms
+        the search removed, the parameter table (`format_report`: value, σ, σ %, unit,
+        status, the reasons below), the consistency verdict, notes and flags."""
         lines = [f"bench identification ({self.structure} structure): {self.n_rows} rows at "
                  f"{self.rate:.4g} Hz after conditioning"]
         for out, r in self.outputs.items():
             lines.append(f"== {out}: K_y = {r.stiffness:.6g} N/m (sigma {r.stiffness_sigma_pct:.3g}"
-                         f" %); compliance {r.compliance:.4g} m/N")
-            for n, x, s in zip(r.reduced.names, r.reduced.x, r.reduced.sigma_pct, strict=True):
-                lines.append(f"  {n:<20} {x:>13.6g}  ({s:.3g} %)")
-            if r.removed:
-                lines.append(f"  removed by the structure search: {len(r.removed)} terms")
+                         f" %); compliance {r.compliance:.4g} m/N; "
+                         f"{len(r.removed)} terms removed by the structure search; "
+                         + ("not checked" if r.consistency is None else r.consistency.verdict))
+        lines.append(format_report(self))
         lines += [f"note: {n}" for n in self.notes]
         lines += [f"FLAG: {f}" for f in self.flags]
         return "\n".join(lines)
 
     def __str__(self):
         return self.table()
+
+    def summary(self) -> dict:
+        """The shared report's summary (parameters with their status, consistency) and the
+        bench identification's own fields (`to_dict`: structure, flags, notes, per output
+        K_y, the removal log, what is not identifiable)."""
+        out = super().summary()
+        out.update(self.to_dict())
+        return out
 
     def to_dict(self) -> dict:
         return {"structure": self.structure, "stable": self.stable, "flags": self.flags,
@@ -589,6 +610,75 @@ class BenchReport(IdentificationReport):
                                     r.reduced.names, r.reduced.sigma_pct, strict=True)},
                                 "removed": r.removed, "not_identifiable": r.not_identifiable}
                             for o, r in self.outputs.items()}}
+
+
+# --------------------------------------------------------------------------------------------
+# Rendering a shared report (the table; the CLI writes CSV/JSON from the same rows)
+
+
+def statuses(rep) -> tuple[str, ...]:
+    """Per parameter one of "identified", "not determined", "held", "not seen" — the shared
+    report's `statuses` where the base provides it, else by its definitions: held at its start
+    value; not seen (σ inf: the data carry no information on it); identified (determined and
+    the fit consistent, `is_identified`); else not determined."""
+    if hasattr(rep, "statuses"):
+        return tuple(rep.statuses)
+    ident = np.asarray(rep.is_identified, bool)
+    held = np.asarray(getattr(rep, "held", np.zeros(len(rep.names), bool)), bool)
+    sig = np.asarray(rep.sigmas, float)
+    out = []
+    for i in range(len(rep.names)):
+        out.append("held" if held[i] else "identified" if ident[i] else
+                   "not seen" if np.isinf(sig[i]) else "not determined")
+    return tuple(out)
+
+
+def report_rows(rep, label: str | None = None) -> list[dict]:
+    """The report's `rows()` with its status and reason per parameter (and `label`, the report
+    a row comes from, when several are written together)."""
+    reasons = tuple(getattr(rep, "reasons", ("",) * len(rep.names)))
+    rows = []
+    for row, st, why in zip(rep.rows(), statuses(rep), reasons, strict=True):
+        row = dict(row)
+        row["status"], row["reason"] = st, why
+        if label is not None:
+            row = {"report": label, **row}
+        rows.append(row)
+    return rows
+
+
+def _cell(v, fmt):
+    return "—" if v is None else format(v, fmt)
+
+
+def format_report(rep, label: str = "", width: int = 110) -> str:
+    """The report as a table: parameter, estimate, σ, σ %, unit and a short status column;
+    the reasons numbered below the table (a wide column would wrap), then the consistency
+    verdict."""
+    rows = report_rows(rep)
+    name_w = max([9] + [len(r["parameter"]) for r in rows])
+    unit_w = max([4] + [len(r["unit"]) for r in rows])
+    head = (f"{'parameter':<{name_w}}  {'estimate':>13}  {'sigma':>10}  {'sigma%':>8}  "
+            f"{'unit':<{unit_w}}  status")
+    lines = [label] if label else []
+    lines += [head, "-" * min(len(head) + 10, width)]
+    notes = []
+    for r in rows:
+        mark = ""
+        if r["reason"]:
+            notes.append(r["reason"])
+            mark = f" [{len(notes)}]"
+        lines.append(f"{r['parameter']:<{name_w}}  {_cell(r['estimate'], '13.6g')}  "
+                     f"{_cell(r['sigma'], '10.3g')}  {_cell(r['sigma_pct'], '8.3g')}  "
+                     f"{r['unit']:<{unit_w}}  {r['status']}{mark}")
+    import textwrap
+
+    for k, n in enumerate(notes, 1):
+        lines += textwrap.wrap(f"[{k}] {n}", width=width, subsequent_indent="    ")
+    con = rep.consistency
+    lines.append("consistency: " + ("not checked" if con is None else con.verdict))
+    return "\n".join(lines)
+
 
 
 def _relax(xp, P, G, omega, dt):
@@ -1021,7 +1111,19 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                         res["fydot_hat"] if output == "Fy" else None, excused, extra,
                         candidates=tuple(names), held_names=held, consistency=consistency,
                         residual=residual, whitened=white,
-                        crit=_crit(significance), threshold=sigma_pct_threshold, full=full)
+                        crit=_crit(significance), threshold=sigma_pct_threshold, full=full,
+                        unexcited=unexcited_inputs(cond))
+
+
+UNEXCITED = 1e-7
+"""An input whose standard deviation over the conditioned rows is below this (its units: m,
+rad) is not excited: the coefficients of its block are not seen by the data."""
+
+
+def unexcited_inputs(cond: "Conditioned") -> dict:
+    """input block → its standard deviation, for the deformation inputs the data do not excite
+    (free rolling: κ′; no camber: γ and its products)."""
+    return {k: v for k, v in cond.excitation.items() if k != "fz" and v < UNEXCITED}
 
 
 def _crit(significance: float) -> float:
@@ -1342,11 +1444,12 @@ class _NoiseGram:
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,
              rolling_radius: float = 294.0, decimate: int | None = None, search: bool = True,
              outputs=("Fy", "Mz"), sigma_pct_threshold: float | None = 10.0,
-             significance: float = 1e-3, ic_threshold: float = 0.0) -> BenchReport:
+             significance: float = 1e-3, ic_threshold: float = 0.0, fixed=()) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else the whole structure estimated as it
-    is, `identify_output`). Bad input raises `InputError`; an identified model that is
+    is, `identify_output`); `fixed`: coefficients held at 0 (names of either output). Bad
+    input raises `InputError`; an identified model that is
     unstable on the data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and
     `report.stable`."""
     if structure not in STRUCTURES:
@@ -1354,6 +1457,13 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     unknown = [o for o in outputs if o not in ("Fy", "Mz")]
     if unknown:
         raise InputError(f"outputs {unknown}: Fy and/or Mz")
+    fixed = tuple(fixed or ())
+    known = {n for o in outputs for n in regressor_model(o, STRUCTURES[structure][o], ly=True,
+                                                        p2=(o == "Mz")).names}
+    unknown = sorted(set(fixed) - known)
+    if unknown:
+        raise InputError(f"fixed: {unknown} are not coefficients of the {structure} models of "
+                         f"{', '.join(outputs)}")
     cond = condition(table, cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate)
     r_m = rolling_radius * 1e-3
     reports = {}
@@ -1361,7 +1471,9 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
         reports[o] = identify_output(cond, o, STRUCTURES[structure][o], search=search,
                                      rolling_radius=r_m, sigma_pct_threshold=sigma_pct_threshold,
                                      significance=significance, ic_threshold=ic_threshold,
-                                     fy_report=reports.get("Fy"))
+                                     fy_report=reports.get("Fy"),
+                                     fixed=[n for n in fixed if n.startswith(f"b_{o}_")]
+                                     or None)
     notes, flags = [], []
     exc = cond.excitation
     if exc["kappa"] < 1e-6:

@@ -66,7 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.stats
 
-from ..errors import InputError
+from ..errors import InputError, ModelError
 from ..lsq import core
 from . import bench
 from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model
@@ -495,6 +495,16 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         return data[i].inputs["gamma"] if conditioned else cols["camber"][i][:, rows].ravel()
 
     options = {"final_pass": final_pass is not None}
+    Dm_host = None if conditioned else bench.difference_matrix(m, dt)
+
+    def unexcited_of(i):  # the inputs the set does not excite (not seen)
+        if conditioned:
+            return bench.unexcited_inputs(data[i])
+        samples = bench._kinematics({c: cols[c][i] for c in cols}, Dm_host, r_m)
+        exc = {k: float(np.std(np.asarray(samples[k])[:, rows]))
+               for k in ("kappa", "delta", "phi", "gamma", "pi_gamma_vx", "pi_gamma_bdot",
+                         "pi_gamma2_bdot")}
+        return {k: v for k, v in exc.items() if v < bench.UNEXCITED}
 
     def dof_of(i):  # the degrees of freedom of the noise level (the consistency's F law)
         if conditioned:
@@ -529,7 +539,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
                     break
         if why is None:
             reports.append(_report("Fy", degrees, names, r, excused, sigma_pct_threshold,
-                                   crit, gamma_of(i), dof_of(i), fixed))
+                                   crit, gamma_of(i), dof_of(i), fixed, unexcited_of(i)))
         else:
             exact[i] = why
             reports.append(bench.identify_output(
@@ -549,7 +559,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
 
 
 def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_dof=None,
-            fixed=()):
+            fixed=(), unexcited=None):
     """A `bench.OutputReport` from one set's traced result, with its consistency verdict
     (`bench.bench_consistency`)."""
     active = np.flatnonzero(r["active"])
@@ -593,7 +603,7 @@ def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_do
                               full={names[i]: (float(r["full_x"][i]), float(r["full_sigma"][i]))
                                     for i in np.flatnonzero(r["full_active"])},
                               threshold=None if not np.isfinite(threshold or np.inf)
-                              else threshold)
+                              else threshold, unexcited=unexcited)
 
 
 # --------------------------------------------------------------------------------------------
@@ -704,19 +714,37 @@ class BenchScenario:
                 elif block == "delta" and i == 1:
                     row[self.names.index(f"b_Fy_Ly_0_{j}")] = v / k
             row[-1] = k * 1e-3
-            if np.max(np.asarray(relaxation.stability_margin(self._model(row), u))) < 0:
+            if np.max(np.asarray(relaxation.stability_margin(self._model(row), u))) >= 0:
+                continue
+            clean = self._clean(row)
+            if all(np.all(np.isfinite(v)) for v in clean.values()):
                 out.append(row)
         return np.array(out)
+
+    def _clean(self, truth) -> dict:
+        """The noise-free bench table of one truth (kept: `draw` checks it is finite, every
+        simulated state within the model's range; `identify` adds the noise)."""
+        from .bench_synthetic import synthetic_flat_trac
+
+        key = np.asarray(truth, float).tobytes()
+        cache = self.__dict__.setdefault("_tables", {})
+        if key not in cache:
+            try:
+                cache[key] = synthetic_flat_trac(
+                    self._model(truth), self.mz, k_fy=float(truth[-1]) * 1e3, k_mz=self.k_mz,
+                    segments=self.segments, duration=self.duration, rate=self.rate,
+                    noise={"FY": 0.0, "MZ": 0.0, "FX": 0.0, "FZ": 0.0})
+            except ModelError:
+                cache[key] = {"FY": np.array([np.nan])}
+        return cache[key]
 
     def simulate(self, truth, rng: np.random.Generator) -> dict:
         """The bench table of one truth (`bench.synthetic_flat_trac`, noise-free), with the
         scenario's noise and outliers."""
-        from .bench_synthetic import synthetic_flat_trac
-
-        table = synthetic_flat_trac(
-            self._model(truth), self.mz, k_fy=float(truth[-1]) * 1e3, k_mz=self.k_mz,
-            segments=self.segments, duration=self.duration, rate=self.rate,
-            noise={"FY": 0.0, "MZ": 0.0, "FX": 0.0, "FZ": 0.0})
+        table = dict(self._clean(truth))
+        if not all(np.all(np.isfinite(v)) for v in table.values()):
+            raise InputError("this truth's simulation leaves the model's range (non-finite "
+                             "forces); draw the truths with `draw`")
         for c in ("FY", "MZ", "FX", "FZ"):
             spec = self.noise.get(c, 0.0)
             a, b = spec if isinstance(spec, tuple | list) else (spec, 0.0)
@@ -732,6 +760,7 @@ class BenchScenario:
         """One `bench.OutputReport` of F_y per truth: the tables simulated, then
         `identify_many` on all of them (one compiled program)."""
         tables = [self.simulate(t, rng) for t in np.atleast_2d(truths)]
+        self.__dict__["_tables"] = {}  # the noise-free tables are not needed any more
         res = identify_many(tables, degrees=self.degrees, significance=self.significance,
                             sigma_pct_threshold=self.sigma_pct_threshold,
                             optimize=self.optimize)

@@ -56,6 +56,13 @@ import numpy as np
 
 from .. import lsq
 from ..errors import InputError
+from ..identify.report import (
+    CONSISTENCY_ALPHA,
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    consistency_from_residuals,
+)
 from . import contact
 from .vehicle import WHEELS, add_noise, rot_z
 
@@ -557,30 +564,148 @@ def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=()) -> lsq.Fit:
         residual_norm=float(np.linalg.norm(r)), residual_sigma=res_sigma)
 
 
+SIGNIFICANCE = 1e-3
+"""A coefficient is determined when |x|/σ ≥ √χ²₁(1 − SIGNIFICANCE) (3.29: σ % ≤ 30 %), the
+bench identification's F-test level."""
+
+_UNITS = {"b_delta_2": "N/(m·kN^2)", "b_delta_1": "N/(m·kN)", "b_delta_0": "N/m",
+          "b_phi_1": "N/(rad·kN)", "b_gamma_1": "N/(rad·kN)", "b_L_2": "1/kN^2",
+          "b_L_1": "1/kN", "b_L_0": "1", "b_offset_1": "N"}
+
+
+def consistency(fit: lsq.Fit, n_wheels: int, wheels=None,
+                alpha: float = CONSISTENCY_ALPHA) -> Consistency:
+    """Does the reduced model (4-16…4-18) reproduce the record? (spec tyre §5.5). The two
+    half-rate records (`halves`) see the same motion 1 ms apart with independent sensor noise,
+    so with r_e, r_o the structural residuals y − W·x of the even and odd rows, (r_e − r_o)/√2
+    is noise only and (r_e + r_o)/√2 is noise plus twice any misfit of the model. χ² =
+    Σ(r_e + r_o)²/(2σ̂²) with σ̂² = Σ(r_e − r_o)²/(2N), against Fisher's F(N − p, N) law (the
+    noise level is itself estimated from N rows): a model that leaves a misfit (a wrong
+    relaxation law, an unremoved Correvit delay) is inconsistent, whatever the noise level.
+    Cases: the wheels of the grouping."""
+    import scipy.stats
+
+    r = np.asarray(fit.residuals, float)
+    half = r.size // 2
+    r_e, r_o = r[:half], r[half:]
+    noise_var = float(np.sum((r_e - r_o) ** 2) / (2 * half))
+    white = ((r_e + r_o) / np.sqrt(2.0 * max(noise_var, 1e-300))).reshape(-1, n_wheels).T
+    p = int(np.sum(np.isfinite(fit.sigma) & ~fit.fixed))
+    names = tuple(f"wheel {w}" for w in (wheels if wheels is not None else range(n_wheels)))
+    con = consistency_from_residuals(
+        [white], [white.size], p, names, measurements=("F_y",), alpha=alpha,
+        note="the even/odd half-records' residuals: their sum against their difference "
+             "(noise only), F law")
+    critical = con.dof * float(scipy.stats.f.isf(alpha, con.dof, half))
+    return dataclasses.replace(con, critical=critical,
+                               consistent=bool(np.isfinite(con.chi2) and con.chi2 <= critical))
+
+
 @dataclasses.dataclass(frozen=True)
-class Report:
+class Report(IdentificationReport):
     """One grouping's identification (Tables 32/33 layout): the `lsq.Fit`, the grouping, whether
     camber was in the model, the Correvit delay removed (s), the regression rows used and the
-    regression instants excluded (fewer than 3 lasers in a window; the last `delay` s plus a
-    window, where the Correvit's shifted copy has no value)."""
+    regression instants excluded (`n_rows`, `excluded`: fewer than 3 lasers in a window; the
+    last `delay` s plus a window, where the Correvit's shifted copy has no value), and its
+    `consistency`.
+
+    As the shared report (`IdentificationReport`): the coefficients (SI, F_z in kN), σ from
+    the clustered IV sandwich, a coefficient determined when the data identify it (`lsq`) and
+    |x|/σ ≥ 3.29 (`SIGNIFICANCE`), b_gamma_1 held at 0 when camber is left out."""
 
     grouping: str
     camber: bool
     delay: float
     fit: lsq.Fit
-    rows: int
+    n_rows: int
     excluded: int
+    consistency: Consistency | None = None
+
+    family = "onboard"
+
+    @property
+    def names(self):
+        return tuple(self.fit.names)
+
+    @property
+    def estimates(self):
+        return np.asarray(self.fit.x, float)
+
+    @property
+    def sigmas(self):
+        return np.where(self.held, np.nan, np.asarray(self.fit.sigma, float))
+
+    @property
+    def sigma_pct(self):
+        x, s = self.estimates, self.sigmas
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(x != 0, 100.0 * s / np.abs(x), np.nan)
+
+    @property
+    def estimate_units(self):
+        return tuple(_UNITS.get(n, "") for n in self.names)
+
+    @property
+    def held(self):
+        return np.asarray(self.fit.fixed, bool)
+
+    def _crit(self):
+        import scipy.stats
+
+        return float(scipy.stats.chi2.isf(SIGNIFICANCE, 1))
+
+    @property
+    def identifiable(self):
+        x, s = self.estimates, self.sigmas
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sig = np.isfinite(s) & (s > 0) & ((x / s) ** 2 >= self._crit())
+        return np.asarray(self.fit.identifiable, bool) & ~self.held & sig
+
+    @property
+    def reasons(self):
+        out = []
+        ident = np.asarray(self.fit.identifiable, bool)
+        for i, n in enumerate(self.names):
+            if self.held[i]:
+                out.append("held at 0: camber left out of the model" if n == "b_gamma_1"
+                           else "held at 0")
+            elif not ident[i]:
+                out.append("not determined: the data determine it only in a combination "
+                           "with others (see combinations)")
+            elif not self.identifiable[i]:
+                out.append(f"not determined: |x|/sigma {abs(self.estimates[i]) / self.sigmas[i]:.2g}"
+                           f" < {np.sqrt(self._crit()):.3g}")
+            else:
+                out.append("")
+        return tuple(out)
+
+    @property
+    def combinations(self):
+        return tuple(f"{t} = {v:.6g}" for t, v in zip(self.fit.relations,
+                                                      self.fit.relation_values, strict=True))
+
+    @property
+    def residuals(self):
+        if self.fit.residuals is None:
+            return {}
+        r = np.asarray(self.fit.residuals, float)
+        white = np.zeros_like(r)
+        if self.consistency is not None:
+            sd = np.std(r[: r.size // 2] - r[r.size // 2:]) / np.sqrt(2.0)
+            white = r / max(sd, 1e-300)
+        return {"F_y": MeasurementResiduals(r, white)}
 
     def table(self) -> str:
         head = (f"{self.grouping} wheels, camber {'in' if self.camber else 'out'}, Correvit "
-                f"delay removed {1000 * self.delay:.1f} ms, {self.rows} rows, "
+                f"delay removed {1000 * self.delay:.1f} ms, {self.n_rows} rows, "
                 f"{self.excluded} instants excluded (laser dropouts; the end of the record "
                 "where the delayed Correvit has no value)")
         return head + "\n" + self.fit.table()
 
     def to_dict(self) -> dict:
         return {"grouping": self.grouping, "camber": self.camber, "delay_s": self.delay,
-                "rows": self.rows, "excluded": self.excluded, "fit": self.fit.to_dict()}
+                "rows": self.n_rows, "excluded": self.excluded, "fit": self.fit.to_dict(),
+                "consistency": None if self.consistency is None else self.consistency.summary()}
 
     def plot(self, axes=None):
         """The F_y residuals of the fit, row by row (N). Returns the matplotlib Figure (made
@@ -659,7 +784,8 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
             fit = iv_fit(W_e[rows], y_e[rows], W_o[rows], y_o[rows], names=names(offset),
                          n_wheels=len(wheels), fixed=fixed)
             reports.append(Report(grouping, cam, delay, fit, 2 * int(rows.sum()),
-                                  int(np.sum(~ok))))
+                                  int(np.sum(~ok)),
+                                  consistency(fit, len(wheels), tuple(wheels.tolist()))))
     return {"delay": delay, "reports": reports, "excluded": int(np.sum(~ok))}
 
 
@@ -725,7 +851,8 @@ def _iv_program(sig, ok, wheels, camber, loads_kn):
             "quantities_sigma": jnp.sqrt(jnp.einsum("ij,jk,ik->i", C, cov, C))}
 
 
-__all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "Options", "Report",
+__all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "SIGNIFICANCE", "Options",
+           "Report", "consistency",
            "body_twist", "check", "correvit_delay", "ground_plane", "halves", "identify",
            "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
            "regressor", "shift_channel", "split_signals", "window_weights"]
