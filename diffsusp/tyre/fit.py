@@ -33,6 +33,7 @@ import dataclasses
 import json
 import math
 import warnings
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -42,11 +43,21 @@ import optimistix as optx
 
 from .. import lsq
 from ..errors import InputError, ModelWarning
-from . import mf6, mf89
+from ..identify.report import (
+    CONSISTENCY_ALPHA,
+    Consistency,
+    IdentificationReport,
+    MeasurementResiduals,
+    chi2_quantile,
+)
+from . import fit_start, mf6, mf89
+from .fit_start import noise_sigma
 
-__all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "read_bench",
-           "read_bench_table", "input_columns", "simulate", "fit", "fit_many", "GROUPS",
-           "POSITIVE", "CHANNELS", "COLUMN_ALIASES", "check_constraints", "plot_fit"]
+__all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "default_names",
+           "default_hold", "read_bench", "read_bench_table", "input_columns", "simulate",
+           "bench_programme", "with_ranges", "fit", "fit_many", "FitRehearsal", "GROUPS",
+           "POSITIVE", "SIGNED_LOG", "CAMBER", "MAX_SIGMA_PCT", "CHANNELS", "COLUMN_ALIASES",
+           "check_constraints", "plot_fit"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
 """Measured channels: forces [N], moments [N·mm] (library units)."""
@@ -56,7 +67,7 @@ GROUPS = {
     "pure_longitudinal": ("PCX1 PDX1 PDX2 PDX3 PEX1 PEX2 PEX3 PEX4 PKX1 PKX2 PKX3 PHX1 PHX2 "
                           "PVX1 PVX2").split(),
     "pure_lateral": ("PCY1 PDY1 PDY2 PDY3 PEY1 PEY2 PEY3 PEY4 PEY5 PKY1 PKY2 PKY3 PKY4 PKY5 "
-                     "PKY6 PKY7 PHY1 PHY2 PVY1 PVY2 PVY3 PVY4").split(),
+                     "PKY6 PKY7 PHY1 PHY2 PHY3 PVY1 PVY2 PVY3 PVY4").split(),
     "pure_aligning": ("QBZ1 QBZ2 QBZ3 QBZ4 QBZ5 QBZ9 QBZ10 QCZ1 QDZ1 QDZ2 QDZ3 QDZ4 QDZ6 QDZ7 "
                       "QDZ8 QDZ9 QDZ10 QDZ11 QEZ1 QEZ2 QEZ3 QEZ4 QEZ5 QHZ1 QHZ2 QHZ3 QHZ4").split(),
     "combined_longitudinal": "RBX1 RBX2 RBX3 RCX1 REX1 REX2 RHX1".split(),
@@ -321,17 +332,105 @@ def _predict(model, data: BenchData, combined: bool) -> jax.Array:
                          ) from None
 
 
+def _noise_pair(value) -> tuple[float, float]:
+    """(a, b) of σ = a + b·|F| from a float σ or an (a, b) pair."""
+    if isinstance(value, tuple | list | np.ndarray):
+        a, b = (float(v) for v in value)
+    else:
+        a, b = float(value), 0.0
+    if not (a >= 0 and b >= 0 and a + b > 0 and math.isfinite(a + b)):
+        raise InputError(f"noise {value!r}: σ = a + b·|F| needs a ≥ 0, b ≥ 0, not both 0")
+    return a, b
+
+
 def simulate(model, data: BenchData, *, noise: dict | None = None, seed: int = 0,
-             combined: bool = True) -> BenchData:
-    """The data's inputs with the model's outputs as measurements, plus Gaussian noise of σ
-    `noise[channel]` (channel units: N, N·mm). For tests, examples and benchmarks."""
+             combined: bool = True, outliers: float = 0.0) -> BenchData:
+    """The data's inputs with the model's outputs as measurements, plus Gaussian noise:
+    `noise[channel]` a σ or an (a, b) pair for σ = a + b·|F| (channel units: N, N·mm), and a
+    fraction `outliers` of gross spikes (30–60 σ of the point, either sign). For tests,
+    examples, benchmarks and rehearsals."""
     y = np.array(_predict(model, data, combined))
     rng = np.random.default_rng(seed)
     for k, c in enumerate(data.channels):
-        s = (noise or {}).get(c, 0.0)
+        if c not in (noise or {}):
+            continue
+        a, b = _noise_pair(noise[c])
+        s = a + b * np.abs(y[k])
         y[k] = y[k] + s * rng.standard_normal(y.shape[1])
+        if outliers > 0:
+            bad = rng.choice(y.shape[1], size=int(round(outliers * y.shape[1])), replace=False)
+            y[k, bad] += rng.choice([-1.0, 1.0], bad.size) * rng.uniform(30, 60, bad.size) * s[bad]
     return BenchData(data.fz, data.kappa, data.alpha, data.gamma, data.vx, data.pressure,
                      jnp.asarray(y), jnp.ones(y.shape, bool), data.channels)
+
+
+def bench_programme(model, *, loads=None, cambers=None, n_slip: int = 31,
+                    channels=("FX", "FY", "MZ"), kappa_range=(-0.3, 0.3)) -> BenchData:
+    """A steady-state bench programme over a property file's ranges (inputs only; fill the
+    measurements with `simulate`). Per load: lateral sweeps α ∈ [ALPMIN, ALPMAX] (κ = 0) at
+    each camber, and a longitudinal sweep κ within [KPUMIN, KPUMAX] ∩ `kappa_range` at γ = 0,
+    `n_slip` points each; every channel measured on every row. Defaults: four loads over
+    [FZMIN, FZMAX] (FNOMIN/2 … 1.5·FNOMIN when the file has no range), cambers 0, ±CAMMAX/2,
+    ±CAMMAX (±0.1 rad without a range). The files' ranges are those their fitters measured."""
+    lim = model.limit if isinstance(model, mf6.MagicFormula6) else {}
+    fnom = float(model["FNOMIN"]) if isinstance(model, mf6.MagicFormula6) else 4000.0
+
+    def rng(lo, hi, dlo, dhi):
+        lo = lim.get(lo, -math.inf)
+        hi = lim.get(hi, math.inf)
+        return (lo if math.isfinite(lo) else dlo), (hi if math.isfinite(hi) else dhi)
+
+    if loads is None:
+        lo, hi = rng("FZMIN", "FZMAX", 0.5 * fnom, 1.5 * fnom)
+        lo = lo if lo > 0 else 0.5 * fnom
+        loads = np.linspace(lo, hi, 4)
+    if cambers is None:
+        clo, chi = rng("CAMMIN", "CAMMAX", -0.1, 0.1)
+        cambers = sorted({0.0, clo, 0.5 * clo, 0.5 * chi, chi})
+    alo, ahi = rng("ALPMIN", "ALPMAX", -0.25, 0.25)
+    klo, khi = rng("KPUMIN", "KPUMAX", *kappa_range)
+    klo, khi = max(klo, kappa_range[0]), min(khi, kappa_range[1])
+    sa = np.linspace(alo, ahi, n_slip)
+    kp = np.linspace(klo, khi, n_slip)
+    rows = []
+    for fz in loads:
+        for g in cambers:
+            rows += [(fz, 0.0, a, g) for a in sa]
+        if "FX" in channels and khi > klo:
+            rows += [(fz, k, 0.0, 0.0) for k in kp]
+    r = np.array(rows, float).T
+    n = r.shape[1]
+    nan = np.full(n, np.nan)
+    return BenchData(*(jnp.asarray(v) for v in (r[0], r[1], r[2], r[3], nan, nan)),
+                     jnp.zeros((len(channels), n)), jnp.ones((len(channels), n), bool),
+                     tuple(channels))
+
+
+def with_ranges(model, data: BenchData):
+    """`model` with its validity ranges (FZMIN … CAMMAX) set to the data's (a fitted file is
+    valid where it was measured, and the fit must not saturate a measured input: MF-Tyre
+    raises F_z to FZMIN in M_z, clips slips at their ranges). A 1989 model is returned as is."""
+    if not isinstance(model, mf6.MagicFormula6):
+        return model
+    lim = dict(model.limit)
+
+    def span(v):
+        v = np.asarray(v, float)
+        return float(np.min(v)), float(np.max(v))
+
+    (fmin, fmax), (kmin, kmax), (amin, amax), (gmin, gmax) = (
+        span(data.fz), span(data.kappa), span(data.alpha), span(data.gamma))
+    lim.update(FZMIN=fmin, FZMAX=fmax, KPUMIN=kmin, KPUMAX=kmax, ALPMIN=amin, ALPMAX=amax,
+               CAMMIN=gmin, CAMMAX=gmax)
+    return mf6.MagicFormula6(dict(model.coefficients), model.version, tuple(sorted(lim.items())))
+
+
+def _open_ranges(model):
+    """The model with no validity ranges (the fit's compiled program is shared by files)."""
+    if not isinstance(model, mf6.MagicFormula6):
+        return model
+    return mf6.MagicFormula6(dict(model.coefficients), model.version,
+                             tuple(sorted(mf6._LIMITS.items())))
 
 
 LOSSES = ("linear", "huber", "cauchy")
@@ -354,6 +453,8 @@ class _Problem(eqx.Module):
     x0: jax.Array
     scale: jax.Array
     positive: jax.Array
+    free: jax.Array
+    rows: jax.Array
     sigma: jax.Array
     loss_code: jax.Array
     k: jax.Array
@@ -365,6 +466,7 @@ class _Problem(eqx.Module):
         return LOSSES[int(self.loss_code)]
 
     def x_of(self, u):
+        u = jnp.where(self.free, u, 0.0)
         return jnp.where(self.positive, self.x0 * jnp.exp(u), self.x0 + self.scale * u)
 
     def with_x(self, x):
@@ -375,8 +477,8 @@ class _Problem(eqx.Module):
 
     def whitened(self, x):
         pred = _predict(self.with_x(x), self.data, self.combined)
-        z = (pred - self.data.measured) / self.sigma[:, None]
-        return jnp.where(self.data.valid, z, 0.0)
+        z = (pred - self.data.measured) / self.sigma
+        return jnp.where(self.data.valid & self.rows, z, 0.0)
 
     def residual_x(self, x):
         return _robust(self.whitened(x), self.loss_code, self.k).ravel()
@@ -406,95 +508,219 @@ _solve = eqx.filter_jit(_solve_impl)
 _solve_many = eqx.filter_jit(eqx.filter_vmap(_solve_impl, in_axes=(eqx.if_array(0), 0, None,
                                                                       None, None)))
 _linearise = eqx.filter_jit(_linearise_impl)
+_predict_jit = eqx.filter_jit(_predict)
+
+
+MAX_SIGMA_PCT = 100.0
+"""A coefficient whose σ exceeds its own magnitude (σ % > 100) is *not determined*: the data
+cannot tell it from zero."""
+
+CAMBER = frozenset(("PDY3 PEY4 PEY5 PKY3 PKY5 PKY6 PKY7 PHY3 PVY3 PVY4 PDX3 PPY5 QBZ4 QBZ5 "
+                    "QDZ3 QDZ4 QDZ8 QDZ9 QDZ10 QDZ11 QEZ5 QHZ3 QHZ4 a5 a6 a9 a10 a111 a112 "
+                    "a12 a13 c5 c6 c7 c14 c15 c16 c17").split())
+"""The camber coefficients: fitted after the zero-camber ones in the staged strategy."""
+
+
+def _channel_of(name: str) -> str:
+    """The channel a coefficient is fitted on first (its own force or moment)."""
+    if name[0] in "abc" and name[1:].isdigit():
+        return {"a": "FY", "b": "FX", "c": "MZ"}[name[0]]
+    if name.startswith("QSX"):
+        return "MX"
+    if name.startswith("QSY"):
+        return "MY"
+    if name.startswith(("Q", "PPZ")):
+        return "MZ"
+    return "FX" if name[2:3] == "X" or name[:3] == "PPX" else "FY"
 
 
 @dataclasses.dataclass
-class TyreFitReport:
-    """The result of a Magic Formula fit (same base API as the suspension fits).
+class TyreFitReport(IdentificationReport):
+    """The result of a Magic Formula fit, an `IdentificationReport` (statuses, rows, writers as
+    every identification).
 
-    **Fields:** `names`, `start`, `values` (fitted coefficients, library units), `sigma`,
-    `sigma_pct`, `identifiable` (bool per coefficient), `correlation` (p, p; NaN rows for
-    non-identifiable ones), `combinations` (text of the identifiable combinations of the
-    others), `linear` (the `diffsusp.lsq.Fit` of the linearisation: every detail), `rms` (per
-    channel, unweighted, channel units, valid points), `n_points` (valid per channel),
-    `residual_sigma` (σ̂ of the whitened robust residual: ≈ 1 when the noise σ's are right),
-    `steps`, `converged`, `loss`, `violations` (constraint checks over the data's range).
+    **Fields:** `names`, `start` (after the data's starting values), `file_start` (the start
+    model's), `values` (fitted coefficients, library units), `sigma`, `sigma_pct`,
+    `identifiable` (determined: identifiable in the linearisation and σ % ≤ `MAX_SIGMA_PCT`),
+    `held` (held at the start value), `reasons` (why not determined), `correlation`,
+    `combinations`, `linear` (the `diffsusp.lsq.Fit` of the linearisation), `rms` (per channel,
+    unweighted, channel units), `n_points`, `residual_sigma` (σ̂ of the whitened robust residual:
+    ≈ 1 when the noise model is right), `noise` (per channel (a, b) of σ = a + b·|F|, the
+    yardstick of the consistency check), `noise_source` ("given" or "estimated from the
+    sweeps"), `steps`, `converged` (the optimiser stopped on its tolerance), `consistency`
+    (does the fitted model reproduce the data within the noise), `loss`, `violations`,
+    `stages` (the strategy's stages: text).
     """
 
+    family: ClassVar[str] = "mf_fit"
     names: tuple[str, ...]
     start: np.ndarray
+    file_start: np.ndarray
     values: np.ndarray
     sigma: np.ndarray
     sigma_pct: np.ndarray
     identifiable: np.ndarray
+    held: np.ndarray
+    reasons: tuple[str, ...]
     correlation: np.ndarray
     combinations: list[str]
     linear: lsq.Fit
     rms: dict[str, float]
     n_points: dict[str, int]
     residual_sigma: float
+    noise: dict[str, tuple[float, float]]
+    noise_source: str
     steps: int
     converged: bool
     loss: str
     violations: list[str]
+    stages: list[str]
+    consistency: Consistency | None = None
+    whitened_residuals: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+
+    # ---- the shared report interface (model units = library units)
+    @property
+    def estimates(self) -> np.ndarray:
+        return self.values
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return self.sigma
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple("-" for _ in self.names)
+
+    @property
+    def residuals(self) -> dict:
+        return {c: MeasurementResiduals(raw=w * 0.0 if w is None else w, whitened=w)
+                for c, w in self.whitened_residuals.items()}
+
+    @property
+    def status_list(self) -> tuple[str, ...]:
+        """Per coefficient: identified / not determined / held / not seen (the base's
+        `statuses` when it provides them)."""
+        base = getattr(super(), "statuses", None)
+        if base is not None:
+            return tuple(base)
+        out = []
+        for i in range(len(self.names)):
+            if self.held[i]:
+                out.append("held")
+            elif self.identifiable[i] and self.consistent is not False:
+                out.append("identified")
+            elif self.reasons[i].endswith("no effect on the data"):
+                out.append("not seen")
+            else:
+                out.append("not determined")
+        return tuple(out)
+
+    @property
+    def status_reasons(self) -> tuple[str, ...]:
+        """`reasons`, with the fit's verdict for a determined coefficient of a fit that does
+        not reproduce the data."""
+        return tuple(r if r or not self.identifiable[i] or self.consistent is not False
+                     else "determined, but the model does not fit the data"
+                     for i, r in enumerate(self.reasons))
+
+    @property
+    def verdict(self) -> str:
+        """One line: the fit's outcome."""
+        if self.consistency is not None and not self.consistency.consistent:
+            return "does not fit the data: " + self.consistency.verdict
+        head = "fits the data" if self.converged else \
+            "fits the data (the optimiser stopped at max_steps)"
+        return head + ("" if self.consistency is None else ": " + self.consistency.verdict)
 
     @property
     def unidentifiable(self) -> tuple[str, ...]:
-        return tuple(n for n, ok in zip(self.names, self.identifiable, strict=True)
-                     if not ok)
+        return tuple(n for n, ok, h in zip(self.names, self.identifiable, self.held,
+                                           strict=True) if not ok and not h)
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
 
     def table(self) -> str:
-        lines = [f"Magic Formula fit ({self.loss} loss): {'converged' if self.converged else 'NOT converged'} in {self.steps} steps; "  # noqa: E501
-                 f"residual sigma {self.residual_sigma:.4g} (whitened)",
+        st, why = self.status_list, self.status_reasons
+        lines = [f"Magic Formula fit ({self.loss} loss): {self.verdict}",
+                 f"optimiser: {'converged' if self.converged else 'NOT converged'} in "
+                 f"{self.steps} steps; whitened residual sigma {self.residual_sigma:.4g} "
+                 f"(against the noise model below)",
                  "rms: " + ", ".join(f"{c} {v:.4g} ({self.n_points[c]} points)"
-                                     for c, v in self.rms.items())]
+                                     for c, v in self.rms.items()),
+                 f"noise ({self.noise_source}): " + ", ".join(
+                     f"{c} {a:.4g} + {b:.4g}·|{c}|" for c, (a, b) in self.noise.items())]
         w = max(9, *(len(n) for n in self.names))
         lines.append(f"{'parameter':<{w}}  {'start':>12}  {'value':>12}  {'sigma':>10}  "
-                     f"{'sigma%':>8}  status")
+                     f"{'sigma%':>9}  status")
         for i, n in enumerate(self.names):
-            status = "" if self.identifiable[i] else self.linear._status(i) or "not identifiable"
             s = f"{self.sigma[i]:.3g}" if np.isfinite(self.sigma[i]) else "-"
             sp = f"{self.sigma_pct[i]:.3g}%" if np.isfinite(self.sigma_pct[i]) else "-"
+            if np.isfinite(self.sigma_pct[i]) and self.sigma_pct[i] > 1e4:
+                sp = ">1e4%"
+            note = f" ({why[i]})" if why[i] and st[i] != "identified" else ""
             lines.append(f"{n:<{w}}  {self.start[i]:>12.6g}  {self.values[i]:>12.6g}  "
-                         f"{s:>10}  {sp:>8}  {status}")
+                         f"{s:>10}  {sp:>9}  {st[i]}{note}")
         if self.combinations:
             lines.append("identifiable combinations:")
             lines += [f"  {c}" for c in self.combinations]
         if self.violations:
             lines.append("constraint checks over the data's range:")
             lines += [f"  {v}" for v in self.violations]
+        if self.stages:
+            lines.append("strategy: " + "; ".join(self.stages))
         return "\n".join(lines)
 
     def __str__(self):
         return self.table()
 
+    def summary(self) -> dict:
+        out = super().summary()
+        st, why = self.status_list, self.status_reasons
+        for row, s, r, h in zip(out["parameters"], st, why, self.held, strict=True):
+            row["status"] = s
+            row["reason"] = r
+            row["held"] = bool(h)
+            row["identified"] = s == "identified"
+        out.update(verdict=self.verdict, noise={c: list(v) for c, v in self.noise.items()},
+                   noise_source=self.noise_source, rms=self.rms, n_points=self.n_points,
+                   residual_sigma=_num(self.residual_sigma), steps=self.steps,
+                   converged=self.converged, loss=self.loss, violations=self.violations,
+                   stages=self.stages)
+        return out
+
     def to_dict(self) -> dict:
         def f(v):
-            return None if not np.isfinite(v) else float(v)
-        return {"names": list(self.names), "start": [float(v) for v in self.start],
-                "values": [float(v) for v in self.values], "sigma": [f(v) for v in self.sigma],
-                "sigma_pct": [f(v) for v in self.sigma_pct],
-                "identifiable": [bool(v) for v in self.identifiable],
-                "combinations": self.combinations, "rms": self.rms, "n_points": self.n_points,
-                "residual_sigma": self.residual_sigma, "steps": self.steps,
-                "converged": self.converged, "loss": self.loss, "violations": self.violations}
+            return _num(v)
+        d = self.summary()
+        d.update({"names": list(self.names), "start": [float(v) for v in self.start],
+                  "values": [float(v) for v in self.values],
+                  "sigma": [f(v) for v in self.sigma],
+                  "sigma_pct": [f(v) for v in self.sigma_pct],
+                  "identifiable": [bool(v) for v in self.identifiable],
+                  "statuses": list(self.status_list)})
+        return d
 
-    def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2)
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(self.to_dict(), **({"indent": 2} | kwargs))
 
     def to_frame(self):
         import pandas as pd
         return pd.DataFrame({"start": self.start, "value": self.values, "sigma": self.sigma,
-                             "sigma_pct": self.sigma_pct, "identifiable": self.identifiable},
+                             "sigma_pct": self.sigma_pct, "identifiable": self.identifiable,
+                             "status": self.status_list},
                             index=list(self.names))
 
 
+def _num(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
 def check_constraints(model, data: BenchData) -> list[str]:
-    """The usual physical constraints over the data's range of load (and camber, pressure):
-    C_x, C_y, C_t > 0, D_x, D_y > 0 (μ > 0), E_x, E_y ≤ 1 (MF 6.x names; spec: tyre §7 C)."""
+    """The usual physical constraints over the data's range of load (and camber): C_x, C_y,
+    C_t > 0; |μ_x|, |μ_y| > 0 without a change of sign (the sign of D is the file's convention:
+    PAC2002 files write PDY1 < 0); E_x, E_y ≤ 1 (MF 6.x names; spec: tyre §7 C)."""
     if not isinstance(model, mf6.MagicFormula6):
         return []
     c = {k: float(v) for k, v in model.coefficients.items()}
@@ -509,9 +735,11 @@ def check_constraints(model, data: BenchData) -> list[str]:
             out.append(f"{name} = {v:.4g} is not > 0")
     mux = (c["PDX1"] + c["PDX2"] * dfz) * (1 - c["PDX3"] * g**2)
     muy = (c["PDY1"] + c["PDY2"] * dfz) * (1 - c["PDY3"] * g**2)
-    for name, v in (("mu_x (D_x/F_z)", mux), ("mu_y (D_y/F_z)", muy)):
-        if np.min(v) <= 0:
-            out.append(f"{name} reaches {np.min(v):.4g} <= 0 in the data's range")
+    for name, v, s in (("mu_x (D_x/F_z)", mux, c["PDX1"]), ("mu_y (D_y/F_z)", muy, c["PDY1"])):
+        sgn = 1.0 if s >= 0 else -1.0
+        if np.min(sgn * v) <= 0:
+            out.append(f"|{name}| reaches 0 (sign change) in the data's range: "
+                       f"{np.min(sgn * v) * sgn:.4g}")
     ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2)[None, :] * (
         1 - c["PEX4"] * np.array([[-1.0], [1.0]]))
     ey = (c["PEY1"] + c["PEY2"] * dfz) * (1 + c["PEY5"] * g**2 - (c["PEY3"] + c["PEY4"] * g))
@@ -522,7 +750,12 @@ def check_constraints(model, data: BenchData) -> list[str]:
     return out
 
 
-def _prepare(model, data, names, noise, loss, loss_scale, combined):
+SIGNED_LOG = frozenset(POSITIVE | {"PKY1", "PKX1", "QDZ1"})
+"""Coefficients fitted as x = x₀·exp(u): magnitude free, sign kept from the start (either sign:
+the PAC2002 convention writes PDY1, PKY1 < 0)."""
+
+
+def _prepare(model, data, names, noise, loss, loss_scale, combined, hold=()):
     names = tuple(names)
     if loss not in LOSSES:
         raise InputError(f"loss {loss!r}: one of {', '.join(LOSSES)}")
@@ -531,71 +764,284 @@ def _prepare(model, data, names, noise, loss, loss_scale, combined):
         raise InputError(f"unknown coefficient(s) {', '.join(unknown)} for "
                          f"{type(model).__name__}")
     x0 = np.array([float(model.coefficients[n]) for n in names])
-    positive = np.array([n in POSITIVE for n in names])
-    bad = positive & (x0 <= 0)
-    if bad.any():
-        raise InputError(f"start values of {', '.join(np.array(names)[bad])} must be > 0 "
-                         "(fitted as x0·exp(u))")
-    meas = np.asarray(data.measured)
-    valid = np.asarray(data.valid)
-    sig = []
-    for k, c in enumerate(data.channels):
-        if noise is not None and c in noise:
-            sig.append(float(noise[c]))
-        else:
-            v = meas[k][valid[k]]
-            spread = float(v.max() - v.min()) if v.size else 0.0
-            sig.append(0.01 * spread if spread > 0 else 1.0)
-    return _Problem(model, data, jnp.asarray(x0), jnp.asarray(np.maximum(np.abs(x0), 0.1)),
-                    jnp.asarray(positive), jnp.asarray(sig), jnp.asarray(LOSSES.index(loss)),
+    if not np.all(np.isfinite(x0)):
+        raise InputError("start values must be finite: " + ", ".join(
+            n for n, v in zip(names, x0, strict=True) if not np.isfinite(v)))
+    positive = np.array([n in SIGNED_LOG for n in names]) & (x0 != 0)
+    sigma = noise_sigma(noise, data)
+    free = np.array([n not in set(hold) for n in names])
+    return _Problem(_open_ranges(model), data, jnp.asarray(x0),
+                    jnp.asarray(np.maximum(np.abs(x0), 0.1)), jnp.asarray(positive),
+                    jnp.asarray(free), jnp.ones(np.shape(data.measured), bool),
+                    jnp.asarray(sigma), jnp.asarray(LOSSES.index(loss)),
                     jnp.asarray(float(loss_scale)), names, combined)
 
 
-def _report(problem, x, steps, ok, threshold):
+def _noise_models(data, noise):
+    """{channel: (a, b)}, the source text, and per channel the number of third differences
+    behind an estimate (0 when given)."""
+    given = {c.upper(): _noise_pair(v) for c, v in (noise or {}).items()}
+    est = fit_start.estimate_noise(data) if len(given) < len(data.channels) else {}
+    out, counts = {}, {}
+    for k, c in enumerate(data.channels):
+        if c in given:
+            out[c], counts[c] = given[c], 0
+        elif c in est:
+            out[c], counts[c] = est[c][:2], est[c][2]
+        else:  # no sweep to estimate from: 1 % of the range, judged by the residual only
+            v = np.asarray(data.measured)[k][np.asarray(data.valid)[k]]
+            out[c], counts[c] = (0.01 * float(np.ptp(v)) if v.size and np.ptp(v) > 0
+                                 else 1.0, 0.0), 0
+    given_all = all(c in given for c in data.channels)
+    src = "given" if given_all else ("estimated from the sweeps" if not given else
+                                     "given for " + ", ".join(given) + ", else estimated")
+    return out, src, counts
+
+
+def _stage_plan(problem, strategy):
+    """(label, free mask, row mask) of each stage (see `fit`)."""
+    names = problem.names
+    free = np.asarray(problem.free)
+    valid = np.asarray(problem.data.valid)
+    chans = problem.data.channels
+    flat = np.abs(np.asarray(problem.data.gamma)) < 1e-9
+    all_rows = np.ones_like(valid)
+    if strategy == "joint":
+        return [("joint", free, all_rows)]
+    plan = []
+    order = [c for c in ("FY", "FX", "MZ", "MX", "MY") if c in chans]
+    for ch in order:
+        own = np.array([_channel_of(n) == ch for n in names]) & free
+        if not own.any():
+            continue
+        k = chans.index(ch)
+        rows_ch = np.zeros_like(valid)
+        rows_ch[k] = True
+        camber = np.array([n in CAMBER for n in names])
+        if (flat & valid[k]).sum() > 4 and (own & ~camber).any():
+            r = rows_ch.copy()
+            r[k] &= flat
+            plan.append((f"{ch} at zero camber", own & ~camber, r))
+        if (own & camber).any():
+            plan.append((f"{ch} camber terms", own & camber, rows_ch))
+        plan.append((f"{ch} all", own, rows_ch))
+    plan.append(("joint", free, all_rows))
+    return plan
+
+
+def _run(problem, strategy, max_steps, rtol, atol):
+    """The stages of `strategy` from the problem's x0; returns (x, steps, converged, labels)."""
+    x = problem.x0
+    total, ok, labels = 0, False, []
+    for label, free, rows in _stage_plan(problem, strategy):
+        p = eqx.tree_at(lambda q: (q.x0, q.free, q.rows), problem,
+                        (jnp.asarray(x), jnp.asarray(free), jnp.asarray(rows)))
+        x, steps, ok = _solve(p, jnp.zeros(len(problem.names)), max_steps, rtol, atol)
+        total += int(steps)
+        labels.append(f"{label} ({int(free.sum())} free, {int(steps)} steps)")
+    return x, total, bool(ok), labels
+
+
+def _consistency(problem, x, noise_counts, n_determined, alpha=CONSISTENCY_ALPHA):
+    """The fitted model against the data in units of the noise model (see `fit`)."""
+    z = np.asarray(_whitened(problem, jnp.asarray(x)))
+    valid = np.asarray(problem.data.valid)
+    chans = problem.data.channels
+    inlier = valid & (np.abs(z) <= OUTLIER_Z)
+    n_out = int((valid & ~inlier).sum())
+    n = int(inlier.sum())
+    chi2 = float(np.sum(np.where(inlier, z, 0.0) ** 2))
+    dof = max(n - int(n_determined), 1)
+    rms = np.array([math.sqrt(np.sum(np.where(inlier[k], z[k], 0) ** 2)
+                              / max(inlier[k].sum(), 1)) for k in range(len(chans))])
+    n_diff = sum(noise_counts.values())
+    if n_diff > 0:
+        from scipy.stats import f as f_law
+        # the noise yardstick is itself estimated: a variance ratio (F law), ~n/2.3 dof
+        critical = dof * float(f_law.ppf(1.0 - alpha, dof, max(n_diff / 2.31, 1.0)))
+        note = ("χ² of the inlier residuals (|z| ≤ 5) against the noise model estimated from "
+                "the sweeps' third differences (F law)")
+    else:
+        critical = chi2_quantile(dof, alpha)
+        note = "χ² of the inlier residuals (|z| ≤ 5) against the given noise"
+    frac = n_out / max(int(valid.sum()), 1)
+    consistent = bool(chi2 <= critical and frac <= MAX_OUTLIER_FRACTION)
+    if frac > MAX_OUTLIER_FRACTION:
+        note += f"; {100 * frac:.3g} % of the points beyond 5σ (more than outliers)"
+    return Consistency(chi2=chi2, n_residuals=n, n_parameters=int(n_determined), dof=dof,
+                       critical=critical, case_rms=rms, cases=chans, failed_cases=(),
+                       consistent=consistent, measurements=chans, alpha=alpha, note=note), z
+
+
+OUTLIER_Z = 5.0
+MAX_OUTLIER_FRACTION = 0.05
+"""Beyond 5 % of the points outside ±5σ the misfit is no longer a few outliers."""
+
+_whitened = eqx.filter_jit(lambda problem, x: problem.whitened(x))
+
+
+def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, noise_counts,
+            stages):
     names = problem.names
     r, J = (np.asarray(a) for a in _linearise(problem, jnp.asarray(x)))
     x = np.asarray(x)
-    rows = np.asarray(problem.data.valid).ravel()
-    lin = lsq.solve(J[rows], J[rows] @ x - r[rows], names=names, prior=x, threshold=threshold)
-    cov = np.asarray(lin.covariance)
+    free = np.asarray(problem.free)
+    rows = (np.asarray(problem.data.valid) & np.asarray(problem.rows)).ravel()
+    Jf = J[rows][:, free]
+    lin = lsq.solve(Jf, Jf @ x[free] - r[rows], names=tuple(np.array(names)[free]),
+                    prior=x[free], threshold=threshold)
+    p = len(names)
+    cov = np.full((p, p), np.nan)
+    fi = np.flatnonzero(free)
+    cov[np.ix_(fi, fi)] = np.asarray(lin.covariance)
     sd = np.sqrt(np.abs(np.diag(cov)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(sd, sd)
-    ident = np.asarray(lin.identifiable, bool)
-    corr[~ident, :] = np.nan
-    corr[:, ~ident] = np.nan
-    sigma = np.where(ident, np.asarray(lin.sigma), np.nan)
+    ident_lin = np.zeros(p, bool)
+    ident_lin[fi] = np.asarray(lin.identifiable, bool)
+    sigma = np.where(ident_lin, sd, np.nan)
+    sigma[fi[~np.asarray(lin.identifiable, bool)]] = np.inf
     with np.errstate(divide="ignore", invalid="ignore"):
         pct = 100.0 * sigma / np.abs(x)
+    reasons = []
+    determined = np.zeros(p, bool)
+    for i in range(p):
+        if not free[i]:
+            reasons.append("held at the start value")
+            continue
+        j = int(np.flatnonzero(fi == i)[0])
+        if not ident_lin[i]:
+            reasons.append(lin._status(j) or "not identifiable")
+        elif not (pct[i] <= MAX_SIGMA_PCT):
+            reasons.append(f"σ % = {pct[i]:.3g} > {MAX_SIGMA_PCT:g}: the data do not fix its "
+                           "value")
+        else:
+            determined[i] = True
+            reasons.append("")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    corr[~determined, :] = np.nan
+    corr[:, ~determined] = np.nan
     fitted = problem.with_x(jnp.asarray(x))
-    pred = np.asarray(_predict(fitted, problem.data, problem.combined))
+    pred = np.asarray(_predict_jit(fitted, problem.data, problem.combined))
     meas, valid = np.asarray(problem.data.measured), np.asarray(problem.data.valid)
     rms = {c: float(np.sqrt(np.mean((pred[k] - meas[k])[valid[k]] ** 2)))
            for k, c in enumerate(problem.data.channels)}
     npts = {c: int(valid[k].sum()) for k, c in enumerate(problem.data.channels)}
+    cons, z = _consistency(problem, x, noise_counts, int(determined.sum()))
     return fitted, TyreFitReport(
-        names, np.asarray(problem.x0), x, sigma, pct, ident, corr, list(lin.relations), lin,
-        rms, npts, float(lin.residual_sigma), int(steps), bool(ok), problem.loss,
-        check_constraints(fitted, problem.data))
+        names, np.asarray(problem.x0), np.asarray(file_start), x, sigma, pct, determined,
+        ~free, tuple(reasons), corr, list(lin.relations), lin, rms, npts,
+        float(lin.residual_sigma), dict(noise), noise_src, int(steps), bool(ok), problem.loss,
+        check_constraints(fitted, problem.data), list(stages), consistency=cons,
+        whitened_residuals={c: z[k] for k, c in enumerate(problem.data.channels)})
 
 
-def fit(model, data: BenchData, names, *, noise: dict | None = None, loss: str = "huber",
-        loss_scale: float = 1.345, combined: bool = True, max_steps: int = 200,
-        rtol: float = 1e-9, atol: float = 1e-9, threshold: float = 1e-8):
+def default_hold(model, names, tir=None) -> tuple[str, ...]:
+    """The coefficients held at the start by default: those the start file does not use
+    (exactly 0, or absent from `tir`, the start's property file, when given). A fitter chose
+    the file's structure (no shift, no camber term): the fit keeps it; name a coefficient in
+    `free=` to fit it anyway."""
+    out = []
+    for n in names:
+        if float(model.coefficients[n]) == 0.0:
+            out.append(n)
+        elif tir is not None and n not in tir:
+            out.append(n)
+    return tuple(out)
+
+
+def default_names(model, channels) -> list[str]:
+    """The coefficients of `default_groups` present in the model."""
+    return [n for g in default_groups(model, channels) for n in GROUPS[g]
+            if n in model.coefficients]
+
+
+def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
+        loss: str = "huber", loss_scale: float = 1.345, combined: bool = True,
+        max_steps: int = 200, rtol: float = 1e-10, atol: float = 1e-10,
+        threshold: float = 1e-8, strategy: str = "staged", start_from_data: bool = True,
+        hold=None, free=(), tir=None):
     """Fit the coefficients `names` of `model` (a `MagicFormula6` or `MagicFormula89`) to `data`.
 
-    **Arguments:** `names` (e.g. `GROUPS["pure_lateral"]`; the others stay at the model's
-    values: fitting mode by mode is a sequence of calls, jointly one call with the union);
-    `noise` per channel σ [N or N·mm] (default 1 % of the channel's range); `loss` "huber",
-    "cauchy" or "linear", `loss_scale` k in units of σ; `combined=False` fits the pure-slip
-    functions (data at zero of the other slip); LM tolerances; `threshold` of identifiability.
+    spec: tyre §7 E item 22, §7 D item 18; the start and noise: `diffsusp.tyre.fit_start`.
 
-    **Returns:** (fitted model, `TyreFitReport`). See the module docstring for the method.
+    **Arguments:** `names` (default `default_names`: the `default_groups` the data's channels
+    allow; the others stay at the model's values); `hold` the names kept at the start value
+    (default `default_hold`: those the start file does not use, 0 or absent from `tir`) less
+    `free`; `noise` per channel σ or (a, b) for σ = a + b·|F| [N or N·mm] (default: estimated
+    from the sweeps, `fit_start.estimate_noise`); `loss` "huber", "cauchy" or "linear",
+    `loss_scale` k in units of σ; `combined=False` fits the pure-slip functions;
+    `strategy` "staged" (default) or "joint"; `start_from_data` the data's starting values of
+    the scale coefficients (`fit_start.data_start`); LM tolerances; `threshold` of
+    identifiability.
+
+    **Strategy "staged"**: after the data's starting values, per channel (F_y, F_x, M_z) its
+    own coefficients on its own data: first the zero-camber ones on the zero-camber sweeps,
+    then the camber ones with the others fixed, then all of the channel's together; last the
+    joint fit of every coefficient on every channel. Every stage runs the same compiled
+    Levenberg–Marquardt program (free coefficients and rows as masks).
+
+    **Noise and verdict.** Residuals are whitened by σ = a + b·|F| per point. With the noise
+    estimated, the fit is polished once with the noise model re-estimated from its residuals
+    (the scale the covariance uses); the consistency check compares the inlier residuals
+    (|z| ≤ 5) with the data-only estimate: a fit whose χ² is beyond the F-law bound, or with
+    more than 5 % of its points beyond 5σ, "does not fit the data" and calls nothing
+    identified.
+
+    **Returns:** (fitted model with the data's validity ranges, `TyreFitReport`).
     """
-    problem = _prepare(model, data, names, noise, loss, loss_scale, combined)
-    u0 = jnp.zeros(len(problem.names))
-    x, steps, ok = _solve(problem, u0, max_steps, rtol, atol)
-    return _report(problem, x, steps, ok, threshold)
+    if strategy not in ("staged", "joint"):
+        raise InputError(f"strategy {strategy!r}: 'staged' or 'joint'")
+    if names is None:
+        names = default_names(model, data.channels)
+    names = tuple(names)
+    unknown = [n for n in (*names, *free, *(hold or ())) if n not in model.coefficients]
+    if unknown:
+        raise InputError(f"unknown coefficient(s) {', '.join(unknown)} for "
+                         f"{type(model).__name__}")
+    if hold is None:
+        hold = default_hold(model, names, tir)
+    hold = tuple(n for n in hold if n not in set(free))
+    file_start = np.array([float(model.coefficients[n]) for n in names])
+    noise_ab, noise_src, counts = _noise_models(data, noise)
+    start = model
+    if start_from_data and isinstance(model, mf6.MagicFormula6):
+        open_model = _open_ranges(model)
+        new = fit_start.data_start(open_model, data, [n for n in names if n not in hold],
+                                   lambda m: _predict_jit(m, data, combined))
+        if new:
+            start = model.replace(**new)
+    problem = _prepare(start, data, names, noise_ab, loss, loss_scale, combined, hold)
+    x, steps, ok, labels = _run(problem, strategy, max_steps, rtol, atol)
+    if noise_src != "given":
+        # polish with the noise re-estimated from the residuals (the covariance's scale)
+        pred = np.asarray(_predict_jit(problem.with_x(x), data, combined))
+        res = np.asarray(data.measured) - pred
+        refit = dict(noise_ab)
+        for k, c in enumerate(data.channels):
+            if c in (noise or {}):
+                continue
+            v = np.asarray(data.valid)[k]
+            if v.sum() >= 12:
+                refit[c] = fit_start._scale_model(res[k][v], np.abs(pred[k][v]))
+        sig = fit_start.noise_sigma(refit, data)
+        p2 = eqx.tree_at(lambda q: (q.x0, q.sigma), problem, (x, jnp.asarray(sig)))
+        x, s2, ok = _solve(p2, jnp.zeros(len(names)), max_steps, rtol, atol)
+        steps += int(s2)
+        labels.append(f"polish with the residuals' noise ({int(s2)} steps)")
+        # the yardstick of the verdict stays the data-only estimate
+        problem = eqx.tree_at(lambda q: q.x0, p2, problem.x0)
+        problem_cov = p2
+    else:
+        problem_cov = problem
+    fitted, report = _report(problem_cov, x, steps, ok, threshold, file_start, noise_ab,
+                             noise_src, counts, labels)
+    if problem_cov is not problem:
+        cons, z = _consistency(problem, np.asarray(x), counts, int(report.identifiable.sum()))
+        report.consistency = cons
+        report.whitened_residuals = {c: z[k] for k, c in enumerate(data.channels)}
+    report.start = np.asarray(problem.x0)
+    return with_ranges(model.replace(**{n: float(v) for n, v in zip(names, x, strict=True)})
+                       if isinstance(model, mf6.MagicFormula6) else fitted, data), report
 
 
 def default_groups(model, channels) -> list[str]:
@@ -612,16 +1058,30 @@ def default_groups(model, channels) -> list[str]:
 
 def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "huber",
              loss_scale: float = 1.345, combined: bool = True, max_steps: int = 200,
-             rtol: float = 1e-9, atol: float = 1e-9, threshold: float = 1e-8):
-    """Many tyres in one batched (vmapped) call: `models` and `datas` are sequences of equal
-    length whose data have equal shapes (pad with `valid=False` rows otherwise). Returns lists
-    of fitted models and reports."""
-    problems = [_prepare(m, d, names, noise, loss, loss_scale, combined)
-                for m, d in zip(models, datas, strict=True)]
+             rtol: float = 1e-10, atol: float = 1e-10, threshold: float = 1e-8, hold=()):
+    """Many tyres in one batched (vmapped) call of the joint strategy: `models` and `datas`
+    are sequences of equal length whose data have equal shapes (pad with `valid=False` rows
+    otherwise); `noise` given (σ or (a, b) per channel; default: estimated per data set).
+    Returns lists of fitted models and reports."""
+    names = tuple(names)
+    preps = []
+    for m, d in zip(models, datas, strict=True):
+        ab, src, counts = _noise_models(d, noise)
+        preps.append((_prepare(m, d, names, ab, loss, loss_scale, combined, hold), ab, src,
+                      counts))
+    problems = [p[0] for p in preps]
     stacked = jax.tree.map(lambda *a: jnp.stack(a), *problems)
-    u0 = jnp.zeros((len(problems), len(problems[0].names)))
+    u0 = jnp.zeros((len(problems), len(names)))
     X, S, OK = _solve_many(stacked, u0, max_steps, rtol, atol)
-    out = [_report(p, X[i], S[i], OK[i], threshold) for i, p in enumerate(problems)]
+    out = []
+    for i, (p, ab, src, counts) in enumerate(preps):
+        fitted, rep = _report(p, X[i], S[i], OK[i], threshold, np.asarray(p.x0), ab, src,
+                              counts, ["joint (batched)"])
+        if isinstance(models[i], mf6.MagicFormula6):
+            fitted = with_ranges(models[i].replace(**{n: float(v) for n, v in
+                                                      zip(names, X[i], strict=True)}),
+                                 datas[i])
+        out.append((fitted, rep))
     return [o[0] for o in out], [o[1] for o in out]
 
 
