@@ -573,18 +573,25 @@ _UNITS = {"b_delta_2": "N/(m·kN^2)", "b_delta_1": "N/(m·kN)", "b_delta_0": "N/
           "b_L_1": "1/kN", "b_L_0": "1", "b_offset_1": "N"}
 
 
+MISFIT_RATIO = 5.0
+"""The on-board consistency's limit on χ²/dof (`consistency`)."""
+
+
 def consistency(fit: lsq.Fit, n_wheels: int, wheels=None,
                 alpha: float = CONSISTENCY_ALPHA) -> Consistency:
     """Does the reduced model (4-16…4-18) reproduce the record? (spec tyre §5.5). The two
-    half-rate records (`halves`) see the same motion 1 ms apart with independent sensor noise,
-    so with r_e, r_o the structural residuals y − W·x of the even and odd rows, (r_e − r_o)/√2
-    is noise only and (r_e + r_o)/√2 is noise plus twice any misfit of the model. χ² =
-    Σ(r_e + r_o)²/(2σ̂²) with σ̂² = Σ(r_e − r_o)²/(2N), against Fisher's F(N − p, N) law (the
-    noise level is itself estimated from N rows): a model that leaves a misfit (a wrong
-    relaxation law, an unremoved Correvit delay) is inconsistent, whatever the noise level.
-    Cases: the wheels of the grouping."""
-    import scipy.stats
+    half-rate records (`halves`) see the same motion 1 ms apart, so with r_e, r_o the
+    structural residuals y − W·x of the even and odd rows, (r_e − r_o)/√2 holds the part of
+    the residual that differs between them (the sensors' noise) and (r_e + r_o)/√2 that part
+    plus twice what they share (a misfit of the model). χ² = Σ(r_e + r_o)²/(2σ̂²) with σ̂² =
+    Σ(r_e − r_o)²/(2N).
 
+    The halves are not independent: the windowed body estimates and the Correvit's delay
+    shift (interpolated between neighbouring samples) correlate them, so a correct model
+    gives χ²/dof ≈ 2–2.7 on the synthetic car's record (halves' residuals correlated 0.4),
+    not 1; a Correvit delay of 100 ms left in the data, 10.5. The χ² law cannot be the
+    reference: the verdict is a misfit flag at χ²/dof > `MISFIT_RATIO` (5), an empirical
+    limit between the two, stated in the verdict's note. Cases: the wheels of the grouping."""
     r = np.asarray(fit.residuals, float)
     half = r.size // 2
     r_e, r_o = r[:half], r[half:]
@@ -594,9 +601,10 @@ def consistency(fit: lsq.Fit, n_wheels: int, wheels=None,
     names = tuple(f"wheel {w}" for w in (wheels if wheels is not None else range(n_wheels)))
     con = consistency_from_residuals(
         [white], [white.size], p, names, measurements=("F_y",), alpha=alpha,
-        note="the even/odd half-records' residuals: their sum against their difference "
-             "(noise only), F law")
-    critical = con.dof * float(scipy.stats.f.isf(alpha, con.dof, half))
+        note=("the even/odd half-records' residuals, their sum against their difference; "
+              f"limit chi2/dof {MISFIT_RATIO:g} (empirical: the halves share the windowing "
+              "and the delay shift's interpolation, a correct model gives 2-2.7)"))
+    critical = MISFIT_RATIO * con.dof
     return dataclasses.replace(con, critical=critical,
                                consistent=bool(np.isfinite(con.chi2) and con.chi2 <= critical))
 
@@ -852,7 +860,7 @@ def _iv_program(sig, ok, wheels, camber, loads_kn):
 
 
 __all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "SIGNIFICANCE", "Options",
-           "Report", "consistency",
+           "Report", "consistency", "MISFIT_RATIO",
            "body_twist", "check", "correvit_delay", "ground_plane", "halves", "identify",
            "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
            "regressor", "shift_channel", "split_signals", "window_weights"]
