@@ -648,7 +648,8 @@ def report_rows(rep, label: str | None = None) -> list[dict]:
 
 
 def _cell(v, fmt):
-    return "—" if v is None else format(v, fmt)
+    width = int("".join(ch for ch in fmt.split(".")[0] if ch.isdigit()) or 0)
+    return "—".rjust(width) if v is None else format(v, fmt)
 
 
 def format_report(rep, label: str = "", width: int = 110) -> str:
