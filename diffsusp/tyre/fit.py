@@ -880,20 +880,52 @@ MAX_OUTLIER_FRACTION = 0.05
 _whitened = eqx.filter_jit(lambda problem, x: problem.whitened(x))
 
 
+def _psi(z, code, k):
+    """ρ'(z) and ρ''(z) of the loss (the M-estimator's ψ and ψ')."""
+    if code == 0:
+        return z, np.ones_like(z)
+    if code == 1:
+        inside = np.abs(z) <= k
+        return np.clip(z, -k, k), inside.astype(float)
+    q = (z / k) ** 2
+    return z / (1.0 + q), (1.0 - q) / (1.0 + q) ** 2
+
+
 def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, noise_counts,
             stages):
+    """The report at x. Covariance: the M-estimator's (Huber 1981, §7.6) on the whitened
+    residuals z: (J_zᵀJ_z)⁻¹·κ, κ = [Σψ(z)²/(n − p)]/[mean ψ'(z)]² over the valid points
+    (κ = σ̂² of the plain least squares for the linear loss); identifiability and combinations
+    from `diffsusp.lsq` on J_z."""
     names = problem.names
     r, J = (np.asarray(a) for a in _linearise(problem, jnp.asarray(x)))
+    z = np.asarray(_whitened(problem, jnp.asarray(x))).ravel()
+    code, k = int(problem.loss_code), float(problem.k)
+    psi, dpsi = _psi(z, code, k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(np.abs(r) > 1e-300, psi / r, 1.0)   # dr/dz = ψ/r
+    slope = np.where(np.isfinite(slope) & (slope > 0), slope, 1.0)
+    J = J / slope[:, None]
     x = np.asarray(x)
     free = np.asarray(problem.free)
     rows = (np.asarray(problem.data.valid) & np.asarray(problem.rows)).ravel()
     Jf = J[rows][:, free]
-    lin = lsq.solve(Jf, Jf @ x[free] - r[rows], names=tuple(np.array(names)[free]),
+    lin = lsq.solve(Jf, Jf @ x[free] - z[rows], names=tuple(np.array(names)[free]),
                     prior=x[free], threshold=threshold)
     p = len(names)
-    cov = np.full((p, p), np.nan)
     fi = np.flatnonzero(free)
-    cov[np.ix_(fi, fi)] = np.asarray(lin.covariance)
+    idl = np.asarray(lin.identifiable, bool)
+    n_rows = int(rows.sum())
+    kappa = (float(np.sum(psi[rows] ** 2)) / max(n_rows - int(idl.sum()), 1)
+             / max(float(np.mean(dpsi[rows])), 1e-3) ** 2)
+    cov = np.full((p, p), np.nan)
+    if idl.any():
+        Ji = Jf[:, idl]
+        sc = np.linalg.norm(Ji, axis=0)
+        sc = np.where(sc > 0, sc, 1.0)
+        inv = np.linalg.pinv((Ji / sc).T @ (Ji / sc)) / np.outer(sc, sc)
+        cov[np.ix_(fi[idl], fi[idl])] = inv * kappa
+    robust_sigma = math.sqrt(kappa)
     sd = np.sqrt(np.abs(np.diag(cov)))
     ident_lin = np.zeros(p, bool)
     ident_lin[fi] = np.asarray(lin.identifiable, bool)
@@ -930,7 +962,7 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
     return fitted, TyreFitReport(
         names, np.asarray(problem.x0), np.asarray(file_start), x, sigma, pct, determined,
         ~free, tuple(reasons), corr, list(lin.relations), lin, rms, npts,
-        float(lin.residual_sigma), dict(noise), noise_src, int(steps), bool(ok), problem.loss,
+        robust_sigma, dict(noise), noise_src, int(steps), bool(ok), problem.loss,
         check_constraints(fitted, problem.data), list(stages), consistency=cons,
         whitened_residuals={c: z[k] for k, c in enumerate(problem.data.channels)})
 

@@ -121,6 +121,17 @@ def noise_sigma(noise_ab: dict, data) -> np.ndarray:
     return out
 
 
+def _median3(y):
+    """Running median of three neighbours (ends kept): a spike does not make a peak or a
+    slope."""
+    y = np.asarray(y, float)
+    if y.size < 3:
+        return y
+    out = y.copy()
+    out[1:-1] = np.median(np.stack([y[:-2], y[1:-1], y[2:]]), axis=0)
+    return out
+
+
 def _central_slope(x, y):
     """Slope at x = 0 of a cubic through the central third of a sweep (at least 4 points)."""
     half = np.max(np.abs(x))
@@ -148,14 +159,14 @@ def _per_load(data, pred, channel, kind, what):
             continue
         x = slip[rows]
         vals = []
-        for y in (meas[k][rows], pred[k][rows]):
+        for y in (_median3(meas[k][rows]), pred[k][rows]):
             if what == "peak":
                 vals.append(float(np.max(np.abs(y))))
             elif what == "slope":
                 vals.append(_central_slope(x, y))
             else:
                 j = data.channels.index("FY")
-                fy = (meas if y is meas[k][rows] else pred)[j][rows]
+                fy = _median3(meas[j][rows]) if not vals else pred[j][rows]
                 sel = np.abs(x) <= max(np.max(np.abs(x)) / 6.0, np.sort(np.abs(x))[2])
                 sel &= np.abs(fy) > 1e-9 * np.max(np.abs(fy))
                 vals.append(-_central_slope(x[sel], y[sel]) / _central_slope(x[sel], fy[sel])
