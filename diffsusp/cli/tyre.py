@@ -17,9 +17,12 @@
   MY, MZ [N·m] (ISO-W); `--out` a table, `--json`.
 - `fit DATA --model mf61|mf62|mf52|mf1989 [--start FILE.tir] --out FITTED.tir`: coefficients from
   bench data (columns as `eval`'s plus the measured FX, FY, MZ [N, N·m]); `--mode` chooses the
-  coefficient groups (`diffsusp.tyre.fit.GROUPS`), fitted one after the other; report to the
-  terminal (and `--report` .json), measured-vs-fitted figures per load and camber to
-  `--figures`.
+  coefficient groups (`diffsusp.tyre.fit.GROUPS`), fitted together by the staged strategy
+  (starting values from the data, zero camber, camber, joint); any sign of a start coefficient
+  (PAC2002 files write PDY1 < 0); coefficients the start file does not use are held (`--free`
+  to fit them); `--noise CH=a,b` (σ = a + b·|F|, default estimated from the sweeps); report to
+  the terminal (and `--report` .json), a verdict ("does not fit the data": exit code 3),
+  measured-vs-fitted figures per load and camber to `--figures`.
 
 Exit codes as the other verbs: 2 bad input, 4 a model that cannot be evaluated.
 """
@@ -303,14 +306,26 @@ def fit_command(
     start: Annotated[Path | None, typer.Option(help="Start .tir (MF 5.2/6.x).")] = None,
     out: Annotated[Path | None, typer.Option(help="Write the fitted .tir here.")] = None,
     mode: Annotated[list[Mode] | None, typer.Option(
-        help="Coefficient group(s), fitted in order (default: pure_lateral, pure_longitudinal, "
+        help="Coefficient group(s) fitted together (default: pure_lateral, pure_longitudinal, "
         "pure_aligning as the data allow; mf1989: mf1989_lateral).")] = None,
     loss: Annotated[Loss, typer.Option(help="Robust loss of the residuals.")] = Loss.huber,
-    report: Annotated[Path | None, typer.Option(help="Write the reports (.json).")] = None,
+    noise: Annotated[list[str] | None, typer.Option(
+        help="Noise of a channel, CH=a or CH=a,b for sigma = a + b|F| [N, N·m] (default: "
+        "estimated from the sweeps).")] = None,
+    free: Annotated[list[str] | None, typer.Option(
+        help="Fit a coefficient the start file does not use (0 or absent: held by "
+        "default).")] = None,
+    strategy: Annotated[str, typer.Option(
+        help="staged (start values from the data, zero camber, camber, joint) or joint.")]
+    = "staged",
+    report: Annotated[Path | None, typer.Option(help="Write the report (.json).")] = None,
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-fitted figures folder.")]
     = None,
 ):
-    """Fit Magic Formula coefficients to bench data (robust LM, σ and identifiability)."""
+    """Fit Magic Formula coefficients to bench data (robust LM, σ and a verdict per coefficient).
+
+    Exit code 3 when the fitted model does not fit the data (its residual is far above the
+    noise): the report and the files are still written, nothing is called identified."""
     from diffsusp.tyre import MagicFormula89
     from diffsusp.tyre import fit as F
 
@@ -322,6 +337,21 @@ def fit_command(
     if model == "mf1989" and out is not None and out.suffix.lower() == ".tir":
         raise fail("mf1989 coefficients are not a .tir model: use --report .json",
                    EXIT_BAD_INPUT)
+    if strategy not in ("staged", "joint"):
+        raise fail(f"--strategy {strategy!r}: staged or joint", EXIT_BAD_INPUT)
+    noise_ab = {}
+    for item in noise or ():
+        ch, _, val = item.partition("=")
+        try:
+            parts = [float(v) for v in val.split(",")]
+            if not 1 <= len(parts) <= 2:
+                raise ValueError
+        except ValueError:
+            raise fail(f"--noise {item!r}: CH=a or CH=a,b (e.g. FY=20,0.01)",
+                       EXIT_BAD_INPUT) from None
+        ch = ch.strip().upper()
+        scale = 1000.0 if ch.startswith("M") else 1.0   # N·m → N·mm, b is relative
+        noise_ab[ch] = (parts[0] * scale, parts[1] if len(parts) == 2 else 0.0)
     check_output(out, suffixes=None if model == "mf1989" else (".tir",), what="fitted model")
     check_output(report, suffixes=(".json",), what="report")
     check_output(figures, what="figures folder", directory=True)
@@ -345,26 +375,34 @@ def fit_command(
                                              "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
                                              "c3": -1.0, "c4": -10.0, "c9": 0.5})
             tir = None
+        unknown = [ch for ch in noise_ab if ch not in bench.channels]
+        if unknown:
+            raise fail(f"--noise for {', '.join(unknown)}: not a channel of the data "
+                       f"({', '.join(bench.channels)})", EXIT_BAD_INPUT)
         groups = mode or F.default_groups(m0, bench.channels)
-        reports = {}
-        fitted = m0
-        for g in groups:
-            names = [n for n in F.GROUPS[g] if n in fitted.coefficients]
-            c.print(f"fitting {g} ({len(names)} coefficients, {bench.n} points) ...")
-            fitted, rep = F.fit(fitted, bench, names, loss=loss)
-            reports[g] = rep
-            c.print(rep.table(), highlight=False)
+        names = list(dict.fromkeys(n for g in groups for n in F.GROUPS[g]
+                                   if n in m0.coefficients))
+        bad = [n for n in free or () if n not in names]
+        if bad:
+            raise fail(f"--free {', '.join(bad)}: not among the fitted coefficients of "
+                       f"{', '.join(groups)}", EXIT_BAD_INPUT)
+        c.print(f"fitting {', '.join(groups)} ({len(names)} coefficients, {bench.n} points, "
+                f"{strategy}) ...")
+        fitted, rep = F.fit(m0, bench, names, loss=loss, noise=noise_ab or None,
+                            free=tuple(free or ()), tir=tir, strategy=strategy)
+        c.print(rep.table(), highlight=False)
         if out is not None and tir is not None:
             from diffsusp.io.tir import write_tir
 
             write_tir(fitted.to_tir(tir), out)
             c.print(f"fitted model written to {out}")
         if report is not None:
-            report.write_text(json.dumps({g: r.to_dict() for g, r in reports.items()},
-                                         indent=2) + "\n")
+            report.write_text(json.dumps({"+".join(groups): rep.to_dict()}, indent=2) + "\n")
         if figures is not None:
             F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")
+        if rep.consistency is not None and not rep.consistency.consistent:
+            raise typer.Exit(3)
 
 
 from .tyre_identify import register as _register_identify  # noqa: E402  (issue 16)
