@@ -29,6 +29,7 @@ from rich.text import Text
 from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the other verbs)
     EVENTS,
     corner_with,
+    default_load,
     parse_range,
     reference_case,
     run_event,
@@ -196,14 +197,21 @@ def kc_command(
     show_warnings(caught)
     for note in _flag_notes(ev):
         warn(note)
+    load = default_load(mech, Event(event).value, corner, fz)
     if as_json:
-        print_json(_json(ev, mech.name))
+        data = _json(ev, mech.name)
+        if load is not None:
+            data["design_load"] = load
+        print_json(data)
         return
     con = console(markup=False)
     con.print(_table(ev, mech.name))
     con.print(Text(f"Held fixed by the derivative metrics: {ev.held}. Signs: toe-in, camber top "
               "outboard, lateral force inboard, longitudinal force rearward (braking) positive "
               f"(Adams/Car, per side). {elapsed:.2f} s."), highlight=False)
+    if load is not None:
+        con.print(Text(f"Design load {load['value']:.6g} N ({load['origin']}); --fz sets "
+                       "another."), highlight=False)
     if out is not None:
         con.print(Text("figures: " + ", ".join(str(p) for p in paths)), highlight=False)
 

@@ -8,6 +8,8 @@ dataset, a version-1 native file) needs a `Corner` passed as `corner=` (or the C
 options).
 """
 
+import math
+
 import numpy as np
 
 from ..errors import InputError
@@ -49,18 +51,33 @@ def corners_of(mech: Mechanism) -> dict[str, Corner]:
 _LOADS = {}  # id(mechanism) → (mechanism, contact point, up, load): a computed design load
 
 
-def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0)) -> float:
-    """The vertical contact load (N, along `up`) at load point `contact_point` for which the
-    design position q = 0 is an equilibrium of `mech` without its motion drivers: the
-    least-squares (F, λ) of the generalised-force rows of the design KKT residual,
-    Q0 + F·Q1 + Φ_qᵀλ = 0 (exact for a one-DOF corner; spec: stiffness §1.4, virtual work).
-    The program of `diffsusp.model.validate.design_terms` (the one validation compiled); the
-    value is remembered per mechanism object."""
+def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
+                     wheel_centre: str | int | None = None) -> float:
+    """The vertical contact load (N, along `up`) at load point `contact_point` that holds the
+    wheel centre at its design height, `mech` without its motion drivers (spec: stiffness
+    §1.4). Solved through the statics for any number of degrees of freedom: the height of the
+    solved wheel centre is a function of the load, h(F), and a safeguarded secant (Illinois
+    once bracketed) finds h(F) = h(design) to 1e-9 mm, each step an equilibrium warm-started
+    from the previous one. The start is the virtual-work estimate at the design position, the
+    least-squares (F, λ) of Q0 + F·Q1 + Φ_qᵀλ = 0 (exact for a one-DOF corner, where the
+    secant stops at once); on a corner on bushings that estimate asks every bushing to be
+    unloaded at design and means nothing, the secant corrects it.
+
+    `wheel_centre`: its marker (name or index; default `'wheel_centre'` under the contact
+    point's prefix). Raises `InputError` when no load within ±1 MN holds the design height
+    (the design is not an equilibrium under any vertical load). The value is remembered per
+    mechanism object."""
+    prefix = contact_point.rpartition("/")[0] + "/" if "/" in contact_point else ""
+    if wheel_centre is None:
+        wheel_centre = prefix + "wheel_centre"
+    wc = wheel_centre if isinstance(wheel_centre, int) else mech.markers.index(wheel_centre)
+    key = (contact_point, tuple(up), wc)
     hit = _LOADS.get(id(mech))
-    if hit is not None and hit[0] is mech and hit[1:3] == (contact_point, tuple(up)):
-        return hit[3]
+    if hit is not None and hit[0] is mech and hit[1] == key:
+        return hit[2]
     from ..model import Loads
     from ..model.validate import design_terms
+    from ..statics import Status, marker_poses, solve_statics
     from .rig import remove_drivers
 
     base = remove_drivers(mech, mech.drivers.names)
@@ -72,12 +89,78 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0)) ->
     r0 = design_terms(base, Loads(force=zero, moment=zero, driver=np.zeros(0)))[1][:n]
     _, r1, jac = design_terms(base, Loads(force=unit, moment=zero, driver=np.zeros(0)))
     a = jac[:n, n:]  # Φ_qᵀ: the residual is linear in the multipliers
-    sol = np.linalg.lstsq(np.column_stack([r1[:n] - r0, a]), -r0, rcond=None)[0]
-    value = float(sol[0])
+    estimate = float(np.linalg.lstsq(np.column_stack([r1[:n] - r0, a]), -r0, rcond=None)[0][0])
+    up_v = np.asarray(up, dtype=float)
+    h0 = float(np.asarray(base.markers.position)[wc] @ up_v)
+    state = {"q": None}
+
+    def height(force: float) -> float:
+        loads = Loads(force=(force * unit)[None], moment=zero[None], driver=np.zeros((1, 0)))
+        sol = solve_statics(base, loads, q0=state["q"], throw=False, checks=False)
+        if int(np.asarray(sol.status)[0]) != Status.CONVERGED:
+            return math.nan
+        state["q"] = sol.q
+        pos, _ = marker_poses(base, sol.q)
+        return float(np.asarray(pos)[0, wc] @ up_v) - h0
+
+    value = _secant(height, estimate if math.isfinite(estimate) else 0.0)
+    if value is None:
+        raise InputError(
+            f"the design position of '{mech.name}' is not an equilibrium under any vertical "
+            f"load at '{contact_point}' within ±1 MN (the wheel centre never reaches its design "
+            "height): state the corner's design_load, or check the springs' free lengths and "
+            "the bushings' preloads.")
     if len(_LOADS) > 64:
         _LOADS.clear()
-    _LOADS[id(mech)] = (mech, contact_point, tuple(up), value)
+    _LOADS[id(mech)] = (mech, key, value)
     return value
+
+
+def _secant(height, f0: float, *, tol: float = 1e-9, limit: float = 1e6, steps: int = 60):
+    """The root of the increasing function `height` (mm of load F, N; NaN where F has no
+    equilibrium) from `f0`: secant steps until the root is bracketed (a step whose load has no
+    equilibrium is halved back toward the last good load), then Illinois regula falsi. None
+    when no root lies within ±`limit`."""
+    fa, ha = f0, height(f0)
+    if not math.isfinite(ha):
+        fa, ha = 0.0, height(0.0)
+    if not math.isfinite(ha):
+        return None
+    if abs(ha) <= tol:
+        return fa
+    fb = fa - math.copysign(max(1000.0, 0.1 * abs(fa)), ha)  # an upward load lifts the wheel
+    for _ in range(steps):  # phase 1: secant until the sign changes
+        if abs(fb) > limit:
+            return None
+        hb = height(fb)
+        while not math.isfinite(hb):
+            fb = 0.5 * (fa + fb)
+            if abs(fb - fa) < 1e-9 * max(1.0, abs(fa)):
+                return None
+            hb = height(fb)
+        if abs(hb) <= tol:
+            return fb
+        if ha * hb < 0:
+            break
+        slope = (hb - ha) / (fb - fa)
+        room = 4.0 * abs(fb - fa) + 1000.0
+        step = -hb / slope if slope > 0 else math.copysign(room, -hb)
+        fa, ha, fb = fb, hb, fb + math.copysign(min(abs(step), room), step)
+    else:
+        return None
+    for _ in range(steps):  # phase 2: Illinois on the bracket (fa, fb)
+        fc = fb - hb * (fb - fa) / (hb - ha)
+        hc = height(fc)
+        if not math.isfinite(hc):
+            return None
+        if abs(hc) <= tol or abs(fc - fb) <= 1e-13 * max(1.0, abs(fc)):
+            return fc
+        if hc * hb < 0:
+            fa, ha = fb, hb
+        else:
+            ha *= 0.5
+        fb, hb = fc, hc
+    return None
 
 
 __all__ = ["FRAMES", "Corner", "PointRef", "ResolvedCorner", "corners_of", "default_corner",

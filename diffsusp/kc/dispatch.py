@@ -96,9 +96,28 @@ def mirrored_corner(corner: Corner) -> Corner:
 
 
 def default_fz_range(mech, corner=None) -> str:
-    """0.5–1.5× the corner's design load, 21 cases (N)."""
-    fz0 = (corner or corners_of(mech)[""]).design_load
+    """0.5–1.5× the corner's design load, 21 cases (N): the load it states, else the one that
+    holds the wheel centre at its design height (`Corner.resolve`)."""
+    fz0 = (corner or corners_of(mech)[""]).resolve(mech).design_load
     return f"{0.5 * fz0}:{1.5 * fz0}:21"
+
+
+LOADED_EVENTS = ("vertical-force", "lateral-force", "braking", "traction", "aligning-torque")
+"""The events whose cases carry the corner's design load unless `fz` is given."""
+
+
+def default_load(mech, event: str, corner=None, fz=None) -> dict | None:
+    """The design load an event uses by default, with its origin: None when `fz` is given or
+    the event applies no vertical load; else `{"value": N, "origin": text}` — the load the
+    model's corner states, or the one computed to hold the wheel centre at its design height
+    (`diffsusp.kc.corner.equilibrium_load`)."""
+    if fz is not None or event not in LOADED_EVENTS:
+        return None
+    c = corner or corners_of(mech)[""]
+    value = float(c.resolve(mech).design_load)
+    origin = ("stated by the model's corner" if c.design_load is not None else
+              "computed: the vertical load that holds the wheel centre at its design height")
+    return {"value": value, "origin": origin}
 
 
 def run_event(mech, event: str, corner=None, *, travel="-80:80:161", fz=None,

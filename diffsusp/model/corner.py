@@ -54,9 +54,9 @@ class Corner:
     - `loaded_radius`: wheel-centre height above the ground at design (mm), for the geometric
       contact point (rigid disc: the lowest point of the wheel's circle of this radius).
     - `design_load`: vertical wheel load at design (N), the default of force events; None:
-      the vertical contact-patch load for which the design position is an equilibrium,
-      computed by `resolve` (least squares over the design KKT residual; exact for a one-DOF
-      corner) — what an imported model that states no wheel load uses.
+      the vertical contact-patch load that holds the wheel centre at its design height,
+      computed by `resolve` through the statics (`diffsusp.kc.corner.equilibrium_load`, any
+      number of degrees of freedom) — what an imported model that states no wheel load uses.
     - `prefix`: name prefix of this corner in a combined axle (e.g. 'left/'); see `with_prefix`.
     """
 
@@ -199,7 +199,8 @@ class Corner:
             loaded_radius=float(self.loaded_radius),
             design_load=float(self.design_load)
             if self.design_load is not None
-            else _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist())),
+            else _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist()),
+                                   wc),
         )
 
 
@@ -237,11 +238,12 @@ class ResolvedCorner(NamedTuple):
         return force, aligning * a
 
 
-def _equilibrium_load(mech, contact_point: str, up) -> float:
-    """The vertical contact load (N) that holds the design position (see `Corner.design_load`)."""
+def _equilibrium_load(mech, contact_point: str, up, wheel_centre: int) -> float:
+    """The vertical contact load (N) that holds the wheel centre at its design height (see
+    `Corner.design_load`)."""
     from ..kc.corner import equilibrium_load
 
-    return equilibrium_load(mech, contact_point, up)
+    return equilibrium_load(mech, contact_point, up, wheel_centre)
 
 
 def design_offset(point, wheel_centre, frame: str, side: str) -> tuple[float, float, float]:
