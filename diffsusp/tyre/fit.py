@@ -893,10 +893,11 @@ def _psi(z, code, k):
 
 def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, noise_counts,
             stages):
-    """The report at x. Covariance: the M-estimator's (Huber 1981, §7.6) on the whitened
-    residuals z: (J_zᵀJ_z)⁻¹·κ, κ = [Σψ(z)²/(n − p)]/[mean ψ'(z)]² over the valid points
-    (κ = σ̂² of the plain least squares for the linear loss); identifiability and combinations
-    from `diffsusp.lsq` on J_z."""
+    """The report at x. Covariance: the M-estimator's sandwich on the whitened residuals z
+    (Huber 1981, §7.6; HC1 small-sample factor n/(n − p)): (Σψ'ᵢJᵢJᵢᵀ)⁻¹(Σψᵢ²JᵢJᵢᵀ)(Σψ'ᵢJᵢJᵢᵀ)⁻¹
+    over the valid points (the linear loss: White's heteroscedasticity-consistent covariance);
+    identifiability and combinations from `diffsusp.lsq` on J_z. The report's residual σ is
+    √κ, κ = [Σψ²/(n − p)]/[mean ψ']² (≈ 1 when the noise model is right)."""
     names = problem.names
     r, J = (np.asarray(a) for a in _linearise(problem, jnp.asarray(x)))
     z = np.asarray(_whitened(problem, jnp.asarray(x))).ravel()
@@ -920,11 +921,18 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
              / max(float(np.mean(dpsi[rows])), 1e-3) ** 2)
     cov = np.full((p, p), np.nan)
     if idl.any():
+        # sandwich (HC1): bread (Σψ'·JᵢJᵢᵀ)⁻¹, meat Σψᵢ²·JᵢJᵢᵀ — right also when the noise
+        # model's shape is not (σ = a + b|F| estimated, outliers down-weighted)
         Ji = Jf[:, idl]
         sc = np.linalg.norm(Ji, axis=0)
         sc = np.where(sc > 0, sc, 1.0)
-        inv = np.linalg.pinv((Ji / sc).T @ (Ji / sc)) / np.outer(sc, sc)
-        cov[np.ix_(fi[idl], fi[idl])] = inv * kappa
+        Js = Ji / sc
+        w1 = np.maximum(dpsi[rows], 0.0)
+        bread = np.linalg.pinv(Js.T @ (Js * w1[:, None]))
+        meat = (Js * (psi[rows] ** 2)[:, None]).T @ Js
+        m = int(idl.sum())
+        hc = bread @ meat @ bread * n_rows / max(n_rows - m, 1)
+        cov[np.ix_(fi[idl], fi[idl])] = hc / np.outer(sc, sc)
     robust_sigma = math.sqrt(kappa)
     sd = np.sqrt(np.abs(np.diag(cov)))
     ident_lin = np.zeros(p, bool)
@@ -991,7 +999,7 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
         loss: str = "huber", loss_scale: float = 1.345, combined: bool = True,
         max_steps: int = 200, rtol: float = 1e-10, atol: float = 1e-10,
         threshold: float = 1e-8, strategy: str = "staged", start_from_data: bool = True,
-        hold=None, free=(), tir=None):
+        hold=None, free=(), tir=None, second_start: bool = True):
     """Fit the coefficients `names` of `model` (a `MagicFormula6` or `MagicFormula89`) to `data`.
 
     spec: tyre §7 E item 22, §7 D item 18; the start and noise: `diffsusp.tyre.fit_start`.
@@ -1011,6 +1019,12 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     then the camber ones with the others fixed, then all of the channel's together; last the
     joint fit of every coefficient on every channel. Every stage runs the same compiled
     Levenberg–Marquardt program (free coefficients and rows as masks).
+
+    **Second start** (`second_start`, staged only): the joint fit is also run from the start
+    file's own values; the better optimum is kept, and when both fit the data equally well
+    (objectives within the χ² quantile of as many dof as free coefficients) a coefficient on
+    which they differ by more than 3σ is *not determined*: the data do not tell the two apart
+    (a nonlinear ridge no linearised σ shows, e.g. E_y's PEY1·(1 − PEY3·sgn α)).
 
     **Noise and verdict.** Residuals are whitened by σ = a + b·|F| per point. With the noise
     estimated, the fit is polished once with the noise model re-estimated from its residuals
@@ -1065,8 +1079,31 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
         problem_cov = p2
     else:
         problem_cov = problem
+    x_other = None
+    if second_start and strategy == "staged":
+        # a second opinion: the joint fit from the start file's own values (another basin)
+        pa = eqx.tree_at(lambda q: q.x0, problem_cov, jnp.asarray(file_start))
+        xa, sa, oka, _ = _run(pa, "joint", max_steps, rtol, atol)
+        s_main = float(_objective(problem_cov, jnp.asarray(x)))
+        s_alt = float(_objective(problem_cov, xa))
+        labels.append(f"second start: joint from the file's values ({sa} steps, "
+                      f"objective {s_alt:.6g} vs {s_main:.6g})")
+        if s_alt < s_main:
+            x, xa, ok = xa, x, oka
+            labels.append("the second start fits better: kept")
+        x_other, gap = np.asarray(xa), abs(s_alt - s_main)
     fitted, report = _report(problem_cov, x, steps, ok, threshold, file_start, noise_ab,
                              noise_src, counts, labels)
+    if x_other is not None:
+        _second_opinion(report, x_other, gap)
+    if second_start:
+        for xp, gp, lab in _ridge_probes(problem_cov, report, max_steps, rtol, atol):
+            labels.append(lab)
+            _second_opinion(report, xp, gp)
+    exact = all(v <= 1e-9 * max(float(np.ptp(np.asarray(data.measured)[k])), 1.0)
+                for k, v in enumerate(report.rms.values()))
+    if not exact:   # with exact data the optimum is exact, clip or not
+        _clipped_curvature(report)
     if problem_cov is not problem:
         cons, z = _consistency(problem, np.asarray(x), counts, int(report.identifiable.sum()))
         report.consistency = cons
@@ -1074,6 +1111,85 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     report.start = np.asarray(problem.x0)
     return with_ranges(model.replace(**{n: float(v) for n, v in zip(names, x, strict=True)})
                        if isinstance(model, mf6.MagicFormula6) else fitted, data), report
+
+
+_objective = eqx.filter_jit(lambda problem, x: jnp.sum(problem.residual_x(x) ** 2))
+
+
+def _ridge_probes(problem, report, max_steps, rtol, atol):
+    """Restarts 4σ away along the least determined direction of the determined coefficients
+    (both ways): (optimum, |objective difference|, label) of each. A valley the linearisation
+    does not see (e.g. a curvature factor clipped at 1 over part of the data) brings a probe to
+    another optimum as good as the first, 3σ or more away."""
+    det = np.asarray(report.identifiable, bool)
+    if det.sum() < 2:
+        return []
+    cov = np.asarray(report.correlation)[np.ix_(det, det)]
+    sd = np.asarray(report.sigma)[det]
+    if not np.all(np.isfinite(cov)) or not np.all(np.isfinite(sd)):
+        return []
+    w, v = np.linalg.eigh(cov)
+    x = np.asarray(report.values)
+    s0 = float(_objective(problem, jnp.asarray(x)))
+    out = []
+    for sign in (1.0, -1.0):
+        d = np.zeros_like(x)
+        d[det] = sign * 4.0 * math.sqrt(max(w[-1], 0.0)) * v[:, -1] * sd
+        p = eqx.tree_at(lambda q: q.x0, problem, jnp.asarray(x + d))
+        xp, sp, _ = _solve(p, jnp.zeros(x.size), max_steps, rtol, atol)
+        s1 = float(_objective(problem, xp))
+        out.append((np.asarray(xp), abs(s1 - s0),
+                    f"ridge probe {'+' if sign > 0 else '-'}4σ ({int(sp)} steps, objective "
+                    f"{s1:.6g} vs {s0:.6g})"))
+    return out
+
+
+def _clipped_curvature(report):
+    """A curvature factor clipped at 1 over part of the data (E_x, E_y > 1: MF-Tyre's limit)
+    leaves its coefficients without a smooth optimum: the data beyond the clip only say E ≥ 1,
+    and the linearised σ misses it. Their coefficients are then not determined."""
+    groups = {"E_y": ("PEY1", "PEY2", "PEY3", "PEY4", "PEY5"),
+              "E_x": ("PEX1", "PEX2", "PEX3", "PEX4")}
+    ident = np.asarray(report.identifiable).copy()
+    reasons = list(report.reasons)
+    for v in report.violations:
+        for e, coeffs in groups.items():
+            if v.startswith(e):
+                for i, n in enumerate(report.names):
+                    if n in coeffs and ident[i]:
+                        ident[i] = False
+                        reasons[i] = (f"{e} reaches the clip at 1 in the data's range: beyond "
+                                      "it the data only say E ≥ 1")
+                # what leans on those coefficients (|correlation| > 0.5) inherits the doubt
+                idx = [i for i, n in enumerate(report.names) if n in coeffs]
+                corr = np.nan_to_num(np.asarray(report.correlation)[:, idx])
+                for i in np.flatnonzero(ident & np.any(np.abs(corr) > 0.5, axis=1)):
+                    ident[i] = False
+                    reasons[i] = (f"correlated with the curvature {e}, which reaches the clip "
+                                  "at 1 in the data's range")
+    report.identifiable = ident
+    report.reasons = tuple(reasons)
+
+
+def _second_opinion(report, x_other, gap):
+    """Mark the determined coefficients on which an equally good second optimum differs by more
+    than 3σ as not determined (see `fit`)."""
+    free = ~np.asarray(report.held)
+    bound = chi2_quantile(max(int(free.sum()), 1))
+    if not gap <= bound:
+        return
+    reasons = list(report.reasons)
+    ident = np.asarray(report.identifiable).copy()
+    for i in np.flatnonzero(ident):
+        d = abs(float(x_other[i]) - float(report.values[i]))
+        # beyond 3σ and beyond the solver's precision (two exact fits agree to ~1e-9)
+        if d > 3.0 * report.sigma[i] and d > 1e-7 * abs(float(report.values[i])) + 1e-12:
+            ident[i] = False
+            reasons[i] = (f"a second optimum fits the data as well (Δobjective {gap:.3g}) at "
+                          f"{float(x_other[i]):.6g}, {d / report.sigma[i]:.3g}σ away: the data "
+                          "do not tell the two apart")
+    report.identifiable = ident
+    report.reasons = tuple(reasons)
 
 
 def default_groups(model, channels) -> list[str]:
@@ -1115,6 +1231,74 @@ def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "hu
                                  datas[i])
         out.append((fitted, rep))
     return [o[0] for o in out], [o[1] for o in out]
+
+
+class FitRehearsal:
+    """A rehearsal of a Magic Formula fit (the scenario of `diffsusp.identify.rehearse`): random
+    truths around the user's start file, the user's bench programme simulated with the user's
+    noise, fitted with the user's options from the start file.
+
+    **Arguments:** `start_model` (the start file's model), `programme` (a `BenchData` whose
+    inputs and channels are the planned bench programme, e.g. `bench_programme`), `names` (the
+    coefficients whose truths are drawn; default the ones `fit` estimates: `default_names` less
+    `default_hold`), `spread` (relative: truths x₀·(1 + spread·U(−1, 1)), default ±20 %),
+    `noise` per channel σ or (a, b) for σ = a + b·|F| (default 20 N + 1 % |F| on forces, 20 N·m
+    + 1 % on moments), `outliers` (fraction of gross spikes), `fit_noise` the noise the fit is
+    told (default None: estimated from the sweeps, as a user without a noise figure runs it),
+    `loss`, `strategy`, `tir` (the start's property file: its absent coefficients are held).
+
+    Each truth is simulated with its validity ranges opened to the programme (a measured tyre
+    saturates nothing) and fitted by `fit`; `identify` returns the reports in the truths'
+    order.
+    """
+
+    method = "mf-fit"
+
+    def __init__(self, start_model, programme: BenchData, names=None, *, spread: float = 0.2,
+                 noise: dict | None = None, outliers: float = 0.0, fit_noise=None,
+                 loss: str = "huber", strategy: str = "staged", tir=None):
+        if not (spread > 0 and math.isfinite(spread)):
+            raise InputError(f"spread {spread!r}: a relative spread > 0 (0.2 = ±20 %)")
+        if not 0.0 <= outliers < 0.5:
+            raise InputError(f"outliers {outliers!r}: a fraction in [0, 0.5)")
+        fitted_names = default_names(start_model, programme.channels)
+        self.hold = default_hold(start_model, fitted_names, tir)
+        if names is None:
+            names = [n for n in fitted_names if n not in self.hold]
+        unknown = [n for n in names if n not in start_model.coefficients]
+        if unknown:
+            raise InputError(f"unknown coefficient(s) {', '.join(unknown)}")
+        self.names = tuple(names)
+        self.fit_names = tuple(dict.fromkeys((*fitted_names, *self.names)))
+        self.hold = tuple(n for n in self.hold if n not in self.names)
+        if noise is None:
+            noise = {c: (20.0, 0.01) if c.startswith("F") else (20e3, 0.01)
+                     for c in programme.channels}
+        self.noise = {c: _noise_pair(v) for c, v in noise.items()}
+        self.start, self.programme, self.spread = start_model, programme, float(spread)
+        self.outliers, self.fit_noise, self.loss, self.strategy = (outliers, fit_noise, loss,
+                                                                   strategy)
+        self.x0 = np.array([float(start_model[n]) for n in self.names])
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """(n, p) truths x₀·(1 + spread·U(−1, 1))."""
+        if int(n) < 1:
+            raise InputError(f"{n} truths: at least 1")
+        return self.x0 * (1.0 + self.spread * rng.uniform(-1.0, 1.0, (int(n), self.x0.size)))
+
+    def truth_model(self, truth):
+        return with_ranges(self.start.replace(**dict(zip(self.names, map(float, truth),
+                                                         strict=True))), self.programme)
+
+    def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
+        reports = []
+        for truth in np.atleast_2d(truths):
+            data = simulate(self.truth_model(truth), self.programme, noise=self.noise,
+                            seed=int(rng.integers(2**31)), outliers=self.outliers)
+            _, rep = fit(self.start, data, self.fit_names, noise=self.fit_noise,
+                         loss=self.loss, strategy=self.strategy, hold=self.hold)
+            reports.append(rep)
+        return reports
 
 
 def plot_fit(model, data: BenchData, *, combined: bool = True, folder=None) -> dict:

@@ -1,0 +1,104 @@
+"""Monte-Carlo rehearsal of the Magic Formula fit (`diffsusp.tyre.fit.FitRehearsal`): random
+truths ±20 % around a real start file (the FEDA truck tyre, PAC2002 convention), its bench
+programme simulated with noise σ = 20 N + 1 % |F| (and optionally 2 % gross outliers), fitted from
+the start file with default options (noise estimated from the sweeps, Huber loss, staged
+strategy). Per coefficient: identified rate, coverage of the 1/2/3σ intervals among identified,
+mean bias/σ, false-"identified" rate (identified but outside 3σ); per scenario the consistent-
+verdict rate.
+
+Uses `diffsusp.identify.rehearse` when it exists, else its own loop with the same numbers.
+
+    python benchmarks/rehearse_mf_fit.py [--n 200] [--scenario fy|fy-outliers|fy-mz|all]
+"""
+
+import argparse
+import json
+import time
+
+import _common  # noqa: F401  (compiler flags, results folder)
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import numpy as np  # noqa: E402
+
+from diffsusp.io.tir import read_tir  # noqa: E402
+from diffsusp.tyre import MagicFormula6  # noqa: E402
+from diffsusp.tyre import fit as F  # noqa: E402
+
+SHARED = "/work/shared/data/tyre/"
+
+
+def scenario(name):
+    start_file = {"fy": 60, "fy-outliers": 60, "fy-mz": 70}[name]
+    tir = read_tir(SHARED + f"335_65R22_5_G275MSA_{start_file}psi.tir")
+    start = MagicFormula6.from_tir(tir)
+    lim = start.limit
+    channels = ("FY", "MZ") if name == "fy-mz" else ("FY",)
+    prog = F.bench_programme(start, loads=np.linspace(lim["FZMIN"], lim["FZMAX"], 3),
+                             cambers=[lim["CAMMIN"], 0.0, lim["CAMMAX"]], n_slip=41,
+                             channels=channels)
+    return F.FitRehearsal(start, prog, spread=0.2, tir=tir,
+                          outliers=0.02 if name == "fy-outliers" else 0.0)
+
+
+def own_loop(sc, n, seed):
+    rng = np.random.default_rng(seed)
+    truths = sc.draw(rng, n)
+    reports = sc.identify(truths, rng)
+    p = len(sc.names)
+    ident = np.zeros((n, p), bool)
+    z = np.full((n, p), np.nan)
+    consistent = np.zeros(n, bool)
+    for i, rep in enumerate(reports):
+        st = rep.status_list
+        for j, name in enumerate(sc.names):
+            k = rep.names.index(name)
+            ident[i, j] = st[k] == "identified"
+            z[i, j] = (rep.values[k] - truths[i, j]) / rep.sigma[k]
+        consistent[i] = bool(rep.consistency.consistent)
+    per = {}
+    for j, name in enumerate(sc.names):
+        sel = ident[:, j]
+        zz = np.abs(z[sel, j])
+        per[name] = {"identified_rate": float(sel.mean()),
+                     "coverage_1s": float(np.mean(zz <= 1)) if sel.any() else None,
+                     "coverage_2s": float(np.mean(zz <= 2)) if sel.any() else None,
+                     "coverage_3s": float(np.mean(zz <= 3)) if sel.any() else None,
+                     "bias_over_sigma": float(np.mean(z[sel, j])) if sel.any() else None,
+                     "false_identified_rate": float(np.mean(sel & ~(np.abs(z[:, j]) <= 3)))}
+    return {"n": n, "consistent_rate": float(consistent.mean()), "parameters": per,
+            "false_identified_overall": float(np.mean(ident & ~(np.abs(z) <= 3))),
+            "coverage_3s_overall": float(np.mean(np.abs(z[ident]) <= 3))}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--n", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--scenario", default="all")
+    args = ap.parse_args()
+    names = ["fy", "fy-outliers", "fy-mz"] if args.scenario == "all" else [args.scenario]
+    results = {}
+    for name in names:
+        sc = scenario(name)
+        t0 = time.perf_counter()
+        try:
+            from diffsusp.identify.rehearse import rehearse
+            rep = rehearse(sc, n=args.n, seed=args.seed)
+            out = rep.summary() if hasattr(rep, "summary") else rep.to_dict()
+        except ImportError:
+            out = own_loop(sc, args.n, args.seed)
+        out["seconds"] = time.perf_counter() - t0
+        results[name] = out
+        print(name, json.dumps({k: v for k, v in out.items() if k != "parameters"}))
+        for k, v in out.get("parameters", {}).items():
+            print(f"  {k:6s} " + " ".join(f"{a}={b:.3g}" if isinstance(b, float) else f"{a}={b}"
+                                           for a, b in v.items()))
+    path = _common.RESULTS / "rehearse_mf_fit.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    old.update(results)
+    path.write_text(json.dumps(old, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
