@@ -146,8 +146,8 @@ def test_rehearsal_of_a_bench_campaign(campaign):
         k_mz=annex_g.lateral_stiffness("dunlop_r16", p, "Mz"), segments=PROGRAMME,
         noise={"FY": (2.0, 0.01), "MZ": (600.0, 0.0), "FX": 3.0, "FZ": 3.0})
     rng = np.random.default_rng(27)
-    truths = sc.draw(rng, 4)
-    assert truths.shape == (4, len(sc.names)) and sc.names[-1] == "K_Fy_y"
+    truths = sc.draw(rng, 3)  # three: the shape of `campaign`'s batch, one compiled program
+    assert truths.shape == (3, len(sc.names)) and sc.names[-1] == "K_Fy_y"
     reports = sc.identify(truths, rng)
     claims = false = 0
     for t, rep in zip(truths, reports, strict=True):
@@ -159,7 +159,7 @@ def test_rehearsal_of_a_bench_campaign(campaign):
         false += int(np.sum(ident & ~(z <= 3)))
         if rep.consistency.consistent:  # the searched model's K_y is determined
             assert ident[-1] and z[-1] <= 3
-    assert claims >= 20 and false == 0, (claims, false)
+    assert claims >= 15 and false == 0, (claims, false)
     with pytest.raises(InputError, match="spread"):
         bench_batch.BenchScenario(sc.fy, sc.mz, sc.k_fy, sc.k_mz, PROGRAMME, spread=0.0)
     with pytest.raises(InputError, match="at least one truth"):

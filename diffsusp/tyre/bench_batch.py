@@ -127,7 +127,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         m = active.astype(dtype)
         return bench.two_step(jnp, X * m, L * m, Dp * m, fydot, y_seg, H, Dm, omega,
                               dt, is_ly=masks[0], is_pneu=masks[1], is_p2=masks[2],
-                              profile=profile, check_var=var, **kw)
+                              profile=profile, **kw)
 
     def least_squares(active, S, g_ref, have_S):
         xs, cov_unit, _ = core._masked_solve(Rw, z, active, zeros)  # cov_unit: G_A⁻¹
@@ -142,7 +142,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         return b, sig, S, g_ref, update
 
     final_keys = ("x", "sigma", "compliance", "compliance_sigma", "sigma_step2", "noise_sigma",
-                  "fydot_hat", "residual", "whitened")
+                  "fydot_hat", "residual")
 
     def iv(active):
         """The final pass's estimate: `two_step` (steps 1 and 2, the σ from the residual's
@@ -202,8 +202,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                   gram_updates=jnp.asarray(0),
                   final=dict(x=zeros, sigma=zeros, compliance=zeros[0], compliance_sigma=zeros[0],
                              sigma_step2=zeros[0], noise_sigma=zeros[0],
-                             fydot_hat=jnp.zeros_like(fydot), residual=jnp.zeros_like(y),
-                             whitened=jnp.zeros_like(y_seg)))
+                             fydot_hat=jnp.zeros_like(fydot), residual=jnp.zeros_like(y)))
 
     def body(st):
         st = dict(st)
@@ -253,6 +252,8 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     st = jax.lax.while_loop(lambda st: st["go"] & (st["steps"] < p), body, state0)
     # the final estimate: the final pass's last one (on the final structure), or step 2 now
     res = st["final"] if final_pass is not None else two_step(st["active"])
+    # the consistency's whitened residual, once, on the final structure
+    white = two_step(st["active"], check_var=var)["whitened"]
     out = {k: st[k] for k in ("fixed", "active", "order", "order_pct", "order_stat",
                               "order_phase", "alias_step", "x", "sigma", "stat", "ls_x", "ls_stat",
                               "ls_active", "ls_done", "steps", "gram_updates")}
@@ -261,7 +262,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
     out.update(final_x=res["x"], final_sigma=res["sigma"], compliance=res["compliance"],
                compliance_sigma=res["compliance_sigma"], sigma_step2=res["sigma_step2"],
                noise_sigma=res["noise_sigma"], fydot_hat=res["fydot_hat"],
-               residual=res["residual"], whitened=res["whitened"], full_x=full_x,
+               residual=res["residual"], whitened=white, full_x=full_x,
                full_sigma=full_sigma, full_active=active0)
     return out
 
