@@ -75,7 +75,8 @@ def with_rack(mech: Mechanism, tie_rod: str = "tie_rod", *, direction=None,
     - `direction`: rack axis (global unit vector) along which positive rack travel moves the
       inner tie-rod point; default: the vehicle's left, i.e. −y in the Adams/Car frame and +y
       in the ISO frame (`frame`).
-    - `frame`: 'adams' or 'iso', for the default direction (default 'adams').
+    - `frame`: 'adams' or 'iso', for the default direction (default: the frame of the model's
+      corner, 'adams' for a model that states none).
     - `name`: the rack driver's name; its value is the rack travel (mm).
 
     **Returns:** the mechanism with the rack.
@@ -97,7 +98,9 @@ def with_rack(mech: Mechanism, tie_rod: str = "tie_rod", *, direction=None,
                          "ground (the inner tie-rod point).")
     inner = inner[0]
     if direction is None:
-        direction = (0.0, 1.0, 0.0) if (frame or "adams") == "iso" else (0.0, -1.0, 0.0)
+        if frame is None:
+            frame = mech.corners[0].frame if mech.corners else "adams"
+        direction = (0.0, 1.0, 0.0) if frame == "iso" else (0.0, -1.0, 0.0)
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
     from ..model.builder import frame_from_axes

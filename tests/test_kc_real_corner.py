@@ -1,9 +1,11 @@
-"""A compliant corner's design load: the vertical contact load that holds the wheel centre at its
+"""K&C on real corners by default. A compliant corner's design load: the vertical contact load that holds the wheel centre at its
 design height, solved through the statics (any number of DOF), and the force events that use it
 by default. On the Chrono double wishbone with `Bushing Data` (11 DOF) the old virtual-work
 estimate at the design position (one load for every generalised-force row, by least squares)
 gave a negative load, the wheel 117 mm below design and a lateral compliance steer 4.5 times too
 large; on the one-DOF double wishbone both are exact and agree.
+
+The frames of the model read where a default depends on them (`with_rack`).
 
 One model structure per file, one lateral-force program shared by the CLI run and the library."""
 
@@ -124,3 +126,17 @@ def test_vertical_force_without_fz_runs_around_the_design_load(bushings):
     np.testing.assert_allclose(fz[[0, -1]], [0.5 * f0, 1.5 * f0], rtol=1e-12)
     travel = np.asarray(data["metrics"]["wheel_travel"]["values"])
     assert abs(travel[np.argmin(np.abs(fz - f0))]) < 1e-6
+
+
+def test_with_rack_reads_the_frame_from_the_model(bushings):
+    """A Chrono (ISO 8855) corner: positive rack travel moves the inner tie-rod point to the
+    vehicle's left, +y in ISO (it was -y, the Adams/Car default, unless frame= was given)."""
+    assert bushings.corners[0].frame == "iso"
+    tie_rod = next(n for n, k in zip(bushings.joints.names, bushings.joints.kind, strict=True)
+                   if k == "distance")
+    racked = kc.with_rack(bushings, tie_rod)
+    explicit = kc.with_rack(bushings, tie_rod, frame="iso")
+    k = racked.drivers.names.index("rack_travel")
+    np.testing.assert_allclose(racked.drivers.direction.reshape(-1, 3)[k], [0.0, 1.0, 0.0],
+                               atol=1e-15)
+    np.testing.assert_array_equal(racked.drivers.direction, explicit.drivers.direction)
