@@ -134,3 +134,39 @@ def test_table_json_agree(feda):
         assert s in line
         assert row["identified"] == (s == "identified")
     assert js["statuses"] == list(rep.status_list)
+
+
+def test_cli_fit_from_a_pac2002_file(feda, tmp_path):
+    """`diffsusp tyre fit --start` a FEDA file (PDY1 < 0, refused before): the data of the other
+    file fitted, the fitted .tir written, the printed table and the JSON report agree on every
+    status, and an impossible start (another tyre's file, far off) never prints 'identified'
+    for a model that does not fit."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from diffsusp.cli import app
+
+    (_, start), (_, truth) = feda[60], feda[70]
+    inp, tr = _programme(truth)
+    data = F.simulate(tr, inp, noise=NOISE, seed=5)
+    fz, sa, ia = (np.asarray(v) for v in (data.fz, data.alpha, data.gamma))
+    fy = np.asarray(data.measured[0])
+    csv = tmp_path / "bench.csv"
+    csv.write_text("FZ [N],SA [rad],IA [rad],FY [N]\n" + "".join(
+        f"{a!r},{b!r},{c!r},{d!r}\n" for a, b, c, d in zip(fz.tolist(), sa.tolist(),
+                                                          ia.tolist(), fy.tolist(),
+                                                          strict=True)))
+    rep, out = tmp_path / "r.json", tmp_path / "fitted.tir"
+    r = CliRunner().invoke(app, ["tyre", "fit", str(csv), "--model", "mf52", "--start",
+                                 FEDA[60], "--report", str(rep), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    js = next(iter(json.loads(rep.read_text()).values()))
+    lines = r.output.splitlines()
+    for row in js["parameters"]:
+        line = next(t for t in lines if t.split() and t.split()[0] == row["parameter"])
+        assert row["status"] in line, (row, line)
+    assert js["verdict"].startswith("fits the data")
+    fitted = MagicFormula6.from_tir(read_tir(out))
+    assert float(fitted["PDY1"]) < 0
+    assert fitted.limit["FZMIN"] == pytest.approx(float(np.min(fz)))

@@ -394,8 +394,14 @@ def fit_command(
         if out is not None and tir is not None:
             from diffsusp.io.tir import write_tir
 
-            write_tir(fitted.to_tir(tir), out)
-            c.print(f"fitted model written to {out}")
+            from diffsusp.tyre import mf6
+
+            written = fitted.to_tir(tir)
+            for n, v in fitted.limit.items():   # the validity ranges: the data's
+                if math.isfinite(v) and n in mf6._LIMIT_SECTION and not n.startswith("PRES"):
+                    written.set(n, float(v), section=mf6._LIMIT_SECTION[n])
+            write_tir(written, out)
+            c.print(f"fitted model written to {out} (validity ranges: the data's)")
         if report is not None:
             report.write_text(json.dumps({"+".join(groups): rep.to_dict()}, indent=2) + "\n")
         if figures is not None:
