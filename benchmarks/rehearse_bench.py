@@ -140,8 +140,9 @@ def main():
               f"{'false':>7}")
         for n, s in st["parameters"].items():
             f = (lambda v: "   -  " if v is None else f"{v:7.3f}")
+            g = (lambda v: " " * 8 if v is None else f"{v:8.2f}")
             print(f"{n:<18}{s['identified_rate']:7.3f}{f(s['coverage_1'])}{f(s['coverage_2'])}"
-                  f"{f(s['coverage_3'])}{'' if s['bias_over_sigma'] is None else format(s['bias_over_sigma'], '8.2f'):>8}"
+                  f"{f(s['coverage_3'])}{g(s['bias_over_sigma'])}"
                   f"{s['false_identified']:7d}{'  (truth 0)' if s['truth_zero'] else ''}")
         sys.stdout.flush()
     RESULTS.mkdir(exist_ok=True)

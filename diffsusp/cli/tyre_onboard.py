@@ -7,8 +7,9 @@ per grouping and camber choice, as the thesis's Tables 32/33 (value and σ % per
 the Correvit delay is estimated and removed unless `--delay` gives it (`--delay 0` and
 `--no-estimate-delay` is the thesis's naive pipeline). `--json` machine-readable, `--figures
 DIR` measured vs model F_y, `--report FILE.csv|.json` the reports (per parameter value, σ, σ %,
-status and reason, each fit's consistency verdict), the same objects the table prints. Exit code 2 for bad input (missing channels, non-finite values
-outside the lasers, a window longer than the record).
+status and reason, each fit's consistency verdict), the same objects the table prints. Exit
+code 2 for bad input (missing channels, non-finite values outside the lasers, a window longer
+than the record).
 """
 
 from pathlib import Path

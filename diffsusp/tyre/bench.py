@@ -32,6 +32,17 @@ seeds (tests/test_tyre_bench.py). The σ of K_y⁻¹ is that of the linearised j
 F = W_pneu·b + c·D(b) (the thesis's step-2 σ ignores step 1's uncertainty and understates
 the spread 1.5×).
 
+**The report** (`OutputReport`, `BenchReport`: `diffsusp.identify.report.IdentificationReport`):
+per candidate coefficient and K_y its value, σ, σ %, status and reason (removed by the F-test,
+alias, held at 0 as not separable, not excited by the data, held by the user). A kept
+coefficient's σ is that of the model of every candidate term combined with the shift the
+search's choice made (the search's reduced σ assumes the structure it chose: rehearsed on
+random tyres, 22 % of the coefficients it called determined were outside 3 σ); per output a
+consistency verdict, the joint model's residual whitened by the filtered noise model against
+the noise level measured above 60 Hz (`bench_consistency`, Fisher's F law). The noise level
+and its growth with the force (σ = a + b·|F|) and the outliers come from that band
+(`bench_condition.noise_model`) and enter every σ.
+
 **Synthetic Flat Trac** (`steering_feel_segments`, `active_safety_segments`,
 `synthetic_flat_trac`): the steering-feel sequences of §4.3 A (straight line, small slip steps
 ±1°, load sine ±500 N at 3 and 6 Hz, slip sines ±1° at 3, 4.5, 6 Hz, medium slip profiles ±4°)
@@ -264,7 +275,8 @@ def _reason_of_removal(why: str) -> str:
         return f"alias of {other} (removed with it): {why}"
     if why.startswith("behaviour"):
         return f"removed by the behaviour rules (spec §3.3): {why}"
-    return f"removed by the F-test (its removal does not raise the residual beyond the noise): {why}"
+    return ("removed by the F-test (its removal does not raise the residual beyond the noise): "
+            + why)
 
 
 @dataclasses.dataclass
@@ -640,6 +652,9 @@ def report_rows(rep, label: str | None = None) -> list[dict]:
     rows = []
     for row, st, why in zip(rep.rows(), statuses(rep), reasons, strict=True):
         row = dict(row)
+        if st == "not determined" and not why and rep.consistent is False:
+            why = ("determined by the data, but the fit is inconsistent with them (see the "
+                   "consistency verdict)")
         row["status"], row["reason"] = st, why
         if label is not None:
             row = {"report": label, **row}

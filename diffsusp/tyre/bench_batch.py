@@ -293,7 +293,8 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
                    batch="map", from_tables=True):
     """The traced F_y identification of many data sets as one function (jit it): from stacked
     bench channels (`from_tables`: dict channel → (sets, segments, samples), then the filter's
-    rows H, the difference matrix Dm, E = [I − F, `bench.noise_band`] (2, m, m)) or stacked conditioned data (samples dict
+    rows H, the difference matrix Dm, E = [I − F, `bench.noise_band`] (2, m, m)) or stacked
+    conditioned data (samples dict
     (sets, segments, samples), y (sets, n), M_z (sets, n), noise (sets, 2): FY, MZ; F_z range
     (sets, 2), then H, Dm), and last `params` = [σ % threshold (inf: none), χ²₁ critical
     value]. `batch`: "map" (`lax.map`, one set at a time in the program: the memory of one

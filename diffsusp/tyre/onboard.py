@@ -681,7 +681,8 @@ class Report(IdentificationReport):
                 out.append("not determined: the data determine it only in a combination "
                            "with others (see combinations)")
             elif not self.identifiable[i]:
-                out.append(f"not determined: |x|/sigma {abs(self.estimates[i]) / self.sigmas[i]:.2g}"
+                z = abs(self.estimates[i]) / self.sigmas[i]
+                out.append(f"not determined: |x|/sigma {z:.2g}"
                            f" < {np.sqrt(self._crit()):.3g}")
             else:
                 out.append("")
