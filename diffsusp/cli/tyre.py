@@ -389,7 +389,8 @@ def fit_command(
         c.print(f"fitting {', '.join(groups)} ({len(names)} coefficients, {bench.n} points, "
                 f"{strategy}) ...")
         fitted, rep = F.fit(m0, bench, names, loss=loss, noise=noise_ab or None,
-                            free=tuple(free or ()), tir=tir, strategy=strategy)
+                            hold=F.default_hold(m0, names, tir), free=tuple(free or ()),
+                            tir=tir, strategy=strategy)
         c.print(rep.table(), highlight=False)
         if out is not None and tir is not None:
             from diffsusp.io.tir import write_tir

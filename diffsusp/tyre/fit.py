@@ -1,32 +1,43 @@
-"""Magic Formula coefficients from bench data: robust Levenberg–Marquardt with exact Jacobians.
+"""Magic Formula coefficients from bench data: a staged robust Levenberg–Marquardt with exact
+Jacobians, from a start file of either sign convention, with a verdict per coefficient.
 
 spec: tyre §7 E item 22 (nonlinear least-squares refinement), §7 D item 18 (the report of the
-guaranteed least squares), issue 15 item 3. The same report style as the suspension fits: σ, σ %,
-identifiable or not, the combinations the data determine (from `diffsusp.lsq` on the
-linearisation at the optimum).
+guaranteed least squares), tyre §7 C (the coefficients' roles and constraints). The report is an
+`diffsusp.identify.report.IdentificationReport`: per coefficient value, σ, σ % and one status
+(identified / not determined with its reason / held / not seen), per fit a consistency verdict.
 
 ```python
-data = tyre.fit.bench_data(io.read_table("bench.csv"))            # FZ, SA, ..., FY [N], ...
-fitted, report = tyre.fit.fit(start, data, names=tyre.fit.GROUPS["pure_lateral"],
-                              channels=("FY",), noise={"FY": 20.0}, loss="huber")
-print(report.table()); fitted.to_tir(template)
+data = tyre.fit.read_bench("bench.csv")                        # FZ, SA, IA, ..., FY [N], ...
+fitted, report = tyre.fit.fit(start, data, tir=start_tir)      # default groups, noise estimated
+print(report.table()); write_tir(fitted.to_tir(start_tir), "fitted.tir")
 ```
 
-**Method.** Residuals z = (model − measured)/σ per channel (whitened by the channel's noise σ,
-in the channel's units: N, N·mm), passed through the robust loss as r = sgn(z)·√(2ρ(z)) so that
-Σr² = 2Σρ(z): Huber ρ = z²/2 (|z| ≤ k), k|z| − k²/2 beyond; Cauchy ρ = (k²/2)·log(1 + (z/k)²);
-"linear" the plain sum of squares. `optimistix.LevenbergMarquardt` minimises Σr² with the
-Jacobian by forward-mode autodiff (exact). **Bounds by reparametrisation**: the shape factors
-and peak frictions that must be positive (`POSITIVE`: p_Cx1, p_Cy1, q_Cz1, r_Cx1, r_Cy1, p_Dx1,
-p_Dy1) are fitted as x = x₀·exp(u), the others as x = x₀ + s·u with s = max(|x₀|, 0.1) (scaling
-only). The curvature factors (E_x, E_y, E_t ≤ 1) and C, D > 0 are **checked over the data's
-range** after the fit and reported in `report.violations`.
+**Start.** Any sign of a start coefficient: the peak frictions, shape factors and stiffness
+scales (`SIGNED_LOG`) are fitted as x = x₀·exp(u) — magnitude free, sign kept (the PAC2002
+convention writes PDY1, PKY1 < 0) — the others as x = x₀ + s·u, s = max(|x₀|, 0.1). The
+coefficients the start file does not use (0, or absent from its .tir) are held (`default_hold`).
+Starting values of the scale coefficients come from the data (`fit_start.data_start`: peak,
+slope at the origin and trail per load, as the fitting tools of the trade do), then the staged
+strategy (`fit`): per channel the zero-camber coefficients on the zero-camber sweeps, the camber
+ones, the channel's all, then everything jointly; a second start and two ridge probes look for
+an equally good optimum elsewhere. The fit's validity ranges become the data's (`with_ranges`);
+during the fit no input is saturated (a measured tyre saturates nothing; FNOMIN is held, so a
+start at another nominal load gives the truth in that normalisation: `fit_start.renormalise`).
 
-**Report.** At the optimum the robust residuals are linearised in the coefficients (Jacobian J
-in coefficient space) and `diffsusp.lsq.solve(J, J·x̂ − r, prior=x̂)` gives σ (from
-(JᵀJ)⁻¹·σ̂²; σ̂² = Σr²/(n − rank), ≈ 1 when the noise σ's are right), σ %, correlations,
-which coefficients are identifiable and the identifiable combinations of the others (relative
-threshold `threshold` on unit-norm columns, default 1e-8).
+**Residuals.** z = (model − measured)/σᵢ with the noise model σᵢ = a + b·|Fᵢ| per channel
+(given, or estimated from the sweeps' third differences: `fit_start.estimate_noise`), through
+the robust loss as r = sgn(z)·√(2ρ(z)): Huber ρ = z²/2 (|z| ≤ k), k|z| − k²/2 beyond; Cauchy
+ρ = (k²/2)·log(1 + (z/k)²); "linear" the plain sum of squares. `optimistix.LevenbergMarquardt`
+minimises Σr², the Jacobian by forward-mode autodiff.
+
+**Report.** σ from the M-estimator's sandwich covariance on the whitened residuals (robust to a
+misjudged noise shape and to outliers); identifiability and the identifiable combinations from
+`diffsusp.lsq` on the linearisation; *determined* = identifiable, σ % ≤ `MAX_SIGMA_PCT`, no
+equally good optimum 3σ away, and no curvature factor clipped at 1 in the data's range leaning
+on it (noisy data). The consistency verdict compares the inlier residuals with the data-only
+noise estimate (F law): a fit far above the noise "does not fit the data" and calls nothing
+identified. Constraint checks over the data's range (C > 0, |μ| > 0 without a change of sign,
+E ≤ 1) in `report.violations`.
 """
 
 import dataclasses
@@ -1006,8 +1017,8 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
 
     **Arguments:** `names` (default `default_names`: the `default_groups` the data's channels
     allow; the others stay at the model's values); `hold` the names kept at the start value
-    (default `default_hold`: those the start file does not use, 0 or absent from `tir`) less
-    `free`; `noise` per channel σ or (a, b) for σ = a + b·|F| [N or N·mm] (default: estimated
+    (default: with `names` not given, `default_hold` — those the start file does not use, 0 or
+    absent from `tir`; with `names` given, none) less `free`; `noise` per channel σ or (a, b) for σ = a + b·|F| [N or N·mm] (default: estimated
     from the sweeps, `fit_start.estimate_noise`); `loss` "huber", "cauchy" or "linear",
     `loss_scale` k in units of σ; `combined=False` fits the pure-slip functions;
     `strategy` "staged" (default) or "joint"; `start_from_data` the data's starting values of
@@ -1037,6 +1048,7 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     """
     if strategy not in ("staged", "joint"):
         raise InputError(f"strategy {strategy!r}: 'staged' or 'joint'")
+    named = names is not None
     if names is None:
         names = default_names(model, data.channels)
     names = tuple(names)
@@ -1045,7 +1057,7 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
         raise InputError(f"unknown coefficient(s) {', '.join(unknown)} for "
                          f"{type(model).__name__}")
     if hold is None:
-        hold = default_hold(model, names, tir)
+        hold = () if named else default_hold(model, names, tir)
     hold = tuple(n for n in hold if n not in set(free))
     file_start = np.array([float(model.coefficients[n]) for n in names])
     noise_ab, noise_src, counts = _noise_models(data, noise)

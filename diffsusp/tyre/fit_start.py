@@ -250,7 +250,9 @@ def renormalise(model, fnomin: float):
     the stiffness terms PKY1, PKY2 (and PKY5) and the trail peak (QDZ1, QDZ2) scaled, the
     exponential PKX3 rescaled into PKX1, PKX2. Two files that differ only in FNOMIN describe the
     same tyre: a fit holds FNOMIN at the start file's, so its coefficients are the truth's in
-    that normalisation (spec: tyre §7 C)."""
+    that normalisation (spec: tyre §7 C). Exact (to rounding) for MF 5.2 (FITTYP 5/6, the
+    PAC2002 files); MF 6.x pressure and turn-slip terms and the combined-slip coefficients are
+    not re-expanded."""
     c = {k: float(v) for k, v in model.coefficients.items()}
     s = float(fnomin) / c["FNOMIN"]   # df_z,old = (s − 1) + s·df_z,new
     d0, d1 = s - 1.0, s
