@@ -135,7 +135,8 @@ def test_identify_iterative_recovers_the_stiffnesses(tables, tmp_path):
     assert result.exit_code == 0, result.output
     assert "converged after" in _text(result)
     rows = out.read_text().splitlines()
-    assert rows[0] == "parameter,value,unit,start,identified,equalised,r" and len(rows) == 7
+    assert rows[0] == ("parameter,value,unit,start,status,reason,identified,gate_passed,"
+                       "equalised,r") and len(rows) == 7
     values = {r.split(",")[0]: float(r.split(",")[1]) for r in rows[1:]}
     np.testing.assert_allclose([values[f"bush.Kt{a}"] for a in "xyz"], 100.0, rtol=1e-8)
     np.testing.assert_allclose([values[f"bush.Kr{a}"] for a in "xyz"], 1e4, rtol=1e-8)
@@ -145,7 +146,7 @@ def test_identify_iterative_recovers_the_stiffnesses(tables, tmp_path):
     # --polish: the loop's result polished by least squares (the report's recommendation).
     report = json.loads(_invoke("iterative", "isolated_bushing", "-m", tables["marks"],
                                 "--start", "1e4", "--polish", "--json").output)
-    assert report["converged"] and all(all(row) for row in report["identified"])
+    assert report["converged"] and all(all(row) for row in report["gate_passed"])
     np.testing.assert_allclose(report["stiffness"][0][:3], 100.0, rtol=1e-6)
     polished = report["polished"]
     assert polished["converged"] and polished["names"][:3] == ["bush.Ktx", "bush.Kty", "bush.Ktz"]
@@ -167,7 +168,8 @@ def test_identify_fit_from_landmarks(tables, tmp_path):
     # though the exact data bring them back (the CLI before printed "identified" for all six).
     assert text.count("not determined: σ%") == 3 and text.count("mm/deg identified") == 3, text
     rows = out.read_text().splitlines()
-    assert rows[0] == "parameter,value,sigma,sigma_pct,unit,start,identifiable,identified,status"
+    assert rows[0] == ("parameter,value,sigma,sigma_pct,unit,start,identifiable,identified,"
+                       "status,reason")
     values = {r.split(",")[0]: float(r.split(",")[1]) for r in rows[1:]}
     np.testing.assert_allclose([values[f"bush.Kt{a}"] for a in "xyz"], 100.0, rtol=1e-6)
     np.testing.assert_allclose([values[f"bush.Kr{a}"] for a in "xyz"], 1e4, rtol=1e-6)  # /deg
@@ -178,7 +180,7 @@ def test_identify_fit_from_landmarks(tables, tmp_path):
                                 "Ktx,Krz", "--loss", "huber", "--json").output)
     assert report["names"] == ["bush.Ktx", "bush.Krz"] and report["loss"] == "huber"
     assert report["converged"]
-    # The CLI prints the library's verdict (FitReport.statuses), not its own: seen by the
+    # The CLI prints the library's verdict (FitReport.status_texts), not its own: seen by the
     # data (identifiable) but above --max-sigma-pct is "not determined", as `verdicts` say.
     result = _invoke("fit", "isolated_bushing", "-m", tables["poses"], "--axes", "Ktx,Krz",
                      "--max-sigma-pct", "1e-9")
@@ -206,7 +208,7 @@ def test_identify_iterative_and_fit_bad_input(tables, tmp_path):
         (("fit", "isolated_bushing", "-m", tables["poses"], "--axes", "Kqq"),
          "unknown bushing axes"),
         (("fit", "isolated_bushing", "-m", tables["poses"], "--out", tmp_path / "r.txt"),
-         "use a .csv or .json file"),
+         "use a .csv or .json or .html file"),
     ):
         result = _invoke(*args)
         assert result.exit_code == 2, (args, result.output)

@@ -130,22 +130,48 @@ def direct(
             _write_model(fitted, write_model, model_file)
     if json_output:
         print_json(report.to_dict())
-        return
-    _print(report, mech, measurements, out, write_model)
+    else:
+        _print(report, mech, measurements, out, write_model)
+    _exit_if_unsolvable(report)
 
 
-def _write_report(report, path: Path):
-    if path.suffix.lower() == ".json":
-        import json
+def _write_report(report, path: Path, rows=None):
+    """The report to `path` by its suffix, every format from the one report object: .csv the
+    method's rows (`rows`, default `report.rows()`: thesis units, each with the report's status
+    and reason), .json `to_dict()` (with the same rows under "parameters"), .html the one-page
+    report (`identify.report.html_text`). Written under a temporary name, then renamed."""
+    import json
 
-        path.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-        return
-    rows = report.rows()
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: "" if v is None else v for k, v in row.items()})
+    from ..identify.report import _atomic_write, html_text
+
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        text = json.dumps(report.to_dict(), indent=2) + "\n"
+    elif suffix in (".html", ".htm"):
+        text = html_text(report)
+    else:
+        text = _csv_text(report.rows() if rows is None else rows)
+    _atomic_write(path, text)
+
+
+def _csv_text(rows) -> str:
+    import io
+
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: "" if v is None else v for k, v in row.items()})
+    return buf.getvalue()
+
+
+def _exit_if_unsolvable(report):
+    """Exit 3 when the returned model has no equilibrium in some measured case."""
+    cons = report.consistency
+    if cons is not None and cons.failed_cases:
+        raise fail(f"the identified model has no equilibrium in case(s) "
+                   f"{', '.join(cons.failed_cases)}: the values written do not describe the "
+                   "measurements; start closer to the expected values.", EXIT_NOT_CONVERGED)
 
 
 def _write_model(mech, path: Path, model_file):
@@ -170,12 +196,14 @@ def _print(report, mech, measurements, out, write_model):
     for col, justify in (("parameter", "left"), ("value", "right"), ("sigma%", "right"),
                          ("unit", "left"), ("model", "right"), ("status", "left")):
         table.add_column(col, justify=justify, no_wrap=col != "status")
+    statuses, reasons = report.statuses, report.status_reasons
     for i, name in enumerate(report.names):
-        shown = report.identified[i]
+        shown = report.is_identified[i]
         pct = report.sigma_pct[i]
         table.add_row(name, f"{report.values[i]:.6g}" if shown else "—",
                       f"{pct:.3g}" if shown and pct == pct else "—", report.units[i],
-                      f"{report.prior[i]:.6g}", report.status[i])
+                      f"{report.prior[i]:.6g}",
+                      statuses[i] + (f": {reasons[i]}" if reasons[i] else ""))
     con.print(table)
     if report.relations:
         con.print("identifiable combinations (the data determine only these sums):")
@@ -192,6 +220,8 @@ def _print(report, mech, measurements, out, write_model):
               f"{', GLS-weighted' if report.weighted else ''}.", highlight=False)
     for note in report.notes:
         con.print(f"note: {note}", highlight=False)
+    con.print(f"verdict: {report.fit_verdict}; σ% judged at {report.judged_at}.",
+              highlight=False)
     for label, path in (("report", out), ("identified model", write_model)):
         if path is not None:
             con.print(f"{label} written to {path}", highlight=False)
@@ -205,7 +235,7 @@ _DEG = 3.141592653589793 / 180.0
 
 def _check_paths(out, write_model, figures=None):
     """Every output checked before any work (suffix, folder exists and is writable)."""
-    check_output(out, suffixes=(".csv", ".json"), what="report")
+    check_output(out, suffixes=(".csv", ".json", ".html"), what="report")
     check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
     check_output(figures, what="figures folder", directory=True)
 
@@ -237,7 +267,9 @@ def _save_on_interrupt(out, rows, what):
                 out.write_text(json.dumps({"interrupted": True, "rows": data}, indent=2) + "\n",
                                encoding="utf-8")
             else:
-                _write_rows(data, out)
+                from ..identify.report import _atomic_write
+
+                _atomic_write(out, _csv_text(data))
             where = f"; the estimate of the last {what} is in {out} (status 'interrupted')"
         elif not data:
             where = f"; no {what} had finished"
@@ -329,7 +361,9 @@ def iterative_command(
                 axisymmetric=tuple(axisymmetric or ()), r_min=r_min, resolution=res, eps=eps,
                 max_iterations=max_iterations, callback=step, polish=polish)
         if out is not None:
-            _write_iterative(report, out)
+            from ..identify.tables import iterative_rows
+
+            _write_report(report, out, iterative_rows(report))
         if write_model is not None:
             _write_model(fitted, write_model, model_file)
         paths = []
@@ -342,7 +376,11 @@ def iterative_command(
         con = console(markup=False)
         con.print(f"{mech.name}: iterative identification from {measurements.name} "
                   f"({meas.n_cases} cases)", highlight=False)
-        con.print(report.table(), highlight=False)
+        from ..identify.report import format_table
+
+        con.print(format_table(report, 120), highlight=False)
+        for note in report.notes:
+            con.print(f"note: {note}", highlight=False)
         if report.polished is not None:
             con.print("polished by least squares through the equilibrium (the model written):",
                       highlight=False)
@@ -352,28 +390,11 @@ def iterative_command(
                 con.print(f"{label} written to {path}", highlight=False)
         if paths:
             con.print("figures: " + ", ".join(str(p) for p in paths), highlight=False)
+    _exit_if_unsolvable(report)
     if not report.converged:
         raise fail(f"the iterative identification did not converge in {report.iterations} "
                    "iterations; the stiffnesses written are the last iteration's. Try more "
                    "--max-iterations or a larger --eps.", EXIT_NOT_CONVERGED)
-
-
-def _write_iterative(report, path: Path):
-    import json
-
-    if path.suffix.lower() == ".json":
-        path.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-        return
-    from ..identify.tables import iterative_rows
-
-    _write_rows(iterative_rows(report), path)
-
-
-def _write_rows(rows, path: Path):
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 # ----------------------------------------------------------------------------- fit
@@ -451,12 +472,7 @@ def fit_command(
             fitted, report = least_squares(mech, data, params, loss=loss, max_steps=max_steps,
                                            max_sigma_pct=max_sigma_pct, callback=step)
         if out is not None:
-            if out.suffix.lower() == ".json":
-                import json
-
-                out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-            else:
-                _write_rows(fit_rows(report), out)
+            _write_report(report, out, fit_rows(report))
         if write_model is not None:
             _write_model(fitted, write_model, model_file)
         paths = []
@@ -467,6 +483,7 @@ def fit_command(
         print_json(dict(report.to_dict(), notes=notes))
     else:
         _print_fit(report, mech, measurements, meas, out, write_model, paths, notes)
+    _exit_if_unsolvable(report)
     if not report.converged:
         raise fail(f"the fit did not converge ({report.message}) after {report.steps} steps; "
                    "the estimates written are the last accepted ones. Try more --max-steps, "
@@ -487,7 +504,7 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=
         pct = row["sigma_pct"]
         table.add_row(row["parameter"], f"{row['start']:.6g}", f"{row['value']:.6g}",
                       f"{row['sigma']:.3g}", f"{pct:.3g}" if pct == pct else "—", row["unit"],
-                      row["status"])
+                      row["status"] + (f": {row['reason']}" if row["reason"] else ""))
     con.print(table)
     if report.null_space:
         con.print("combinations the data cannot see (internal coordinates: log K, mm):")

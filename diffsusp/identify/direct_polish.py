@@ -24,7 +24,7 @@ from .direct import (
 )
 from .direct_report import DirectReport
 from .params import Params
-from .report import check_data
+from .report import check_consistency, check_data
 
 __all__ = ["POLISH_CHI2", "direct_batch"]
 
@@ -114,13 +114,16 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
     unknown and are recomputed with the new verdicts."""
     from .direct import _derived, _prior
 
-    model = plan.params.apply(mech, jnp.asarray(fit.estimate))
+    # What the report calls identified is what the model carries: a polished value the data do
+    # not determine keeps the model's value (its polished estimate stays in the report).
+    determined = np.asarray(fit.determined, bool)
+    model = plan.params.apply(mech, jnp.asarray(
+        np.where(determined, fit.estimate, np.asarray(plan.params.start))))
     held_values = _prior(model, params)  # the returned model's values, table units
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
     status = list(report.status)
     conv = report.parameters_to_model
-    determined = fit.determined
     for i, j in plan.index.items():
         values[i], sigma[i] = fit.estimate[j] / conv[i], fit.sigma[j] / conv[i]
         sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
@@ -176,7 +179,13 @@ def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Paramet
     start = _polish_start(plan, report)
     batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None],
                                 max_sigma_pct=max_sigma_pct)
-    return _merge_polish(report, plan, batch.reports[0], params, mech)
+    fit = batch.reports[0]
+    model, merged = _merge_polish(report, plan, fit, params, mech)
+    if not np.all(fit.determined):  # the returned model differs from the fit's: judge it
+        consistency = check_consistency(model, data, int(np.sum(fit.determined)),
+                                        cases=report.cases)
+        merged = dataclasses.replace(merged, consistency=consistency).judged()
+    return model, merged
 
 
 def _as_batch(data, n: int, items=None):

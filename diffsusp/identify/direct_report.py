@@ -77,6 +77,16 @@ class DirectReport(IdentificationReport):
         check)."""
         return np.asarray(self.identified, dtype=bool)
 
+    @property
+    def held(self) -> np.ndarray:
+        """Unknowns held at the model's value (in the polish, or by `hold`)."""
+        return np.array([st.startswith("held") for st in self.status], dtype=bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """The method's phrase for every unknown it does not call identified."""
+        return tuple("" if st.startswith("identified") else st for st in self.status)
+
     # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
     @property
     def _to_model(self) -> np.ndarray:
@@ -122,16 +132,17 @@ class DirectReport(IdentificationReport):
     def rows(self) -> list[dict]:
         """One dict per unknown (and per derived quantity): for CSV/JSON export."""
         out = []
+        statuses, reasons = self.statuses, self.status_reasons
         for i, name in enumerate(self.names):
             out.append(dict(parameter=name, value=float(self.values[i]),
                             sigma=_nan_none(self.sigma[i]), sigma_pct=_nan_none(self.sigma_pct[i]),
                             unit=self.units[i], identified=bool(self.is_identified[i]),
-                            prior=float(self.prior[i]), status=self.status[i]))
+                            prior=float(self.prior[i]), status=statuses[i], reason=reasons[i]))
         for name, (v, s, unit) in self.derived.items():
             out.append(dict(parameter=name, value=_nan_none(v), sigma=_nan_none(s),
                             sigma_pct=_nan_none(100 * s / abs(v)) if v else None, unit=unit,
                             identified=bool(np.isfinite(v)) and self.consistent is not False,
-                            prior=None, status="derived"))
+                            prior=None, status="derived", reason=""))
         return out
 
     def to_dict(self) -> dict:
@@ -144,6 +155,7 @@ class DirectReport(IdentificationReport):
                       zip(self.cases, self.case_residuals, self.case_scale, strict=True)],
             "notes": list(self.notes),
             "consistency": None if self.consistency is None else self.consistency.summary(),
+            "fit_verdict": self.fit_verdict, "judged_at": self.judged_at,
             "polished": self.polished is not None,
         }
 

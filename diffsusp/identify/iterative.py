@@ -99,6 +99,7 @@ class IterativeReport(IdentificationReport):
     consistency: Consistency | None = None
     polished: object = None
     sigma_data: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
     _mech: Mechanism | None = dataclasses.field(default=None, repr=False, compare=False)
     _data: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
 
@@ -167,6 +168,25 @@ class IterativeReport(IdentificationReport):
         with np.errstate(divide="ignore", invalid="ignore"):
             return 100.0 * self.sigmas / np.abs(self.estimates)
 
+    max_sigma_pct: ClassVar[float] = 10.0
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """Why a selected direction is not determined: the correlation gate never passed (its
+        start value kept), or σ % above the bar."""
+        gate, det, pct = self.identifiable, self.determined, self.sigma_pct
+        return tuple("" if det[k] else
+                     "the regression never passed the correlation gate: start value kept"
+                     if not gate[k] else f"σ% {pct[k]:.3g} > {MAX_SIGMA_PCT:g} at the estimate"
+                     for k in range(len(self.names)))
+
+    @property
+    def stop_reason(self) -> str:
+        last = self.history[-1].max_change if self.history else float("nan")
+        return (f"converged after {self.iterations} iterations (max |Δk/k| {last:.3g})"
+                if self.converged else
+                f"NOT converged after {self.iterations} iterations (max |Δk/k| {last:.3g})")
+
     @property
     def estimate_units(self) -> tuple[str, ...]:
         sel = self._selected
@@ -221,10 +241,13 @@ class IterativeReport(IdentificationReport):
         return {
             "bushings": list(self.bushings), "axes": list(AXES),
             "stiffness": self.stiffness.tolist(), "units": ["N/mm"] * 3 + ["N*mm/rad"] * 3,
-            "identified": self.identified.tolist(), "equalised": self.equalised.tolist(),
+            "gate_passed": self.identified.tolist(), "equalised": self.equalised.tolist(),
             "r": self.r.tolist(), "offset": self.offset.tolist(),
             "iterations": self.iterations, "converged": self.converged,
             "consistency": None if self.consistency is None else self.consistency.summary(),
+            "fit_verdict": self.fit_verdict, "stop_reason": self.stop_reason,
+            "judged_at": self.judged_at, "notes": list(self.notes),
+            "parameters": self.rows(),
         }
 
 
@@ -373,14 +396,32 @@ def iterative(
         delta = _measured_array(measured, names, loads.n_cases)
         weight = None
     chosen = np.ones((len(names), 6), bool) if selected is None else selected
+    k = np.concatenate([np.asarray(mech.bushings.k_trans)[index],
+                        np.asarray(mech.bushings.k_rot)[index]], axis=1)
+    # A direction that is 0 in the model is free (e.g. a Chrono bushing's torsion): it carries
+    # no force, so the regression of force on deformation has nothing to correlate and the
+    # loop can neither move nor judge it. It is left out of the selection, with a note.
+    free = chosen & ~(k != 0)
+    if free.all():
+        raise InputError("nothing to identify: every selected stiffness is 0 in the model "
+                         "(free directions); give start values (e.g. --start) or another "
+                         "selection.")
+    free_note = ("left out " + ", ".join(f"{names[i]}.{AXES[j]}" for i, j in np.argwhere(free))
+                 + ": 0 in the model (a free direction carries no force; the correlation "
+                 "loop cannot identify it)") if free.any() else ""
+    chosen = chosen & ~free
+    keep = chosen.any(axis=1)
+    if not keep.all():
+        names, index, chosen, k = (tuple(n for n, ok in zip(names, keep, strict=True) if ok),
+                                   index[keep], chosen[keep], k[keep])
+        delta = delta[:, keep]
+        weight = None if weight is None else weight[:, keep]
     axi = np.array([n in axisymmetric for n in names])
     resolved = np.ones((len(names), 6), bool)
     if resolution is not None:
         floor = np.repeat(np.asarray(resolution, dtype=float), 3)
         resolved = delta.std(axis=0) > floor
 
-    k = np.concatenate([np.asarray(mech.bushings.k_trans)[index],
-                        np.asarray(mech.bushings.k_rot)[index]], axis=1)
     start = k.copy()
     ever = np.zeros(k.shape, bool)
     history, q, converged = [], None, False
@@ -400,7 +441,7 @@ def iterative(
         k_new = np.where(accepted, slope, k)
         slope_sigma = _slope_sigma(delta[ok], np.asarray(force)[ok], slope)
         k_new, equalised = _equalise(k_new, accepted, weight, axi)
-        change = float(np.max(np.abs(k_new - k) / np.abs(k)))
+        change = _relative_change(k_new, k, chosen)
         ever |= accepted
         record = IterationRecord(k_new, r, accepted, change, int((~ok).sum()))
         history.append(record)
@@ -432,12 +473,24 @@ def iterative(
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
         converged=converged, history=tuple(history), slope_sigma=slope_sigma,
         selected=chosen, weight=weight, consistency=consistency, _mech=final,
+        notes=(free_note,) if free_note else (),
         _data=check_items, sigma_data=sigma_data if check or polish else None,
     )
     if polish:
         polished_mech, fit = report.polish()
         return polished_mech, dataclasses.replace(report, polished=fit)
     return final, report
+
+
+def _relative_change(new: np.ndarray, old: np.ndarray, chosen: np.ndarray) -> float:
+    """max |Δk|/|k| over the selected directions (spec stiffness §2.5's stop test), finite
+    whatever the values: a direction with k = 0 compares with its new value, and one that is 0
+    before and after has not changed."""
+    scale = np.maximum(np.abs(old), np.abs(new))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(scale > 0, np.abs(new - old) / scale, 0.0)
+    rel = np.where(chosen & np.isfinite(rel), rel, np.where(chosen, np.inf, 0.0))
+    return float(rel.max()) if rel.size else 0.0
 
 
 MAX_SIGMA_PCT = 10.0

@@ -125,6 +125,19 @@ class FitReport(IdentificationReport):
         return np.asarray(self.identifiable, bool) & ~(np.isfinite(pct) &
                                                         (pct > self.max_sigma_pct))
 
+    @property
+    def judged_at(self) -> str:
+        return "the estimate" if self.gate_sigma_pct is None else "the start values"
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """Why each parameter is not determined (the σ % with its bar), "" otherwise."""
+        gate = self.sigma_percent if self.gate_sigma_pct is None else self.gate_sigma_pct
+        det = self.determined
+        return tuple("" if det[k] else "not seen by the data" if not self.identifiable[k]
+                     else f"σ% {gate[k]:.3g} > {self.max_sigma_pct:g} at {self.judged_at}"
+                     for k in range(len(self.names)))
+
     # The base API (identify.report): model units already.
     @property
     def estimates(self) -> np.ndarray:
@@ -160,7 +173,7 @@ class FitReport(IdentificationReport):
                 out.append((name, idx, float(res.whitened[idx])))
         return out
 
-    def statuses(self) -> tuple[str, ...]:
+    def status_texts(self) -> tuple[str, ...]:
         """Per parameter, the verdict `table()` prints, the same as `verdicts` with its
         reason: "identified"; "not determined: not seen by the data" (`identifiable` False,
         σ from the data > 100 %); "not determined: σ% N > 10 at the start values" (seen, but
@@ -183,13 +196,13 @@ class FitReport(IdentificationReport):
         return tuple(out)
 
     def table(self) -> str:
-        """Estimates with σ and σ %, and per parameter its verdict (`statuses()`: identified,
+        """Estimates with σ and σ %, and per parameter its verdict (`status_texts()`: identified,
         or why not — the verdict of `verdicts` and `is_identified`); the fit's state, χ², the
         model-vs-data verdict and the combinations the data cannot see."""
         width = max(len(n) for n in self.names) + 2
         lines = [f"{'parameter':<{width}}{'start':>14}{'estimate':>14}{'sigma':>12}{'sigma %':>9}"
                  "  status"]
-        for k, (name, status) in enumerate(zip(self.names, self.statuses(), strict=True)):
+        for k, (name, status) in enumerate(zip(self.names, self.status_texts(), strict=True)):
             pct = self.sigma_percent[k]
             pct = f"{pct:>9.3g}" if np.isfinite(pct) else f"{'-':>9}"
             lines.append(f"{name:<{width}}{self.start[k]:>14.6g}{self.estimate[k]:>14.6g}"
@@ -212,7 +225,9 @@ class FitReport(IdentificationReport):
             "gate_sigma_percent": None if self.gate_sigma_pct is None else
             [None if not np.isfinite(v) else float(v) for v in self.gate_sigma_pct],
             "identifiable": self.identifiable.tolist(),
-            "identified": self.is_identified.tolist(), "status": list(self.statuses()),
+            "identified": self.is_identified.tolist(), "status": list(self.statuses),
+            "reason": list(self.status_reasons), "fit_verdict": self.fit_verdict,
+            "judged_at": self.judged_at, "parameters": self.rows(),
             "singular_values": self.singular_values.tolist(),
             "null_space": [d.text for d in self.null_space],
             "chi2": self.chi2, "n_residuals": self.n_residuals, "converged": self.converged,

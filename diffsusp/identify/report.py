@@ -33,6 +33,7 @@ parameters; the model is declared inconsistent when χ² exceeds that law's uppe
 equilibrium.
 """
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -241,15 +242,31 @@ def _number(v):
     return v if math.isfinite(v) else None
 
 
+STATUSES = ("identified", "not determined", "held", "not seen")
+"""The one status of a parameter in every identification report: *identified* (determined by
+the data and the fit consistent with them), *not determined* (with the reason: σ % above the
+bar, only a combination determined, the fit inconsistent, …), *held* (at its start value, not
+estimated), *not seen* (the data carry no information on it: σ infinite)."""
+
+
 class IdentificationReport:
     """Base of the identification reports (see the module docstring for what a subclass
-    provides). Not a dataclass itself, so that its subclasses keep their own fields."""
+    provides). Not a dataclass itself, so that its subclasses keep their own fields.
+
+    Optional in a subclass: `held` (bool per parameter: held at its start value), `reasons`
+    (text per parameter: why it is not determined, "" otherwise), `judged_at` (where the σ %
+    bar was applied), `stop_reason` (why the method stopped). The base derives from them one
+    status per parameter (`statuses`, `status_reasons`), and every writer — `table_text`,
+    `rows()`, `summary()`/`to_json()`, `write_report` (.csv, .json, .html) — renders those."""
 
     family: ClassVar[str] = "identification"
     """The method's name: 'direct', 'iterative', 'least_squares'."""
 
     consistency: Consistency | None = None
     """The identified model against the data (None: not checked)."""
+
+    judged_at: ClassVar[str] = "the estimate"
+    """Where `determined` applied its σ % bar (the estimate, or the start values)."""
 
     @property
     def determined(self) -> np.ndarray:
@@ -265,10 +282,57 @@ class IdentificationReport:
         return None if self.consistency is None else bool(self.consistency.consistent)
 
     @property
+    def held_mask(self) -> np.ndarray:
+        """`(p,)` parameters held at their start value (a subclass's `held`; none by default)."""
+        held = getattr(self, "held", None)
+        n = len(self.names)
+        return np.zeros(n, bool) if held is None else np.asarray(held, bool).reshape(n)
+
+    @property
     def is_identified(self) -> np.ndarray:
-        """`(p,)`: determined by the data AND the identified model consistent with them: the
-        only values a report calls *identified* (an unchecked model counts as consistent)."""
-        return self.determined & (self.consistent is not False)
+        """`(p,)`: determined by the data AND the identified model consistent with them (and not
+        held): the only values a report calls *identified* (an unchecked model counts as
+        consistent)."""
+        return self.determined & (self.consistent is not False) & ~self.held_mask
+
+    @property
+    def statuses(self) -> tuple[str, ...]:
+        """Per parameter one of `STATUSES`; "identified" exactly where `is_identified`."""
+        return tuple(s for s, _ in self._status_pairs())
+
+    @property
+    def status_reasons(self) -> tuple[str, ...]:
+        """Per parameter why it has its status ("" for identified)."""
+        return tuple(r for _, r in self._status_pairs())
+
+    def _status_pairs(self) -> list[tuple[str, str]]:
+        det, held, ident = self.determined, self.held_mask, self.is_identified
+        own = tuple(getattr(self, "reasons", None) or ("",) * len(self.names))
+        sigma = np.asarray(self.sigmas, dtype=float)
+        pct = np.asarray(self.sigma_pct, dtype=float)
+        bar = getattr(self, "max_sigma_pct", None)
+        out = []
+        for k in range(len(self.names)):
+            if held[k]:
+                out.append(("held", own[k] or "held at its start value"))
+            elif ident[k]:
+                out.append(("identified", ""))
+            elif np.isinf(sigma[k]):
+                out.append(("not seen", own[k] or "the data carry no information on it"))
+            elif not det[k]:
+                if own[k]:
+                    why = own[k]
+                elif not bool(np.asarray(self.identifiable)[k]):
+                    why = "not identifiable on its own by the data"
+                elif bar is not None and np.isfinite(pct[k]):
+                    why = f"σ% > {bar:g} at {self.judged_at}"
+                else:
+                    why = "not determined by the data"
+                out.append(("not determined", why))
+            else:
+                out.append(("not determined", "determined by the data, but the fit is "
+                            "inconsistent with them: " + _short_verdict(self.consistency)))
+        return out
 
     @property
     def verdicts(self) -> tuple[str, ...]:
@@ -279,21 +343,33 @@ class IdentificationReport:
                      "determined, but the model is inconsistent with the data" if ok else
                      "not determined by the data" for ok in det)
 
+    @property
+    def fit_verdict(self) -> str:
+        """One line for the whole fit: the consistency verdict (or that it was not checked) and
+        the stop reason."""
+        text = ("consistency not checked" if self.consistency is None else
+                self.consistency.verdict)
+        stop = getattr(self, "stop_reason", "")
+        return text + (f"; stopped: {stop}" if stop else "")
+
     def rows(self) -> list[dict]:
-        """One dict per parameter: parameter, estimate, sigma, sigma_pct, unit, identifiable
-        (the data determine it), identified (and the model is consistent), verdict (model
-        units; None where there is no number)."""
+        """One dict per parameter: parameter, estimate, sigma, sigma_pct, unit, status (one of
+        `STATUSES`), reason, identifiable (the data determine it), identified (status is
+        'identified'), verdict (model units; None where there is no number)."""
         ident, verdicts = self.is_identified, self.verdicts
+        pairs = self._status_pairs()
         return [dict(parameter=name, estimate=_number(self.estimates[i]),
                      sigma=_number(self.sigmas[i]), sigma_pct=_number(self.sigma_pct[i]),
-                     unit=self.estimate_units[i], identifiable=bool(self.identifiable[i]),
-                     identified=bool(ident[i]), verdict=verdicts[i])
+                     unit=self.estimate_units[i], status=pairs[i][0], reason=pairs[i][1],
+                     identifiable=bool(self.identifiable[i]), identified=bool(ident[i]),
+                     verdict=verdicts[i])
                 for i, name in enumerate(self.names)]
 
     def summary(self) -> dict:
         """The common part of every report as plain data: method, parameters (`rows()`),
-        combinations, per measurement the RMS of its whitened residuals, and the consistency
-        of the identified model with the data (None when not checked)."""
+        combinations, per measurement the RMS of its whitened residuals, the consistency of the
+        identified model with the data (None when not checked), the fit's verdict and stop
+        reason, and where the σ % bar was judged."""
         rms = {}
         for name, res in self.residuals.items():
             white = np.asarray(res.whitened, dtype=float)
@@ -301,11 +377,16 @@ class IdentificationReport:
         return {"method": self.family, "parameters": self.rows(),
                 "combinations": list(self.combinations), "residual_rms": rms,
                 "consistency": None if self.consistency is None else
-                self.consistency.summary()}
+                self.consistency.summary(), "fit_verdict": self.fit_verdict,
+                "stop_reason": getattr(self, "stop_reason", ""), "judged_at": self.judged_at}
 
     def to_json(self, **kwargs) -> str:
         """`summary()` as JSON (NaN and inf written as null); `kwargs` go to `json.dumps`."""
         return json.dumps(self.summary(), **kwargs)
+
+    def table_text(self, width: int | None = 100) -> str:
+        """The report as text (`format_table`)."""
+        return format_table(self, width)
 
     def to_frame(self):
         """`rows()` as a pandas DataFrame indexed by parameter (pandas is imported here only:
@@ -318,7 +399,7 @@ class IdentificationReport:
         return pd.DataFrame(self.rows()).set_index("parameter")
 
     def plot(self, axes=None):
-        """Estimates with ±σ bars on a log scale (grey: not identifiable). Returns the
+        """Estimates with ±σ bars on a log scale (grey: not identified). Returns the
         matplotlib Figure."""
         import matplotlib.pyplot as plt
 
@@ -327,20 +408,193 @@ class IdentificationReport:
         else:
             fig = axes.figure
         idx = np.arange(len(self.names))
-        ok = np.asarray(self.identifiable, dtype=bool)
+        ok = np.asarray(self.is_identified, dtype=bool)
         value = np.abs(np.asarray(self.estimates, dtype=float))
         sigma = np.nan_to_num(np.asarray(self.sigmas, dtype=float), nan=0.0, posinf=0.0)
         axes.bar(idx[ok], value[ok], yerr=sigma[ok], color="C0", capsize=2,
-                 label="identifiable")
-        axes.bar(idx[~ok], value[~ok], color="0.75", label="not identifiable")
-        axes.set_yscale("log")
+                 label="identified")
+        axes.bar(idx[~ok], value[~ok], color="0.75", label="not identified")
+        if np.any(value > 0):
+            axes.set_yscale("log")
         axes.set_xticks(idx, self.names, rotation=90, fontsize=7)
         axes.set_ylabel("|estimate| (model units)")
         axes.set_title(f"{self.family.replace('_', ' ')} identification", fontsize=9)
-        axes.legend(fontsize=8)
+        axes.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         fig.tight_layout()
         return fig
 
 
-__all__ = ["CONSISTENCY_ALPHA", "Consistency", "IdentificationReport", "MeasurementResiduals",
-           "check_consistency", "check_data", "chi2_quantile", "consistency_from_residuals"]
+def _short_verdict(consistency: Consistency | None) -> str:
+    if consistency is None:
+        return "not checked"
+    return f"χ²/dof {consistency.chi2_per_dof:.3g}" + (
+        f", no equilibrium in case(s) {', '.join(consistency.failed_cases)}"
+        if consistency.failed_cases else "")
+
+
+def _cell(v, fmt: str = ".6g") -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def format_table(report: IdentificationReport, width: int | None = 100) -> str:
+    """The report as a fixed-width text table: parameter, estimate, σ, σ %, unit, status (short)
+    and a note number; the notes (each status's reason, numbered once per distinct text) below
+    the table, then the fit's verdict — nothing wraps inside the table. `width` folds the notes
+    and the verdict (None: no folding)."""
+    import textwrap
+
+    rows = report.rows()
+    notes: dict[str, int] = {}
+    for row in rows:
+        if row["reason"] and row["reason"] not in notes:
+            notes[row["reason"]] = len(notes) + 1
+    name_w = max([len("parameter")] + [len(r["parameter"]) for r in rows])
+    unit_w = max([len("unit")] + [len(r["unit"]) for r in rows])
+    head = (f"{'parameter':<{name_w}}  {'estimate':>13}  {'sigma':>10}  {'sigma %':>8}  "
+            f"{'unit':<{unit_w}}  status")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        note = f" [{notes[r['reason']]}]" if r["reason"] else ""
+        lines.append(f"{r['parameter']:<{name_w}}  {_cell(r['estimate']):>13}  "
+                     f"{_cell(r['sigma'], '.3g'):>10}  {_cell(r['sigma_pct'], '.3g'):>8}  "
+                     f"{r['unit']:<{unit_w}}  {r['status']}{note}")
+
+    def fold(text: str, indent: str = "") -> list[str]:
+        if width is None:
+            return [indent + text]
+        return textwrap.wrap(text, width, initial_indent=indent,
+                             subsequent_indent=" " * len(indent)) or [indent]
+
+    if notes:
+        lines.append("")
+        for text, k in notes.items():
+            lines += fold(text, f"[{k}] ")
+    lines.append("")
+    lines += fold(f"{report.family.replace('_', ' ')}: {report.fit_verdict}")
+    if report.judged_at:
+        lines += fold(f"σ % judged at {report.judged_at}.")
+    return "\n".join(lines)
+
+
+def _atomic_write(path, text: str) -> None:
+    """Write `text` to `path` through a temporary file in the same folder, renamed at the end:
+    an interrupted or failed write never leaves a truncated file under the final name."""
+    import os
+    import pathlib
+    import tempfile
+
+    path = pathlib.Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def csv_text(report: IdentificationReport) -> str:
+    """`rows()` as CSV, with the method and the fit's verdict on every row."""
+    import csv
+    import io
+
+    rows = report.rows()
+    buf = io.StringIO()
+    fields = ["method", *(rows[0] if rows else ["parameter"]), "fit_verdict"]
+    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({"method": report.family, **{k: _csv_cell(v) for k, v in row.items()},
+                         "fit_verdict": report.fit_verdict})
+    return buf.getvalue()
+
+
+def _csv_cell(v):
+    if v is None:
+        return ""
+    if isinstance(v, str) and v[:1] in ("=", "+", "-", "@") and not _is_number(v):
+        return "'" + v  # a text cell a spreadsheet would run as a formula
+    return v
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def html_text(report: IdentificationReport, figures: bool = True) -> str:
+    """A one-page self-contained HTML report: the fit's verdict, the table of `rows()` (status
+    and reason per parameter), the combinations, and the report's figure (`plot()`) inline as
+    SVG (no external file)."""
+    import html
+
+    esc = html.escape
+    rows = report.rows()
+    cols = ("parameter", "estimate", "sigma", "sigma_pct", "unit", "status", "reason")
+    body = "".join(
+        "<tr class='{}'>".format(esc(r["status"].replace(" ", "-"))) +
+        "".join(f"<td>{esc(_cell(r[c]) if not isinstance(r[c], str) else r[c])}</td>"
+                for c in cols) + "</tr>" for r in rows)
+    svg = ""
+    if figures and rows:
+        import io
+
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        fig = report.plot()
+        buf = io.StringIO()
+        fig.savefig(buf, format="svg", bbox_inches="tight")
+        plt.close(fig)
+        svg = buf.getvalue()
+        svg = svg[svg.index("<svg"):]
+    combos = "".join(f"<li>{esc(c)}</li>" for c in report.combinations)
+    title = f"{report.family.replace('_', ' ')} identification"
+    return (
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>"
+        f"<title>{esc(title)}</title><style>body{{font-family:sans-serif;margin:2em}}"
+        "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 6px;"
+        "text-align:right}td:first-child,td:nth-child(5),td:nth-child(6),td:nth-child(7)"
+        "{text-align:left}tr.identified td:nth-child(6){color:#060}"
+        "tr.not-determined td:nth-child(6),tr.not-seen td:nth-child(6){color:#a00}</style>"
+        f"</head><body><h1>{esc(title)}</h1><p class='verdict'>{esc(report.fit_verdict)}</p>"
+        f"<p>σ % judged at {esc(report.judged_at)}.</p><table><tr>"
+        + "".join(f"<th>{c}</th>" for c in cols) + f"</tr>{body}</table>"
+        + (f"<h2>Combinations</h2><ul>{combos}</ul>" if combos else "")
+        + (f"<h2>Figure</h2>{svg}" if svg else "") + "</body></html>\n")
+
+
+def write_report(report: IdentificationReport, path) -> None:
+    """Write `report` by the suffix of `path`: .csv (`csv_text`: one row per parameter, with
+    its status, reason and the fit's verdict), .json (`summary()`), .html (`html_text`), .txt
+    (`format_table`). Every writer renders the same `rows()`, so they cannot disagree. The file
+    is written under a temporary name and renamed (never left truncated)."""
+    import pathlib
+
+    path = pathlib.Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        text = csv_text(report)
+    elif suffix == ".json":
+        text = json.dumps(report.summary(), indent=2, allow_nan=False) + "\n"
+    elif suffix in (".html", ".htm"):
+        text = html_text(report)
+    elif suffix == ".txt":
+        text = format_table(report) + "\n"
+    else:
+        raise ValueError(f"write_report: unknown report format '{path.suffix}' "
+                         "(use .csv, .json, .html or .txt).")
+    _atomic_write(path, text)
+
+
+__all__ = ["CONSISTENCY_ALPHA", "STATUSES", "Consistency", "IdentificationReport",
+           "MeasurementResiduals", "check_consistency", "check_data", "chi2_quantile",
+           "consistency_from_residuals", "csv_text", "format_table", "html_text",
+           "write_report"]
