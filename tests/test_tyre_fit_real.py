@@ -2,7 +2,7 @@
 convention, PDY1 < 0) as start and as truth, the reverse, noise that grows with the force, 2 %
 outliers, data below the start file's load range, and a start file of another tyre.
 
-The reduced programme (F_y only, three loads, three cambers, 41 slip angles) keeps one compiled
+The reduced programme (F_y only, three loads, three cambers, 31 slip angles) keeps one compiled
 fit program for every test here; `benchmarks/rehearse_mf_fit.py` runs the full programme and the
 Monte-Carlo."""
 
@@ -28,7 +28,7 @@ def _programme(truth, loads=None):
     lim = truth.limit
     loads = np.linspace(lim["FZMIN"], lim["FZMAX"], 3) if loads is None else loads
     inp = F.bench_programme(truth, loads=loads, cambers=[lim["CAMMIN"], 0.0, lim["CAMMAX"]],
-                            n_slip=41, channels=("FY",))
+                            n_slip=31, channels=("FY",))
     return inp, F.with_ranges(truth, inp)   # a measured tyre saturates nothing
 
 
@@ -73,7 +73,7 @@ def test_noisy_within_three_sigma(feda, outliers):
     (stir, start), (_, truth) = feda[60], feda[70]
     inp, tr = _programme(truth)
     worst = []
-    for seed in (1, 2):
+    for seed in (1,):
         data = F.simulate(tr, inp, noise=NOISE, seed=seed, outliers=outliers)
         _, rep = F.fit(start, data, tir=stir)
         ref = _reference(truth, start)

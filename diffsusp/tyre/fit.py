@@ -1125,7 +1125,16 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
                        if isinstance(model, mf6.MagicFormula6) else fitted, data), report
 
 
-_objective = eqx.filter_jit(lambda problem, x: jnp.sum(problem.residual_x(x) ** 2))
+def _objective(problem, x) -> float:
+    """Σr² of the robust residuals at x (from the compiled whitened residuals)."""
+    z = np.asarray(_whitened(problem, jnp.asarray(x)))
+    code, k = int(problem.loss_code), float(problem.k)
+    if code == 0:
+        return float(np.sum(z * z))
+    if code == 1:
+        a = np.abs(z)
+        return float(np.sum(np.where(a <= k, z * z, 2.0 * k * a - k * k)))
+    return float(np.sum(k * k * np.log1p((z / k) ** 2)))
 
 
 def _ridge_probes(problem, report, max_steps, rtol, atol):
