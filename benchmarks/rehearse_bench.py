@@ -19,7 +19,7 @@ Per parameter (among the coefficients with a non-zero truth, the coefficients wh
 that the search kept, and K_y): how often "identified", the coverage of the 1/2/3 σ
 intervals among the identified, the mean (estimate − truth)/σ, and the false "identified"
 rate (claimed identified but outside 3 σ, of all claims); per scenario the consistent-verdict
-rate. Results to benchmarks/results/rehearse_bench.json.
+rate. Results to benchmarks/results/rehearse_bench_<scenario>.json.
 
     python benchmarks/rehearse_bench.py [--n 200] [--scenario het|outliers|all]
 """
@@ -145,8 +145,9 @@ def main():
                   f"{f(s['coverage_3'])}{g(s['bias_over_sigma'])}"
                   f"{s['false_identified']:7d}{'  (truth 0)' if s['truth_zero'] else ''}")
         sys.stdout.flush()
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "rehearse_bench.json").write_text(json.dumps(results, indent=1) + "\n")
+        RESULTS.mkdir(exist_ok=True)
+        (RESULTS / f"rehearse_bench_{name}.json").write_text(
+            json.dumps(results[name], indent=1) + "\n")
 
 
 if __name__ == "__main__":
