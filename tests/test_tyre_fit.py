@@ -90,7 +90,8 @@ def test_robust_holds_and_plain_does_not(setup):
     x_true = np.array([float(truth[k]) for k in NAMES])
     out = {}
     for loss in ("huber", "linear"):
-        _, rep = F.fit(start, dirty, NAMES, noise={"FY": sigma}, loss=loss, combined=False)
+        _, rep = F.fit(start, dirty, NAMES, noise={"FY": sigma}, loss=loss, combined=False,
+                       strategy="joint")
         ok = clean.identifiable
         out[loss] = np.max(np.abs((rep.values - x_true)[ok] / clean.sigma[ok]))
     assert out["huber"] < 3.0, out
