@@ -119,7 +119,7 @@ def test_start_from_another_tyre(feda):
         assert not any(s == "identified" for s in rep.status_list)
 
 
-def test_table_json_agree(feda):
+def test_table_json_agree(feda, tmp_path):
     """The printed table and the JSON carry the same status for every coefficient."""
     import json
 
@@ -134,6 +134,21 @@ def test_table_json_agree(feda):
         assert s in line
         assert row["identified"] == (s == "identified")
     assert js["statuses"] == list(rep.status_list)
+    # the shared writers render the same statuses
+    import csv as csv_mod
+
+    from diffsusp.identify.report import format_table, write_report
+
+    write_report(rep, tmp_path / "r.csv")
+    write_report(rep, tmp_path / "r.html")
+    with open(tmp_path / "r.csv", newline="") as f:
+        rows = [r for r in csv_mod.DictReader(f) if r.get("parameter") in rep.names]
+    assert [r["status"] for r in rows] == list(rep.status_list)
+    shared = format_table(rep, width=120)
+    for n, s in zip(rep.names, rep.status_list, strict=True):
+        line = next(t for t in shared.splitlines() if t.split() and t.split()[0] == n)
+        assert s in line or s.split()[0] in line, (n, s, line)
+    assert "identified" in (tmp_path / "r.html").read_text()
 
 
 def test_cli_fit_from_a_pac2002_file(feda, tmp_path):

@@ -318,7 +318,8 @@ def fit_command(
     strategy: Annotated[str, typer.Option(
         help="staged (start values from the data, zero camber, camber, joint) or joint.")]
     = "staged",
-    report: Annotated[Path | None, typer.Option(help="Write the report (.json).")] = None,
+    report: Annotated[Path | None, typer.Option(
+        help="Write the report (.json, .csv or .html).")] = None,
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-fitted figures folder.")]
     = None,
 ):
@@ -353,7 +354,7 @@ def fit_command(
         scale = 1000.0 if ch.startswith("M") else 1.0   # N·m → N·mm, b is relative
         noise_ab[ch] = (parts[0] * scale, parts[1] if len(parts) == 2 else 0.0)
     check_output(out, suffixes=None if model == "mf1989" else (".tir",), what="fitted model")
-    check_output(report, suffixes=(".json",), what="report")
+    check_output(report, suffixes=(".json", ".csv", ".html"), what="report")
     check_output(figures, what="figures folder", directory=True)
     c = console(markup=False)
     with cli_errors():
@@ -403,8 +404,12 @@ def fit_command(
                     written.set(n, float(v), section=mf6._LIMIT_SECTION[n])
             write_tir(written, out)
             c.print(f"fitted model written to {out} (validity ranges: the data's)")
-        if report is not None:
+        if report is not None and report.suffix.lower() == ".json":
             report.write_text(json.dumps({"+".join(groups): rep.to_dict()}, indent=2) + "\n")
+        elif report is not None:   # the shared writers: the same statuses as the table
+            from diffsusp.identify.report import write_report
+
+            write_report(rep, report)
         if figures is not None:
             F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")

@@ -610,29 +610,13 @@ class TyreFitReport(IdentificationReport):
     @property
     def status_list(self) -> tuple[str, ...]:
         """Per coefficient: identified / not determined / held / not seen (the base's
-        `statuses` when it provides them)."""
-        base = getattr(super(), "statuses", None)
-        if base is not None:
-            return tuple(base)
-        out = []
-        for i in range(len(self.names)):
-            if self.held[i]:
-                out.append("held")
-            elif self.identifiable[i] and self.consistent is not False:
-                out.append("identified")
-            elif self.reasons[i].endswith("no effect on the data"):
-                out.append("not seen")
-            else:
-                out.append("not determined")
-        return tuple(out)
+        `statuses`: one rule for every identification)."""
+        return tuple(self.statuses)
 
     @property
-    def status_reasons(self) -> tuple[str, ...]:
-        """`reasons`, with the fit's verdict for a determined coefficient of a fit that does
-        not reproduce the data."""
-        return tuple(r if r or not self.identifiable[i] or self.consistent is not False
-                     else "determined, but the model does not fit the data"
-                     for i, r in enumerate(self.reasons))
+    def stop_reason(self) -> str:
+        return (f"converged in {self.steps} steps" if self.converged else
+                f"max_steps reached ({self.steps} steps in all)")
 
     @property
     def verdict(self) -> str:
@@ -949,7 +933,9 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
     ident_lin = np.zeros(p, bool)
     ident_lin[fi] = np.asarray(lin.identifiable, bool)
     sigma = np.where(ident_lin, sd, np.nan)
-    sigma[fi[~np.asarray(lin.identifiable, bool)]] = np.inf
+    for j in np.flatnonzero(~idl):   # inf: no information at all (a null column)
+        if (lin._status(int(j)) or "").endswith("no effect on the data"):
+            sigma[fi[j]] = np.inf
     with np.errstate(divide="ignore", invalid="ignore"):
         pct = 100.0 * sigma / np.abs(x)
     reasons = []
