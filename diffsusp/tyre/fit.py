@@ -588,6 +588,8 @@ class TyreFitReport(IdentificationReport):
     stages: list[str]
     consistency: Consistency | None = None
     whitened_residuals: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    raw_residuals: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    """Per channel model − measured (channel units; 0 where not valid)."""
 
     # ---- the shared report interface (model units = library units)
     @property
@@ -604,7 +606,8 @@ class TyreFitReport(IdentificationReport):
 
     @property
     def residuals(self) -> dict:
-        return {c: MeasurementResiduals(raw=w * 0.0 if w is None else w, whitened=w)
+        return {c: MeasurementResiduals(raw=self.raw_residuals.get(c, np.zeros_like(w)),
+                                        whitened=w)
                 for c, w in self.whitened_residuals.items()}
 
     @property
@@ -969,6 +972,8 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
         ~free, tuple(reasons), corr, list(lin.relations), lin, rms, npts,
         robust_sigma, dict(noise), noise_src, int(steps), bool(ok), problem.loss,
         check_constraints(fitted, problem.data), list(stages), consistency=cons,
+        raw_residuals={c: np.where(valid[k], pred[k] - meas[k], 0.0)
+                       for k, c in enumerate(problem.data.channels)},
         whitened_residuals={c: z[k] for k, c in enumerate(problem.data.channels)})
 
 
