@@ -10,7 +10,9 @@ CPU: one cluster for the module; the recipe is the cheapest (direct: linear); th
 are one jitted program; the workers load the programs the in-process run compiled from the
 run's persistent compilation cache."""
 
+import csv
 import inspect
+import io
 import json
 import math
 import os
@@ -129,6 +131,10 @@ def test_in_process_reports_are_the_library_results(in_process, items, mech):
     rows = (out / "summary.csv").read_text().splitlines()
     assert len(rows) == N_DRAWS + 3 and rows[0].startswith("item,status,message,hash,")
     assert rows[1].startswith("bad_number,error,")
+    # Beside each estimate, the library's status of that parameter.
+    table = {r["item"]: r for r in csv.DictReader(io.StringIO("\n".join(rows)))}
+    for name, status in zip(direct.names, direct.statuses, strict=True):
+        assert table["draw007"][f"{name} status"] == status
 
 
 def test_cluster_with_a_killed_worker_matches_in_process(in_process, items, mech, client,

@@ -99,8 +99,8 @@ class Direct(Recipe):
         from .. import identify
 
         _, report = identify.direct(mech, data, **self.options)
-        return report.to_dict(), dict(zip(report.names, map(float, report.values),
-                                          strict=True))
+        return report.to_dict(), _with_statuses(report, dict(zip(
+            report.names, map(float, report.values), strict=True)))
 
 
 class Iterative(Recipe):
@@ -117,7 +117,20 @@ class Iterative(Recipe):
         d = report.to_dict()
         values = {f"{b}.{a}": float(report.stiffness[i][j])
                   for i, b in enumerate(d["bushings"]) for j, a in enumerate(d["axes"])}
-        return d, values
+        return d, _with_statuses(report, values)
+
+
+def _with_statuses(report, values: dict) -> dict:
+    """The summary's values with each reported parameter's status (`identified`, `not
+    determined`, `held`, `not seen`: `IdentificationReport.statuses`) in a column
+    `<name> status` beside its value."""
+    status = dict(zip(report.names, report.statuses, strict=True))
+    out: dict = {}
+    for name, v in values.items():
+        out[name] = v
+        if name in status:
+            out[f"{name} status"] = status[name]
+    return out
 
 
 def _padded(items: list, pad_to, mesh) -> list:
@@ -196,8 +209,8 @@ class LeastSquares(Recipe):
                 continue
             for k, i in enumerate(group):
                 report = batch.reports[k]
-                out[i] = (report.to_dict(), dict(zip(report.names, map(float, report.estimate),
-                                                     strict=True)))
+                out[i] = (report.to_dict(), _with_statuses(report, dict(zip(
+                    report.names, map(float, report.estimate), strict=True))))
         return out
 
 

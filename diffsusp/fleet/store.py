@@ -6,7 +6,8 @@ OUT/
   journal.jsonl       one line per finished item (appended, one fsync per batch): item, hash,
                       status, message, summary values, seconds, worker, batch
   reports/ITEM.json   the item's report, as the single-item verb writes it (--out x.json)
-  summary.csv         one row per item: item, status, message, hash, then the estimates
+  summary.csv         one row per item: item, status, message, hash, then the estimates,
+                      each with its identification status (`<name> status`)
 ```
 
 Nothing finished is lost: a line is in the journal (and the report on disk) as soon as its
@@ -110,10 +111,16 @@ class Store:
                 e = entries[item]
                 values = e.get("values") or {}
                 writer.writerow([item, e["status"], e.get("message") or "", e["hash"],
-                                 *(repr(values[n]) if values.get(n) is not None else ""
-                                   for n in names)])
+                                 *(_cell(values.get(n)) for n in names)])
         os.replace(tmp, path)
         return path
+
+
+def _cell(v) -> str:
+    """A summary cell: a number as Python writes it (round-trips), a text (a status) as is."""
+    if v is None:
+        return ""
+    return v if isinstance(v, str) else repr(v)
 
 
 def _jsonable(x):
