@@ -163,8 +163,16 @@ def _selected_fields(mech: Mechanism, where) -> dict[str, np.ndarray]:
     return selected
 
 
+def free_axes(mech: Mechanism) -> list[tuple[int, int]]:
+    """(bushing, axis) pairs whose stiffness is 0 in the model: free directions (e.g. a Chrono
+    bushing's torsion about its pivot axis), which the default selection leaves out."""
+    k = np.concatenate([np.asarray(mech.bushings.k_trans), np.asarray(mech.bushings.k_rot)],
+                       axis=1).reshape(-1, 6)
+    return [(int(e), int(a)) for e, a in np.argwhere(k == 0)]
+
+
 def _parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axisymmetric,
-                offsets_alone_ok=True) -> tuple[Parameter, ...]:
+                offsets_alone_ok=True, free=()) -> tuple[Parameter, ...]:
     b, s = mech.bushings, mech.springs
     names = set(b.names) | set(s.names)
     if elements is None:
@@ -205,6 +213,7 @@ def _parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axi
                 for x in (0, 3):
                     sel[e, x:x + 2] = sel[e, x:x + 2].any()
         k_axes, c_axes = set(np.flatnonzero(k_sel[e])), set(np.flatnonzero(c_sel[e]))
+        k_axes -= {a for f, a in free if f == e and not (sym and a in (0, 1, 3, 4))}
         for a in sorted(k_axes | c_axes):
             if spline[e, a]:
                 raise ModelError(
@@ -410,7 +419,8 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
     measurements = as_equilibria(measurements)
     q = _check_measurements(mech, measurements)
     fields = _selected_fields(mech, where or _default_where)
-    params = _parameters(mech, fields, elements, axisymmetric)
+    params = _parameters(mech, fields, elements, axisymmetric,
+                         free=free_axes(mech) if where is None else ())
     eval_mech = _evaluation_model(mech, params)
     selection = _selection(mech, params)
     rows, rhs, null = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
@@ -709,6 +719,11 @@ def direct(
     case_scale = np.linalg.norm(raw.y.reshape(n_cases, -1), axis=1)
     write = ~negligible if method == "tikhonov" else identified
     notes = list(raw.notes)
+    free = free_axes(mech) if _selection_of(params, where) is None else []
+    if free:
+        notes.append("left out " + ", ".join(
+            f"{mech.bushings.names[e]}.{STIFFNESS_NAMES[a]}" for e, a in free) + ": 0 in the "
+            "model (free directions; select them with where= or elements= to identify them)")
     if negative.any():
         notes.append(f"{', '.join(np.asarray(raw.names)[negative])} came out negative and "
                      "were not kept: check the values held for the other unknowns and the "

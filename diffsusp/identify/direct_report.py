@@ -85,7 +85,8 @@ class DirectReport(IdentificationReport):
     @property
     def reasons(self) -> tuple[str, ...]:
         """The method's phrase for every unknown it does not call identified."""
-        return tuple("" if st.startswith("identified") else st for st in self.status)
+        return tuple("" if st.startswith("identified") else st.removeprefix("not determined: ")
+                     for st in self.status)
 
     # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
     @property

@@ -650,7 +650,8 @@ def least_squares(
       (`is_identified`, `rows()`), however identifiable (default 10 %, as `direct`).
     - `callback(step, record)`: called after every LM step with its `StepRecord`.
 
-    **Returns:** `(mech', report)`: the mechanism at the estimate and a `FitReport`.
+    **Returns:** `(mech', report)`: the mechanism at the estimate (a parameter the data do not
+    see keeps its start value, `returned_values`) and a `FitReport`.
     """
     data = _as_data(data)
     if {m.n_sets for m in data} != {None}:
@@ -665,7 +666,15 @@ def least_squares(
     report = _report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
                      int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma, jac0[0])
     report = dataclasses.replace(report, max_sigma_pct=float(max_sigma_pct))
-    return params.apply(mech, jnp.asarray(report.estimate)), report
+    return params.apply(mech, jnp.asarray(returned_values(report))), report
+
+
+def returned_values(report) -> np.ndarray:
+    """The values the returned model carries: the estimate, except a parameter the data do not
+    see (`identifiable` False: it lies in a direction of `null_space`) keeps its start value —
+    the optimiser's drift along a direction the data cannot see is not a result, and the
+    report calls it "not seen"."""
+    return np.where(np.asarray(report.identifiable, bool), report.estimate, report.start)
 
 
 @dataclasses.dataclass(frozen=True)

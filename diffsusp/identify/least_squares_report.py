@@ -130,11 +130,18 @@ class FitReport(IdentificationReport):
         return "the estimate" if self.gate_sigma_pct is None else "the start values"
 
     @property
+    def seen(self) -> np.ndarray:
+        """The data determine the parameter on its own (`identifiable`); the others lie in
+        the directions the data cannot see (`null_space`)."""
+        return np.asarray(self.identifiable, bool)
+
+    @property
     def reasons(self) -> tuple[str, ...]:
         """Why each parameter is not determined (the σ % with its bar), "" otherwise."""
         gate = self.sigma_percent if self.gate_sigma_pct is None else self.gate_sigma_pct
         det = self.determined
-        return tuple("" if det[k] else "not seen by the data" if not self.identifiable[k]
+        return tuple("" if det[k] else "in a combination the data cannot see"
+                     if not self.identifiable[k]
                      else f"σ% {gate[k]:.3g} > {self.max_sigma_pct:g} at {self.judged_at}"
                      for k in range(len(self.names)))
 

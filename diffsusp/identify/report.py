@@ -253,7 +253,8 @@ class IdentificationReport:
     """Base of the identification reports (see the module docstring for what a subclass
     provides). Not a dataclass itself, so that its subclasses keep their own fields.
 
-    Optional in a subclass: `held` (bool per parameter: held at its start value), `reasons`
+    Optional in a subclass: `held` (bool per parameter: held at its start value), `seen` (bool
+    per parameter: the data carry information on it on its own; default σ finite), `reasons`
     (text per parameter: why it is not determined, "" otherwise), `judged_at` (where the σ %
     bar was applied), `stop_reason` (why the method stopped). The base derives from them one
     status per parameter (`statuses`, `status_reasons`), and every writer — `table_text`,
@@ -311,13 +312,15 @@ class IdentificationReport:
         sigma = np.asarray(self.sigmas, dtype=float)
         pct = np.asarray(self.sigma_pct, dtype=float)
         bar = getattr(self, "max_sigma_pct", None)
+        seen = getattr(self, "seen", None)
+        seen = np.ones(len(self.names), bool) if seen is None else np.asarray(seen, bool)
         out = []
         for k in range(len(self.names)):
             if held[k]:
                 out.append(("held", own[k] or "held at its start value"))
             elif ident[k]:
                 out.append(("identified", ""))
-            elif np.isinf(sigma[k]):
+            elif np.isinf(sigma[k]) or not seen[k]:
                 out.append(("not seen", own[k] or "the data carry no information on it"))
             elif not det[k]:
                 if own[k]:
@@ -443,7 +446,7 @@ def format_table(report: IdentificationReport, width: int | None = 100) -> str:
     and the verdict (None: no folding)."""
     import textwrap
 
-    rows = report.rows()
+    rows = IdentificationReport.rows(report)
     notes: dict[str, int] = {}
     for row in rows:
         if row["reason"] and row["reason"] not in notes:
@@ -496,11 +499,12 @@ def _atomic_write(path, text: str) -> None:
 
 
 def csv_text(report: IdentificationReport) -> str:
-    """`rows()` as CSV, with the method and the fit's verdict on every row."""
+    """The base `rows()` (model units) as CSV, with the method and the fit's verdict on every
+    row."""
     import csv
     import io
 
-    rows = report.rows()
+    rows = IdentificationReport.rows(report)
     buf = io.StringIO()
     fields = ["method", *(rows[0] if rows else ["parameter"]), "fit_verdict"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
@@ -534,7 +538,7 @@ def html_text(report: IdentificationReport, figures: bool = True) -> str:
     import html
 
     esc = html.escape
-    rows = report.rows()
+    rows = IdentificationReport.rows(report)
     cols = ("parameter", "estimate", "sigma", "sigma_pct", "unit", "status", "reason")
     body = "".join(
         "<tr class='{}'>".format(esc(r["status"].replace(" ", "-"))) +
@@ -583,7 +587,7 @@ def write_report(report: IdentificationReport, path) -> None:
     if suffix == ".csv":
         text = csv_text(report)
     elif suffix == ".json":
-        text = json.dumps(report.summary(), indent=2, allow_nan=False) + "\n"
+        text = json.dumps(IdentificationReport.summary(report), indent=2, allow_nan=False) + "\n"
     elif suffix in (".html", ".htm"):
         text = html_text(report)
     elif suffix == ".txt":
