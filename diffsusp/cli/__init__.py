@@ -6,7 +6,7 @@ Exit codes (`diffsusp.cli.common`): 0 success, 2 bad input (paths, files, tables
 3 a load case did not converge, 4 a model that cannot be solved as given.
 """
 
-from . import demo, fleet, geometry, identify, kc, model, sensitivity
+from . import demo, fleet, geometry, identify, kc, model, rehearse, sensitivity
 from .common import app
 
 # The verbs, registered here explicitly (help lists commands in this order, then groups).
@@ -15,6 +15,7 @@ app.command("kc")(kc.kc_command)
 app.command("info")(model.info)
 app.command("simulate")(model.simulate)
 app.command("sensitivity")(sensitivity.sensitivity_command)
+app.command("rehearse")(rehearse.rehearse_command)
 app.add_typer(identify.identify_app, name="identify")
 identify.identify_app.command("direct")(identify.direct)
 identify.identify_app.command("iterative")(identify.iterative_command)

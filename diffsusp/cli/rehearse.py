@@ -1,0 +1,159 @@
+"""`diffsusp rehearse METHOD MODEL`: before measuring, rehearse the planned experiment — random
+truths around the start, the measurements simulated with the planned noise, the method run on
+each, and per parameter how often it is identified and how often "identified" is right
+(`diffsusp.identify.rehearse`).
+
+Methods: `direct`, `iterative`, `least-squares` (MODEL: a built-in model or a model file; the
+truths are its bushing stiffnesses × a log-uniform factor in `--spread`, default 0.5–2; the
+measurements four landmarks per part with σ `--noise` mm), `mf-fit` (MODEL: the start `.tir`
+file; the truths its coefficients × (1 ± `--spread`), default ±20 %; the measurements the file's
+bench programme with σ = a + b·|F|, `--noise a,b`, default 20 N + 1 %).
+"""
+
+import enum
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .common import EXIT_BAD_INPUT, check_output, cli_errors, console, enable_x64, fail, print_json
+
+Method = enum.StrEnum("Method", {v: v for v in ("direct", "iterative", "least-squares",
+                                                 "mf-fit")})
+Cases = enum.StrEnum("Cases", {v: v for v in ("corner", "thesis")})
+
+
+def _floats(text: str, what: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise fail(f"--{what} must be numbers separated by commas; got {text!r}.",
+                   EXIT_BAD_INPUT) from None
+    if not all(math.isfinite(v) for v in values):
+        raise fail(f"--{what} must be finite; got {text!r}.", EXIT_BAD_INPUT)
+    return values
+
+
+def corner_cases(mech):
+    """The default load table of a suspension rehearsal: at the corner's contact point, the
+    design load × 0.7, 1, 1.3, each with lateral −2, 0, +2 kN and longitudinal ±1.5 kN (18
+    cases: a K&C rig's combined-load grid)."""
+    from ..kc.corner import corners_of
+
+    corner = corners_of(mech)[""].resolve(mech)
+    f0 = corner.design_load
+    force = [[x, y, z] for z in (0.7 * f0, f0, 1.3 * f0) for y in (-2000.0, 0.0, 2000.0)
+             for x in (-1500.0, 1500.0)]
+    name = mech.load_points.names[corner.contact_point]
+    return mech.loads(forces={name: force})
+
+
+def _params(mech, names: str | None):
+    """The default selection, or the named stiffnesses ('bushing.Ktx,...')."""
+    from ..identify import Params
+    from ..identify.selection import fit_selection
+
+    default = fit_selection(mech)[0]
+    if not names:
+        return default
+    wanted = [n.strip() for n in names.split(",") if n.strip()]
+    unknown = [n for n in wanted if n not in default.names]
+    if unknown:
+        raise fail(f"unknown parameter(s) {', '.join(unknown)}; the model's: "
+                   f"{', '.join(default.names)}.", EXIT_BAD_INPUT)
+    params = None
+    for bushing in dict.fromkeys(n.rsplit(".", 1)[0] for n in wanted):
+        axes = tuple(n.rsplit(".", 1)[1] for n in wanted if n.rsplit(".", 1)[0] == bushing)
+        p = Params.bushing_stiffness(mech, (bushing,), axes=axes)
+        params = p if params is None else params + p
+    return params
+
+
+def rehearse_command(
+    method: Annotated[Method, typer.Argument(help="The identification to rehearse.")],
+    model: Annotated[str, typer.Argument(
+        help="Start model: built-in name or model file (mf-fit: the start .tir file).")],
+    n: Annotated[int, typer.Option("--n", help="Random truths.")] = 200,
+    seed: Annotated[int, typer.Option(help="Seed of the truths and the noise.")] = 0,
+    noise: Annotated[str | None, typer.Option(
+        help="Measurement noise: landmark σ in mm (suspension, default 0.05); 'a,b' for "
+        "σ = a + b·|F| in N (mf-fit, default 20,0.01).")] = None,
+    spread: Annotated[str | None, typer.Option(
+        help="Spread of the truths: 'low,high' factors on the stiffnesses (default 0.5,2); "
+        "a relative ± on the MF coefficients (default 0.2).")] = None,
+    params: Annotated[str | None, typer.Option(
+        help="Parameters to draw and identify, comma-separated (default: every non-zero "
+        "bushing stiffness / every coefficient the fit estimates).")] = None,
+    cases: Annotated[Cases, typer.Option(
+        help="Load cases (suspension): the corner's combined-load grid, or the thesis's "
+        "Table 5-1.")] = Cases.corner,
+    out: Annotated[Path | None, typer.Option(help="Write the rehearsal (.csv or .json).")]
+    = None,
+    json_output: Annotated[bool, typer.Option("--json", help="JSON on stdout.")] = False,
+):
+    """Rehearse an identification on random truths before measuring: per parameter, how often
+    the planned experiment identifies it and how often "identified" is right (within 3σ)."""
+    check_output(out, suffixes=(".csv", ".json"), what="rehearsal")
+    if n < 1:
+        raise fail(f"--n must be at least 1 random truth; got {n}.", EXIT_BAD_INPUT)
+    method = Method(method).value
+    enable_x64()
+    from ..identify.rehearse import SuspensionScenario, rehearse
+
+    with cli_errors():
+        if method == "mf-fit":
+            scenario = _mf_scenario(model, noise, spread, params)
+        else:
+            from .common import load_model_file
+
+            mech = load_model_file(model).mechanism
+            sigma = _floats(noise, "noise") if noise is not None else [0.05]
+            if len(sigma) != 1 or not sigma[0] > 0:
+                raise fail(f"--noise must be one positive landmark σ (mm); got {noise!r} (a "
+                           "noise of 0 would call everything identified with σ = 0).",
+                           EXIT_BAD_INPUT)
+            factors = _floats(spread, "spread") if spread is not None else [0.5, 2.0]
+            if len(factors) != 2 or not 0 < factors[0] < factors[1]:
+                raise fail(f"--spread must be 'low,high' factors with 0 < low < high; got "
+                           f"{spread!r}.", EXIT_BAD_INPUT)
+            selection = _params(mech, params)
+            if cases == Cases.thesis:
+                from ..models import thesis_load_cases
+
+                loads = thesis_load_cases(mech)
+            else:
+                loads = corner_cases(mech)
+            scenario = SuspensionScenario(method.replace("-", "_"), mech, loads, selection,
+                                          noise=sigma[0], spread=tuple(factors))
+        report = rehearse(scenario, n=n, seed=seed)
+        if out is not None:
+            report.write(out)
+    if json_output:
+        print_json(report.summary())
+        return
+    con = console(markup=False)
+    con.print(report.table(), highlight=False, soft_wrap=True)
+    if out is not None:
+        con.print(f"rehearsal written to {out}", highlight=False)
+
+
+def _mf_scenario(path: str, noise, spread, params):
+    from ..io.tir import read_tir
+    from ..tyre import fit as F
+    from ..tyre.mf6 import MagicFormula6
+
+    tir = read_tir(path)
+    start = MagicFormula6.from_tir(tir)
+    ab = _floats(noise, "noise") if noise is not None else [20.0, 0.01]
+    if len(ab) != 2 or ab[0] < 0 or ab[1] < 0 or not (ab[0] > 0 or ab[1] > 0):
+        raise fail(f"--noise must be 'a,b' (σ = a + b·|F|, N) with a or b > 0; got {noise!r}.",
+                   EXIT_BAD_INPUT)
+    rel = _floats(spread, "spread") if spread is not None else [0.2]
+    if len(rel) != 1 or not rel[0] > 0:
+        raise fail(f"--spread must be one relative spread > 0 (0.2 = ±20 %); got {spread!r}.",
+                   EXIT_BAD_INPUT)
+    programme = F.bench_programme(start, channels=("FY",))
+    names = [n.strip() for n in params.split(",")] if params else None
+    return F.FitRehearsal(start, programme, names, spread=rel[0],
+                          noise={"FY": (ab[0], ab[1])}, tir=tir)
