@@ -103,14 +103,36 @@ __all__ = [
 ]
 
 
+FREE_AXIS_RATIO = 1e-3
+"""A bushing is free about one of its marker axes when its rotational stiffness there (linear
+plus cubic at 0.1 rad) is at most this fraction of the smaller of the other two: the arm then
+turns about that axis (a revolute) and the bushing's position along it leaves no trace in the
+relative motion (spec geometry §4.3)."""
+
+
+def _free_axis(mech, name: str) -> int | None:
+    """The one axis (0, 1, 2 of the bushing's I marker) a bushing is free about, or None (no
+    free axis, or two or three: a ball). spec: geometry §4.3, stiffness §1.8."""
+    b = mech.bushings
+    k = list(b.names).index(name)
+    rot = np.abs(np.asarray(b.k_rot)[k]) + np.abs(np.asarray(b.cubic_rot)[k]) * 0.01
+    for a in range(3):
+        others = np.delete(rot, a)
+        if others.min() > 0 and rot[a] <= FREE_AXIS_RATIO * others.min():
+            return a
+    return None
+
+
 def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = ()
                       ) -> tuple[tuple[GeometricJoint, ...], tuple[str, ...]]:
     """The joint list a model implies for the measured `parts` (spec geometry §4.6): which
     solver locates which element, with the model's hardpoints as priors.
 
     - spherical and universal joints, and bushings, between two measured parts (or one and the
-      ground): `'ball'` (a bushing named in `compliant`, on a link whose other end is a ball
-      joint: `'compliant_bushing'`);
+      ground): `'ball'`; a bushing free about one axis (`FREE_AXIS_RATIO`): `'revolute'`
+      with the model's point kept along the axis (not observable there), like a revolute (a
+      bushing named in `compliant`, on a link whose other end is a ball joint:
+      `'compliant_bushing'`);
     - revolute and cylindrical joints: `'revolute'` (the prior keeps the model's point along
       the axis);
     - a ball joint (spherical/universal) between a measured part and an unmeasured part that
@@ -143,8 +165,16 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
         if kind in ("spherical", "universal", "bushing") and known(pi) and known(pj):
             if pi < 0 and pj < 0:
                 continue
+            free = _free_axis(mech, name) if kind == "bushing" else None
             if name in compliant:
                 joints.append(("compliant", name, pi, pj, at))
+            elif free is not None:
+                joints.append(GeometricJoint(name, "revolute", (name_of[pi], name_of[pj]),
+                                             prior=at, elements=(name,)))
+                notes.append(f"'{name}' (bushing) is free about its {'xyz'[free]} axis "
+                             f"(torsional stiffness ≤ {FREE_AXIS_RATIO:g} × the other two): "
+                             "located as a revolute, its position along the axis is not "
+                             "observable")
             else:
                 joints.append(GeometricJoint(name, "ball", (name_of[pi], name_of[pj]),
                                              elements=(name,)))

@@ -588,6 +588,12 @@ def locate_joints(
                    and chi2 > LACK_OF_FIT else ""))
         else:
             observable = True
+        if observable and j.kind == "revolute":
+            # motion fixes the axis line only: the point along it is the prior's (spec geometry
+            # §4.3); its σ are those of the line's point at that position
+            note = ("position along the axis not observable (kept at the prior's "
+                    + (f"{j.prior_coordinate}" if j.prior_coordinate else "nearest point")
+                    + ")")
         results.append(JointEstimate(
             name=j.name, kind=j.kind, parts=tuple(j.parts),
             centre=centre if observable else None, axis=axis if observable else None,
