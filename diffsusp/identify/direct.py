@@ -420,7 +420,7 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
     q = _check_measurements(mech, measurements)
     fields = _selected_fields(mech, where or _default_where)
     params = _parameters(mech, fields, elements, axisymmetric,
-                         free=free_axes(mech) if where is None else ())
+                         free=free_axes(mech) if where is None and elements is None else ())
     eval_mech = _evaluation_model(mech, params)
     selection = _selection(mech, params)
     rows, rhs, null = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
@@ -447,7 +447,8 @@ def direct_system(
     unknowns, table units), each case's rows are whitened by the covariance that pose errors
     cause at those values (see `direct`, `weighting="noise"`).
     """
-    ctx = _prepare(mech, measurements, _selection_of(params, where), elements, axisymmetric)
+    selected = _selection_of(params, where)
+    ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
     return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
 
 
@@ -679,7 +680,8 @@ def direct(
     if not max_sigma_pct > 0:
         raise InputError(f"max_sigma_pct must be positive; got {max_sigma_pct!r}.")
     threshold = DEFAULT_THRESHOLD if threshold is None else float(threshold)
-    ctx = _prepare(mech, measurements, _selection_of(params, where), elements, axisymmetric)
+    selected = _selection_of(params, where)
+    ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
     raw = ctx.system()
     # Structure: what the equations determine (unweighted, as the thesis writes them).
     negligible = _negligible(raw, threshold)
@@ -719,7 +721,7 @@ def direct(
     case_scale = np.linalg.norm(raw.y.reshape(n_cases, -1), axis=1)
     write = ~negligible if method == "tikhonov" else identified
     notes = list(raw.notes)
-    free = free_axes(mech) if _selection_of(params, where) is None else []
+    free = free_axes(mech) if selected is None and elements is None else []
     if free:
         notes.append("left out " + ", ".join(
             f"{mech.bushings.names[e]}.{STIFFNESS_NAMES[a]}" for e, a in free) + ": 0 in the "

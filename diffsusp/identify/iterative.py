@@ -476,6 +476,18 @@ def iterative(
         notes=(free_note,) if free_note else (),
         _data=check_items, sigma_data=sigma_data if check or polish else None,
     )
+    # The returned model carries the values the report determines; a direction the data do
+    # not determine (gate never passed, or σ% above the bar) keeps the model's start value.
+    kept = np.zeros(k.shape, bool)
+    kept[chosen] = report.determined
+    written = np.where(kept | ~chosen, k, start)
+    if not np.array_equal(written, k):
+        final = _with_stiffness(mech, index, written)
+        if check_items is not None:
+            consistency = check_consistency(final, check_items, int(np.sum(kept)))
+            _, consistency = _least_squares_gap(mech, final, names, chosen, check_items,
+                                                consistency)
+        report = dataclasses.replace(report, _mech=final, consistency=consistency)
     if polish:
         polished_mech, fit = report.polish()
         return polished_mech, dataclasses.replace(report, polished=fit)
