@@ -140,7 +140,8 @@ def test_polish_returns_the_model_it_judges(bushing_cases):
     where = lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,  # noqa: E731
                        m.bushings.offset_rot)
     fitted, report = identify.direct(mech, noisy, where=where, polish=True)
-    assert report.polished is not None and report.consistency is report.polished.consistency
+    # The consistency is the returned model's (the polish's values where it determines them).
+    assert report.polished is not None
     again = check_consistency(fitted, check_data(mech, noisy),
                               report.consistency.n_parameters, cases=report.cases)
     assert again.chi2 == pytest.approx(report.consistency.chi2, rel=1e-6)
@@ -159,10 +160,14 @@ def test_polish_returns_the_model_it_judges(bushing_cases):
                                rtol=1e-12)
     assert np.all(report.linear_values[constants] != report.values[constants])
     assert not any(np.isfinite(v) for v, _, _ in report.derived.values())
-    # The stiffnesses: the returned model's, table units.
-    np.testing.assert_allclose(report.values[:6], np.concatenate([k_trans, k_rot / DEG]),
-                               rtol=1e-12)
+    # The stiffnesses: the returned model carries the identified ones (table units); the
+    # others keep the model's values.
     ok = report.identified[:6]
+    model = np.concatenate([k_trans, k_rot / DEG])
+    np.testing.assert_allclose(report.values[:6][ok], model[ok], rtol=1e-12)
+    start = np.concatenate([np.asarray(mech.bushings.k_trans[0]),
+                            np.asarray(mech.bushings.k_rot[0]) / DEG])
+    np.testing.assert_array_equal(model[~ok], start[~ok])
     assert ok[2:].all(), report.status
     err = (report.values[:6] - np.array([100.0] * 3 + [1e4] * 3)) / report.sigma[:6]
     assert np.all(np.abs(err[ok]) < 4.0), err
@@ -356,7 +361,9 @@ def test_equations_match_an_independent_construction():
     loads = thesis_load_cases(mech, np.array([[4500.0, 0.0, 0.0], [3000.0, 1000.0, 0.0],
                                               [6000.0, 0.0, -1000.0]]))
     meas = measure.from_poses(mech.parts, rot, trans, loads)
-    system = identify.direct_system(mech, meas)
+    # Every element named: the directions at 0 in the model (left out by default) included.
+    system = identify.direct_system(mech, meas,
+                                    elements=[*mech.bushings.names, *mech.springs.names])
     r = system.rows_per_case
     assert r == 24 - 12 and system.W.shape == (n_cases * r, 20)
     ours = np.column_stack([system.W, system.y]).reshape(n_cases, r, -1)
