@@ -512,7 +512,8 @@ MAX_SIGMA_PCT = 10.0
 
 def _least_squares_gap(mech, final, names, chosen, items, consistency):
     """σ of the selected stiffnesses from the measurements (whitened Jacobian through the
-    equilibrium at the loop's values) and Δχ² = ‖QᵀR‖²: how much a least-squares fit of the
+    equilibrium at the loop's values, widened by the loop's distance from the least-squares
+    estimate) and Δχ² = ‖QᵀR‖²: how much a least-squares fit of the
     same data would still lower χ² from here. The loop does not minimise χ², so a value within
     the noise's χ² band can still be far from what the data say; Δχ² above the χ² quantile of
     p dof marks it inconsistent (see `report.Consistency.gap`)."""
@@ -537,6 +538,12 @@ def _least_squares_gap(mech, final, names, chosen, items, consistency):
     gap = float(np.sum((u[:, keep].T @ z) ** 2))
     inv = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
     sigma = np.sqrt((vt.T ** 2) @ inv)
+    # The loop's values are not the least-squares estimate: they lie a Gauss–Newton step
+    # Δ = −J⁺z from it, and the truth lies within σ of that estimate. The gap test admits Δ up
+    # to the χ² quantile of p dof (≈ 4σ along one direction for p = 6), so σ alone would call
+    # values identified that are several σ off; the reported σ is √(σ² + Δ²).
+    step = vt.T @ (np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0) * (u.T @ z))
+    sigma = np.hypot(sigma, step)
     sigma[((vt.T ** 2) @ (~keep).astype(float)) > 1e-12] = np.inf
     critical = chi2_quantile(len(order), consistency.alpha)
     consistency = dataclasses.replace(
