@@ -24,8 +24,9 @@ import numpy as np  # noqa: E402
 from diffsusp.io.tir import read_tir  # noqa: E402
 from diffsusp.tyre import MagicFormula6  # noqa: E402
 from diffsusp.tyre import fit as F  # noqa: E402
+from diffsusp.tyre.examples import DATA
 
-SHARED = "/work/shared/data/tyre/"
+SHARED = str(DATA) + "/"  # the shipped copies of the shared tyre files
 
 
 def scenario(name):

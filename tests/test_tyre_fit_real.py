@@ -13,8 +13,9 @@ from diffsusp.io.tir import read_tir
 from diffsusp.tyre import MagicFormula6
 from diffsusp.tyre import fit as F
 from diffsusp.tyre.fit_start import renormalise
+from diffsusp.tyre.examples import DATA
 
-SHARED = "/work/shared/data/tyre/"
+SHARED = str(DATA) + "/"  # the shipped copies of the shared tyre files
 FEDA = {p: SHARED + f"335_65R22_5_G275MSA_{p}psi.tir" for p in (60, 70)}
 NOISE = {"FY": (20.0, 0.01)}   # σ = 20 N + 1 % |F_y|
 
