@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 from diffsusp.io.tir import read_tir  # noqa: E402
 from diffsusp.tyre import MagicFormula6  # noqa: E402
 from diffsusp.tyre import fit as F  # noqa: E402
-from diffsusp.tyre.examples import DATA
+from diffsusp.tyre.examples import DATA  # noqa: E402
 
 SHARED = str(DATA) + "/"  # the shipped copies of the shared tyre files
 
