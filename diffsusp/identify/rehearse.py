@@ -271,7 +271,7 @@ class SuspensionScenario:
         import jax
 
         from .. import measure
-        from . import direct_batch, iterative, least_squares_batch
+        from . import direct_batch, least_squares_batch
         from .report import check_data
 
         layout = measure.place_landmarks(self.mech, self.per_part, seed=self.layout_seed)
@@ -290,21 +290,35 @@ class SuspensionScenario:
         where = [k for k, m in enumerate(sets) if m is not None]
         if not good:
             return reports
-        if self.method == "direct":
-            out = direct_batch(self.mech, good, self.params)
-        elif self.method == "least_squares":
-            data = [check_data(self.mech, m)[0] for m in good]
-            out = least_squares_batch(self.mech, _stack(data), self.params).reports
-        else:
-            out = []
-            for m in good:
-                try:
-                    out.append(iterative(self.mech, m, self.params)[1])
-                except InputError:
-                    out.append(None)
+        try:  # batched where the method has a batched form
+            if self.method == "direct":
+                out = list(direct_batch(self.mech, good, self.params))
+            elif self.method == "least_squares":
+                data = [check_data(self.mech, m)[0] for m in good]
+                out = list(least_squares_batch(self.mech, _stack(data), self.params).reports)
+            else:
+                out = None
+        except InputError:  # a set the batch refuses (e.g. a start without equilibrium)
+            out = None
+        if out is None:  # one set at a time: a set the method refuses is a failed run
+            out = [self._one(m) for m in good]
         for k, rep in zip(where, out, strict=True):
             reports[k] = rep
         return reports
+
+    def _one(self, meas):
+        from . import direct, iterative, least_squares
+        from .report import check_data
+
+        try:
+            if self.method == "direct":
+                return direct(self.mech, meas, self.params)[1]
+            if self.method == "least_squares":
+                return least_squares(self.mech, check_data(self.mech, meas)[0],
+                                     self.params)[1]
+            return iterative(self.mech, meas, self.params)[1]
+        except InputError:
+            return None
 
 
 def _stack(items: Sequence):
