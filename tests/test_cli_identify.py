@@ -140,7 +140,12 @@ def test_identify_iterative_recovers_the_stiffnesses(tables, tmp_path):
     values = {r.split(",")[0]: float(r.split(",")[1]) for r in rows[1:]}
     np.testing.assert_allclose([values[f"bush.Kt{a}"] for a in "xyz"], 100.0, rtol=1e-8)
     np.testing.assert_allclose([values[f"bush.Kr{a}"] for a in "xyz"], 1e4, rtol=1e-8)
-    np.testing.assert_allclose(load_model(model).bushings.k_trans, 100.0, rtol=1e-8)
+    # the model written carries the values the report determines, the start elsewhere
+    status = {r.split(",")[0]: r.split(",")[4] for r in rows[1:]}
+    k_written = np.asarray(load_model(model).bushings.k_trans)[0]
+    for a, k in zip("xyz", k_written, strict=True):
+        determined = status[f"bush.Kt{a}"] == "identified"
+        assert k == pytest.approx(100.0 if determined else 1e4, rel=1e-8), (a, status)
     for stem in ("iterative_convergence", "iterative_cases"):
         assert (figs / f"{stem}.png").stat().st_size > 0 and (figs / f"{stem}.svg").exists()
     # --polish: the loop's result polished by least squares (the report's recommendation).

@@ -77,7 +77,8 @@ def test_three_methods_one_measurement_one_selection_one_report_api(case):
         summary = json.loads(report.to_json())
         assert summary["method"] == method and summary["parameters"] == rows
         assert set(summary) == {"method", "parameters", "combinations", "residual_rms",
-                                "consistency"}
+                                "consistency", "fit_verdict", "stop_reason", "judged_at"}
+        assert [r["status"] for r in rows] == list(report.statuses)
         # Issue 12: every report says whether the identified model reproduces the data
         # (noise-free here: the exact methods do; the iterative loop stops at a 1 % change).
         check = summary["consistency"]
@@ -180,7 +181,9 @@ def test_the_report_tables_in_the_thesis_units(case):
         assert row["unit"] == ("N*mm/deg" if row["parameter"][-3:-1] == "Kr" else "N/mm")
         assert row["value"] == pytest.approx(_in_thesis_units(row["parameter"], k), rel=1e-15)
         assert row["start"] == pytest.approx(_in_thesis_units(row["parameter"], k0), rel=1e-15)
-        assert row["identified"] == bool(ok)
+        assert row["gate_passed"] == bool(ok)  # the correlation gate; "identified" is the verdict
+    assert [r["status"] for r in rows] == list(it.statuses)
+    assert [r["identified"] for r in rows] == list(it.is_identified)
     mech0 = params.apply(ref, 1.5 * params.start)  # the start model of the fixture
     last = it.history[-1]
     rows = tables.interrupted_iterative_rows(mech0, it.bushings, last)

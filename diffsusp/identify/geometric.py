@@ -461,9 +461,14 @@ def design_geometry_cases(
                           if name.startswith(prefix)])
     history, observable, sigma = [], {}, {}
     stop = len(report.chosen)
+    best = {j.name: np.inf for j in joints}
     for step in range(len(report.chosen)):
-        sig = {j.name: float(np.max(report.sigma[step][cols]))
+        # A case added never removes information: a σ that rises again after a step is the
+        # rank test of the pseudo-inverse flipping (a weak direction under a threshold relative
+        # to the strongest), not a joint lost; each joint keeps the best bound so far.
+        sig = {j.name: min(best[j.name], float(np.max(report.sigma[step][cols])))
                for j, cols in zip(joints, per_joint, strict=True)}
+        best = sig
         history.append(max(sig.values()))
         sigma, observable = sig, {k: bool(v <= max_sigma) for k, v in sig.items()}
         if all(observable.values()):
