@@ -44,9 +44,9 @@ weakest one — the direction the relative motion hardly sees (on the Chrono str
 bushing taken as a ball, ≈ 21 mm off along the pivot axis with σ·√(χ²/E) ≈ 8 mm: reported
 observable before). The reported σ of the centre and of a revolute's axis carry the same
 factor (the compliance bias: the Chrono double wishbone's torsion-free arm bushing located as
-a revolute is 9 mrad and 0.8 mm off its axis line under ±2000 N lateral cases, about 12 × the noise σ). A ball's
-reported σ stays the noise σ: there the factor does not cover the bias (the pseudo-McPherson's
-stiff bushing A, χ²/E = 2.4, is 3.9 mm off with σ·√(3χ²/E) = 0.59 mm)."""
+a revolute is 9 mrad and 0.8 mm off its axis line under ±2000 N lateral cases, about 12 × the
+noise σ). A ball's reported σ stays the noise σ: there the factor does not cover the bias (the
+pseudo-McPherson's stiff bushing A, χ²/E = 2.4, is 3.9 mm off with σ·√(3χ²/E) = 0.59 mm)."""
 
 
 def _ball(r, t):
