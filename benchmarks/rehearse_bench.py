@@ -139,8 +139,12 @@ def main():
         print(f"{'parameter':<18}{'ident':>7}{'cov1':>7}{'cov2':>7}{'cov3':>7}{'bias/s':>8}"
               f"{'false':>7}")
         for n, s in st["parameters"].items():
-            f = (lambda v: "   -  " if v is None else f"{v:7.3f}")
-            g = (lambda v: " " * 8 if v is None else f"{v:8.2f}")
+            def f(v):
+                return "   -  " if v is None else f"{v:7.3f}"
+
+            def g(v):
+                return " " * 8 if v is None else f"{v:8.2f}"
+
             print(f"{n:<18}{s['identified_rate']:7.3f}{f(s['coverage_1'])}{f(s['coverage_2'])}"
                   f"{f(s['coverage_3'])}{g(s['bias_over_sigma'])}"
                   f"{s['false_identified']:7d}{'  (truth 0)' if s['truth_zero'] else ''}")

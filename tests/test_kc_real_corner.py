@@ -1,9 +1,10 @@
-"""K&C on real corners by default. A compliant corner's design load: the vertical contact load that holds the wheel centre at its
-design height, solved through the statics (any number of DOF), and the force events that use it
-by default. On the Chrono double wishbone with `Bushing Data` (11 DOF) the old virtual-work
-estimate at the design position (one load for every generalised-force row, by least squares)
-gave a negative load, the wheel 117 mm below design and a lateral compliance steer 4.5 times too
-large; on the one-DOF double wishbone both are exact and agree.
+"""K&C on real corners by default. A compliant corner's design load: the vertical contact load
+that holds the wheel centre at its design height, solved through the statics (any number of
+DOF), and the force events that use it by default. On the Chrono double wishbone with `Bushing
+Data` (11 DOF) the old virtual-work estimate at the design position (one load for every
+generalised-force row, by least squares) gave a negative load, the wheel 117 mm below design
+and a lateral compliance steer 4.5 times too large; on the one-DOF double wishbone both are
+exact and agree.
 
 The frames of the model read where a default depends on them (`with_rack`).
 

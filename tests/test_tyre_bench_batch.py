@@ -7,6 +7,7 @@ import pathlib
 
 import numpy as np
 import pytest
+from test_tyre_bench import SEGMENTS_25  # tests/ is on sys.path (pytest)
 
 from diffsusp.tyre import annex_g, bench, bench_batch, poly
 
@@ -116,16 +117,7 @@ def test_behaviour_fault_goes_through_the_exact_search(campaign):
     np.testing.assert_array_equal(res.kept[0], [n in rep.reduced.names for n in res.names])
 
 
-PROGRAMME = bench.make_segments(
-    [dict(speed=v, fz0=f, camber=g, sine_amp=1.0, sine_freq=hz, sequence=4)
-     for v in (40.0, 120.0) for f in (3.0, 4.5, 6.0) for g in (-1.5, 0.0, 1.5)
-     for hz in (3.0, 6.0)]
-    + [dict(speed=v, fz0=f, fz_amp=0.5, fz_freq=3.0, slip0=s, sequence=3)
-       for v in (40.0, 120.0) for f in (3.0, 4.5) for s in (-1.0, 1.0)]
-    + [dict(speed=v, fz0=f, camber=g, ramp_amp=3.0, ramp_period=2.0, step_amp=1.0,
-            step_period=1.0, sequence=5)
-       for v in (40.0, 120.0) for f, g in ((3.0, 0.0), (4.5, -1.5), (4.5, 0.0), (4.5, 1.5),
-                                           (6.0, 0.0))])
+PROGRAMME = SEGMENTS_25
 """The programme of the shipped campaign (`_table10`): the batched program compiles once."""
 
 

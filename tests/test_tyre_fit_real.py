@@ -12,8 +12,8 @@ import pytest
 from diffsusp.io.tir import read_tir
 from diffsusp.tyre import MagicFormula6
 from diffsusp.tyre import fit as F
-from diffsusp.tyre.fit_start import renormalise
 from diffsusp.tyre.examples import DATA
+from diffsusp.tyre.fit_start import renormalise
 
 SHARED = str(DATA) + "/"  # the shipped copies of the shared tyre files
 FEDA = {p: SHARED + f"335_65R22_5_G275MSA_{p}psi.tir" for p in (60, 70)}
@@ -163,7 +163,7 @@ def test_cli_fit_from_a_pac2002_file(feda, tmp_path):
 
     from diffsusp.cli import app
 
-    (_, start), (_, truth) = feda[60], feda[70]
+    truth = feda[70][1]
     inp, tr = _programme(truth)
     data = F.simulate(tr, inp, noise=NOISE, seed=5)
     fz, sa, ia = (np.asarray(v) for v in (data.fz, data.alpha, data.gamma))

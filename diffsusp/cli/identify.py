@@ -19,7 +19,6 @@ CSV rows and figures `diffsusp.identify.tables`; this module parses, calls and f
 """
 
 import contextlib
-import csv
 import enum
 import os
 from pathlib import Path
@@ -142,7 +141,8 @@ def _write_report(report, path: Path, rows=None):
     report (`identify.report.html_text`). Written under a temporary name, then renamed."""
     import json
 
-    from ..identify.report import _atomic_write, html_text
+    from ..identify.report import html_text, rows_csv
+    from ..io.files import write_text_atomic
 
     suffix = path.suffix.lower()
     if suffix == ".json":
@@ -150,19 +150,8 @@ def _write_report(report, path: Path, rows=None):
     elif suffix in (".html", ".htm"):
         text = html_text(report)
     else:
-        text = _csv_text(report.rows() if rows is None else rows)
-    _atomic_write(path, text)
-
-
-def _csv_text(rows) -> str:
-    import io
-
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: "" if v is None else v for k, v in row.items()})
-    return buf.getvalue()
+        text = rows_csv(report.rows() if rows is None else rows)
+    write_text_atomic(path, text)
 
 
 def _exit_if_unsolvable(report):
@@ -267,9 +256,10 @@ def _save_on_interrupt(out, rows, what):
                 out.write_text(json.dumps({"interrupted": True, "rows": data}, indent=2) + "\n",
                                encoding="utf-8")
             else:
-                from ..identify.report import _atomic_write
+                from ..identify.report import rows_csv
+                from ..io.files import write_text_atomic
 
-                _atomic_write(out, _csv_text(data))
+                write_text_atomic(out, rows_csv(data))
             where = f"; the estimate of the last {what} is in {out} (status 'interrupted')"
         elif not data:
             where = f"; no {what} had finished"

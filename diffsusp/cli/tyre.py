@@ -395,7 +395,6 @@ def fit_command(
         c.print(rep.table(), highlight=False)
         if out is not None and tir is not None:
             from diffsusp.io.tir import write_tir
-
             from diffsusp.tyre import mf6
 
             written = fitted.to_tir(tir)

@@ -25,15 +25,11 @@ import math
 import os
 import pathlib
 
+from ..io.files import write_text_atomic
+
 __all__ = ["FleetStatus", "Store", "status"]
 
 SUMMARY_HEAD = ("item", "status", "message", "hash")
-
-
-def _write_atomic(path: pathlib.Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def _number(v):
@@ -50,7 +46,7 @@ class Store:
 
     def open(self, manifest: dict) -> None:
         self.reports.mkdir(parents=True, exist_ok=True)
-        _write_atomic(self.out / "fleet.json", json.dumps(manifest, indent=1) + "\n")
+        write_text_atomic(self.out / "fleet.json", json.dumps(manifest, indent=1) + "\n")
 
     def entries(self) -> dict[str, dict]:
         """The last journal line of every item."""
@@ -79,7 +75,7 @@ class Store:
         in between leaves reports without a line: those items run again."""
         for entry, report in done:
             if report is not None:
-                _write_atomic(self.reports / f"{entry['item']}.json",
+                write_text_atomic(self.reports / f"{entry['item']}.json",
                               json.dumps(report, indent=1, default=_jsonable) + "\n")
         with open(self.journal_path, "a", encoding="utf-8") as f:
             f.write("".join(json.dumps(entry, default=_jsonable) + "\n" for entry, _ in done))

@@ -30,13 +30,24 @@ for the suspension methods (`direct`, `iterative`, `least_squares`); the tyre be
 import dataclasses
 import json
 import math
+import pathlib
 from collections.abc import Sequence
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from ..errors import InputError
+from .. import measure
+from ..errors import ConvergenceError, InputError
+from ..io.files import write_text_atomic
 from ..model.mechanism import Loads, Mechanism
-from .report import _atomic_write
+from .direct import direct
+from .direct_polish import direct_batch
+from .iterative import iterative
+from .least_squares import least_squares, least_squares_batch
+from .report import check_data, rows_csv
+from .selection import fit_selection
 
 __all__ = ["ParameterRehearsal", "RehearsalReport", "SuspensionScenario", "rehearse"]
 
@@ -139,26 +150,15 @@ class RehearsalReport:
 
     def write(self, path) -> None:
         """.json (`summary()`) or .csv (`rows()`), by suffix; written atomically."""
-        import csv
-        import io
-        import pathlib
-
         path = pathlib.Path(path)
         if path.suffix.lower() == ".json":
             text = json.dumps(self.summary(), indent=2) + "\n"
         elif path.suffix.lower() == ".csv":
-            buf = io.StringIO()
-            rows = self.rows()
-            writer = csv.DictWriter(buf, fieldnames=["method", *rows[0]], lineterminator="\n")
-            writer.writeheader()
-            for r in rows:
-                writer.writerow({"method": self.method,
-                                 **{k: "" if v is None else v for k, v in r.items()}})
-            text = buf.getvalue()
+            text = rows_csv([{"method": self.method, **r} for r in self.rows()])
         else:
             raise InputError(f"{path}: unknown format '{path.suffix}' for a rehearsal; use "
                              ".csv or .json.")
-        _atomic_write(path, text)
+        write_text_atomic(path, text)
 
 
 def _number(v):
@@ -239,8 +239,6 @@ class SuspensionScenario:
     layout_seed: int = 0
 
     def __post_init__(self):
-        from .selection import fit_selection
-
         if self.method not in METHODS:
             raise InputError(f"unknown method '{self.method}' for a suspension rehearsal; "
                              f"known: {', '.join(METHODS)}.")
@@ -268,12 +266,6 @@ class SuspensionScenario:
         return start * np.exp(rng.uniform(lo, hi, size=(n, start.size)))
 
     def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
-        import jax
-
-        from .. import measure
-        from . import direct_batch, least_squares_batch
-        from .report import check_data
-
         layout = measure.place_landmarks(self.mech, self.per_part, seed=self.layout_seed)
         noise = measure.GaussianNoise(landmarks=float(self.noise))
         sets = []
@@ -283,7 +275,7 @@ class SuspensionScenario:
             try:
                 sets.append(measure.synthesize(truth_mech, self.loads, layout=layout,
                                                noise=noise, key=key))
-            except Exception:  # noqa: BLE001  (a truth without equilibrium: a failed run)
+            except (ConvergenceError, InputError):  # a truth without equilibrium: failed run
                 sets.append(None)
         good = [m for m in sets if m is not None]
         reports: list = [None] * len(sets)
@@ -307,9 +299,6 @@ class SuspensionScenario:
         return reports
 
     def _one(self, meas):
-        from . import direct, iterative, least_squares
-        from .report import check_data
-
         try:
             if self.method == "direct":
                 return direct(self.mech, meas, self.params)[1]
@@ -323,9 +312,6 @@ class SuspensionScenario:
 
 def _stack(items: Sequence):
     """One measurement with a leading data-set axis from one-set measurements alike."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
     fields = items[0]._values
     return eqx.tree_at(lambda m: tuple(getattr(m, f) for f in fields), items[0],
                        tuple(jnp.stack([getattr(it, f) for it in items]) for f in fields))

@@ -33,15 +33,21 @@ parameters; the model is declared inconsistent when χ² exceeds that law's uppe
 equilibrium.
 """
 
-import contextlib
+import csv
 import dataclasses
+import html
+import io
 import json
 import math
+import pathlib
+import textwrap
 from collections.abc import Sequence
 from typing import ClassVar
 
 import equinox as eqx
 import numpy as np
+
+from ..io.files import write_text_atomic
 
 CONSISTENCY_ALPHA = 1e-3
 """Significance of the consistency test: a correct model with the stated noise is called
@@ -444,8 +450,6 @@ def format_table(report: IdentificationReport, width: int | None = 100) -> str:
     and a note number; the notes (each status's reason, numbered once per distinct text) below
     the table, then the fit's verdict — nothing wraps inside the table. `width` folds the notes
     and the verdict (None: no folding)."""
-    import textwrap
-
     rows = IdentificationReport.rows(report)
     notes: dict[str, int] = {}
     for row in rows:
@@ -479,39 +483,22 @@ def format_table(report: IdentificationReport, width: int | None = 100) -> str:
     return "\n".join(lines)
 
 
-def _atomic_write(path, text: str) -> None:
-    """Write `text` to `path` through a temporary file in the same folder, renamed at the end:
-    an interrupted or failed write never leaves a truncated file under the final name."""
-    import os
-    import pathlib
-    import tempfile
-
-    path = pathlib.Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 def csv_text(report: IdentificationReport) -> str:
     """The base `rows()` (model units) as CSV, with the method and the fit's verdict on every
     row."""
-    import csv
-    import io
+    rows = IdentificationReport.rows(report) or [{"parameter": None}]
+    return rows_csv([{"method": report.family, **row, "fit_verdict": report.fit_verdict}
+                     for row in rows])
 
-    rows = IdentificationReport.rows(report)
+
+def rows_csv(rows: Sequence[dict]) -> str:
+    """Rows (dicts with the same keys) as CSV text: None as an empty cell, and a text cell that
+    a spreadsheet would run as a formula (leading = + - @, not a number) quoted with '."""
     buf = io.StringIO()
-    fields = ["method", *(rows[0] if rows else ["parameter"]), "fit_verdict"]
-    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
     for row in rows:
-        writer.writerow({"method": report.family, **{k: _csv_cell(v) for k, v in row.items()},
-                         "fit_verdict": report.fit_verdict})
+        writer.writerow({k: _csv_cell(v) for k, v in row.items()})
     return buf.getvalue()
 
 
@@ -535,8 +522,6 @@ def html_text(report: IdentificationReport, figures: bool = True) -> str:
     """A one-page self-contained HTML report: the fit's verdict, the table of `rows()` (status
     and reason per parameter), the combinations, and the report's figure (`plot()`) inline as
     SVG (no external file)."""
-    import html
-
     esc = html.escape
     rows = IdentificationReport.rows(report)
     cols = ("parameter", "estimate", "sigma", "sigma_pct", "unit", "status", "reason")
@@ -546,8 +531,6 @@ def html_text(report: IdentificationReport, figures: bool = True) -> str:
                 for c in cols) + "</tr>" for r in rows)
     svg = ""
     if figures and rows:
-        import io
-
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -580,8 +563,6 @@ def write_report(report: IdentificationReport, path) -> None:
     its status, reason and the fit's verdict), .json (`summary()`), .html (`html_text`), .txt
     (`format_table`). Every writer renders the same `rows()`, so they cannot disagree. The file
     is written under a temporary name and renamed (never left truncated)."""
-    import pathlib
-
     path = pathlib.Path(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
@@ -595,10 +576,10 @@ def write_report(report: IdentificationReport, path) -> None:
     else:
         raise ValueError(f"write_report: unknown report format '{path.suffix}' "
                          "(use .csv, .json, .html or .txt).")
-    _atomic_write(path, text)
+    write_text_atomic(path, text)
 
 
 __all__ = ["CONSISTENCY_ALPHA", "STATUSES", "Consistency", "IdentificationReport",
            "MeasurementResiduals", "check_consistency", "check_data", "chi2_quantile",
-           "consistency_from_residuals", "csv_text", "format_table", "html_text",
+           "consistency_from_residuals", "csv_text", "rows_csv", "format_table", "html_text",
            "write_report"]

@@ -13,8 +13,11 @@ read (a 50 MB model file would take minutes and gigabytes to parse).
 - tables (load cases, measurements; CSV or Parquet): `TABLE_LIMIT`, 512 MiB.
 """
 
+import contextlib
 import os
+import pathlib
 import stat
+import tempfile
 
 from ..errors import ModelFileError
 
@@ -93,3 +96,19 @@ def read_input(path, what: str, kind: str = "model") -> bytes:
         raise ModelFileError(f"the {what} is larger than the limit of {_size(bound)}; "
                              f"raise it with --max-file-mb or ${ENVIRONMENT}.", path=path)
     return data
+
+
+def write_text_atomic(path, text: str) -> None:
+    """Write `text` (UTF-8) to `path` through a temporary file in the same folder, renamed over
+    `path` at the end: an interrupted or failed write never leaves a truncated file under the
+    final name (a reader sees the old file or the new one)."""
+    path = pathlib.Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise

@@ -324,7 +324,6 @@ def noise_model(y, E, F, inner, *, E_noise=None, outliers: bool = True, passes: 
     as y), (a, b), the outlier mask)."""
     xp = np if isinstance(y, np.ndarray) else jnp
     E_noise = E if E_noise is None else E_noise
-    c = xp.sqrt(xp.sum(E * E, axis=1))  # √c_t per sample of a segment
     cn = xp.sqrt(xp.sum(E_noise * E_noise, axis=1))
     flagged = xp.zeros(y.shape, bool)
     inside = xp.broadcast_to(xp.asarray(inner), y.shape)
@@ -342,7 +341,6 @@ def noise_model(y, E, F, inner, *, E_noise=None, outliers: bool = True, passes: 
     a, b = xp.asarray(0.0), xp.asarray(0.0)
     level = None
     for _ in range(passes):
-        z = clean @ E.T
         zn = clean @ E_noise.T
         f = xp.abs(clean @ F.T)
         u = xp.abs(zn) / cn / math.sqrt(2.0 / math.pi)

@@ -1009,8 +1009,9 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     **Arguments:** `names` (default `default_names`: the `default_groups` the data's channels
     allow; the others stay at the model's values); `hold` the names kept at the start value
     (default: with `names` not given, `default_hold` — those the start file does not use, 0 or
-    absent from `tir`; with `names` given, none) less `free`; `noise` per channel σ or (a, b) for σ = a + b·|F| [N or N·mm] (default: estimated
-    from the sweeps, `fit_start.estimate_noise`); `loss` "huber", "cauchy" or "linear",
+    absent from `tir`; with `names` given, none) less `free`; `noise` per channel σ or (a, b)
+    for σ = a + b·|F| [N or N·mm] (default: estimated from the sweeps,
+    `fit_start.estimate_noise`); `loss` "huber", "cauchy" or "linear",
     `loss_scale` k in units of σ; `combined=False` fits the pure-slip functions;
     `strategy` "staged" (default) or "joint"; `start_from_data` the data's starting values of
     the scale coefficients (`fit_start.data_start`); LM tolerances; `threshold` of
