@@ -228,6 +228,25 @@ def check_output(path, *, suffixes=None, what: str = "output", directory: bool =
                    EXIT_BAD_INPUT)
 
 
+def check_number(value, option: str, *, positive: bool = False, nonnegative: bool = False,
+                 unit: str = ""):
+    """Fail (exit 2, before any work) unless the value of `option` is a finite number (and > 0
+    with `positive`, >= 0 with `nonnegative`): `--cutoff 0`, `--radius nan` and the like are
+    bad input, not a run that ends in NaN or an internal error (bad_inputs D14). None passes
+    (an option not given)."""
+    if value is None:
+        return value
+    v = float(value)
+    if v != v or v in (float("inf"), float("-inf")):
+        raise fail(f"{option} must be a finite number; got {value}.", EXIT_BAD_INPUT)
+    if positive and not v > 0:
+        raise fail(f"{option} must be > 0{unit and f' [{unit}]'}; got {value}.", EXIT_BAD_INPUT)
+    if nonnegative and v < 0:
+        raise fail(f"{option} must be >= 0{unit and f' [{unit}]'}; got {value}.",
+                   EXIT_BAD_INPUT)
+    return value
+
+
 class Side(enum.StrEnum):
     """A side of the vehicle (`--side`)."""
 

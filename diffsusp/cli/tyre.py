@@ -42,11 +42,13 @@ from rich.table import Table as RichTable
 from .common import (
     EXIT_BAD_INPUT,
     app,
+    check_number,
     check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
+    plain,
     print_json,
     warn,
 )
@@ -109,7 +111,8 @@ def info(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")
 def eval_command(
     file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
     inputs: Annotated[Path | None, typer.Option(
-        help="Input table: FZ [N], SL [-], SA [rad], IA [rad], P [Pa], VX [m/s] (.csv/.parquet).")]
+        help=plain("Input table: FZ [N], SL [-], SA [rad], IA [rad], P [Pa], VX [m/s] "
+                   "(.csv/.parquet; the table `--out` writes reads back)."))]
     = None,
     out: Annotated[Path | None, typer.Option(help="Results table (.csv or .parquet).")] = None,
     grid: Annotated[bool, typer.Option(
@@ -139,7 +142,9 @@ def eval_command(
             cols = {"FZ": fz, "SL": z, "SA": sa, "IA": z, "P": z + float(model["INFLPRES"]),
                     "VX": z + float(model["LONGVL"])}
         else:
-            cols = F.input_columns(F.read_bench_table(inputs))
+            from diffsusp.io.tyre_tables import read_tyre_table
+
+            cols = F.input_columns(read_tyre_table(inputs, "input table"))
         p = np.where(np.isnan(cols["P"]), float(model["INFLPRES"]), cols["P"])
         vx = np.where(np.isnan(cols["VX"]), float(model["LONGVL"]), cols["VX"])
         if limits:
@@ -177,11 +182,20 @@ def eval_command(
 
 
 def _parse_loads(text: str) -> list[float]:
+    """The loads of `--loads`: finite and > 0 [N], at least one (bad_inputs D7)."""
     try:
-        return [float(v) for v in text.split(",") if v.strip()]
+        loads = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise fail(f"--loads must be numbers separated by commas, got '{text}'",
                    EXIT_BAD_INPUT) from None
+    if not loads:
+        raise fail(f"--loads '{text}' holds no load; give loads [N] separated by commas, e.g. "
+                   "2000,4000,6000", EXIT_BAD_INPUT)
+    bad = [v for v in loads if not (math.isfinite(v) and v > 0)]
+    if bad:
+        raise fail(f"--loads: every load must be a finite number > 0 [N]; got {bad[0]:g}",
+                   EXIT_BAD_INPUT)
+    return loads
 
 
 @tyre_app.command("spec")
@@ -195,11 +209,17 @@ def spec_command(
     from diffsusp.tyre import specification
     from diffsusp.tyre.spec import to_rows
 
+    given = _parse_loads(loads) if loads is not None else None
     with cli_errors():
         enable_x64()
         tir, model = _load(file)
-        fz = (_parse_loads(loads) if loads else
+        fz = (given if given is not None else
               [f * float(model["FNOMIN"]) for f in (0.5, 0.75, 1.0, 1.25, 1.5)])
+        fzmax = float(model.limit.get("FZMAX", math.inf))
+        beyond = [v for v in fz if v > fzmax]
+        if beyond:
+            warn(f"--loads {', '.join(f'{v:g}' for v in beyond)} N beyond FZMAX = {fzmax:g} N "
+                 f"of {file} [VERTICAL_FORCE_RANGE]: outside the file's validity range")
         rows = to_rows(specification(model, np.array(fz)))
     if json_out:
         print_json(rows)
@@ -224,13 +244,13 @@ def rig_command(
     model: Annotated[str, typer.Option(
         help="Suspension: a built-in model name or a model file.")] = "pseudo_mcpherson",
     slip_angle: Annotated[str, typer.Option(
-        help="Commanded slip angles [deg, ISO-W]: start:stop:count or one number.")]
+        help=plain("Commanded slip angles [deg, ISO-W]: start:stop:count or one number."))]
     = "-4:4:9",
     fz: Annotated[float | None, typer.Option(
         help="Vertical load [N] (default: the corner's design load).")] = None,
     slip_ratio: Annotated[float, typer.Option(help="Slip ratio κ [-].")] = 0.0,
     camber_offset: Annotated[float, typer.Option(
-        help="Added to the corner's camber [deg, top outboard +].")] = 0.0,
+        help=plain("Added to the corner's camber [deg, top outboard +]."))] = 0.0,
     longitudinal_at: Annotated[str, typer.Option(
         help="contact_patch (brake torque on the carrier) | wheel_centre (drive shaft).")]
     = "contact_patch",
@@ -246,11 +266,26 @@ def rig_command(
     from .kc import parse_range
 
     check_output(out, suffixes=(".csv", ".parquet"), what="results table")
+    check_number(fz, "--fz", positive=True, unit="N")
+    check_number(slip_ratio, "--slip-ratio")
+    check_number(camber_offset, "--camber-offset")
     with cli_errors():
+        alpha = np.radians(parse_range(slip_angle, "slip-angle"))
+        if alpha.size > MAX_RIG_CASES or not np.isfinite(alpha).all():
+            raise fail(f"--slip-angle '{slip_angle}': {alpha.size} case(s); give at most "
+                       f"{MAX_RIG_CASES} finite angles [deg]", EXIT_BAD_INPUT)
         enable_x64()
         _, tyre = _load(file)
         mech = _suspension(model)
-        alpha = np.radians(parse_range(slip_angle, "slip-angle"))
+        if hasattr(tyre, "limit"):   # the range warnings of `tyre eval` (bad_inputs D17)
+            from diffsusp.tyre import check_limits
+
+            check_limits(tyre, fz=None if fz is None else [fz],
+                         kappa=np.full(alpha.size, slip_ratio), alpha=alpha,
+                         gamma=[math.radians(camber_offset)], where=f"{file}: ")
+        if np.abs(alpha).max() >= math.pi / 2 or abs(camber_offset) >= 90.0:
+            warn("a commanded slip angle or camber offset of 90° or more: the tyre is "
+                 "side-on to the road; the result is not a tyre on a rig")
         rig = tyre_rig.tyre_rig(mech, tyre, longitudinal_at=longitudinal_at)
         sol = tyre_rig.solve(rig, jnp.asarray(alpha), fz=fz, slip_ratio=slip_ratio,
                              camber_offset=math.radians(camber_offset))
@@ -280,6 +315,10 @@ def rig_command(
     for i in range(alpha.size):
         t.add_row(*(f"{res[k][i]:.5g}" for k in res))
     c.print(t)
+
+
+MAX_RIG_CASES = 10_000
+"""Most commanded slip angles of one `tyre rig` run (10⁷ cases exhausted memory: D17)."""
 
 
 def _suspension(name: str):
@@ -322,11 +361,21 @@ def fit_command(
         help="Write the report (.json, .csv or .html).")] = None,
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-fitted figures folder.")]
     = None,
+    max_steps: Annotated[int, typer.Option(
+        help="Most Levenberg-Marquardt steps per stage.", min=1)] = 200,
+    keep_unconverged: Annotated[bool, typer.Option(
+        help="Write --out even when the optimiser did not converge (the file is marked).")]
+    = False,
 ):
     """Fit Magic Formula coefficients to bench data (robust LM, σ and a verdict per coefficient).
 
     Exit code 3 when the fitted model does not fit the data (its residual is far above the
-    noise): the report and the files are still written, nothing is called identified."""
+    noise): the report and the files are still written, nothing is called identified. Exit
+    code 3 too when the optimiser did not converge: the report is written, the fitted .tir only
+    with --keep-unconverged (and marked NOT CONVERGED in its first line). Checked before the
+    fit (exit 2): the table (`diffsusp.io.tyre_tables`), data that vary (at least as many
+    distinct input points as free coefficients). Channels the model has no output for (MX, MY
+    for mf1989) are noted and left out."""
     from diffsusp.tyre import MagicFormula89
     from diffsusp.tyre import fit as F
 
@@ -366,16 +415,27 @@ def fit_command(
                 raise fail(f"--model {model} but {start} is MF {m0.version} (FITTYP "
                            f"{tir.fittyp}); use --model mf{m0.version.replace('.', '')}",
                            EXIT_BAD_INPUT)
-        with warnings.catch_warnings(record=True) as rec:
-            warnings.simplefilter("always")
-            bench = F.read_bench(data)
-        for w in rec:
-            warn(w.message)
         if model == "mf1989":
             m0 = MagicFormula89.from_values({"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0,
                                              "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
                                              "c3": -1.0, "c4": -10.0, "c9": 0.5})
             tir = None
+        from diffsusp.io.tyre_tables import read_tyre_table
+
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            table = read_tyre_table(data, "bench table")
+            present = [ch for ch in F.CHANNELS
+                       if any(F.COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
+            outputs = MODEL_OUTPUTS[model]
+            left = [ch for ch in present if ch not in outputs]
+            if left and len(left) < len(present):   # bad_inputs D23: fit what the model has
+                warn(f"{data}: {', '.join(left)} not fitted: {model} has no such output "
+                     f"(fitting {', '.join(ch for ch in present if ch in outputs)})")
+            bench = F.bench_data(table, channels=[ch for ch in present if ch in outputs]
+                                 if left and len(left) < len(present) else None)
+        for w in rec:
+            warn(w.message)
         unknown = [ch for ch in noise_ab if ch not in bench.channels]
         if unknown:
             raise fail(f"--noise for {', '.join(unknown)}: not a channel of the data "
@@ -387,13 +447,22 @@ def fit_command(
         if bad:
             raise fail(f"--free {', '.join(bad)}: not among the fitted coefficients of "
                        f"{', '.join(groups)}", EXIT_BAD_INPUT)
+        hold = F.default_hold(m0, names, tir)
+        _check_varies(data, bench, len([n for n in names if n not in hold or n in (free or ())]))
         c.print(f"fitting {', '.join(groups)} ({len(names)} coefficients, {bench.n} points, "
                 f"{strategy}) ...")
         fitted, rep = F.fit(m0, bench, names, loss=loss, noise=noise_ab or None,
-                            hold=F.default_hold(m0, names, tir), free=tuple(free or ()),
-                            tir=tir, strategy=strategy)
+                            hold=hold, free=tuple(free or ()),
+                            tir=tir, strategy=strategy, max_steps=max_steps)
         c.print(rep.table(), highlight=False)
-        if out is not None and tir is not None:
+        converged = bool(rep.converged)
+        if not converged:   # bad_inputs D4: never a success, the model only on request
+            warn(f"the fit did NOT converge in {rep.steps} steps (max {max_steps} per stage): "
+                 "the coefficients are not a minimum; "
+                 + ("the fitted .tir is written, marked NOT CONVERGED" if out is not None and
+                    keep_unconverged else "the fitted model is not written"
+                    + (" (--keep-unconverged writes it, marked)" if out is not None else "")))
+        if out is not None and tir is not None and (converged or keep_unconverged):
             from diffsusp.io.tir import write_tir
             from diffsusp.tyre import mf6
 
@@ -401,8 +470,11 @@ def fit_command(
             for n, v in fitted.limit.items():   # the validity ranges: the data's
                 if math.isfinite(v) and n in mf6._LIMIT_SECTION and not n.startswith("PRES"):
                     written.set(n, float(v), section=mf6._LIMIT_SECTION[n])
-            write_tir(written, out)
-            c.print(f"fitted model written to {out} (validity ranges: the data's)")
+            write_tir(written, out, header=None if converged else
+                      f"$ NOT CONVERGED: diffsusp tyre fit stopped after {rep.steps} steps "
+                      "without converging; these coefficients are not a fit\n")
+            c.print(f"fitted model written to {out} (validity ranges: the data's)"
+                    + ("" if converged else " — NOT CONVERGED"))
         if report is not None and report.suffix.lower() == ".json":
             report.write_text(json.dumps({"+".join(groups): rep.to_dict()}, indent=2) + "\n")
         elif report is not None:   # the shared writers: the same statuses as the table
@@ -412,8 +484,29 @@ def fit_command(
         if figures is not None:
             F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")
-        if rep.consistency is not None and not rep.consistency.consistent:
+        if not converged or (rep.consistency is not None and not rep.consistency.consistent):
             raise typer.Exit(3)
+
+
+MODEL_OUTPUTS = {"mf61": ("FX", "FY", "MX", "MY", "MZ"), "mf62": ("FX", "FY", "MX", "MY", "MZ"),
+                 "mf52": ("FX", "FY", "MX", "MY", "MZ"), "mf1989": ("FX", "FY", "MZ")}
+"""The channels each `--model` evaluates (`tyre.fit._predict`)."""
+
+
+def _check_varies(data, bench, n_free: int) -> None:
+    """Bench data with fewer distinct input points (FZ, SL, SA, IA, VX, P over the rows
+    kept) than free coefficients cannot determine them: an error before anything is compiled
+    (10⁶ rows of one repeated point ran for minutes: bad_inputs D16)."""
+    from diffsusp.errors import InputError
+
+    keep = np.asarray(bench.valid).any(axis=0)
+    pts = np.stack([np.asarray(v)[keep] for v in (bench.fz, bench.kappa, bench.alpha,
+                                                  bench.gamma, bench.vx, bench.pressure)], 1)
+    distinct = np.unique(np.nan_to_num(pts, nan=-1.0), axis=0).shape[0]
+    if distinct < max(n_free, 2):
+        raise InputError(f"{data}: the data hold {distinct} distinct input point(s) (FZ, SL, "
+                         f"SA, IA, VX, P) in {int(keep.sum())} rows, fewer than the {n_free} "
+                         "coefficients to fit; a fit needs sweeps of slip and load")
 
 
 from .tyre_identify import register as _register_identify  # noqa: E402  (issue 16)

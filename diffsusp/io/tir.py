@@ -213,12 +213,20 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
             value, vtext, comment = _parse_value(m.group(2), path, i, name)
             key = name
             if name in entries:
-                # the same name in another section (MASS in [UNITS] and [INERTIA]) is kept
-                # under SECTION.NAME; twice in one section is an error
+                # the same name in [UNITS] and another section (MASS in [UNITS] and [INERTIA])
+                # is kept under SECTION.NAME; twice in one section is an error, and so is a
+                # coefficient in two sections (a stray PCY1 in [LONGITUDINAL_COEFFICIENTS]
+                # would silently replace the lateral one: bad_inputs D3)
+                first = entries[name]
                 key = f"{section}.{name}"
-                if entries[name].section == section or key in entries:
+                if first.section == section or key in entries:
                     raise ModelFileError(f"{name} defined twice in [{section}]", path=path,
                                          line=i, field=name)
+                if "UNITS" not in (first.section, section):
+                    raise ModelFileError(
+                        f"{name} is defined in [{first.section}] (line {first.line}) and again "
+                        f"in [{section}]; keep it in the section where it belongs only",
+                        path=path, line=i, field=name)
             entries[key] = TirEntry(name, value, vtext, comment, section, i)
             sections[section].append(key)
             continue
@@ -235,7 +243,39 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
         raise ModelFileError("no 'NAME = value' line: not a .tir file", path=path)
     tir = TirFile(entries, sections, lines, path, tables)
     tir.check_units()
+    check_values(tir)
     return tir
+
+
+POSITIVE = ("FNOMIN", "UNLOADED_RADIUS", "LONGVL", "WIDTH", "RIM_RADIUS",
+            "VERTICAL_STIFFNESS")
+"""Quantities that must be > 0 when present (a zero or negative FNOMIN, radius or reference
+speed divides the Magic Formula by zero or flips its signs: bad_inputs D2)."""
+NON_NEGATIVE = ("NOMPRES", "INFLPRES", "PRESMIN", "PRESMAX", "FZMIN", "FZMAX")
+"""Quantities that must be >= 0 when present (0 is written by some exporters for "none")."""
+
+
+def check_values(tir: TirFile) -> None:
+    """Every number finite (a value beyond float range, `1e400` or 400 digits, reads as inf),
+    `POSITIVE` ones > 0 and `NON_NEGATIVE` ones >= 0; an error naming the key and its line.
+
+    spec: tyre §7 C (the property file's quantities); issue 28 item 11 (bad_inputs D2)."""
+    for e in tir.entries.values():
+        if not isinstance(e.value, float):
+            continue
+        if e.value != e.value or e.value in (float("inf"), float("-inf")):
+            shown = e.text if len(e.text) <= 30 else e.text[:27] + "..."
+            raise ModelFileError(f"{e.name} = {shown} is not a finite number (beyond the "
+                                 "range of a float64)", path=tir.path, line=e.line,
+                                 field=e.name)
+        if e.section == "UNITS":
+            continue
+        if e.name in POSITIVE and not e.value > 0:
+            raise ModelFileError(f"{e.name} = {e.text} must be > 0", path=tir.path,
+                                 line=e.line, field=e.name)
+        if e.name in NON_NEGATIVE and e.value < 0:
+            raise ModelFileError(f"{e.name} = {e.text} must be >= 0", path=tir.path,
+                                 line=e.line, field=e.name)
 
 
 def read_tir(path: str | os.PathLike) -> TirFile:
@@ -294,7 +334,11 @@ def to_text(tir: TirFile) -> str:
     return "\n".join(out) + "\n"
 
 
-def write_tir(tir: TirFile, path: str | os.PathLike) -> None:
-    """Write `tir` (SI, as read; changed values with `repr`, so write → read is exact)."""
-    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as f:
-        f.write(to_text(tir))
+def write_tir(tir: TirFile, path: str | os.PathLike, *, header: str | None = None) -> None:
+    """Write `tir` (SI, as read; changed values with `repr`, so write → read is exact);
+    `header` (comment lines starting with `$`, ending with a newline) goes before the first
+    line, e.g. to mark a fit that did not converge."""
+    from .files import write_text_atomic
+
+    # through a temporary file renamed at the end: an interrupted write leaves no half file
+    write_text_atomic(os.fspath(path), to_text(tir) if header is None else header + to_text(tir))
