@@ -329,6 +329,12 @@ def _stop(model, g, pa, ra, pb, rb, ctx):
 def _load(model, g, pa, ra, pb, rb, ctx):
     force, moment = ctx["force"], ctx["moment"]  # (E, 3) in the load point's frame
     xm = pa + np.einsum("...ij,...j->...i", ra, model.x0[g.i])
+    radius = g.params.get("contact_radius")
+    if radius is not None:  # the ground contact point of a wheel about the marker (spin = z)
+        s = np.einsum("...ij,...j->...i", ra, model.r0[g.i][:, :, 2])
+        v = np.array([0.0, 0.0, 1.0]) - s[..., 2:3] * s
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
+        xm = xm - radius[:, None] * v / np.where(n > 0, n, 1.0)
     frame = rb @ model.r0[g.j]
     is_global = g.params["is_global"][:, None]
     f = np.where(is_global, force, np.einsum("...ij,...j->...i", frame, force))
@@ -700,7 +706,7 @@ def _initial_multipliers(orc, p, r, force, moment, driver):
 
 def solve(mech, force, moment, driver, q0=None, *, lam0=None, method: str = "newton",
           rtol: float = 1e-9, atol: float = 1e-11, max_steps: int = 60, polish: int = 2,
-          throw: bool = True) -> OracleSolution:
+          throw: bool = True, contact_radius=None) -> OracleSolution:
     """Static equilibrium of `mech` under one load case, by the independent NumPy formulation.
 
     **Arguments:**
@@ -716,11 +722,18 @@ def solve(mech, force, moment, driver, q0=None, *, lam0=None, method: str = "new
       polish).
     - `rtol`: force rows below rtol·F_s (moments rtol·F_s·L); `atol`: constraint rows (mm).
     - `polish`: Newton steps taken after convergence.
+    - `contact_radius`: (l,) per load point (mm) or None: where > 0 the load point's force acts
+      at the lowest point (along +z) of the circle of that radius about its marker in the plane
+      normal to the marker's z axis (`diffsusp.model.Loads.contact_radius`).
 
     **Returns:** an `OracleSolution`.
     """
     orc = _oracle(mech)
     m = orc.model
+    if m.loads is not None:
+        m.loads.params.pop("contact_radius", None)
+        if contact_radius is not None and np.any(np.asarray(contact_radius) != 0):
+            m.loads.params["contact_radius"] = np.asarray(contact_radius, float).reshape(-1)
     force = np.asarray(force, float).reshape(m.n_loads, 3)
     moment = np.asarray(moment, float).reshape(m.n_loads, 3)
     driver = np.asarray(driver, float).reshape(m.n_drivers)

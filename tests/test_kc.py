@@ -125,10 +125,11 @@ def reference_metrics(mech, spec, p, R, force, moment, lam=None, travel_driver=N
     m["scrub_radius"] = (ground - c) @ -oh
     m["mechanical_trail"] = (ground - c) @ h
     lp = mech.load_points.names
-    f = force[lp.index(pre + "contact_patch")] + force[lp.index(pre + "wheel_centre")]
+    contact = [lp.index(n) for n in (pre + "contact_patch", pre + "road_contact") if n in lp]
+    f = force[contact].sum(0) + force[lp.index(pre + "wheel_centre")]
     toe_out = UP if np.cross(UP, fwd) @ out_dir > 0 else -UP
     m.update(vertical_force=f[2], lateral_force=f @ -out_dir, longitudinal_force=f @ -fwd,
-             aligning_torque=moment[lp.index(pre + "contact_patch")] @ toe_out)
+             aligning_torque=moment[contact].sum(0) @ toe_out)
     if travel_driver is not None:
         m["vertical_force"] += lam[travel_driver]
     m["_out"], m["_fwd"], m["_toe_out"], m["_c"] = out_dir, fwd, toe_out, c
@@ -150,7 +151,9 @@ def oracle_metrics(ev, c, spec, corner=0, base=None, dforce=None, dmoment=None, 
         moment = moment + dmoment
     if ddriver is not None:
         driver = driver + ddriver
-    sol = oracle.solve(rig.mech, force, moment, driver, q0=base)
+    radius = ev.loads.contact_radius
+    sol = oracle.solve(rig.mech, force, moment, driver, q0=base,
+                       contact_radius=None if radius is None else np.asarray(radius[c]))
     td = rig.travel_drivers[corner]
     lam_index = rig.multiplier_index(td) if td >= 0 else None
     return reference_metrics(rig.mech, spec, sol.p, sol.R, force, moment, sol.lam,
@@ -186,7 +189,10 @@ def directions(ev, c, base, corner=0, prefix=""):
     rearward, aligning torque toe-out, at the corner's contact point."""
     rig = ev.rig
     force, moment, driver = case_arrays(ev, c)
-    lp = rig.mech.load_points.names.index(prefix + "contact_patch")
+    names = rig.mech.load_points.names
+    # the force events' loads act at the ground contact point (kc.force_rig: road_contact)
+    lp = names.index(prefix + ("road_contact" if prefix + "road_contact" in names
+                               else "contact_patch"))
 
     def at(vec, which):
         arr = np.zeros_like(force if which == "f" else moment)

@@ -52,16 +52,21 @@ _LOADS = {}  # id(mechanism) → (mechanism, contact point, up, load): a compute
 
 
 def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
-                     wheel_centre: str | int | None = None) -> float:
-    """The vertical contact load (N, along `up`) at load point `contact_point` that holds the
-    wheel centre at its design height, `mech` without its motion drivers (spec: stiffness
-    §1.4). Solved through the statics for any number of degrees of freedom: the height of the
-    solved wheel centre is a function of the load, h(F), and a safeguarded secant (Illinois
-    once bracketed) finds h(F) = h(design) to 1e-9 mm, each step an equilibrium warm-started
-    from the previous one. The start is the virtual-work estimate at the design position, the
-    least-squares (F, λ) of Q0 + F·Q1 + Φ_qᵀλ = 0 (exact for a one-DOF corner, where the
-    secant stops at once); on a corner on bushings that estimate asks every bushing to be
-    unloaded at design and means nothing, the secant corrects it.
+                     wheel_centre: str | int | None = None, *,
+                     loaded_radius: float | None = None) -> float:
+    """The vertical contact load (N, along `up`) that holds the wheel centre at its design
+    height, `mech` without its motion drivers (spec: stiffness §1.4). With `loaded_radius`
+    (mm) the load acts where the K&C force events apply it: at the ground contact point of a
+    wheel of that radius, moving with the wheel plane (`diffsusp.kc.rig.add_road_contact`,
+    `Loads.contact_radius`; `up` must then be the road normal +z); without, at load point
+    `contact_point` (fixed on the wheel carrier). Solved through the statics for any number
+    of degrees of freedom: the height of the solved wheel centre is a function of the load,
+    h(F), and a safeguarded secant (Illinois once bracketed) finds h(F) = h(design) to 1e-9
+    mm, each step an equilibrium warm-started from the previous one. The start is the
+    virtual-work estimate at the design position, the least-squares (F, λ) of Q0 + F·Q1 +
+    Φ_qᵀλ = 0 (exact for a one-DOF corner, where the secant stops at once); on a corner on
+    bushings that estimate asks every bushing to be unloaded at design and means nothing,
+    the secant corrects it.
 
     `wheel_centre`: its marker (name or index; default `'wheel_centre'` under the contact
     point's prefix). Raises `InputError` when no load within ±1 MN holds the design height
@@ -71,23 +76,33 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
     if wheel_centre is None:
         wheel_centre = prefix + "wheel_centre"
     wc = wheel_centre if isinstance(wheel_centre, int) else mech.markers.index(wheel_centre)
-    key = (contact_point, tuple(up), wc)
+    key = (contact_point, tuple(up), wc, loaded_radius)
     hit = _LOADS.get(id(mech))
     if hit is not None and hit[0] is mech and hit[1] == key:
         return hit[2]
     from ..model import Loads
     from ..model.validate import design_terms
     from ..statics import Status, marker_poses, solve_statics
-    from .rig import remove_drivers
+    from .rig import add_road_contact, remove_drivers
 
     base = remove_drivers(mech, mech.drivers.names)
-    k = base.load_points.index(contact_point)
+    if loaded_radius is None:
+        k, radius = base.load_points.index(contact_point), None
+    else:
+        if tuple(float(v) for v in up) != (0.0, 0.0, 1.0):
+            raise InputError("equilibrium_load: the ground contact point needs the road normal "
+                             f"up = (0, 0, 1); got {tuple(up)}.")
+        base, k = add_road_contact(base, wc, prefix)
+        radius = np.zeros(len(base.load_points.names))
+        radius[k] = float(loaded_radius)
     n, n_l = base.n_coordinates, len(base.load_points.names)
     zero = np.zeros((n_l, 3))
     unit = zero.copy()
     unit[k] = np.asarray(up, dtype=float)
-    r0 = design_terms(base, Loads(force=zero, moment=zero, driver=np.zeros(0)))[1][:n]
-    _, r1, jac = design_terms(base, Loads(force=unit, moment=zero, driver=np.zeros(0)))
+    r0 = design_terms(base, Loads(force=zero, moment=zero, driver=np.zeros(0),
+                                  contact_radius=radius))[1][:n]
+    _, r1, jac = design_terms(base, Loads(force=unit, moment=zero, driver=np.zeros(0),
+                                          contact_radius=radius))
     a = jac[:n, n:]  # Φ_qᵀ: the residual is linear in the multipliers
     estimate = float(np.linalg.lstsq(np.column_stack([r1[:n] - r0, a]), -r0, rcond=None)[0][0])
     up_v = np.asarray(up, dtype=float)
@@ -95,7 +110,8 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
     state = {"q": None}
 
     def height(force: float) -> float:
-        loads = Loads(force=(force * unit)[None], moment=zero[None], driver=np.zeros((1, 0)))
+        loads = Loads(force=(force * unit)[None], moment=zero[None], driver=np.zeros((1, 0)),
+                      contact_radius=None if radius is None else radius[None])
         sol = solve_statics(base, loads, q0=state["q"], throw=False, checks=False)
         if int(np.asarray(sol.status)[0]) != Status.CONVERGED:
             return math.nan

@@ -46,7 +46,7 @@ from ..statics import (
 from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margins, warn_law_validity
 from .corner import Corner, ResolvedCorner, corners_of
 from .metrics import METRICS, Derivatives, corner_geometry
-from .rig import add_driver, remove_drivers
+from .rig import ROAD_CONTACT, add_driver, add_road_contact, remove_drivers
 
 TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
 """The thesis load tables (F_vert, F_lat, F_long) in N: Table 5-1 (13 cases, spec stiffness
@@ -61,7 +61,10 @@ class Rig(eqx.Module):
     compiled program), static `corners` (resolved), `mode` ('travel': wheel heights driven;
     'force': wheels free, loaded by forces), `travel_drivers` (per corner, index of its
     wheel-travel driver or −1), `rack_driver` (index of the steering rack's driver, or −1;
-    a rack is an input of every event on the rig, steering or not: steer gain).
+    a rack is an input of every event on the rig, steering or not: steer gain), `road` (per
+    corner, the load point where its contact-patch loads act at the ground contact point — the
+    wheel plane's lowest point on the road, `add_road_contact` — or empty: at the corner's
+    `contact_point`, fixed on the wheel carrier).
     """
 
     mech: Mechanism
@@ -70,6 +73,21 @@ class Rig(eqx.Module):
     mode: str = eqx.field(static=True)
     travel_drivers: tuple[int, ...] = eqx.field(static=True)
     rack_driver: int = eqx.field(static=True, default=-1)
+    road: tuple[int, ...] = eqx.field(static=True, default=())
+
+    def contact(self, c: int) -> int:
+        """The load point where corner `c`'s contact-patch loads act."""
+        return self.road[c] if self.road else self.corners[c].contact_point
+
+    def contact_radius(self, n: int | None = None):
+        """`Loads.contact_radius` of the rig: each corner's loaded radius at its road contact
+        load point (None without road contacts); with a leading axis of `n` cases."""
+        if not self.road:
+            return None
+        radius = np.zeros(len(self.mech.load_points.names))
+        for c, rc in enumerate(self.corners):
+            radius[self.road[c]] = rc.loaded_radius
+        return jnp.asarray(radius if n is None else np.broadcast_to(radius, (n, radius.size)))
 
     def multiplier_index(self, driver: int) -> int:
         """Position of driver `driver`'s row among the solution's multipliers."""
@@ -159,13 +177,31 @@ def travel_rig(mech: Mechanism, corner=None, *, drive: str = "wheel_centre",
                travel_drivers=tuple(drivers), rack_driver=_rack(mech, rack, require_rack))
 
 
-def force_rig(mech: Mechanism, corner=None, *, rack: str = "rack_travel") -> Rig:
+def force_rig(mech: Mechanism, corner=None, *, rack: str = "rack_travel",
+              contact: str = "road") -> Rig:
     """The model with its wheels free and loaded by forces (drivers on the wheel markers are
-    removed; others, e.g. a rack, stay at the load case's value)."""
+    removed; others, e.g. a rack, stay at the load case's value).
+
+    `contact`: where the contact-patch forces act. 'road' (default, as a K&C rig and Adams
+    apply the tyre force): at the ground contact point, the wheel plane's lowest point on the
+    road, C = W − R_l·u (W the wheel centre, u the unit vector in the wheel plane pointing up
+    from the road, R_l the corner's `loaded_radius`), which moves with the wheel — a wind-up
+    of the wheel carrier does not carry it along the road. A load point `<prefix>road_contact`
+    on the wheel-centre marker is added for it (`add_road_contact`) and the loads carry
+    `contact_radius`. 'fixed': at the corner's `contact_point` load point, fixed on the
+    wheel carrier (the behaviour before issue 28)."""
+    if contact not in ("road", "fixed"):
+        raise InputError(f"contact must be 'road' or 'fixed'; got '{contact}'.")
     corners = _resolve(mech, corner)
     mech = _strip_wheel_drivers(mech, corners)
+    road = []
+    if contact == "road":
+        for rc in corners:
+            mech, k = add_road_contact(mech, rc.wheel_centre, rc.prefix)
+            road.append(k)
     return Rig(mech=mech, pattern=jnp.ones(len(corners)), corners=corners, mode="force",
-               travel_drivers=tuple(-1 for _ in corners), rack_driver=_rack(mech, rack, False))
+               travel_drivers=tuple(-1 for _ in corners), rack_driver=_rack(mech, rack, False),
+               road=tuple(road))
 
 
 # ----------------------------------------------------------------------------- the kernel
@@ -186,7 +222,7 @@ def _basis(rig: Rig) -> Loads:
     driver = jnp.zeros((n_u, n_d))
     k = 4
     for c, rc in enumerate(rig.corners):
-        cp = rc.contact_point
+        cp = rig.contact(c)
         if rig.mode == "travel":
             driver = driver.at[0, rig.travel_drivers[c]].set(rig.pattern[c])
         elif rig.mode == "force":
@@ -201,7 +237,8 @@ def _basis(rig: Rig) -> Loads:
             k += 6
     if rig.rack_driver >= 0:
         driver = driver.at[n_u - 1, rig.rack_driver].set(1.0)
-    return Loads(force=force, moment=moment, driver=driver)
+    radius = None if not rig.road else jnp.zeros((n_u, n_l))
+    return Loads(force=force, moment=moment, driver=driver, contact_radius=radius)
 
 
 def raw_metrics(rig: Rig, loads: Loads, q, multipliers) -> dict:
@@ -221,8 +258,8 @@ def raw_metrics(rig: Rig, loads: Loads, q, multipliers) -> dict:
         geo["wheel_travel"] = (w - vec(geo0, "wheel_centre")) @ up
         geo["half_track_change"] = (cpt - vec(geo0, "contact_patch")) @ o
         geo["wheelbase_change"] = (w - vec(geo0, "wheel_centre")) @ r
-        force = loads.force[rc.contact_point]
-        moment = loads.moment[rc.contact_point]
+        force = loads.force[rig.contact(c)]
+        moment = loads.moment[rig.contact(c)]
         if rc.wheel_centre_load >= 0:
             force = force + loads.force[rc.wheel_centre_load]
         vertical = force @ up
@@ -414,20 +451,22 @@ def _loads(rig: Rig, n: int, *, vertical=0.0, lateral=0.0, longitudinal=0.0, ali
         sign = pattern[c]
         f_v, _ = rc.load_vectors(vertical * (sign if rig.mode == "force" else 1.0), 0, 0, 0)
         f_h, m = rc.load_vectors(0, lateral, longitudinal, aligning)
-        force[:, rc.contact_point] += f_v
+        cp = rig.contact(c)
+        force[:, cp] += f_v
         if at == "wheel_centre":
             if rc.wheel_centre_load < 0:
                 raise InputError("this event loads the wheel centre, but the corner has no "
                                  "wheel_centre_load load point.")
             force[:, rc.wheel_centre_load] += f_h
         else:
-            force[:, rc.contact_point] += f_h
-        moment[:, rc.contact_point] += m
+            force[:, cp] += f_h
+        moment[:, cp] += m
         if rig.travel_drivers[c] >= 0:
             driver[:, rig.travel_drivers[c]] = sign * travel
     if rig.rack_driver >= 0:
         driver[:, rig.rack_driver] = rack
-    return Loads(force=jnp.asarray(force), moment=jnp.asarray(moment), driver=jnp.asarray(driver))
+    return Loads(force=jnp.asarray(force), moment=jnp.asarray(moment), driver=jnp.asarray(driver),
+                 contact_radius=rig.contact_radius(n))
 
 
 def corner_loads(mech: Mechanism, table=None, *, vertical=0.0, lateral=0.0,
@@ -454,7 +493,11 @@ def corner_loads(mech: Mechanism, table=None, *, vertical=0.0, lateral=0.0,
 
     **Returns:** `Loads` of `mech` with a leading case axis (drivers at 0). A driver on a
     loaded wheel would carry the vertical load: apply them to a model whose wheels are free
-    (`kc.force_rig(mech).mech` removes those drivers, as the force events do)."""
+    (`kc.force_rig(mech).mech` removes those drivers, as the force events do). On a model with
+    road contact load points (`kc.force_rig(mech).mech`) the contact-patch loads act at the
+    ground contact point, moving with the wheel, as in the force events (the loads carry
+    `contact_radius`); on the model itself at its `contact_point`, fixed on the wheel
+    carrier."""
     if table is not None:
         arr = np.asarray(table, dtype=float)
         if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)):
@@ -474,8 +517,12 @@ def corner_loads(mech: Mechanism, table=None, *, vertical=0.0, lateral=0.0,
         raise InputError(f"the load components must be finite scalars or (cases,) arrays; "
                          f"got shape {shape}.")
     corners = _resolve(mech, corner)
+    names = mech.load_points.names
+    road = tuple(names.index(rc.prefix + ROAD_CONTACT) for rc in corners
+                 if rc.prefix + ROAD_CONTACT in names)
     rig = Rig(mech=mech, pattern=jnp.ones(len(corners)), corners=corners, mode="force",
-              travel_drivers=tuple(-1 for _ in corners))
+              travel_drivers=tuple(-1 for _ in corners),
+              road=road if len(road) == len(corners) else ())
     n = shape[0] if shape else 1
     return _loads(rig, n, vertical=values[0], lateral=values[1], longitudinal=values[2],
                   aligning=values[3], at=at)

@@ -134,3 +134,26 @@ def with_rack(mech: Mechanism, tie_rod: str = "tie_rod", *, direction=None,
         reference_points=mech.reference_points + (tuple(float(v) for v in np.asarray(at)),),
     )
     return add_driver(out, name, "rack.slide.i", d)
+
+
+ROAD_CONTACT = "road_contact"
+"""Name (after the corner's prefix) of the load point `add_road_contact` adds."""
+
+
+def add_road_contact(mech: Mechanism, wheel_centre: int, prefix: str = "") -> tuple[Mechanism, int]:
+    """`mech` with a load point `<prefix>road_contact` on the wheel-centre marker (global
+    components), and its index: loaded with a `Loads.contact_radius` R, its force acts at the
+    wheel plane's lowest point on the road, C = W − R·u (u the unit vector in the wheel plane
+    pointing up from the road, spec kc §1), which moves with the wheel, not with the wheel
+    carrier. An existing one (same marker) is reused."""
+    name = prefix + ROAD_CONTACT
+    lp = mech.load_points
+    if name in lp.names:
+        k = lp.names.index(name)
+        if lp.marker[k] != wheel_centre or lp.frame[k] != GROUND:
+            raise InputError(f"the model has a load point '{name}' that is not on the wheel "
+                             "centre with global components; rename it.")
+        return mech, k
+    points = dataclasses.replace(lp, marker=lp.marker + (wheel_centre,),
+                                 frame=lp.frame + (GROUND,), names=lp.names + (name,))
+    return dataclasses.replace(mech, load_points=points), len(lp.names)

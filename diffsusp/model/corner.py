@@ -51,8 +51,13 @@ class Corner:
       model's frame, that the wheel centre is on at design).
     - `frame`: 'adams' (x rearward, y right, z up) or 'iso' (Chrono, ISO 8855: x forward,
       y left, z up).
-    - `loaded_radius`: wheel-centre height above the ground at design (mm), for the geometric
-      contact point (rigid disc: the lowest point of the wheel's circle of this radius).
+    - `loaded_radius`: wheel-centre height above the ground at design (mm): the K&C force
+      events apply the tyre force at the ground contact point, the lowest point of the wheel's
+      circle of this radius, moving with the wheel plane (`diffsusp.kc.force_rig`); also the
+      geometric contact point of the metrics.
+    - `loaded_radius_stated`: False when `loaded_radius` is a reader's default, not a value the
+      model file or the user gave (a Chrono suspension file carries no tyre): `diffsusp kc`
+      then says which radius it uses.
     - `design_load`: vertical wheel load at design (N), the default of force events; None:
       the vertical contact-patch load that holds the wheel centre at its design height,
       computed by `resolve` through the statics (`diffsusp.kc.corner.equilibrium_load`, any
@@ -69,6 +74,7 @@ class Corner:
     loaded_radius: float = 300.0
     design_load: float | None = 4000.0
     prefix: str = ""
+    loaded_radius_stated: bool = True
 
     def __post_init__(self):
         if self.side not in ("left", "right", "auto"):
@@ -200,7 +206,7 @@ class Corner:
             design_load=float(self.design_load)
             if self.design_load is not None
             else _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist()),
-                                   wc),
+                                   wc, float(self.loaded_radius)),
         )
 
 
@@ -238,12 +244,13 @@ class ResolvedCorner(NamedTuple):
         return force, aligning * a
 
 
-def _equilibrium_load(mech, contact_point: str, up, wheel_centre: int) -> float:
-    """The vertical contact load (N) that holds the wheel centre at its design height (see
-    `Corner.design_load`)."""
+def _equilibrium_load(mech, contact_point: str, up, wheel_centre: int,
+                      loaded_radius: float) -> float:
+    """The vertical load (N) at the ground contact point of a wheel of `loaded_radius` that
+    holds the wheel centre at its design height (see `Corner.design_load`)."""
     from ..kc.corner import equilibrium_load
 
-    return equilibrium_load(mech, contact_point, up, wheel_centre)
+    return equilibrium_load(mech, contact_point, up, wheel_centre, loaded_radius=loaded_radius)
 
 
 def design_offset(point, wheel_centre, frame: str, side: str) -> tuple[float, float, float]:

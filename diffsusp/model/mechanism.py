@@ -234,12 +234,20 @@ class Loads(eqx.Module):
     """One load case (or a table of them, with a leading case axis on every array).
 
     **Fields:** `force` (N) and `moment` (N·mm) per load point, in the frame the load point names;
-    `driver` values (mm) per motion driver.
+    `driver` values (mm) per motion driver; `contact_radius` (mm, optional, per load point):
+    where it is > 0 the load point's force acts at the *ground contact point* of a wheel of that
+    radius about the load point's marker — the lowest point, along the road normal (global +z),
+    of the circle of that radius in the plane normal to the marker's z axis (the spin axis):
+    C = x_m − R·u, u = unit(e_z − (e_z·s)s). C moves with the wheel plane, not with the wheel
+    carrier (`diffsusp.kc`: the tyre force of a K&C rig; spec kc §1). None: every load acts at
+    its marker.
     """
 
     force: Float[Array, "*cases l 3"] = eqx.field(metadata={"unit": "N"})
     moment: Float[Array, "*cases l 3"] = eqx.field(metadata={"unit": "N·mm"})
     driver: Float[Array, "*cases d"] = eqx.field(metadata={"unit": "mm"})
+    contact_radius: Float[Array, "*cases l"] | None = eqx.field(default=None,
+                                                                 metadata={"unit": "mm"})
 
     @property
     def n_cases(self) -> int | None:
