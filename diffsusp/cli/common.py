@@ -240,9 +240,10 @@ def check_number(value, option: str, *, positive: bool = False, nonnegative: boo
     if v != v or v in (float("inf"), float("-inf")):
         raise fail(f"{option} must be a finite number; got {value}.", EXIT_BAD_INPUT)
     if positive and not v > 0:
-        raise fail(f"{option} must be > 0{unit and f' [{unit}]'}; got {value}.", EXIT_BAD_INPUT)
+        raise fail(f"{option} must be a positive number{unit and f' [{unit}]'}; got {value}.",
+                   EXIT_BAD_INPUT)
     if nonnegative and v < 0:
-        raise fail(f"{option} must be >= 0{unit and f' [{unit}]'}; got {value}.",
+        raise fail(f"{option} must be a number >= 0{unit and f' [{unit}]'}; got {value}.",
                    EXIT_BAD_INPUT)
     return value
 

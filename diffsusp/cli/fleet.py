@@ -63,7 +63,15 @@ def _items(values: list[str]) -> list[str]:
     out = []
     for v in values:
         if v.lower().endswith(".txt") and pathlib.Path(v).is_file():
-            out += [line.strip() for line in pathlib.Path(v).read_text().splitlines()
+            from ..io.files import read_input
+
+            try:
+                text = read_input(v, "item list").decode("utf-8")
+            except UnicodeDecodeError:
+                raise fail(f"{v}: the item list is not UTF-8 text.", EXIT_BAD_INPUT) from None
+            except ValueError as e:   # ModelFileError: too large, not a regular file
+                raise fail(str(e), EXIT_BAD_INPUT) from None
+            out += [line.strip() for line in text.splitlines()
                     if line.strip() and not line.lstrip().startswith("#")]
         else:
             out.append(v)

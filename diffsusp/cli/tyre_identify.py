@@ -26,27 +26,30 @@ import typer
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_MODEL_ERROR,
+    check_number,
     check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
+    plain,
 )
 
 _UNITS = {"steer": "angle", "camber": "angle", "speed": "speed", "FZ": "force", "FX": "force",
           "FY": "force", "MZ": "moment", "t": "time", "omega": "rate", "segment": None}
 _FACTORS = {
     "angle": {"rad": 1.0, "deg": np.pi / 180.0},
-    "speed": {"mm/s": 1.0, "m/s": 1e3, "km/h": 1e6 / 3600.0},
+    "speed": {"mm/s": 1.0, "m/s": 1e3, "km/h": 1e6 / 3600.0, "kph": 1e6 / 3600.0},
     "force": {"N": 1.0, "kN": 1e3},
     "moment": {"N·mm": 1.0, "N*mm": 1.0, "Nmm": 1.0, "N·m": 1e3, "N*m": 1e3, "Nm": 1e3},
     "time": {"s": 1.0, "ms": 1e-3},
-    "rate": {"rad/s": 1.0, "rpm": 2 * np.pi / 60.0},
+    "rate": {"rad/s": 1.0, "rpm": 2 * np.pi / 60.0, "deg/s": np.pi / 180.0},
 }
 
 
 def _columns(table) -> dict:
     out = {}
+    where = f"{table.path}:{table.header_line}: " if table.path else ""
     for name in table.names:
         kind = _UNITS.get(name)
         values = np.asarray(table[name], float)
@@ -54,11 +57,57 @@ def _columns(table) -> dict:
         if kind is not None and unit:
             f = _FACTORS[kind].get(unit)
             if f is None:
-                raise fail(f"column {name}: unit [{unit}] not understood; use one of "
+                raise fail(f"{where}{name}: unit [{unit}] not understood; use one of "
                            f"{', '.join(_FACTORS[kind])}", EXIT_BAD_INPUT)
             values = values * f
         out[name] = values
     return out
+
+
+SPEED_RATIO = (0.5, 2.0)
+"""Accepted range of the belt speed over ω·R_r (median over the rows): a speed column without
+its unit (km/h read as mm/s: 278× off, bad_inputs D5) or ω in rpm read as rad/s falls outside."""
+
+
+def _check_bench(table, cols: dict, rolling_radius: float) -> None:
+    """The plausibility of a Flat Trac table, each error naming the file, the line and the
+    column (bad_inputs D5, D20): finite channels, time increasing, loads >= 0 (the reader), the
+    belt speed consistent with the wheel spin and the rolling radius."""
+    path = table.path
+
+    def line(row):
+        return table.lines[row] if table.lines is not None and row < len(table.lines) else None
+
+    def bad(name, row, why):
+        where = f"{path}:{line(row) or f'row {row + 1}'}: {name}"
+        return fail(f"{where}: {why}", EXIT_BAD_INPUT)
+
+    for name, v in cols.items():
+        if name in _UNITS and not np.isfinite(v).all():
+            i = int(np.flatnonzero(~np.isfinite(v))[0])
+            raise bad(name, i, f"{table[name][i]} is not a finite value; remove or repair "
+                      "the row")
+    if "t" in cols and "segment" in cols:
+        t, seg = cols["t"], cols["segment"]
+        same = seg[1:] == seg[:-1]
+        back = same & (np.diff(t) <= 0)
+        if back.any():
+            i = int(np.flatnonzero(back)[0]) + 1
+            raise bad("t", i, f"time {t[i]:g} s after {t[i - 1]:g} s in one segment: time "
+                      "must increase (sort by segment, then time)")
+    if "speed" in cols and "omega" in cols:
+        speed, omega = np.abs(cols["speed"]), np.abs(cols["omega"])
+        ref = float(np.median(omega)) * rolling_radius
+        if ref > 0 and np.median(speed) > 0:
+            ratio = float(np.median(speed)) / ref
+            if not SPEED_RATIO[0] <= ratio <= SPEED_RATIO[1]:
+                unit = table.units.get("speed") or "mm/s (no unit given)"
+                raise fail(f"{path}:{table.header_line}: speed: the belt speed is {ratio:.3g}× "
+                           f"ω·R_r (median {np.median(speed):.4g} {unit} against "
+                           f"{ref:.4g} mm/s from omega and --rolling-radius "
+                           f"{rolling_radius:g} mm): a missing or wrong unit? Write "
+                           "'speed [km/h]' (or [m/s], [mm/s]) and 'omega [rpm]' as recorded",
+                           EXIT_BAD_INPUT)
 
 
 # --------------------------------------------------------------------------------------------
@@ -142,8 +191,10 @@ def identify_command(
     = None,
     to_mf: Annotated[Path | None, typer.Option(
         "--to-mf", help="Convert to the Magic Formula 1989 set (.json).")] = None,
-    radius: Annotated[float, typer.Option(help="Conversion radius for --to-mf [m].")] = 0.33,
-    rolling_radius: Annotated[float, typer.Option(help="Rolling radius R_r [mm].")] = 294.0,
+    radius: Annotated[float, typer.Option(help=plain("Conversion radius for --to-mf [m]."))]
+    = 0.33,
+    rolling_radius: Annotated[float, typer.Option(help=plain("Rolling radius R_r [mm]."))]
+    = 294.0,
     hold: Annotated[list[str] | None, typer.Option(
         "--hold", help="Hold a coefficient at 0 (repeatable), e.g. b_Fy_one_1_0.")] = None,
     cutoff: Annotated[float, typer.Option(help="Low-pass cut-off [Hz].")] = 25.0,
@@ -157,13 +208,18 @@ def identify_command(
                                  (to_mf, (".json",), "Magic Formula set")):
         check_output(path, suffixes=suffixes, what=what)
     check_output(figures, what="figures folder", directory=True)
+    check_number(radius, "--radius", positive=True, unit="m")
+    check_number(rolling_radius, "--rolling-radius", positive=True, unit="mm")
+    check_number(cutoff, "--cutoff", positive=True, unit="Hz")
     c = console(markup=False)
     with cli_errors():
-        enable_x64()
-        from diffsusp.io.tables import read_table
-        from diffsusp.tyre import bench, convert
+        from diffsusp.io.tyre_tables import read_tyre_table
 
-        table = _columns(read_table(data))
+        raw = read_tyre_table(data, "Flat Trac table")   # regular file, UTF-8, FZ >= 0, units
+        table = _columns(raw)
+        _check_bench(raw, table, rolling_radius)
+        enable_x64()
+        from diffsusp.tyre import bench, convert
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
                              rolling_radius=rolling_radius, significance=significance,
                              sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()))

@@ -18,18 +18,83 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from .common import EXIT_BAD_INPUT, check_output, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    check_number,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    plain,
+    print_json,
+)
 
 
 def _load(path: Path) -> dict:
+    """The arrays of a .npz record: a regular file within the table size limit (a FIFO or a
+    device is refused before it is opened: bad_inputs D1), an archive (a renamed .npy is not)."""
+    from diffsusp.io.files import check_input
+
     if path.suffix != ".npz":
         raise fail(f"{path}: the on-board record must be a .npz archive of arrays (channels "
                    "as diffsusp.tyre.onboard.CHANNELS).", EXIT_BAD_INPUT)
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
+        check_input(path, "on-board record", "table")
+    except FileNotFoundError as exc:
+        raise fail(f"{path}: cannot read the record: {exc.strerror}.", EXIT_BAD_INPUT) from None
+    except ValueError as exc:   # ModelFileError: names the file already
+        raise fail(str(exc), EXIT_BAD_INPUT) from None
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
         raise fail(f"{path}: cannot read the archive ({exc}).", EXIT_BAD_INPUT) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise fail(f"{path}: a single array (a .npy file renamed .npz?), not an archive of "
+                   "channels; save the record with numpy.savez.", EXIT_BAD_INPUT)
+    try:
+        with z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise fail(f"{path}: cannot read the archive ({exc}).", EXIT_BAD_INPUT) from None
+
+
+def _check_record(path: Path, record: dict, window_time: float) -> None:
+    """The checks the pipeline's own (`onboard.check`) do not make, with the file and the
+    channel named (bad_inputs D9, D10): numeric channels; a 1-D time of at least two samples,
+    finite and increasing, in seconds (a step of 0.5 s or more, e.g. milliseconds or whole
+    seconds, leaves the window `--window-time` fewer than three samples); a wheel spin that is
+    never zero (the slip divides by it)."""
+    def bad(channel, why):
+        return fail(f"{path}: {channel}: {why}", EXIT_BAD_INPUT)
+
+    for k, v in record.items():
+        if v.dtype.kind not in "biuf":
+            raise bad(k, f"holds {v.dtype} values, not numbers")
+    if "time" in record:
+        t = np.asarray(record["time"], float)
+        if t.ndim != 1 or t.size < 2:
+            raise bad("time", f"has shape {t.shape}; expected a 1-D array of samples [s]")
+        if not np.isfinite(t).all():
+            i = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise bad("time", f"is not finite at sample {i} ({t[i]})")
+        dt = np.diff(t)
+        if not (dt > 0).all():
+            i = int(np.flatnonzero(dt <= 0)[0])
+            raise bad("time", f"does not increase at sample {i + 1} ({t[i + 1]:g} after "
+                      f"{t[i]:g}); a constant or reversed time is not a record")
+        step = float(np.median(dt))
+        if window_time / step < 2.0:
+            raise bad("time", f"a sampling step of {step:g} s leaves the {window_time:g} s "
+                      "window fewer than 3 samples: time in milliseconds or whole seconds? "
+                      "Give time in seconds (or a longer --window-time)")
+    if "spin" in record:
+        spin = np.asarray(record["spin"], float)
+        if spin.size and (spin == 0).any():
+            i = int(np.flatnonzero((spin == 0).reshape(spin.shape[0], -1).any(axis=1))[0]) \
+                if spin.ndim >= 1 else 0
+            raise bad("spin", f"is 0 at sample {i}: the wheels must roll (the slip divides by "
+                      "the spin)")
 
 
 def register(tyre_app: typer.Typer) -> None:
@@ -39,11 +104,12 @@ def register(tyre_app: typer.Typer) -> None:
         grouping: Annotated[str, typer.Option(
             help="Wheel groupings, comma separated: all, front, rear.")] = "all,front,rear",
         delay: Annotated[float | None, typer.Option(
-            help="Correvit delay to remove [s] (default: estimated).")] = None,
+            help=plain("Correvit delay to remove [s] (default: estimated)."))] = None,
         estimate_delay: Annotated[bool, typer.Option(
             help="Estimate the Correvit delay when --delay is not given.")] = True,
         window: Annotated[str, typer.Option(help="hamming or blackman.")] = "hamming",
-        window_time: Annotated[float, typer.Option(help="Window length T [s].")] = 0.05,
+        window_time: Annotated[float, typer.Option(help=plain("Window length T [s]."))]
+        = 0.05,
         json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
         figures: Annotated[Path | None, typer.Option(
             help="Folder for measured-vs-model figures.")] = None,
@@ -56,10 +122,16 @@ def register(tyre_app: typer.Typer) -> None:
 
         check_output(figures, what="figures folder", directory=True)
         check_output(report, suffixes=(".json", ".csv"), what="report")
+        check_number(window_time, "--window-time", positive=True, unit="s")
+        check_number(delay, "--delay")
+        groups = tuple(g.strip() for g in grouping.split(",") if g.strip())
+        if not groups:
+            raise fail(f"--grouping '{grouping}' names no grouping; give all, front or rear "
+                       "(comma separated).", EXIT_BAD_INPUT)
         with cli_errors():
-            enable_x64()
             record = _load(data)
-            groups = tuple(g.strip() for g in grouping.split(",") if g.strip())
+            _check_record(data, record, window_time)
+            enable_x64()
             out = onboard.identify(record, groupings=groups, camber=(True, False),
                                    delay=delay, estimate_delay=estimate_delay,
                                    options=onboard.Options(window=window,

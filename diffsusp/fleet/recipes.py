@@ -40,6 +40,15 @@ class ItemTimeout(Exception):
     """An item (or its batch) ran past the fleet's time limit per item."""
 
 
+class NotConverged(Exception):
+    """An item whose fit ran but did not converge: its report and values are kept, its status
+    is `not converged` (a failure, never `ok`: bad_inputs D4)."""
+
+    def __init__(self, message, report, values):
+        super().__init__(message)
+        self.report, self.values = report, values
+
+
 def _check_deadline(deadline, what="the item"):
     if deadline is not None and time.monotonic() > deadline:
         raise ItemTimeout(f"{what} ran past the time limit per item")
@@ -68,6 +77,9 @@ class Recipe:
         from ..resolve import load_model_file
 
         return load_model_file(spec).mechanism
+
+    def check(self) -> None:
+        """Raise `InputError` for options the recipe cannot use, before any item runs."""
 
     def read(self, mech, path):
         from .. import measure
@@ -361,6 +373,30 @@ class TyreFit(Recipe):
     batched = True
     _FIT = ("loss", "noise", "loss_scale", "combined", "max_steps", "rtol", "atol",
             "threshold")
+    _OPTIONS = _FIT + ("groups", "names", "pad_to")
+
+    def check(self):
+        """Unknown option keys, groups or losses are bad input before any item runs
+        (bad_inputs D18), not an error on every item."""
+        from ..errors import InputError
+        from ..tyre import fit as F
+
+        unknown = [k for k in self.options if k not in self._OPTIONS]
+        if unknown:
+            raise InputError(f"tyre-fit option(s) {', '.join(map(repr, unknown))} unknown; "
+                             f"known: {', '.join(self._OPTIONS)}.")
+        groups = self.options.get("groups")
+        if groups is not None:
+            if isinstance(groups, str):
+                raise InputError(f"tyre-fit option groups must be a list, e.g. "
+                                 f"groups='[\"{groups}\"]'.")
+            bad = [g for g in groups if g not in F.GROUPS]
+            if bad or not groups:
+                raise InputError(f"tyre-fit option groups: {bad or '(none)'} not among "
+                                 f"{', '.join(F.GROUPS)}.")
+        loss = self.options.get("loss")
+        if loss is not None and loss not in ("linear", "huber", "cauchy"):
+            raise InputError(f"tyre-fit option loss {loss!r}: linear, huber or cauchy.")
 
     def load_model(self, spec):
         from .. import tyre
@@ -372,11 +408,12 @@ class TyreFit(Recipe):
         return tyre.MagicFormula6.from_tir(read_tir(spec))
 
     def read(self, model, path):
+        from ..io.tyre_tables import read_tyre_table
         from ..tyre import fit as F
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            bench = F.read_bench(path)
+            bench = F.bench_data(read_tyre_table(path, "bench table"))
         return bench, tuple(str(w.message) for w in caught)
 
     def _groups(self, model, channels) -> list[str]:
@@ -429,7 +466,10 @@ class TyreFit(Recipe):
                 report["warnings"] = list(data[i][1])
                 values = {n: float(v) for r in reports[k].values()
                           for n, v in zip(r.names, r.values, strict=True)}
-                out[i] = (report, values)
+                stuck = [g for g, r in reports[k].items() if not bool(r.converged)]
+                out[i] = (NotConverged(f"the fit of {', '.join(stuck)} did NOT converge "
+                                       f"(max_steps {kwargs.get('max_steps', 200)})",
+                                       report, values) if stuck else (report, values))
         return out
 
 

@@ -37,8 +37,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ..errors import ModelFileError
+from ..io.files import read_input
 from .engine import DaskEngine, Engine, InProcessEngine, worker_environment
-from .recipes import ItemTimeout, Recipe
+from .recipes import ItemTimeout, NotConverged, Recipe
 from .recipes import recipe as make_recipe
 from .store import Store
 
@@ -252,9 +254,9 @@ def _prepare(items: list[Item], salt: bytes, models: _Models) -> list[_Prepared]
         model_bytes = fp.encode() if fp else _digest(b"unloadable", repr(it.model).encode(
             ) if not isinstance(it.model, str | os.PathLike) else _file_bytes(it.model)).encode()
         if it.path is not None:
-            try:
-                content = pathlib.Path(it.path).read_bytes()
-            except OSError as e:
+            try:   # a regular file within the table limit: never a FIFO or /dev/zero (D1)
+                content = read_input(it.path, "fleet item", "table")
+            except (OSError, ModelFileError) as e:
                 content = None
                 shape = ("unreadable", str(e))
                 digest = _digest(salt, model_bytes, b"missing", str(it.path).encode())
@@ -283,8 +285,8 @@ def _prepare(items: list[Item], salt: bytes, models: _Models) -> list[_Prepared]
 
 def _file_bytes(path) -> bytes:
     try:
-        return pathlib.Path(path).read_bytes()
-    except OSError:
+        return read_input(path, "model file")
+    except (OSError, ModelFileError):
         return os.fspath(path).encode()
 
 
@@ -405,6 +407,9 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
         entry = results[k]
         if isinstance(outcome, ItemTimeout):
             entry.update(status="timeout", message=str(outcome))
+        elif isinstance(outcome, NotConverged):   # a failure, with its report (D4)
+            entry.update(status="not converged", message=str(outcome))
+            entry["report"], entry["values"] = outcome.report, outcome.values
         elif isinstance(outcome, Exception):
             entry.update(status="error", message=_message(outcome))
         else:
@@ -520,6 +525,7 @@ def run(
     from ..errors import InputError
 
     rec = make_recipe(recipe, **(options or {}))
+    rec.check()
     if batch_size < 1:
         raise InputError(f"batch_size must be at least 1; got {batch_size}.")
     if time_limit is not None and not time_limit > 0:
@@ -533,6 +539,13 @@ def run(
     if model is None and any(it.model is None for it in item_list):
         raise InputError("no model: give the fleet a model= (or every item its own).")
     models = _Models(rec, model)
+    if model is not None:   # the fleet's own model is bad input, not a failure of every item
+        try:
+            models.get(model)
+        except InputError:
+            raise
+        except Exception as e:
+            raise InputError(f"the fleet's model {model!r}: {_message(e)}") from None
     salt = _digest(FORMAT.encode(), rec.name.encode(),
                    json.dumps(rec.options, sort_keys=True, default=str).encode()).encode()
     prepared = _prepare(item_list, salt, models)

@@ -25,7 +25,8 @@ import math
 import os
 import pathlib
 
-from ..io.files import write_text_atomic
+from ..errors import ModelFileError
+from ..io.files import read_input, write_text_atomic
 
 __all__ = ["FleetStatus", "Store", "status"]
 
@@ -53,16 +54,25 @@ class Store:
         last: dict[str, dict] = {}
         if not self.journal_path.exists():
             return last
-        with open(self.journal_path, encoding="utf-8") as f:
-            for line in f:
-                line = line.strip()
-                if not line:
-                    continue
-                try:
-                    entry = json.loads(line)
-                except json.JSONDecodeError:  # a line cut by a crash: that item re-runs
-                    continue
-                last[entry["item"]] = entry
+        # a regular file within the table limit (never a FIFO); a line that is not JSON (cut
+        # by a crash) is skipped, that item re-runs; a JSON line that is not an entry is an
+        # error naming the line (bad_inputs D18)
+        data = read_input(self.journal_path, "fleet journal", "table")
+        for k, raw in enumerate(data.splitlines(), start=1):
+            line = raw.decode("utf-8", errors="replace").strip()
+            if not line:
+                continue
+            try:
+                entry = json.loads(line)
+            except json.JSONDecodeError:  # a line cut by a crash: that item re-runs
+                continue
+            if not (isinstance(entry, dict) and isinstance(entry.get("item"), str)
+                    and isinstance(entry.get("hash"), str)
+                    and isinstance(entry.get("status"), str)):
+                raise ModelFileError("not a journal entry (item, hash, status); the fleet's "
+                                     "folder is damaged: remove journal.jsonl to run every "
+                                     "item again", path=self.journal_path, line=k)
+            last[entry["item"]] = entry
         return last
 
     def record(self, entry: dict, report: dict | None) -> None:
@@ -83,8 +93,29 @@ class Store:
             os.fsync(f.fileno())
 
     def manifest(self) -> dict:
+        """The folder's `fleet.json` ({} when there is none). A damaged one (not a regular
+        file, not UTF-8 JSON, not a fleet's manifest) is an error naming the file and the line
+        (bad_inputs D18): remove it to start the fleet again."""
         path = self.out / "fleet.json"
-        return json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+        if not path.exists():
+            return {}
+        data = read_input(path, "fleet state")
+        fix = "; the fleet's folder is damaged: remove fleet.json (and journal.jsonl) to " \
+              "run every item again"
+        try:
+            doc = json.loads(data.decode("utf-8"))
+        except UnicodeDecodeError:
+            raise ModelFileError(f"not UTF-8 text{fix}", path=path) from None
+        except json.JSONDecodeError as e:
+            raise ModelFileError(f"not valid JSON ({e.msg}){fix}", path=path,
+                                 line=e.lineno) from None
+        items = doc.get("items", []) if isinstance(doc, dict) else None
+        if not isinstance(items, list) or not all(
+                isinstance(i, dict) and isinstance(i.get("item"), str)
+                and isinstance(i.get("hash"), str) for i in items):
+            raise ModelFileError(f"not a fleet's state (items with item and hash){fix}",
+                                 path=path, field="items")
+        return doc
 
     def write_summary(self) -> pathlib.Path:
         """summary.csv from the journal: one row per item of the manifest that has a line,
@@ -106,17 +137,29 @@ class Store:
                     continue
                 e = entries[item]
                 values = e.get("values") or {}
-                writer.writerow([item, e["status"], e.get("message") or "", e["hash"],
+                writer.writerow([_cell(item), _cell(e["status"]), _cell(e.get("message") or ""),
+                                 _cell(e["hash"]),
                                  *(_cell(values.get(n)) for n in names)])
         os.replace(tmp, path)
         return path
 
 
 def _cell(v) -> str:
-    """A summary cell: a number as Python writes it (round-trips), a text (a status) as is."""
+    """A summary cell: a number as Python writes it (round-trips); a text with its control
+    characters escaped (a newline in an item's name cannot forge a row) and, when a spreadsheet
+    would run it as a formula (leading = + - @, not a number), quoted with ' (bad_inputs D22)."""
     if v is None:
         return ""
-    return v if isinstance(v, str) else repr(v)
+    if not isinstance(v, str):
+        return repr(v)
+    text = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in v)
+    if text[:1] in ("=", "+", "-", "@"):
+        try:
+            float(text)
+        except ValueError:
+            return "'" + text
+    return text
 
 
 def _jsonable(x):
