@@ -265,8 +265,17 @@ def test_revolute_axis_and_prior():
     assert np.linalg.norm(np.cross(rep["wishbone_pivot"].axis, axis)) < 1e-12
     np.testing.assert_allclose(rep["wishbone_pivot"].centre, point, atol=1e-9)
     assert np.all(np.isnan(rep["wishbone_pivot"].sigma))
-    (row,) = rep.rows()
+    (row,) = rep.joint_rows()
     assert row["joint"] == "wishbone_pivot" and row["observable"] and row["x"] == 177.0
+    # the report base's rows (issue 27): the line cut at the prior's x, x itself the prior's
+    # (not determined), the axis' y and z components; poses only: consistency not checked
+    rows = {r["parameter"]: r for r in rep.rows()}
+    assert list(rows) == [f"wishbone_pivot.{c}" for c in ("x", "y", "z", "axis_y", "axis_z")]
+    assert rows["wishbone_pivot.x"]["status"] == "not determined"
+    assert "along the axis not observable" in rows["wishbone_pivot.x"]["reason"]
+    assert rows["wishbone_pivot.y"]["estimate"] == pytest.approx(point[1], abs=1e-9)
+    assert rows["wishbone_pivot.axis_z"]["estimate"] == pytest.approx(axis[2], abs=1e-12)
+    assert rep.consistency is None and "not checked" in rep.fit_verdict
 
 
 def test_bad_input(data):

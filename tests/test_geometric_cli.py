@@ -52,20 +52,26 @@ def _run(*args):
 
 def test_identify_geometry(files, tmp_path):
     out, model, figs = tmp_path / "joints.csv", tmp_path / "located.toml", tmp_path / "figs"
-    result = _run("geometry", "isolated_bushing", "--measurements", files["motion"], "--out",
-                  out, "--write-model", model, "--figures", figs)
+    report = tmp_path / "report.csv"
+    result = _run("geometry", "isolated_bushing", "--measurements", files["motion"],
+                  "--joint-table", out, "--out", report, "--write-model", model, "--figures",
+                  figs)
     assert result.exit_code == 0, result.output
-    assert "bush" in result.output and "observable" in result.output
+    assert "bush.x" in result.output and "identified" in result.output
+    assert max(len(line) for line in result.output.splitlines()) <= 120
     rows = out.read_text().splitlines()
     assert rows[0].startswith("joint,kind,part_1,part_2,x,y,z")
+    assert report.read_text().splitlines()[0].startswith("method,parameter,estimate,sigma")
     located = load_model(model)
     np.testing.assert_allclose(located.markers.position[0], CENTRE, atol=1e-9)
     np.testing.assert_allclose(located.markers.position[1], CENTRE, atol=1e-9)
     assert (figs / "geometry_joints.png").stat().st_size > 1000
     result = _run("geometry", "isolated_bushing", "--measurements", files["motion"], "--json")
     assert result.exit_code == 0, result.output
-    (joint,) = json.loads(result.output)["joints"]
+    summary = json.loads(result.output)
+    (joint,) = summary["joints"]
     assert joint["kind"] == "ball" and joint["observable"]
+    assert [p["status"] for p in summary["parameters"]] == ["identified"] * 3
     np.testing.assert_allclose(joint["centre"], CENTRE, atol=1e-9)
 
 
@@ -91,6 +97,11 @@ def test_identify_correct(files, tmp_path):
     assert report["converged"] and report["pose_errors"][-1] < 1e-4
     assert report["pose_errors"][0] > 0.1
     assert list(report["case_errors"]) == ["1"] and report["case_errors"]["1"] < 1e-4
+    # the report base's rows: the moved I marker's coordinates, σ from the landmark noise
+    (marker,) = report["moves"]
+    rows = report["parameters"]
+    assert [r["parameter"] for r in rows] == [f"{marker}.{c}" for c in "xyz"]
+    assert all(r["status"] == "identified" and r["sigma"] > 0 for r in rows), rows
     # the written model is the library's correction (same compiled solve: same model)
     perturbed = load_model(files["perturbed"])
     meas = measure.read_measurements(files["equilibrium"], perturbed)

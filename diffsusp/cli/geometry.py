@@ -6,24 +6,35 @@ geometric correction (spec geometry §3.8, chapter 2).
   joints_from_model`: ball joints and bushings between measured parts as ball joints, bushings
   named with `--compliant` by the compliant-link method, revolute joints, the tie rod on an
   unmeasured rack, the strut top on an unmeasured strut) or from `--joints FILE.json` (a list
-  of `GeometricJoint` fields). The joint table goes to the terminal (or `--json`), optionally to
-  `--out` (.csv: one row per joint; .json), the model with the located joints to
-  `--write-model`, and a figure of the located joints against the model to `--figures`.
+  of `GeometricJoint` fields). The report (one row per located coordinate with value, σ and
+  one status: identified / not determined (why) / not seen; the registration's verdict,
+  warnings for swapped or moved landmarks; the model's compliance bias carried in σ unless
+  `--no-compliance`) goes to the terminal (or `--json`), optionally to `--out` (.csv, .json,
+  .html, .txt: `identify.report.write_report`, the same rows), the former one-row-per-joint
+  table to `--joint-table`, the model with the identified joints to `--write-model`, and a
+  figure of the located joints against the model to `--figures`.
 - `correct`: the model's joint frames moved so that its equilibrium under the loads of case
-  `--case` reproduces the measured poses (iterated to `--tol` mm).
+  `--case` reproduces the measured poses (iterated to `--tol` mm); the same report, one row
+  per moved marker coordinate, to the terminal and `--out`.
 
 TABLE is a landmark or pose table (format in `diffsusp.io.measurements`). Units: mm.
 """
 
-import json
+import textwrap
 from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich import box
-from rich.table import Table as RichTable
 
-from .common import EXIT_BAD_INPUT, cli_errors, console, enable_x64, fail, print_json
+from .common import (
+    EXIT_BAD_INPUT,
+    check_output,
+    cli_errors,
+    console,
+    enable_x64,
+    fail,
+    print_json,
+)
 from .identify import (
     JsonOpt,
     MeasurementsOpt,
@@ -60,22 +71,32 @@ def geometry(
     min_snr: Annotated[float, typer.Option(
         help="A joint whose weakest singular value is below this many times its noise level "
              "is not observable.")] = 3.0,
-    out: Annotated[Path | None, typer.Option(help="Write the joint table (.csv or .json).")]
-    = None,
+    compliance: Annotated[bool, typer.Option(
+        help="Carry the model's compliance bias in sigma (its own equilibria at the measured "
+             "loads, located the same way).")] = True,
+    out: Annotated[Path | None, typer.Option(
+        help="Write the report: .csv, .json, .html or .txt (one row per located coordinate, "
+             "with its status).")] = None,
+    joint_table: Annotated[Path | None, typer.Option(
+        help="Write the joint table, one row per joint (.csv or .json).")] = None,
     write_model: Annotated[Path | None, typer.Option(
-        help="Write the model with the located joints (.toml or .adm).")] = None,
+        help="Write the model with the identified joints (.toml or .adm).")] = None,
     figures: Annotated[Path | None, typer.Option(
         help="Write the located joints against the model (PNG) in this directory.")] = None,
     reorder: ReorderOpt = False,
     json_output: JsonOpt = False,
 ):
     """Locate the joints from the relative motion of the measured parts (mm)."""
-    _check_paths(out, write_model)
-    if landmark_sigma <= 0 or max_sigma <= 0 or min_snr <= 0:
+    check_output(out, suffixes=(".csv", ".json", ".html", ".txt"), what="report")
+    check_output(joint_table, suffixes=(".csv", ".json"), what="joint table")
+    check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
+    check_output(figures, what="figures folder", directory=True)
+    if not (landmark_sigma > 0 and max_sigma > 0 and min_snr > 0):
         raise fail("--landmark-sigma, --max-sigma and --min-snr must be positive.",
                    EXIT_BAD_INPUT)
     enable_x64()
     from ..identify import geometric
+    from ..identify.report import format_table, write_report
 
     with cli_errors():
         model_file, mech, meas = _load(model, measurements, reorder)
@@ -89,9 +110,12 @@ def geometry(
             raise fail("no joint to locate: measure the parts on both sides of a joint, or "
                        "give --joints.", EXIT_BAD_INPUT)
         report = geometric.locate_joints(meas, joint_list, landmark_sigma=landmark_sigma,
-                                         max_sigma=max_sigma, min_snr=min_snr)
+                                         max_sigma=max_sigma, min_snr=min_snr,
+                                         model=mech if compliance else None)
         if out is not None:
-            geometric.write_joints(report, out)
+            write_report(report, out)
+        if joint_table is not None:
+            geometric.write_joints(report, joint_table)
         if write_model is not None:
             located, _ = geometric.apply_locations(mech, report, joint_list)
             _write_model(located, write_model, model_file)
@@ -101,31 +125,19 @@ def geometry(
             fig = report.plot(mech, joint_list)
             plot.save(fig, figures / "geometry_joints", formats=("png",))
     if json_output:
-        print_json(json.loads(report.to_json()) | {"notes_model": list(notes)})
+        print_json(report.summary() | {"notes_model": list(notes)})
         return
     con = console(markup=False)
-    table = RichTable(title=f"{mech.name}: joints located from {measurements.name} "
-                      f"({report.n_cases} cases, σ at landmark noise {landmark_sigma:g} mm)",
-                      box=box.SIMPLE_HEAD)
-    for col in ("joint", "kind", "parts", "x", "y", "z", "σx", "σy", "σz", "axis", "rms",
-                "verdict"):
-        table.add_column(col, justify="left" if col in ("joint", "kind", "parts", "verdict")
-                         else "right")
-    for j in report.joints:
-        if j.centre is None:
-            table.add_row(j.name, j.kind, "–".join(j.parts), *["—"] * 8,
-                          f"not observable from these cases: {j.note}")
-            continue
-        axis = "" if j.axis is None else "(" + ", ".join(f"{v:.4f}" for v in j.axis) + ")"
-        table.add_row(j.name, j.kind, "–".join(j.parts), *(f"{v:.3f}" for v in j.centre),
-                      *(f"{v:.3f}" for v in j.sigma), axis, f"{j.residual:.2e}",
-                      "observable")
-    con.print(table)
+    con.print(f"{mech.name}: joints located from {measurements.name} ({report.n_cases} cases, "
+              f"σ at landmark noise {landmark_sigma:g} mm)", highlight=False, soft_wrap=True)
+    con.print(format_table(report, 120), highlight=False, soft_wrap=True)
     for note in (*report.notes, *notes):
-        con.print(f"note: {note}", highlight=False)
-    for label, path in (("joint table", out), ("model", write_model), ("figure", figures)):
+        con.print(textwrap.fill(f"note: {note}", 120, subsequent_indent="  "),
+                  highlight=False, soft_wrap=True)
+    for label, path in (("report", out), ("joint table", joint_table), ("model", write_model),
+                        ("figure", figures)):
         if path is not None:
-            con.print(f"{label} written to {path}", highlight=False)
+            con.print(f"{label} written to {path}", highlight=False, soft_wrap=True)
 
 
 def correct(
@@ -141,16 +153,21 @@ def correct(
     max_iterations: Annotated[int, typer.Option(help="Re-solve/re-correct passes.")] = 20,
     write_model: Annotated[Path | None, typer.Option(
         help="Write the corrected model (.toml or .adm).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        help="Write the report: .csv, .json, .html or .txt (one row per moved marker "
+             "coordinate, with its status).")] = None,
     reorder: ReorderOpt = False,
     json_output: JsonOpt = False,
 ):
     """Move the bolted-side joint frames so that the model's equilibrium reproduces the
     measured poses of one case (spec geometry §3.8)."""
+    check_output(out, suffixes=(".csv", ".json", ".html", ".txt"), what="report")
     _check_paths(None, write_model)
     if (tol is not None and tol <= 0) or max_iterations < 1:
         raise fail("--tol must be positive and --max-iterations at least 1.", EXIT_BAD_INPUT)
     enable_x64()
     from ..identify import geometric
+    from ..identify.report import format_table, write_report
 
     with cli_errors():
         model_file, mech, meas = _load(model, measurements, reorder)
@@ -162,16 +179,18 @@ def correct(
             max_iterations=max_iterations)
         if write_model is not None:
             _write_model(corrected, write_model, model_file)
+        if out is not None:
+            write_report(report, out)
     if json_output:
-        print_json(dict(pose_errors=list(report.pose_errors), converged=report.converged,
-                        iterations=report.iterations, moves=report.moves,
-                        case_errors=dict(zip(meas.cases, report.case_errors, strict=True)),
-                        notes=list(report.notes)))
+        print_json(report.summary() | dict(
+            case_errors=dict(zip(meas.cases, report.case_errors, strict=True))))
         return
     con = console(markup=False)
-    con.print(str(report), highlight=False)
+    con.print(str(report), highlight=False, soft_wrap=True)
+    con.print(format_table(report, 120), highlight=False, soft_wrap=True)
     worst = max(range(len(meas.cases)), key=lambda c: report.case_errors[c])
     con.print(f"pose error of the corrected model at the other cases: largest "
               f"{report.case_errors[worst]:.3g} mm (case {meas.cases[worst]})", highlight=False)
-    if write_model is not None:
-        con.print(f"corrected model written to {write_model}", highlight=False)
+    for label, path in (("corrected model", write_model), ("report", out)):
+        if path is not None:
+            con.print(f"{label} written to {path}", highlight=False, soft_wrap=True)

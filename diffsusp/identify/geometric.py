@@ -65,6 +65,7 @@ from .geometric_correct import CorrectionReport, correct_geometry, offset_equiva
 from .geometric_joints import (
     GROUND,
     JOINT_KINDS,
+    Coordinate,
     GeometricJoint,
     GeometricReport,
     JointEstimate,
@@ -78,7 +79,9 @@ from .geometric_locate import (
     _pose_covariance,
     _skew,
     _specs,
+    joint_values,
     locate_joints,
+    registration_check,
     relative_operators,
 )
 
@@ -88,14 +91,19 @@ __all__ = [
     "GeometryDesign",
     "design_geometry_cases",
     "apply_locations",
+    "displace_joints",
     "element_table",
     "joints_from_model",
+    "model_geometry",
     "CorrectionReport",
     "correct_geometry",
     "GeometricJoint",
     "GeometricReport",
     "JointEstimate",
+    "Coordinate",
+    "joint_values",
     "locate_joints",
+    "registration_check",
     "offset_equivalent",
     "read_joints",
     "relative_operators",
@@ -233,9 +241,59 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
     return tuple(out), tuple(notes)
 
 
+def model_geometry(mech, joint: GeometricJoint):
+    """The model's own location of `joint` as `locate_joints` reports it: `(centre, axis)`, the
+    centre the design position of the I marker of its first element, the axis (a revolute: the
+    joint's marker z, or a bushing's free axis; an unknown slide: the z of the slide joint's
+    marker on S1; else None) — or None when the joint names no element of `mech`. The truth a
+    located joint is compared with (the rehearsal), and the reference of the compliance bias."""
+    table = element_table(mech)
+    if not joint.elements or joint.elements[0] not in table:
+        return None
+    name = joint.elements[0]
+    group, _, _, _, mi, _ = table[name]
+    pos = np.asarray(mech.markers.position)
+    ori = np.asarray(mech.markers.orientation)
+    axis = None
+    if joint.kind == "revolute":
+        free = _free_axis(mech, name) if group == "bushing" else None
+        axis = ori[mi][:, 2 if free is None else free]
+    elif joint.kind == "ball_unknown_slide":
+        s1 = mech.part_index(joint.parts[0]) if joint.parts[0] != GROUND else -1
+        for _, kind, pi, pj, ma, mb in table.values():
+            if kind in ("translational", "cylindrical") and s1 in (pi, pj):
+                axis = ori[ma if pi == s1 else mb][:, 2]
+                break
+        if axis is None:
+            return None
+    return pos[mi].copy(), (np.zeros(3) if axis is None else np.asarray(axis, float))
+
+
+def displace_joints(mech, joints: Sequence[GeometricJoint], offsets):
+    """`mech` with the I and J markers of each joint's elements moved by `offsets` (joints,
+    3) mm (design positions; the joints stay assembled: both markers move together). A
+    bushing's or joint's markers shared by two listed joints move once, by the first."""
+    import equinox as eqx
+
+    table = element_table(mech)
+    pos = np.array(mech.markers.position)
+    done = set()
+    for joint, offset in zip(joints, np.asarray(offsets, float), strict=True):
+        for element in joint.elements:
+            if element not in table:
+                raise InputError(f"joint '{joint.name}' stands for '{element}', which is not "
+                                 f"a joint or bushing of model '{mech.name}'.")
+            for m in table[element][4:]:
+                if m not in done:
+                    pos[m] = pos[m] + offset
+                    done.add(m)
+    return eqx.tree_at(lambda m: m.markers.position, mech, jnp.asarray(pos))
+
+
 def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoint]):
-    """The model with the located joints: the I and J markers of every element a located,
-    observable joint stands for are moved to its centre (design coordinates); a revolute
+    """The model with the located joints: the I and J markers of every element a located
+    joint the report calls identified (every coordinate but a revolute's position along its
+    axis) stands for are moved to its centre (design coordinates); a revolute
     joint's markers are also turned so that their z is the located axis.
 
     **Returns:** `(mechanism, moved)`: the new model and element name → displacement (mm).
@@ -248,8 +306,8 @@ def apply_locations(mech, report: GeometricReport, joints: Sequence[GeometricJoi
     moved = {}
     for joint in joints:
         est = report[joint.name]
-        if not est.observable:
-            continue
+        if not est.observable or (est.coordinates and not report.joint_identified(joint.name)):
+            continue  # only what the report calls identified is written
         for element in joint.elements:
             if element not in table:
                 raise InputError(f"joint '{joint.name}' stands for '{element}', which is not "

@@ -4,12 +4,16 @@ and the offset-equivalent model of bushing preloads. Units: mm.
 """
 
 import dataclasses
+import math
 from collections.abc import Sequence
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
+from .geometric_joints import Coordinate
+from .report import IdentificationReport
 
 TOL_FLOOR = 1e-4
 """mm: `correct_geometry`'s default stop on noise-free data (the pose error below it)."""
@@ -23,7 +27,7 @@ allow (σ: the measurements' noise, mm); converged when the error is then within
 
 
 @dataclasses.dataclass(frozen=True)
-class CorrectionReport:
+class CorrectionReport(IdentificationReport):
     """Result of `correct_geometry`.
 
     **Fields:** `pose_errors`: per equilibrium solved, the largest distance (mm) between a
@@ -33,7 +37,14 @@ class CorrectionReport:
     `moves`: marker name → total displacement of its design position (mm);
     `elements`: the joints and bushings whose I (or J) marker was moved; `case_errors`: the
     final model's pose error at every measured case (mm: how it does away from the reference
-    case); `notes`.
+    case); `notes`; `coordinates`: one `Coordinate` per moved marker coordinate (its new design
+    position, mm, and its σ from the landmark noise of the reference case's measured poses).
+
+    On the report base (issue 27): one row per moved marker coordinate (`'<marker>.x'`…) with
+    value, σ and one status: *identified* when the correction converged and σ is known (the
+    marker's parts measured with landmarks, or the ground), *not determined* otherwise (with
+    the reason). The correction reproduces one case by construction, so its consistency with
+    the data is not checked (`consistency` None); the stop reason says how it ended.
     """
 
     pose_errors: tuple[float, ...]
@@ -42,10 +53,62 @@ class CorrectionReport:
     elements: tuple[str, ...]
     case_errors: tuple[float, ...] = ()
     notes: tuple[str, ...] = ()
+    coordinates: tuple[tuple[str, Coordinate], ...] = ()
+
+    family: ClassVar[str] = "geometric_correction"
+    judged_at: ClassVar[str] = "the corrected model (no σ % bar)"
+    combinations: ClassVar[tuple] = ()
+    consistency: ClassVar[None] = None
 
     @property
     def iterations(self) -> int:
         return len(self.pose_errors) - 1
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"{m}.{c.name}" for m, c in self.coordinates)
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return np.array([c.value for _, c in self.coordinates], dtype=float)
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return np.array([c.sigma for _, c in self.coordinates], dtype=float)
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * self.sigmas / np.abs(self.estimates)
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple(c.unit for _, c in self.coordinates)
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        return np.array([c.determined for _, c in self.coordinates], dtype=bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        return tuple(c.reason for _, c in self.coordinates)
+
+    @property
+    def residuals(self) -> dict:
+        return {}
+
+    @property
+    def stop_reason(self) -> str:
+        head = (f"{self.iterations} correction(s), pose error at the reference case "
+                + " → ".join(f"{e:.3g}" for e in self.pose_errors) + " mm")
+        return head + ("" if self.converged else " (NOT converged)") + "".join(
+            f"; {n}" for n in self.notes)
+
+    def summary(self) -> dict:
+        return IdentificationReport.summary(self) | dict(
+            pose_errors=list(self.pose_errors), converged=self.converged,
+            iterations=self.iterations, moves=self.moves, elements=list(self.elements),
+            case_errors=list(self.case_errors), notes=list(self.notes))
 
     def __str__(self) -> str:
         lines = [f"Geometric correction: {self.iterations} correction(s), pose error "
@@ -55,6 +118,34 @@ class CorrectionReport:
             lines.append(f"  {name:<28} moved {move:8.4f} mm")
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
+
+
+def _marker_sigma(x_i, part_i, part_j, measured_index, rot_m, trans_m, pose_cov, sigma):
+    """σ (3,) of a moved I marker's design position from the landmark noise of the measured
+    poses of its two parts at the reference case (spec geometry §3.8: x_I = R1ᵀ(g − T1) with g
+    the point of S2 where I must sit; a pose perturbed by (θ, δT) moves it by
+    R1ᵀ([g − T1]× θ1 − δT1) + R1ᵀ(−[g − T2]× θ2 + δT2)); None when a part is neither measured
+    nor the ground (its pose is the equilibrium's, whose noise is not modelled here)."""
+    from .geometric_locate import _skew
+
+    for p in (part_i, part_j):
+        if p >= 0 and p not in measured_index:
+            return None
+    if part_i >= 0:
+        m1 = measured_index[part_i]
+        r1, t1 = rot_m[m1], trans_m[m1]
+    else:
+        m1, r1, t1 = None, np.eye(3), np.zeros(3)
+    g = r1 @ x_i + t1
+    cov = np.zeros((3, 3))
+    if m1 is not None:
+        g1 = r1.T @ np.hstack([np.asarray(_skew(jnp.asarray(g - t1))), -np.eye(3)])
+        cov += g1 @ pose_cov[m1] @ g1.T
+    if part_j >= 0:
+        m2 = measured_index[part_j]
+        g2 = r1.T @ np.hstack([-np.asarray(_skew(jnp.asarray(g - trans_m[m2]))), np.eye(3)])
+        cov += g2 @ pose_cov[m2] @ g2.T
+    return sigma * np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 def _element_markers(mech, elements, side):
@@ -270,8 +361,49 @@ def correct_geometry(
                f"still falling, or above {NOISE_FLOOR:g} σ = {NOISE_FLOOR * sigma:g} mm")
         notes = (f"not converged: pose error {errors[-1]:.3g} mm after {len(errors) - 1} "
                  f"corrections ({why})",)
+    coords = _correction_rows(current, pairs, measurements, measured_index, case, sigma,
+                              bool(converged))
     return current, CorrectionReport(tuple(errors), bool(converged), moves,
-                                     tuple(n for n, _ in pairs), tuple(case_errors), notes)
+                                     tuple(n for n, _ in pairs), tuple(case_errors), notes,
+                                     coords)
+
+
+def _correction_rows(mech, pairs, measurements, measured_index, case, sigma, converged):
+    """One (marker, `Coordinate`) per coordinate of every moved marker (its new design
+    position and σ, `_marker_sigma`), with its status."""
+    from .geometric_locate import _pose_covariance
+
+    part_of = np.asarray(mech.markers.part)
+    final = np.asarray(mech.markers.position)
+    rot_m = np.asarray(measurements.rotation)[case]
+    trans_m = np.asarray(measurements.translation)[case]
+    landmarks = measurements.layout is not None and measurements.weights is not None
+    pose_cov = None
+    if landmarks:
+        pose_cov = np.asarray(_pose_covariance(
+            jnp.asarray(measurements.layout.position),
+            jnp.asarray(measurements.rotation)[case:case + 1],
+            jnp.asarray(measurements.weights)[case:case + 1]))[0]
+    out = []
+    for _, (mi, mj) in pairs:
+        name = mech.markers.names[mi]
+        sig = None if pose_cov is None else _marker_sigma(
+            final[mi], int(part_of[mi]), int(part_of[mj]), measured_index, rot_m, trans_m,
+            pose_cov, sigma)
+        if not converged:
+            reason = "the correction did not converge"
+        elif pose_cov is None:
+            reason = "σ unknown: poses without landmarks"
+        elif sig is None:
+            reason = ("σ unknown: a part of this element has no measured pose (it moves with "
+                      "the equilibrium)")
+        else:
+            reason = ""
+        for k in range(3):
+            s = math.nan if sig is None else float(sig[k])
+            out.append((name, Coordinate(name="xyz"[k], value=float(final[mi, k]), sigma=s,
+                                         unit="mm", determined=not reason, reason=reason)))
+    return tuple(out)
 
 
 def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):

@@ -13,10 +13,12 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from ..errors import InputError
+from .report import Consistency, IdentificationReport
 
 JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
                "compliant_bushing")
@@ -81,6 +83,39 @@ class GeometricJoint:
 
 
 @dataclasses.dataclass(frozen=True)
+class Coordinate:
+    """One located coordinate of a joint: a row of the report (issue 27: one verdict).
+
+    **Fields:** `name` ('x', 'y', 'z' of the centre; 'axis_y'… a component of a revolute's or
+    slide's unit axis, the largest component left out: the norm fixes it); `value`; `sigma`
+    the reported 1σ (landmark noise, inflated by a revolute's lack of fit, with the model's
+    compliance bias `bias` added in quadrature; NaN: none); `unit` ('mm' or '-');
+    `determined` (the data fix it: its joint observable and nothing flags it); `seen` (False:
+    the parts never move relative to each other); `reason` why it is not determined;
+    `along_axis`: a revolute's coordinate along its axis (kept at the prior's: never
+    observable, spec geometry §4.3).
+    """
+
+    name: str
+    value: float
+    sigma: float
+    unit: str
+    determined: bool
+    seen: bool = True
+    reason: str = ""
+    bias: float = 0.0
+    along_axis: bool = False
+
+    def to_dict(self) -> dict:
+        def num(v):
+            return float(v) if math.isfinite(v) else None
+
+        return dict(name=self.name, value=num(self.value), sigma=num(self.sigma),
+                    unit=self.unit, determined=self.determined, seen=self.seen,
+                    reason=self.reason, bias=num(self.bias), along_axis=self.along_axis)
+
+
+@dataclasses.dataclass(frozen=True)
 class JointEstimate:
     """Located joint. Coordinates are design (reference) coordinates in the global frame (mm).
 
@@ -111,6 +146,16 @@ class JointEstimate:
     estimate: np.ndarray
     snr: float = math.nan
     chi2: float = math.nan
+    coordinates: tuple["Coordinate", ...] = ()
+    peak: float = math.nan
+    covariance: np.ndarray | None = None
+
+    @property
+    def determined(self) -> bool:
+        """Every coordinate the joint's solver estimates is determined (the revolute's position
+        along its axis excepted: never observable)."""
+        rows = [c for c in self.coordinates if not c.along_axis]
+        return bool(rows) and all(c.determined for c in rows)
 
     def to_dict(self) -> dict:
         def arr(v):
@@ -120,18 +165,39 @@ class JointEstimate:
                     centre=arr(self.centre), axis=arr(self.axis), sigma=arr(self.sigma),
                     sigma_axis=arr(self.sigma_axis), residual=float(self.residual),
                     singular_values=arr(self.singular_values), observable=self.observable,
-                    note=self.note, snr=float(self.snr), chi2=float(self.chi2))
+                    note=self.note, snr=float(self.snr), chi2=float(self.chi2),
+                    coordinates=[c.to_dict() for c in self.coordinates])
 
 
 @dataclasses.dataclass(frozen=True)
-class GeometricReport:
+class GeometricReport(IdentificationReport):
     """Result of `locate_joints`: one `JointEstimate` per joint of the list, in order, the
-    landmark noise σ_L used for the σ (mm), and the number of cases."""
+    landmark noise σ_L used for the σ (mm), and the number of cases.
+
+    On the report base of every identification (`identify.report`, issue 27): one parameter
+    per located coordinate (`'<joint>.x'`, `'<joint>.axis_y'`…, see `Coordinate`) with its
+    value, σ and one status — *identified* (determined and the data consistent), *not
+    determined* with the reason (a revolute's position along its axis; not observable; a
+    compliant joint taken as a ball without the model), *not seen* (the parts never move
+    relative to each other). `consistency`: the registration residuals of every part and case
+    against σ_L (χ² with 3n − 6 dof per part and case); `warnings`: the parts and cases whose
+    own registration residual is beyond noise (swapped or moved landmarks), which make the
+    verdict inconsistent. Each joint's own lack of fit is judged joint by joint (σ inflated, or
+    the joint flagged). Every writer (`format_table`, `csv_text`, `html_text`, `write_report`)
+    renders these rows; `joint_rows()` keeps the former one row per joint.
+    """
 
     joints: tuple[JointEstimate, ...]
     landmark_sigma: float
     n_cases: int
     notes: tuple[str, ...] = ()
+    consistency: Consistency | None = None
+    warnings: tuple[str, ...] = ()
+
+    family: ClassVar[str] = "geometry"
+    judged_at: ClassVar[str] = ("the estimate (no σ % bar: a coordinate is determined when its "
+                                "joint is observable and its σ within the hardpoint tolerance)")
+    combinations: ClassVar[tuple] = ()
 
     def __getitem__(self, name: str) -> JointEstimate:
         for j in self.joints:
@@ -140,13 +206,73 @@ class GeometricReport:
         raise KeyError(f"no joint named '{name}' (joints: "
                        f"{', '.join(j.name for j in self.joints)}).")
 
-    def to_json(self) -> str:
-        return json.dumps(dict(landmark_sigma=self.landmark_sigma, n_cases=self.n_cases,
-                               notes=list(self.notes),
-                               joints=[j.to_dict() for j in self.joints]), indent=2)
+    def _coordinates(self) -> list[tuple[JointEstimate, Coordinate]]:
+        return [(j, c) for j in self.joints for c in j.coordinates]
 
-    def rows(self) -> list[dict]:
-        """One flat row per joint (for tables and CSV): x, y, z, σx, σy, σz, axis, verdict."""
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"{j.name}.{c.name}" for j, c in self._coordinates())
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return np.array([c.value for _, c in self._coordinates()], dtype=float)
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return np.array([c.sigma for _, c in self._coordinates()], dtype=float)
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * self.sigmas / np.abs(self.estimates)
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple(c.unit for _, c in self._coordinates())
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        return np.array([c.determined for _, c in self._coordinates()], dtype=bool)
+
+    @property
+    def seen(self) -> np.ndarray:
+        return np.array([c.seen for _, c in self._coordinates()], dtype=bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        return tuple(c.reason for _, c in self._coordinates())
+
+    @property
+    def residuals(self) -> dict:
+        return {}
+
+    @property
+    def fit_verdict(self) -> str:
+        """The registration's consistency verdict, and the flagged parts and cases."""
+        text = ("consistency not checked (poses without landmarks)" if self.consistency is None
+                else self.consistency.verdict)
+        return "; ".join((text, *self.warnings))
+
+    def joint_identified(self, name: str) -> bool:
+        """Every coordinate of joint `name` its solver estimates is identified."""
+        ident = dict(zip(self.names, self.is_identified, strict=True))
+        joint = self[name]
+        rows = [c for c in joint.coordinates if not c.along_axis]
+        return bool(rows) and all(ident[f"{name}.{c.name}"] for c in rows)
+
+    def summary(self) -> dict:
+        """The report base's summary (one row per coordinate) with the landmark σ, the number
+        of cases, the notes and warnings, and the joints in detail."""
+        return IdentificationReport.summary(self) | dict(
+            landmark_sigma=self.landmark_sigma, n_cases=self.n_cases, notes=list(self.notes),
+            warnings=list(self.warnings), joints=[j.to_dict() for j in self.joints])
+
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(self.summary(), **({"indent": 2} | kwargs))
+
+    def joint_rows(self) -> list[dict]:
+        """One flat row per joint (the joint table, `write_joints`): x, y, z, σx, σy, σz,
+        axis, residual, snr, χ²/E, observable, note."""
         out = []
         for j in self.joints:
             c = j.centre if j.centre is not None else np.full(3, np.nan)
@@ -211,6 +337,7 @@ class GeometricReport:
                 text += f"  axis ({j.axis[0]:.5f}, {j.axis[1]:.5f}, {j.axis[2]:.5f})"
             lines.append(text + f"  rms {j.residual:.2e}" + (f"  [{j.note}]" if j.note else ""))
         lines += [f"  note: {n}" for n in self.notes]
+        lines.append(f"  verdict: {self.fit_verdict}")
         return "\n".join(lines)
 
 
@@ -266,12 +393,12 @@ def _joint_of(item, k: int, path: Path) -> GeometricJoint:
 
 def write_joints(report: GeometricReport, path) -> None:
     """Write the joint table: `.json` → `report.to_json()`; otherwise CSV, one row per joint
-    with the columns of `GeometricReport.rows` (an unobservable joint's coordinates empty)."""
+    with the columns of `GeometricReport.joint_rows` (an unobservable joint's coordinates empty)."""
     path = Path(path)
     if path.suffix.lower() == ".json":
         path.write_text(report.to_json() + "\n", encoding="utf-8")
         return
-    rows = report.rows()
+    rows = report.joint_rows()
     with open(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["joint"])
         writer.writeheader()

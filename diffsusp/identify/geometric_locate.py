@@ -16,7 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
-from .geometric_joints import GROUND, GeometricJoint, GeometricReport, JointEstimate
+from .geometric_joints import GROUND, Coordinate, GeometricJoint, GeometricReport, JointEstimate
+from .report import CONSISTENCY_ALPHA, Consistency, chi2_quantile
 
 START_OFFSETS = 150.0
 """Half-width (mm) of the 3×3×3 grid of starts around the initial estimate of a
@@ -201,7 +202,7 @@ def _locate(specs, rot, trans, mask, index, slides, priors, starts):
         rows = res.shape[0] // (n_cases + (kind == "ball_unknown_slide"))
         count = rows * (n_real + (kind == "ball_unknown_slide"))
         out[k] = dict(centre=c, axis=axis, rms=jnp.sqrt(jnp.sum(res**2) / count), sv=sv,
-                      motion=motion)
+                      motion=motion, peak=jnp.max(jnp.linalg.norm(res.reshape(-1, 3), axis=1)))
     return [out[k] for k in range(len(specs))]
 
 
@@ -481,6 +482,8 @@ def locate_joints(
     min_snr: float = 3.0,
     rcond: float = 1e-6,
     with_sigma: bool = True,
+    model=None,
+    loads=None,
 ) -> GeometricReport:
     """Locate joints from the measured motion of the parts (spec geometry §4, chapter 3).
 
@@ -506,13 +509,30 @@ def locate_joints(
       singular value is below `rcond` × the largest (after the revolute's axis) is not
       observable.
     - `with_sigma`: compute σ and the noise-relative verdict (closed form: `_uncertainty`).
+    - `model` (optional, with `loads`, default the measurements' loads): the model whose
+      joints are located. Its own equilibria at the measured cases, located the same way,
+      give each coordinate's **compliance bias** (located − the model's hardpoint: a bushing
+      taken as a ball or a revolute deflects, and the located point is biased by it — the
+      pseudo-McPherson's bushing A by 3.9 mm with a noise σ of 0.06 mm); it is added to σ in
+      quadrature. Without the model, a ball whose equations do not fit (χ²/E >
+      `LACK_OF_FIT`) is reported not determined ("compliant: …").
 
     The number of cases is padded up to a multiple of `CASE_BUCKET` with masked cases, so that
     tables of similar size share one compiled program.
 
+    **Report (issue 27):** one row per located coordinate (`Coordinate`: the centre's x, y, z;
+    a revolute's two coordinates across its axis where the line crosses the plane of the
+    prior's coordinate along it, that coordinate itself "not determined: position along the
+    axis not observable", and its axis' two smaller components; an unknown slide's axis
+    likewise), with σ and one status; the consistency verdict is the registration's (every
+    part and case against σ_L: `registration_check`): a part whose landmarks were swapped or
+    moved in some case is named in a warning and the verdict is inconsistent, so that no
+    coordinate is then "identified".
+
     **Returns:** a `GeometricReport`.
 
-    **Raises:** `InputError` for a joint list naming an unknown part or a wrong link.
+    **Raises:** `InputError` for a joint list naming an unknown part or a wrong link, or a
+    `model` without a measured part.
     """
     parts = tuple(measurements.parts)
     specs, index = _specs(joints, parts)
@@ -533,10 +553,18 @@ def locate_joints(
     else:
         reference = jnp.zeros((len(parts), 1, 3))
         weights = jnp.ones((n_pad, len(parts), 1))
-    outputs, cov, noise = _run(specs, _pad(measurements.rotation, n_pad),
-                               _pad(measurements.translation, n_pad), mask, _IndexMap(lookup),
-                               slides, priors, starts, reference, weights, with_sigma)
+
+    def run(rotation, translation):
+        return _run(specs, _pad(rotation, n_pad), _pad(translation, n_pad), mask,
+                    _IndexMap(lookup), slides, priors, starts, reference, weights, with_sigma)
+
+    outputs, cov, noise = run(measurements.rotation, measurements.translation)
     cov = None if cov is None else np.asarray(cov) * landmark_sigma**2
+    notes = list(measurements.notes)
+    nominal = None
+    if model is not None:
+        nominal, note = _model_located(model, measurements, joints, loads, run)
+        notes += [note] if note else []
     results = []
     for k, (j, o) in enumerate(zip(joints, outputs, strict=True)):
         centre = np.asarray(o["centre"])
@@ -544,6 +572,7 @@ def locate_joints(
             else None
         sv = np.asarray(o["sv"])
         snr, chi2 = math.nan, math.nan
+        block = None
         if cov is not None:
             block = cov[6 * k: 6 * k + 6, 6 * k: 6 * k + 6]
             sigma = np.sqrt(np.clip(np.diag(block)[:3], 0, None))
@@ -567,6 +596,7 @@ def locate_joints(
                 if j.kind == "revolute":
                     sigma = sigma * inflate
                     sigma_axis = None if sigma_axis is None else sigma_axis * inflate
+                    block = block * inflate**2
         else:
             sigma, sigma_axis, worst = np.full(3, np.nan), None, float("nan")
             worst_fit = math.nan
@@ -604,13 +634,206 @@ def locate_joints(
             note = ("position along the axis not observable (kept at the prior's "
                     + (f"{j.prior_coordinate}" if j.prior_coordinate else "nearest point")
                     + ")")
+        raw_axis = np.asarray(o["axis"])
+        coords = _coordinates(
+            j, centre, raw_axis, block, observable=observable, moving=moving, note=note,
+            chi2=chi2, peak=float(o["peak"]), max_sigma=max_sigma,
+            nominal=None if nominal is None else nominal[k])
         results.append(JointEstimate(
             name=j.name, kind=j.kind, parts=tuple(j.parts),
             centre=centre if observable else None, axis=axis if observable else None,
             sigma=sigma, sigma_axis=sigma_axis, residual=float(o["rms"]), singular_values=sv,
-            observable=observable, note=note, estimate=centre, snr=snr, chi2=chi2))
+            observable=observable, note=note, estimate=centre, snr=snr, chi2=chi2,
+            coordinates=coords, peak=float(o["peak"]), covariance=block))
+    consistency, warnings = (registration_check(measurements, landmark_sigma) if landmarks
+                             else (None, ()))
     return GeometricReport(tuple(results), float(landmark_sigma), int(measurements.n_cases),
-                           tuple(measurements.notes))
+                           tuple(notes), consistency, tuple(warnings))
+
+
+def _dominant(kind: str, axis, prior_coordinate: str | None) -> int:
+    """The coordinate a revolute's line is cut at (its prior's coordinate, else the axis'
+    largest component), and the axis component left out (the norm fixes it)."""
+    if kind == "revolute" and prior_coordinate is not None:
+        return "xyz".index(prior_coordinate)
+    return int(np.argmax(np.abs(np.asarray(axis, float))))
+
+
+def joint_values(kind: str, centre, axis, prior, d: int):
+    """The reported coordinates of a located joint (names, values, Jacobian (k, 6) with respect
+    to (centre, axis), units, along-the-axis flags):
+
+    - a point: x, y, z of the centre;
+    - `'revolute'`: where its line (through `centre` along `axis`) crosses the plane of the
+      prior's coordinate `d`, the two other coordinates; coordinate `d` itself (the prior's:
+      along the axis); then the axis components but the `d`-th (the axis signed so that
+      component `d` is positive);
+    - `'ball_unknown_slide'`: x, y, z and the slide axis' components but the `d`-th.
+    """
+    c = np.asarray(centre, float)
+    names, values, jac, units, along = [], [], [], [], []
+    eye = np.eye(3)
+    if kind in ("revolute", "ball_unknown_slide"):
+        a = np.asarray(axis, float)
+        a = a / np.linalg.norm(a) * (1.0 if a[d] >= 0 else -1.0)
+    if kind == "revolute":
+        s = float(np.asarray(prior, float)[d])
+        t = (s - c[d]) / a[d]
+        point = c + a * t
+        d_c = eye - np.outer(a, eye[d]) / a[d]
+        d_a = t * (eye - np.outer(a, eye[d]) / a[d])
+        for i in range(3):
+            names.append("xyz"[i])
+            values.append(float(point[i]))
+            jac.append(np.concatenate([d_c[i], d_a[i]]) if i != d else np.zeros(6))
+            units.append("mm")
+            along.append(i == d)
+    else:
+        for i in range(3):
+            names.append("xyz"[i])
+            values.append(float(c[i]))
+            jac.append(np.concatenate([eye[i], np.zeros(3)]))
+            units.append("mm")
+            along.append(False)
+    if kind in ("revolute", "ball_unknown_slide"):
+        for i in range(3):
+            if i != d:
+                names.append(f"axis_{'xyz'[i]}")
+                values.append(float(a[i]))
+                jac.append(np.concatenate([np.zeros(3), eye[i]]))
+                units.append("-")
+                along.append(False)
+    return names, np.array(values), np.array(jac), units, along
+
+
+def _coordinates(j: GeometricJoint, centre, axis, block, *, observable, moving, note, chi2,
+                 peak, max_sigma, nominal):
+    """The `Coordinate` rows of one located joint (see `locate_joints`)."""
+    axis = np.asarray(axis, float)
+    if not (np.all(np.isfinite(axis)) and np.linalg.norm(axis) > 0):
+        axis = np.array([1.0, 0.0, 0.0])  # no axis found (parts that do not move)
+    d = _dominant(j.kind, axis, j.prior_coordinate)
+    prior = j.prior if j.prior is not None else centre
+    names, values, jac, units, along = joint_values(j.kind, centre, axis, prior, d)
+    if block is not None and np.all(np.isfinite(block)):
+        sigma = np.sqrt(np.clip(np.einsum("ri,ij,rj->r", jac, block, jac), 0.0, None))
+    else:
+        sigma = np.full(len(names), np.nan)
+    bias = np.zeros(len(names))
+    if nominal is not None and moving:
+        located, truth = nominal
+        if located is not None and truth is not None:
+            bias = (joint_values(j.kind, *located, prior, d)[1]
+                    - joint_values(j.kind, *truth, prior, d)[1])
+            bias = np.where(np.isfinite(bias), bias, np.inf)
+    carried = nominal is not None and moving and nominal[0] is not None \
+        and nominal[1] is not None
+    misfit = (j.kind == "ball" and not carried and math.isfinite(chi2) and chi2 > LACK_OF_FIT)
+    out = []
+    for k, name in enumerate(names):
+        sig = float(np.hypot(sigma[k], bias[k])) if not along[k] else math.nan
+        reason, ok = "", True
+        if not moving:
+            ok, reason = False, note
+        elif not observable:
+            ok, reason = False, f"not observable: {note}"
+        elif along[k]:
+            ok, reason = False, (f"position along the axis not observable (the prior's "
+                                 f"{'xyz'[d]} kept)")
+        elif misfit:
+            ok, reason = False, (
+                f"compliant: its centre moves up to {peak:.2g} mm across the cases (lack of "
+                f"fit χ²/E = {chi2:.2g}), a bias the noise σ does not cover; give the model "
+                "to carry its compliance in σ")
+        elif units[k] == "mm" and not sig <= max_sigma:
+            ok, reason = False, (f"σ {sig:.3g} mm with the model's compliance bias is beyond "
+                                 f"the hardpoint tolerance {max_sigma:g} mm")
+        out.append(Coordinate(name=name, value=float(values[k]),
+                              sigma=float(sig) if not along[k] else math.nan,
+                              unit=units[k], determined=ok, seen=moving, reason=reason,
+                              bias=float(bias[k]), along_axis=along[k]))
+    return tuple(out)
+
+
+def _model_located(model, measurements, joints, loads, run):
+    """Per joint (located, truth): the model's own equilibria at the measured cases located as
+    the measurements are (same compiled program), and the model's hardpoint and axis
+    (`geometric.model_geometry`); None where the model has no element for it. Returns the
+    list and a note (or "")."""
+    from ..statics import Status, part_poses, solve_statics
+    from .geometric import model_geometry
+
+    loads = measurements.loads if loads is None else loads
+    missing = [p for p in measurements.parts if p not in model.parts]
+    if missing:
+        raise InputError(f"measured part(s) {', '.join(missing)} are not parts of model "
+                         f"'{model.name}': its compliance bias cannot be computed.")
+    sol = solve_statics(model, loads, throw=False)
+    bad = np.asarray(sol.status) != Status.CONVERGED
+    if bad.any():
+        return None, (f"the model has no equilibrium in {int(bad.sum())} measured case(s): "
+                      "its compliance bias is not carried in σ")
+    rot, trans = part_poses(model, sol.q)
+    index = np.asarray([model.part_index(p) for p in measurements.parts], dtype=int)
+    outputs, _, _ = run(np.asarray(rot)[:, index], np.asarray(trans)[:, index])
+    out = []
+    for j, o in zip(joints, outputs, strict=True):
+        truth = model_geometry(model, j)
+        located = (np.asarray(o["centre"]), np.asarray(o["axis"]))
+        moving = float(o["motion"]) > 1e-9  # the model's parts move: a bias to speak of
+        out.append((located if moving and np.all(np.isfinite(located[0])) else None, truth))
+    return out, ("σ carry the compliance bias of the model's own equilibria at the measured "
+                 "cases (located − hardpoint)")
+
+
+def registration_check(measurements, landmark_sigma: float):
+    """The registration residuals of every part and case against the landmark σ (D6 of the
+    bad-input review): χ² = Σ ‖R P + T − Q‖² / σ_L² over the landmarks used, 3n − 6 dof per
+    part and case. A part and case beyond the upper `CONSISTENCY_ALPHA`/(parts × cases)
+    quantile (swapped or moved landmarks) is named in a warning and makes the verdict
+    inconsistent; so does the total χ² beyond its quantile. Returns `(Consistency, warnings)`.
+    """
+    ref = np.asarray(measurements.layout.position, float)
+    lm = np.asarray(measurements.landmarks, float)
+    w = np.asarray(measurements.weights, float) > 0
+    rot = np.asarray(measurements.rotation, float)
+    trans = np.asarray(measurements.translation, float)
+    res = np.einsum("cpij,pkj->cpki", rot, ref) + trans[:, :, None] - lm
+    sq = np.where(w, np.sum(res**2, axis=-1), 0.0) / landmark_sigma**2  # (c, p, k)
+    chi2_pc = sq.sum(-1)
+    used = w.sum(-1)
+    dof_pc = np.maximum(3 * used - 6, 1)
+    n_pc = int(np.count_nonzero(used))
+    cases = tuple(measurements.cases) or tuple(str(c + 1) for c in range(lm.shape[0]))
+    warnings = []
+    flagged = np.zeros(chi2_pc.shape, bool)
+    for p, part in enumerate(measurements.parts):
+        bad = [c for c in range(lm.shape[0]) if used[c, p] and chi2_pc[c, p] > chi2_quantile(
+            int(dof_pc[c, p]), CONSISTENCY_ALPHA / max(n_pc, 1))]
+        if not bad:
+            continue
+        flagged[bad, p] = True
+        rms = np.sqrt(chi2_pc[bad, p] / (3 * used[bad, p])) * landmark_sigma
+        warnings.append(
+            f"part '{part}': registration residual RMS up to {rms.max():.3g} mm "
+            f"({rms.max() / landmark_sigma:.3g} σ) in case(s) "
+            f"{', '.join(cases[c] for c in bad)}: landmarks swapped or moved on this part? "
+            "Check its landmarks in those cases (or read the table with --reorder, which "
+            "matches them by their distances)")
+    n_res = int(3 * used.sum())
+    n_par = 6 * n_pc
+    dof = max(n_res - n_par, 1)
+    chi2 = float(chi2_pc.sum())
+    critical = chi2_quantile(dof)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        case_rms = np.sqrt(chi2_pc.sum(-1) / np.maximum(3 * used.sum(-1), 1))
+    consistency = Consistency(
+        chi2=chi2, n_residuals=n_res, n_parameters=n_par, dof=dof, critical=critical,
+        case_rms=case_rms, cases=cases, failed_cases=(),
+        consistent=bool(chi2 <= critical and not flagged.any()), measurements=("landmarks",),
+        note="registration residuals of every part and case against the landmark σ; each "
+             "joint's own lack of fit is judged joint by joint")
+    return consistency, tuple(warnings)
 
 
 class _IndexMap(tuple):

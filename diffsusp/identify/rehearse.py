@@ -22,7 +22,8 @@ the test every method must pass on scenarios it was not written against).
 A *scenario* is any object with `method` (str), `names` (the parameters drawn, spelled as the
 reports name them), `draw(rng, n) -> (n, p)` truths, and `identify(truths, rng) -> list` of one
 `IdentificationReport` per truth (None for a run that failed). `SuspensionScenario` is the one
-for the suspension methods (`direct`, `iterative`, `least_squares`); the tyre bench
+for the suspension methods (`direct`, `iterative`, `least_squares`), `GeometryScenario` for the
+geometric location (joint hardpoints displaced, landmarks measured); the tyre bench
 (`diffsusp.tyre.bench_batch.BenchScenario`) and the Magic Formula fit
 (`diffsusp.tyre.fit.FitRehearsal`) provide theirs.
 """
@@ -49,7 +50,8 @@ from .least_squares import least_squares, least_squares_batch
 from .report import check_data, rows_csv
 from .selection import fit_selection
 
-__all__ = ["ParameterRehearsal", "RehearsalReport", "SuspensionScenario", "rehearse"]
+__all__ = ["GeometryScenario", "ParameterRehearsal", "RehearsalReport", "SuspensionScenario",
+           "rehearse"]
 
 METHODS = ("direct", "iterative", "least_squares")
 """The suspension methods `SuspensionScenario` runs."""
@@ -315,3 +317,127 @@ def _stack(items: Sequence):
     fields = items[0]._values
     return eqx.tree_at(lambda m: tuple(getattr(m, f) for f in fields), items[0],
                        tuple(jnp.stack([getattr(it, f) for it in items]) for f in fields))
+
+
+@dataclasses.dataclass
+class GeometryScenario:
+    """The rehearsal of the geometric location (`identify.geometric.locate_joints`, spec
+    geometry §4): the truths are the user's model with the hardpoints of its joints (both
+    markers of each located element) displaced by a uniform ±`spread` mm per coordinate; the
+    user's load cases are solved on each truth and measured by landmarks (`per_part` on every
+    part the joints join, σ `noise` mm); the joints are located from them with the user's
+    model as the start (its hardpoints are the revolutes' priors, its own equilibria give the
+    compliance bias carried in σ). The parameters are the report's coordinates (`'<joint>.x'`,
+    `'<joint>.axis_y'`…); a truth's value of each is the truth model's own (its hardpoint; a
+    revolute's line cut at the prior's plane and its axis).
+
+    **Fields:** `mech` the user's model; `loads` the load table; `joints` the joint list
+    (default `joints_from_model` over every part); `noise` landmark σ (mm, > 0); `spread`
+    (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as `locate_joints`.
+
+    `draw` keeps the hardpoint displacements it drew for the next `identify` (the truths it
+    returns are the coordinates, not the displacements)."""
+
+    mech: Mechanism
+    loads: Loads
+    joints: tuple = None
+    noise: float = 0.05
+    spread: float = 5.0
+    per_part: int = 4
+    layout_seed: int = 0
+    max_sigma: float = 10.0
+    min_snr: float = 3.0
+    method: str = "geometry"
+
+    def __post_init__(self):
+        from .geometric import joints_from_model
+
+        if not (isinstance(self.noise, int | float) and math.isfinite(self.noise)
+                and self.noise > 0):
+            raise InputError(f"the rehearsal's noise must be a positive landmark σ (mm); got "
+                             f"{self.noise!r}: noise-free data would call every coordinate "
+                             "identified with a zero σ.")
+        if not (isinstance(self.spread, int | float) and math.isfinite(self.spread)
+                and self.spread > 0):
+            raise InputError(f"the spread must be a positive displacement (mm) of the "
+                             f"hardpoints; got {self.spread!r}: a spread of 0 draws the start "
+                             "every time.")
+        if self.loads.n_cases is None:
+            raise InputError("the rehearsal needs a table of load cases (leading case axis).")
+        if self.joints is None:
+            self.joints = joints_from_model(self.mech, self.mech.parts)[0]
+        self.joints = tuple(self.joints)
+        if not self.joints:
+            raise InputError(f"model '{self.mech.name}' has no joint the geometric location "
+                             "can locate.")
+        parts = tuple(p for p in self.mech.parts
+                      if any(p in j.parts for j in self.joints))
+        self.layout = measure.place_landmarks(self.mech, self.per_part, parts=parts,
+                                              seed=self.layout_seed)
+        nominal = self._locate(measure.synthesize(self.mech, self.loads, layout=self.layout))
+        self._names = nominal.names
+        # the cut coordinate / left-out axis component of each joint, as the nominal reports
+        self._rows = {j.name: self._row_map(j, est) for j, est in
+                      zip(self.joints, nominal.joints, strict=True)}
+        self._drawn = None
+
+    @staticmethod
+    def _row_map(joint, est):
+        names = [c.name for c in est.coordinates]
+        kinds = ("revolute", "ball_unknown_slide")
+        axis_rows = [n for n in names if n.startswith("axis_")]
+        d = "xyz".index(next(c for c in "xyz" if f"axis_{c}" not in axis_rows)) \
+            if joint.kind in kinds else 0
+        return d
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._names)
+
+    def _locate(self, meas):
+        from .geometric import locate_joints
+
+        return locate_joints(meas, self.joints, landmark_sigma=float(self.noise),
+                             max_sigma=self.max_sigma, min_snr=self.min_snr, model=self.mech)
+
+    def truth_values(self, mech) -> np.ndarray:
+        """The coordinates (in `names` order) of the joints of model `mech` (NaN where the
+        model has no element for a joint)."""
+        from .geometric import joint_values, model_geometry
+
+        values = {}
+        for j in self.joints:
+            geo = model_geometry(mech, j)
+            if geo is None:
+                continue
+            d = self._rows[j.name]
+            prior = j.prior if j.prior is not None else geo[0]
+            names, vals, _, _, _ = joint_values(j.kind, geo[0], geo[1], prior, d)
+            values.update({f"{j.name}.{n}": v for n, v in zip(names, vals, strict=True)})
+        return np.array([values.get(n, np.nan) for n in self._names])
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        from .geometric import displace_joints
+
+        offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.joints), 3))
+        self._drawn = offsets
+        return np.stack([self.truth_values(displace_joints(self.mech, self.joints, o))
+                         for o in offsets])
+
+    def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
+        from .geometric import displace_joints
+
+        if self._drawn is None or len(self._drawn) != len(truths):
+            raise InputError("GeometryScenario.identify needs the truths of its own draw().")
+        noise = measure.GaussianNoise(landmarks=float(self.noise))
+        reports = []
+        for offsets in self._drawn:
+            truth = displace_joints(self.mech, self.joints, offsets)
+            key = jax.random.PRNGKey(int(rng.integers(2**31)))
+            try:
+                meas = measure.synthesize(truth, self.loads, layout=self.layout, noise=noise,
+                                          key=key)
+                reports.append(self._locate(meas))
+            except (ConvergenceError, InputError):  # a truth without equilibrium: failed
+                reports.append(None)
+        return reports
