@@ -50,13 +50,6 @@ def _virtual_work(mech, point="contact_patch"):
                                  rcond=None)[0][0])
 
 
-def _design_load(mech):
-    """The design load the K&C events use: at the ground contact point of the corner's loaded
-    radius (kc.force_rig's road contact, issue 28 item 3)."""
-    return equilibrium_load(mech, "contact_patch",
-                            loaded_radius=mech.corners[0].loaded_radius)
-
-
 def _height_at(mech, f0):
     n_l = len(mech.load_points.names)
     force = np.zeros((1, n_l, 3))
@@ -74,7 +67,7 @@ def _height_at(mech, f0):
 @pytest.mark.parametrize("path", [BUSHINGS, RIGID], ids=["bushings", "rigid"])
 def test_design_load_holds_the_wheel_centre_at_design_height(path, bushings):
     mech = bushings if path == BUSHINGS else load_model(str(path))
-    f0 = equilibrium_load(mech, "contact_patch")
+    f0 = equilibrium_load(mech, "contact_patch", loaded_radius=None)  # at the load point
     assert abs(_height_at(mech, f0)) < 1e-8
     assert f0 > 0  # the spring carries the car: compressed, pushing the wheel down
     if path == RIGID:  # one DOF: the virtual-work estimate is exact, both agree
@@ -92,7 +85,7 @@ def test_lateral_force_defaults_to_the_equilibrium_design_load(bushings):
     result = runner.invoke(app, ["kc", str(BUSHINGS), "--event", "lateral-force", "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
-    f0 = _design_load(bushings)
+    f0 = equilibrium_load(bushings, "contact_patch")
     assert data["design_load"]["value"] == pytest.approx(f0, rel=1e-12)
     assert "design height" in data["design_load"]["origin"]
     travel = np.asarray(data["metrics"]["wheel_travel"]["values"])
@@ -116,7 +109,8 @@ def test_every_force_event_uses_the_equilibrium_design_load(bushings, event):
     from diffsusp.kc.dispatch import default_load
 
     load = default_load(bushings, event)
-    assert load["value"] == pytest.approx(_design_load(bushings), rel=1e-12)
+    assert load["value"] == pytest.approx(equilibrium_load(bushings, "contact_patch"),
+                                          rel=1e-12)
     assert default_load(bushings, event, fz="5000") is None
     assert default_load(bushings, "parallel-travel") is None
 
@@ -128,7 +122,7 @@ def test_vertical_force_without_fz_runs_around_the_design_load(bushings):
                                       "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
-    f0 = _design_load(bushings)
+    f0 = equilibrium_load(bushings, "contact_patch")
     fz = np.asarray(data["metrics"]["vertical_force"]["values"])
     np.testing.assert_allclose(fz[[0, -1]], [0.5 * f0, 1.5 * f0], rtol=1e-12)
     travel = np.asarray(data["metrics"]["wheel_travel"]["values"])

@@ -418,6 +418,9 @@ def fit_command(
         help="Largest sigma% (at the start values) still called identified.")] = 10.0,
     max_steps: Annotated[int, typer.Option(help="Levenberg–Marquardt steps.")] = 200,
     reorder: ReorderOpt = False,
+    rig_sigma: Annotated[str | None, typer.Option(
+        help="K&C-rig tables: σ per channel in the column's unit, e.g. 'toe=0.01,camber=0.01,"
+        "wheel_centre_y=0.05' (replaces the table's '# sigma:' line).")] = None,
     out: OutOpt = None,
     write_model: WriteModelOpt = None,
     figures: FiguresOpt = None,
@@ -426,6 +429,10 @@ def fit_command(
     """Identify stiffnesses (and hardpoints) by least squares through the equilibrium: the
     model's landmarks or poses are fitted to the measured ones (Levenberg–Marquardt, exact
     derivatives), with σ, σ% and the combinations the data cannot see.
+
+    A K&C-rig table (toe, camber, wheel-centre x/y/z, ... against the loads or the wheel
+    travel of each case, σ per channel; format in `diffsusp.measure.rig`) is fitted as rig
+    curves: the model on a K&C rig, the tyre force at the ground contact point.
     """
     from ..identify.tables import fit_rows
 
@@ -435,19 +442,32 @@ def fit_command(
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
     enable_x64()
     from .. import measure
-    from ..identify.least_squares import least_squares
+    from ..identify.least_squares import least_squares, returned_values
     from ..identify.selection import fit_selection
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements
+    from ..measure.rig import is_rig_table, read_rig_table, rig_measurement
     from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
-        meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        data = from_measurements(meas, sigma, sigma_rotation * _DEG)
-        params, notes = fit_selection(mech, bushing, axes, centres=centres, springs=springs,
-                                      start=start)
+        fit_mech, rig_notes = mech, []
+        if is_rig_table(measurements):  # K&C-rig curves (issue 28 item 10)
+            meas = read_rig_table(measurements, sigma=rig_sigma)
+            rig, data, rig_notes = rig_measurement(mech, meas)
+            fit_mech = rig.mech
+        elif rig_sigma is not None:
+            from ..errors import InputError
+
+            raise InputError(f"--rig-sigma is for K&C-rig tables; {measurements} is a landmark "
+                             "or pose table (use --sigma).")
+        else:
+            meas = measure.read_measurements(measurements, mech, reorder=reorder)
+            data = from_measurements(meas, sigma, sigma_rotation * _DEG)
+        params, notes = fit_selection(fit_mech, bushing, axes, centres=centres,
+                                      springs=springs, start=start)
+        notes = [*rig_notes, *notes]
         last = []
         with _progress() as progress, _save_on_interrupt(out, lambda: interrupted_fit_rows(
                 params, last[0] if last else None), "LM step"):
@@ -459,14 +479,20 @@ def fit_command(
                 progress.update(task, completed=i, description=f"step {i}: loss "
                                 f"{record.trial_loss:.4g}")
 
-            fitted, report = least_squares(mech, data, params, loss=loss, max_steps=max_steps,
-                                           max_sigma_pct=max_sigma_pct, callback=step)
+            fitted, report = least_squares(fit_mech, data, params, loss=loss,
+                                           max_steps=max_steps, max_sigma_pct=max_sigma_pct,
+                                           callback=step)
+        if fit_mech is not mech:  # the rig's model → the user's, with the same values
+            fitted = params.apply(mech, returned_values(report))
         if out is not None:
             _write_report(report, out, fit_rows(report))
         if write_model is not None:
             _write_model(fitted, write_model, model_file)
         paths = []
-        if figures is not None:
+        if figures is not None and fit_mech is not mech:
+            notes.append("--figures: the fit figures are drawn for landmark and pose tables; "
+                         "not for a K&C-rig table.")
+        elif figures is not None:
             paths = _save_figures(fit_figures(report, params.apply(mech, params.start), fitted,
                                               meas), figures)
     if json_output:
@@ -482,9 +508,11 @@ def fit_command(
 
 def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=()):
     con = console(markup=False)
+    channels = getattr(meas, "channels", None)  # a K&C-rig table
+    kind = f"K&C rig: {', '.join(channels)}; " if channels else ""
     table = RichTable(
-        title=f"{mech.name}: least-squares fit to {measurements.name} ({meas.n_cases} cases, "
-        f"{report.n_residuals} residuals, loss {report.loss_name})", box=box.SIMPLE_HEAD)
+        title=f"{mech.name}: least-squares fit to {measurements.name} ({kind}{meas.n_cases} "
+        f"cases, {report.n_residuals} residuals, loss {report.loss_name})", box=box.SIMPLE_HEAD)
     for col in ("parameter", "start", "estimate", "sigma", "sigma%", "unit", "status"):
         table.add_column(col, justify="left" if col in ("parameter", "unit", "status")
                          else "right", no_wrap=col != "status")

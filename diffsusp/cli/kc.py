@@ -30,6 +30,7 @@ from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the oth
     EVENTS,
     corner_with,
     default_load,
+    loaded_radius_origin,
     parse_range,
     reference_case,
     run_event,
@@ -78,9 +79,14 @@ def _model(name: str, side=None):
     return load_model_file(name, side=side_value(side)).mechanism
 
 
-def _corner(mech, frame, loaded_radius, kingpin):
+def _corner(mech, frame, loaded_radius, kingpin, tyre=None):
+    if tyre is not None:
+        from diffsusp.io.tir import read_tir
+        from diffsusp.tyre import MagicFormula6
+
+        tyre = MagicFormula6.from_tir(read_tir(tyre))
     return corner_with(mech, frame=None if frame is None else Frame(frame).value,
-                       loaded_radius=loaded_radius, kingpin=kingpin)
+                       loaded_radius=loaded_radius, kingpin=kingpin, tyre=tyre)
 
 
 def _run_event(mech, event, corner, travel, fz, force, torque, rack):
@@ -165,7 +171,10 @@ def kc_command(
     frame: Annotated[Frame | None, typer.Option(
         help="model frame (default: the model's own corner)")] = None,
     loaded_radius: Annotated[float | None, typer.Option(
-        help="loaded tyre radius (mm; default: the model's own corner)")] = None,
+        help="loaded tyre radius (mm; default: the model's own corner, or --tyre)")] = None,
+    tyre: Annotated[pathlib.Path | None, typer.Option(
+        help="the tyre (.tir): the loaded radius is its radius at the design load (the tyre "
+        "force acts at the ground contact point of that radius)")] = None,
     kingpin: Annotated[str | None, typer.Option(
         help="steering axis markers 'upper,lower'")] = None,
     out: Annotated[pathlib.Path | None, typer.Option(
@@ -180,7 +189,8 @@ def kc_command(
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mech = _model(model, side)
-        corner = _corner(mech, frame, loaded_radius, kingpin)
+        corner = _corner(mech, frame, loaded_radius, kingpin, tyre)
+        radius = loaded_radius_origin(mech, corner, given=loaded_radius, tyre_file=tyre)
         t0 = time.perf_counter()
         with err.status(f"running {event.value} on {mech.name} (the first run compiles, "
                         "~30 s)..."):
@@ -202,6 +212,7 @@ def kc_command(
         data = _json(ev, mech.name)
         if load is not None:
             data["design_load"] = load
+        data["loaded_radius"] = radius
         print_json(data)
         return
     con = console(markup=False)
@@ -212,6 +223,10 @@ def kc_command(
     if load is not None:
         con.print(Text(f"Design load {load['value']:.6g} N ({load['origin']}); --fz sets "
                        "another."), highlight=False)
+    if radius is not None and (radius["default"] or tyre is not None):
+        con.print(Text(f"Loaded radius {radius['value']:.6g} mm ({radius['origin']}); the tyre "
+                       "force acts at the ground contact point this far below the wheel "
+                       "centre in the wheel plane."), highlight=False)
     if out is not None:
         con.print(Text("figures: " + ", ".join(str(p) for p in paths)), highlight=False)
 

@@ -629,7 +629,7 @@ def _outboard_axis(toe: float, camber: float, side: str) -> np.ndarray:
     return spin if side == "left" else -spin
 
 
-def _corner(pts, template, side, radius, centre):
+def _corner(pts, template, side, radius, centre, stated=True):
     """The wheel: ISO frame, this side, `radius` below the wheel centre, design load computed
     (None), steering axis through the ball joints (DoubleWishbone), from the strut top to the
     lower ball joint (MacPhersonStrut), or from the upper ball joint to the virtual pivot of
@@ -646,7 +646,7 @@ def _corner(pts, template, side, radius, centre):
             pts.point("Trailing Link", "Location Upright"))
         kingpin = ("ua_upright", ("upright", design_offset(pivot, centre, "iso", side)))
     return Corner(kingpin=kingpin, side=side, frame="iso", loaded_radius=radius,
-                  design_load=None)
+                  design_load=None, loaded_radius_stated=stated)
 
 
 def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
@@ -660,7 +660,9 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
     - `path`: the JSON file (comments // and /* */ are allowed, as in Chrono).
     - `side`: 'left' (the file's points) or 'right' (mirrored in y).
     - `loaded_radius`: distance (mm) from the wheel centre down to the contact patch load
-      point, and the corner's loaded radius; default `DEFAULT_LOADED_RADIUS` (330 mm).
+      point, and the corner's loaded radius; default `DEFAULT_LOADED_RADIUS` (330 mm), marked
+      as a default (`Corner.loaded_radius_stated` False: the file carries no tyre, and
+      `diffsusp kc` says which radius it uses).
     - `wheel_travel`: add driver 'wheel_travel' (wheel-centre z travel, mm).
     - `spring_interpolation`: 'linear' (Chrono's) or 'akima' (smooth) for a spring curve
       (`SPRING_INTERPOLATIONS`).
@@ -708,7 +710,7 @@ def read_chrono(path, *, side: str = "left", loaded_radius: float | None = None,
         b.load_point("wheel_centre", marker="wheel_centre")
         if wheel_travel:
             b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))
-        b.corner(_corner(pts, template, side, radius, centre))
+        b.corner(_corner(pts, template, side, radius, centre, loaded_radius is not None))
     except ModelError as e:
         if isinstance(e, ModelFileError):
             raise

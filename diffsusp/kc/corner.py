@@ -53,13 +53,15 @@ _LOADS = {}  # id(mechanism) → (mechanism, contact point, up, load): a compute
 
 def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
                      wheel_centre: str | int | None = None, *,
-                     loaded_radius: float | None = None) -> float:
+                     loaded_radius: float | None | str = "corner") -> float:
     """The vertical contact load (N, along `up`) that holds the wheel centre at its design
-    height, `mech` without its motion drivers (spec: stiffness §1.4). With `loaded_radius`
+    height, `mech` without its motion drivers (spec: stiffness §1.4). With a `loaded_radius`
     (mm) the load acts where the K&C force events apply it: at the ground contact point of a
     wheel of that radius, moving with the wheel plane (`diffsusp.kc.rig.add_road_contact`,
-    `Loads.contact_radius`; `up` must then be the road normal +z); without, at load point
-    `contact_point` (fixed on the wheel carrier). Solved through the statics for any number
+    `Loads.contact_radius`; `up` must then be the road normal +z); 'corner' (default): the
+    loaded radius of the model's corner under the contact point's prefix (the same load as
+    `Corner.resolve`), or, for a model that states no corner, the load point; None: at load
+    point `contact_point` (fixed on the wheel carrier). Solved through the statics for any number
     of degrees of freedom: the height of the solved wheel centre is a function of the load,
     h(F), and a safeguarded secant (Illinois once bracketed) finds h(F) = h(design) to 1e-9
     mm, each step an equilibrium warm-started from the previous one. The start is the
@@ -76,6 +78,12 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
     if wheel_centre is None:
         wheel_centre = prefix + "wheel_centre"
     wc = wheel_centre if isinstance(wheel_centre, int) else mech.markers.index(wheel_centre)
+    if isinstance(loaded_radius, str):
+        if loaded_radius != "corner":
+            raise InputError(f"equilibrium_load: loaded_radius must be a length (mm), 'corner' "
+                             f"or None; got {loaded_radius!r}.")
+        stated = [c for c in mech.corners if c.prefix + c.contact_point == contact_point]
+        loaded_radius = float(stated[0].loaded_radius) if stated else None
     key = (contact_point, tuple(up), wc, loaded_radius)
     hit = _LOADS.get(id(mech))
     if hit is not None and hit[0] is mech and hit[1] == key:

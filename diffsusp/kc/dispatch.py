@@ -65,11 +65,17 @@ def parse_range(text, what: str) -> np.ndarray:
                      "-80:80:161) or one number.")
 
 
-def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None):
+def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None, tyre=None):
     """The model's own corner (`Mechanism.corners`) with some of its settings replaced (None:
     that corner, unchanged; a model without one starts from `Corner()`). `kingpin`: two marker
-    names, a tuple or the text 'upper,lower'."""
-    if frame is None and loaded_radius is None and kingpin is None and side is None:
+    names, a tuple or the text 'upper,lower'. `tyre` (a `diffsusp.tyre.MagicFormula6`): the
+    loaded radius is the tyre's at the design load (`tyre_loaded_radius`); not with
+    `loaded_radius`."""
+    if tyre is not None and loaded_radius is not None:
+        raise InputError("give the loaded radius (--loaded-radius) or a tyre (--tyre), not "
+                         "both: the tyre's radius at the design load is the loaded radius.")
+    if frame is None and loaded_radius is None and kingpin is None and side is None and (
+            tyre is None):
         return None  # the model's registered corner
     try:
         base = default_corner(mech)
@@ -87,7 +93,77 @@ def corner_with(mech, *, frame=None, loaded_radius=None, kingpin=None, side=None
         if len(names) != 2:
             raise InputError("--kingpin must be two marker names 'upper,lower'.")
         changes["kingpin"] = tuple(n.strip() for n in names)
-    return dataclasses.replace(base, **changes)
+    if loaded_radius is not None:
+        changes["loaded_radius_stated"] = True
+    out = dataclasses.replace(base, **changes)
+    if tyre is not None:
+        radius, _ = tyre_loaded_radius(mech, tyre, out)
+        out = dataclasses.replace(out, loaded_radius=radius, loaded_radius_stated=True)
+    return out
+
+
+def tyre_loaded_radius(mech, tyre, corner=None, *, tol: float = 1e-6, steps: int = 8
+                       ) -> tuple[float, float]:
+    """The loaded radius (mm) of `tyre` (a `diffsusp.tyre.MagicFormula6`: UNLOADED_RADIUS and
+    its vertical model, `tyre.vertical.loaded_radius`) under the corner's design load, and
+    that load (N): the load the corner states, or the one that holds the wheel centre at its
+    design height with the tyre force at the ground contact point of that radius — a fixed
+    point (the radius sets the load's lever arm, the load the tyre's deflection), iterated
+    until the radius moves less than `tol` mm (two or three rounds: a millimetre of radius
+    changes the load by little). `corner`: default the model's."""
+    from ..tyre.vertical import loaded_radius as vertical_radius
+    from .corner import equilibrium_load
+
+    c = corner or default_corner(mech)
+
+    def radius(load: float) -> float:
+        state = vertical_radius(tyre, max(float(load), 0.0))
+        if not bool(np.asarray(state.converged)):
+            raise InputError(f"the tyre's vertical model has no loaded radius at {load:.6g} N "
+                             "(the corner's design load).")
+        return float(np.asarray(state.rl))
+
+    if c.design_load is not None:
+        return radius(c.design_load), float(c.design_load)
+    wc = mech.markers.index(c.prefix + c.wheel_centre)
+    r = float(c.loaded_radius)
+    for _ in range(steps):
+        load = equilibrium_load(mech, c.prefix + c.contact_point, (0.0, 0.0, 1.0), wc,
+                                loaded_radius=r)
+        new = radius(load)
+        if abs(new - r) < tol:
+            return new, load
+        r = new
+    raise InputError("the tyre's loaded radius and the corner's design load do not settle "
+                     f"(last radius {r:.6g} mm): state the corner's design_load.")
+
+
+def loaded_radius_origin(mech, corner=None, *, given: float | None = None,
+                         tyre_file=None) -> dict:
+    """Where the loaded radius of an event comes from, as `diffsusp kc` prints it (and puts in
+    `--json`): `{"value": mm, "origin": text, "default": bool}` — the tyre file's radius at
+    the design load (`tyre_file`, the corner already carrying it), the option (`given`), the
+    model's corner, or a reader's default (`Corner.loaded_radius_stated` False: a Chrono
+    suspension file carries no tyre). The first corner of an axle; None for a model that
+    states no corner (the event then says what is missing)."""
+    if corner is None:
+        if not mech.corners:
+            return None
+        corner = mech.corners[0]
+    c = corner
+    value = float(c.loaded_radius)
+    if tyre_file is not None:
+        origin = (f"the tyre {tyre_file}: its loaded radius at the design load (UNLOADED_RADIUS "
+                  "and the vertical model)")
+    elif given is not None:
+        origin = "given (--loaded-radius)"
+    elif c.loaded_radius_stated:
+        origin = "stated by the model's corner"
+    else:
+        origin = ("default: the model states no tyre (a Chrono suspension file carries none); "
+                  "--tyre FILE.tir or --loaded-radius sets it")
+    return {"value": value, "origin": origin,
+            "default": tyre_file is None and given is None and not c.loaded_radius_stated}
 
 
 def mirrored_corner(corner: Corner) -> Corner:
@@ -217,5 +293,5 @@ def event_json(ev, model_name: str) -> dict:
     return out
 
 
-__all__ = ["EVENTS", "corner_with", "default_fz_range", "event_json", "mirrored_corner",
-           "parse_range", "reference_case", "run_event"]
+__all__ = ["EVENTS", "corner_with", "default_fz_range", "event_json", "loaded_radius_origin",
+           "mirrored_corner", "parse_range", "reference_case", "run_event", "tyre_loaded_radius"]

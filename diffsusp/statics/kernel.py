@@ -185,16 +185,18 @@ def load_wrench(pi, ri, pf, rf, x0m, r0f, force, moment):
     return jnp.concatenate([f, _mv(axes, moment) + cross(xm - pi, f), jnp.zeros(6, f.dtype)])
 
 
+_E_Z = np.array([0.0, 0.0, 1.0])
+
+
 def contact_load_wrench(pi, ri, pf, rf, x0m, r0f, spin0, force, moment, radius):
     """`load_wrench` with the force at the ground contact point of a wheel of `radius` about
     marker m (`Loads.contact_radius`): C = x_m − R·u, u = unit(e_z − (e_z·s)s) with s = R_I·s0
     the marker's current z axis (the spin axis). The point moves with the wheel plane, so the
     twist Jacobian carries the load's geometric stiffness; R = 0 is `load_wrench`."""
     s = _mv(ri, spin0)
-    v = jnp.zeros(3, s.dtype).at[2].set(1.0) - s[2] * s
-    norm = _safe_norm(v)
-    u = v / jnp.where(norm > 0.0, norm, 1.0)
-    xm = pi + _mv(ri, x0m) - radius * u
+    v = _E_Z - s[2] * s
+    vv = _dot(v, v)
+    xm = pi + _mv(ri, x0m) - (radius * jax.lax.rsqrt(jnp.where(vv > 0.0, vv, 1.0))) * v
     axes = _mm(rf, r0f)
     f = _mv(axes, force)
     return jnp.concatenate([f, _mv(axes, moment) + cross(xm - pi, f), jnp.zeros(6, f.dtype)])
