@@ -12,6 +12,7 @@ the `error:` and `warning:` labels, never for text that comes from a file, a nam
 
 import contextlib
 import enum
+import errno
 import json
 import os
 import signal
@@ -142,6 +143,9 @@ def interruptible():
         signal.signal(signal.SIGTERM, previous)
 
 
+_WRITE_ERRNOS = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS)
+
+
 @contextlib.contextmanager
 def cli_errors(*, record_warnings: bool = True):
     """Map the library's exceptions to messages and exit codes (bad input 2, non-convergence 3,
@@ -168,8 +172,10 @@ def cli_errors(*, record_warnings: bool = True):
             raise
         except ConvergenceError as e:
             raise failed(str(e), EXIT_NOT_CONVERGED) from None
-        except (FileNotFoundError, IsADirectoryError, PermissionError) as e:
+        except FileNotFoundError as e:
             raise failed(f"cannot read {e.filename}: {e.strerror}", EXIT_BAD_INPUT) from None
+        except (IsADirectoryError, PermissionError) as e:
+            raise failed(f"cannot access {e.filename}: {e.strerror}", EXIT_BAD_INPUT) from None
         except ModelError as e:
             code = EXIT_BAD_INPUT if getattr(e, "bad_input", False) else EXIT_MODEL_ERROR
             raise failed(str(e), code) from None
@@ -180,6 +186,11 @@ def cli_errors(*, record_warnings: bool = True):
             raise failed("out of memory; use a smaller model or table.",
                          EXIT_BAD_INPUT) from None
         except Exception as e:
+            if isinstance(e, OSError) and e.errno in _WRITE_ERRNOS:
+                # a full disk, a file-size limit, a read-only file system: what could not be
+                # known before the work (bad_inputs D11); atomic writers leave no half file
+                raise failed(f"cannot write {e.filename or 'an output file'}: {e.strerror}",
+                             EXIT_BAD_INPUT) from None
             if os.environ.get("DIFFSUSP_DEBUG"):
                 raise
             raise failed(f"internal error ({type(e).__name__}: {e}). This is a bug in "

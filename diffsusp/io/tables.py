@@ -445,7 +445,15 @@ class TableWriter:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind, value, tb):
+        if kind is not None and self.kind == "csv" and not self._file.closed:
+            # the rows so far stay readable; the mark says the table is not complete (a
+            # reader skips '#' lines): bad_inputs D12
+            try:
+                self._file.write(f"# INCOMPLETE: {self.rows} rows written, then "
+                                 f"{kind.__name__}\n")
+            except OSError:
+                pass
         self.close()
         return False
 
@@ -465,13 +473,20 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     for name in arrays:
         if _HEADER_RE.match(name) or "\n" in name or "\r" in name:
             raise ValueError(f"write_table: column name {name!r} cannot hold a unit or a newline.")
+    from .files import write_text_atomic
+
+    # Through a temporary file renamed at the end: an interrupted or failed write never leaves
+    # a table cut after whole rows under the final name (bad_inputs D12).
     if kind == "csv":
-        with open(path, "w", newline="", encoding="utf-8") as f:
-            writer = csv.writer(f, lineterminator="\n")
-            writer.writerow([_header(n, units.get(n)) for n in arrays])
-            for row in zip(*arrays.values(), strict=True):
-                writer.writerow([_format(v) for v in row])
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow([_header(n, units.get(n)) for n in arrays])
+        for row in zip(*arrays.values(), strict=True):
+            writer.writerow([_format(v) for v in row])
+        write_text_atomic(path, buf.getvalue())
         return
+    import tempfile
+
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -481,7 +496,16 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     ]
     table = pa.Table.from_arrays([pa.array(a) for a in arrays.values()],
                                  schema=pa.schema(fields))
-    pq.write_table(table, path)
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(os.fspath(path))}.", dir=folder)
+    os.close(fd)
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
 
 
 # ---------------------------------------------------------------------------------- load cases
