@@ -7,7 +7,10 @@ Methods: `direct`, `iterative`, `least-squares` (MODEL: a built-in model or a mo
 truths are its bushing stiffnesses × a log-uniform factor in `--spread`, default 0.5–2; the
 measurements four landmarks per part with σ `--noise` mm), `mf-fit` (MODEL: the start `.tir`
 file; the truths its coefficients × (1 ± `--spread`), default ±20 %; the measurements the file's
-bench programme with σ = a + b·|F|, `--noise a,b`, default 20 N + 1 %).
+bench programme with σ = a + b·|F|, `--noise a,b`, default 20 N + 1 %), `geometry` (MODEL: a
+built-in model or a model file; the truths its located joints' hardpoints displaced by a uniform
+±`--spread` mm per coordinate, default 5; `--params`: the joints to locate, default every joint
+the model implies; the measurements four landmarks per part with σ `--noise` mm, default 0.05).
 """
 
 import enum
@@ -20,7 +23,7 @@ import typer
 from .common import EXIT_BAD_INPUT, check_output, cli_errors, console, enable_x64, fail, print_json
 
 Method = enum.StrEnum("Method", {v: v for v in ("direct", "iterative", "least-squares",
-                                                 "mf-fit")})
+                                                 "mf-fit", "geometry")})
 Cases = enum.StrEnum("Cases", {v: v for v in ("corner", "thesis")})
 
 
@@ -81,10 +84,12 @@ def rehearse_command(
         "σ = a + b·|F| in N (mf-fit, default 20,0.01).")] = None,
     spread: Annotated[str | None, typer.Option(
         help="Spread of the truths: 'low,high' factors on the stiffnesses (default 0.5,2); "
-        "a relative ± on the MF coefficients (default 0.2).")] = None,
+        "a relative ± on the MF coefficients (default 0.2); ± mm on the joint hardpoints "
+        "(geometry, default 5).")] = None,
     params: Annotated[str | None, typer.Option(
         help="Parameters to draw and identify, comma-separated (default: every non-zero "
-        "bushing stiffness / every coefficient the fit estimates).")] = None,
+        "bushing stiffness / every coefficient the fit estimates / every joint the model "
+        "implies, by joint name for geometry).")] = None,
     cases: Annotated[Cases, typer.Option(
         help="Load cases (suspension): the corner's combined-load grid, or the thesis's "
         "Table 5-1.")] = Cases.corner,
@@ -104,6 +109,8 @@ def rehearse_command(
     with cli_errors():
         if method == "mf-fit":
             scenario = _mf_scenario(model, noise, spread, params)
+        elif method == "geometry":
+            scenario = _geometry_scenario(model, noise, spread, params, cases)
         else:
             from .common import load_model_file
 
@@ -157,3 +164,36 @@ def _mf_scenario(path: str, noise, spread, params):
     names = [n.strip() for n in params.split(",")] if params else None
     return F.FitRehearsal(start, programme, names, spread=rel[0],
                           noise={"FY": (ab[0], ab[1])}, tir=tir)
+
+
+def _geometry_scenario(model: str, noise, spread, params, cases):
+    from ..identify.geometric import joints_from_model
+    from ..identify.rehearse import GeometryScenario
+    from .common import load_model_file
+
+    mech = load_model_file(model).mechanism
+    sigma = _floats(noise, "noise") if noise is not None else [0.05]
+    if len(sigma) != 1 or not sigma[0] > 0:
+        raise fail(f"--noise must be one positive landmark σ (mm); got {noise!r} (a noise of 0 "
+                   "would call everything identified with σ = 0).", EXIT_BAD_INPUT)
+    mm = _floats(spread, "spread") if spread is not None else [5.0]
+    if len(mm) != 1 or not mm[0] > 0:
+        raise fail(f"--spread must be one displacement > 0 (mm) of the joint hardpoints; got "
+                   f"{spread!r}.", EXIT_BAD_INPUT)
+    joints = joints_from_model(mech, mech.parts)[0]
+    if params:
+        wanted = [n.strip() for n in params.split(",") if n.strip()]
+        known = [j.name for j in joints]
+        unknown = [n for n in wanted if n not in known]
+        if unknown or not wanted:
+            raise fail(f"unknown parameter(s) {', '.join(unknown) or repr(params)}: --params "
+                       f"names the joints to locate; the model's: {', '.join(known)}.",
+                       EXIT_BAD_INPUT)
+        joints = tuple(j for j in joints if j.name in wanted)
+    if cases == Cases.thesis:
+        from ..models import thesis_load_cases
+
+        loads = thesis_load_cases(mech)
+    else:
+        loads = corner_cases(mech)
+    return GeometryScenario(mech, loads, joints, noise=sigma[0], spread=mm[0])
