@@ -123,9 +123,25 @@ def test_eval_tables_exit_2_before_work(tmp_path):
     assert r.exit_code == 2 and "1 distinct input point" in _text(r), r.output
 
 
-def test_options_and_help(tmp_path):
+def test_options_and_help(tmp_path, monkeypatch):
     """D7 (`spec --loads`), D14 (`identify --cutoff/--radius/--rolling-radius`), D17 (`rig`
     sizes and values), D9 (`onboard --window-time/--grouping`), D21 (units kept in --help)."""
+    import diffsusp.tyre as tyre
+    from diffsusp.errors import InputError
+    from diffsusp.tyre import rig
+
+    def stop(*a, **k):   # the work itself is not the subject: the warnings before it are
+        raise InputError("stopped before the work")
+
+    monkeypatch.setattr(tyre, "specification", stop)
+    monkeypatch.setattr(rig, "tyre_rig", stop)
+    r = _run("tyre", "spec", BOOK, "--loads", "3000,90000")
+    assert "90000 N beyond FZMAX" in _text(r), r.output
+    r = _run("tyre", "rig", BOOK, "--slip-angle", "-90:90:3", "--slip-ratio", "5",
+             "--camber-offset", "1e9")
+    for limit in ("ALPMAX", "KPUMAX", "CAMMAX", "side-on"):
+        assert limit in _text(r), (limit, r.output)
+    monkeypatch.undo()
     for loads in ("nan", "-2000", "0", "inf", ",", "", "3000,,abc"):
         r = _run("tyre", "spec", BOOK, "--loads", loads, "--json")
         assert r.exit_code == 2 and "--loads" in _text(r), (loads, r.output)
