@@ -32,6 +32,12 @@ def test_fleet_bad_inputs(tmp_path):
         r = _run("tyre-fit", "--items", fifo, "--out", tmp_path / "o2", "--model", TIR,
                  "--option", opt)
         assert r.exit_code == 2 and opt.split("=")[0] in _text(r), (opt, r.output)
+    for recipe, opt in (("direct", "colour=red"), ("iterative", "tolerance=1"),
+                        ("least-squares", "sigmas=0.1"), ("kc", "event=bounce")):
+        r = _run(recipe, "--items", fifo, "--out", tmp_path / "o4", "--model",
+                 "pseudo_mcpherson", "--option", opt)
+        assert r.exit_code == 2 and opt.split("=")[-1 if recipe == "kc" else 0] in _text(r), \
+            (recipe, r.output)
     bad_model = tmp_path / "start.tir"
     bad_model.write_text("[MODEL]\nFITTYP = 61\n[VERTICAL]\nFNOMIN = -1\n")
     r = _run("tyre-fit", "--items", fifo, "--out", tmp_path / "o3", "--model", bad_model)

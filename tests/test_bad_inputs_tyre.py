@@ -233,6 +233,11 @@ def test_identify_units_and_plausibility(tmp_path):
     path = write("nan.csv", nan)
     r = _run("tyre", "identify", path)
     assert r.exit_code == 2 and f"{path}:11: FX" in _text(r), r.output
+    ms = dict(base)
+    ms["t"] = ms.pop("t [ms]")      # milliseconds written without their unit
+    path = write("ms.csv", ms)
+    r = _run("tyre", "identify", path)
+    assert r.exit_code == 2 and f"{path}:1: t:" in _text(r) and "[ms]" in _text(r), r.output
     back = dict(base)
     back["t [ms]"] = np.concatenate([np.arange(30) * 5.0, np.arange(30) * 5.0])
     path = write("back.csv", back)

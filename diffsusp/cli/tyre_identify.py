@@ -69,7 +69,7 @@ SPEED_RATIO = (0.5, 2.0)
 its unit (km/h read as mm/s: 278× off, bad_inputs D5) or ω in rpm read as rad/s falls outside."""
 
 
-def _check_bench(table, cols: dict, rolling_radius: float) -> None:
+def _check_bench(table, cols: dict, rolling_radius: float, cutoff: float) -> None:
     """The plausibility of a Flat Trac table, each error naming the file, the line and the
     column (bad_inputs D5, D20): finite channels, time increasing, loads >= 0 (the reader), the
     belt speed consistent with the wheel spin and the rolling radius."""
@@ -95,6 +95,13 @@ def _check_bench(table, cols: dict, rolling_radius: float) -> None:
             i = int(np.flatnonzero(back)[0]) + 1
             raise bad("t", i, f"time {t[i]:g} s after {t[i - 1]:g} s in one segment: time "
                       "must increase (sort by segment, then time)")
+        steps = np.diff(t)[same]
+        if steps.size and 1.0 / float(np.median(steps)) < 4.0 * cutoff:
+            unit = table.units.get("t") or "s (no unit given)"
+            raise fail(f"{path}:{table.header_line}: t: a time step of {np.median(steps):.4g} "
+                       f"s ({unit}) is a rate below 4x the {cutoff:g} Hz cut-off: time in "
+                       "milliseconds without 't [ms]'? Or record faster / lower --cutoff",
+                       EXIT_BAD_INPUT)
     if "speed" in cols and "omega" in cols:
         speed, omega = np.abs(cols["speed"]), np.abs(cols["omega"])
         ref = float(np.median(omega)) * rolling_radius
@@ -217,7 +224,7 @@ def identify_command(
 
         raw = read_tyre_table(data, "Flat Trac table")   # regular file, UTF-8, FZ >= 0, units
         table = _columns(raw)
-        _check_bench(raw, table, rolling_radius)
+        _check_bench(raw, table, rolling_radius, cutoff)
         enable_x64()
         from diffsusp.tyre import bench, convert
         rep = bench.identify(table, structure=structure, cutoff=cutoff,

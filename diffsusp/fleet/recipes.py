@@ -81,6 +81,23 @@ class Recipe:
     def check(self) -> None:
         """Raise `InputError` for options the recipe cannot use, before any item runs."""
 
+    def _check_keywords(self, function, own=()) -> None:
+        """Every option a keyword argument of `function` (or one of `own`): an unknown key is
+        bad input before any item runs, not ignored nor an error on every item (D18)."""
+        import inspect
+
+        from ..errors import InputError
+
+        params = inspect.signature(function).parameters
+        if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+            return
+        known = [n for n, p in params.items()
+                 if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)][2:] + list(own)
+        unknown = [k for k in self.options if k not in known]
+        if unknown:
+            raise InputError(f"{self.name} option(s) {', '.join(map(repr, unknown))} unknown; "
+                             f"known: {', '.join(known)}.")
+
     def read(self, mech, path):
         from .. import measure
 
@@ -107,6 +124,11 @@ class Direct(Recipe):
 
     name = "direct"
 
+    def check(self) -> None:
+        from .. import identify
+
+        self._check_keywords(identify.direct)
+
     def run_one(self, mech, data):
         from .. import identify
 
@@ -121,6 +143,11 @@ class Iterative(Recipe):
     N·mm/rad."""
 
     name = "iterative"
+
+    def check(self) -> None:
+        from .. import identify
+
+        self._check_keywords(identify.iterative)
 
     def run_one(self, mech, data):
         from .. import identify
@@ -180,6 +207,11 @@ class LeastSquares(Recipe):
     name = "least_squares"
     batched = True
     _OWN = ("bushings", "axes", "sigma", "sigma_rotation", "pad_to")
+
+    def check(self) -> None:
+        from ..identify import least_squares_batch
+
+        self._check_keywords(least_squares_batch, self._OWN)
 
     def read(self, mech, path):
         return self._measurement(super().read(mech, path))
@@ -321,6 +353,18 @@ class KC(Recipe):
     @property
     def items_are_models(self) -> bool:
         return self.event != "table"
+
+    def check(self) -> None:
+        from ..errors import InputError
+        from ..kc.dispatch import EVENTS
+
+        unknown = sorted(set(self.options) - {"event", *self._RANGES})
+        if unknown:
+            raise InputError(f"unknown kc option(s) {', '.join(unknown)}; the options are "
+                             f"event and its ranges ({', '.join(self._RANGES)}).")
+        if self.event != "table" and self.event not in EVENTS:
+            raise InputError(f"unknown event '{self.event}'; known events: table, "
+                             f"{', '.join(EVENTS)}.")
 
     def read(self, mech, path):
         return _load_table(mech, path)
