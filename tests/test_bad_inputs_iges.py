@@ -1,5 +1,5 @@
 """`io.read_iges` on hostile files (issue 28 item 11, `reviews/bad_inputs.md` D19): an entity of
-a million parameters reads in linear time, a model scale that sends coordinates to infinity is
+200 000 parameters reads in linear time, a model scale that sends coordinates to infinity is
 an error naming the line. The files are written here (a point and a line)."""
 
 import time
