@@ -113,6 +113,12 @@ def test_table_csv_json_agree_and_swapped_landmarks_are_flagged(tables, tmp_path
     assert f"case(s) {', '.join(str(c + 1) for c in SWAPPED)}:" in warning
     assert "identified" not in status.values()
     assert "INCONSISTENT" in text and "part 'upright'" in " ".join(text.split())
+    # the re-ordering the warning offers matches the landmarks by their distances: consistent
+    fixed = _run("identify", "geometry", MODEL, "-m", bad, "--reorder", "--json")
+    assert fixed.exit_code == 0, fixed.output
+    summary = json.loads(fixed.output)
+    assert summary["consistency"]["consistent"] and not summary["warnings"]
+    assert {p["parameter"]: p["status"] for p in summary["parameters"]} == report["good"][2]
 
 
 def test_a_small_geometry_rehearsal_claims_nothing_wrong(chrono):
