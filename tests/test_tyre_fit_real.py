@@ -216,3 +216,30 @@ def test_outlier_rehearsal_truths_within_three_sigma(feda):
         assert np.all(np.abs(z[ok]) <= 3.0), (i, dict(zip(np.array(sc.names)[ok], z[ok],
                                                            strict=True)))
         assert any("outlier(s) beyond 5σ left out" in s for s in rep.stages), rep.stages
+
+
+def test_noise_estimate_on_coarse_sweeps(feda):
+    """21 slip angles over ±0.2 rad (a coarse programme): the third differences see the curve's
+    own bending (33 N on exact data of the 70 psi file), the estimate takes the fifth (under
+    10 N). A fit whose camber shift is held at 0 (PVY3, PVY4: a model that cannot follow the
+    data) on a precise rig, σ = 2 N + 0.2 % |F|, then does not fit the data; with the inflated
+    yardstick it was called consistent."""
+    (stir, start), (_, truth) = feda[60], feda[70]
+    lim = truth.limit
+    inp = F.bench_programme(truth, loads=np.linspace(lim["FZMIN"], lim["FZMAX"], 3),
+                            cambers=[lim["CAMMIN"], 0.0, lim["CAMMAX"]], n_slip=21,
+                            channels=("FY",))
+    tr = F.with_ranges(truth, inp)
+    a, b, _ = F.fit_start.estimate_noise(F.simulate(tr, inp))["FY"]
+    assert a + b * 30000.0 < 10.0, (a, b)
+    data = F.simulate(tr, inp, noise={"FY": (2.0, 0.002)}, seed=3)
+    a, b, _ = F.fit_start.estimate_noise(data)["FY"]
+    assert a + b * 10000.0 < 40.0, (a, b)          # truth 22 N at 10 kN
+    _, rep = F.fit(start.replace(PVY3=0.0, PVY4=0.0), data, tir=stir)
+    assert rep.rms["FY"] > 60.0                     # the misfit (the noise: 2-60 N)
+    assert not rep.consistency.consistent and rep.verdict.startswith("does not fit"), \
+        rep.table()
+    assert "identified" not in rep.status_list
+    # the same programme, the model able to follow it: consistent
+    _, rep = F.fit(start, data, tir=stir)
+    assert rep.consistency.consistent, rep.table()
