@@ -98,15 +98,23 @@ def read_input(path, what: str, kind: str = "model") -> bytes:
     return data
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_text_atomic(path, text: str) -> None:
     """Write `text` (UTF-8) to `path` through a temporary file in the same folder, renamed over
     `path` at the end: an interrupted or failed write never leaves a truncated file under the
-    final name (a reader sees the old file or the new one)."""
+    final name (a reader sees the old file or the new one). The file gets the permissions a
+    plain `open` would give it (0666 less the umask), not the temporary file's 0600."""
     path = pathlib.Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
             f.write(text)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

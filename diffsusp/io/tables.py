@@ -490,6 +490,8 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from .files import _umask
+
     fields = [
         pa.field(n, pa.float64(), metadata={"unit": units[n]} if units.get(n) else None)
         for n in arrays
@@ -501,6 +503,7 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     os.close(fd)
     try:
         pq.write_table(table, tmp)
+        os.chmod(tmp, 0o666 & ~_umask())  # a plain open's permissions, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
