@@ -341,19 +341,25 @@ def rig_measurement(mech, table: RigTable, corner=None):
 def write_rig_table(path, inputs: dict, channels: dict, sigma: dict, units: dict | None = None
                     ) -> None:
     """Write a rig table (CSV): `inputs` and `channels` name → (cases,) values in the column's
-    unit (`units`: name → unit, default the library's), `sigma` name → σ per channel (the
-    `# sigma:` line, in the same units). What `read_rig_table` reads back."""
+    unit (`units`: name → unit, default the library's), `sigma` channel → σ in the same unit:
+    a number (the `# sigma:` line) or (cases,) values (a column `sigma.<channel>`). What
+    `read_rig_table` reads back."""
     from ..io.files import write_text_atomic
 
-    units = units or {}
-    names = [*inputs, *channels]
-    columns = {**inputs, **channels}
-    n = {len(np.atleast_1d(v)) for v in columns.values()}
-    if len(n) != 1:
+    units = dict(units or {})
+    scalar = {k: float(v) for k, v in sigma.items() if np.ndim(v) == 0}
+    columns = {**inputs, **channels,
+               **{f"sigma.{k}": v for k, v in sigma.items() if np.ndim(v) > 0}}
+    for k in sigma:
+        units.setdefault(f"sigma.{k}", units.get(k))
+    names = list(columns)
+    if len({np.size(v) for v in columns.values()}) != 1:
         raise InputError("write_rig_table: every column must have one length.")
     head = ",".join(f"{k} [{units[k]}]" if units.get(k) else k for k in names)
-    lines = ["# K&C rig table (diffsusp.measure.rig)",
-             "# sigma: " + ", ".join(f"{k}={float(v):.17g}" for k, v in sigma.items()), head]
+    lines = ["# K&C rig table (diffsusp.measure.rig)"]
+    if scalar:
+        lines.append("# sigma: " + ", ".join(f"{k}={v:.17g}" for k, v in scalar.items()))
+    lines.append(head)
     data = np.column_stack([np.atleast_1d(np.asarray(columns[k], dtype=float)) for k in names])
     lines += [",".join(f"{v:.17g}" for v in row) for row in data]
     write_text_atomic(path, "\n".join(lines) + "\n")
