@@ -60,6 +60,22 @@ without turn slip, as before. Choices where the sources differ or are silent:
   λ_Fz0;
 - M_x: the Besselink draft (49) with q_sx12…q_sx14; M_y: paper (A48), negative in ISO-W.
 
+**Friction ellipse** (`friction_ellipse`, the `FE_METHOD = 'YES'` of MF-Tyre 5.0 / PAC2002
+files, e.g. the FEDA truck tyre's; Chrono's `ChPac02Tire` with USE_MODE 4): combined slip
+combines the pure-slip forces instead of using the R* coefficients. With F_x0, F_y0 the pure-slip
+forces, S_Vx, S_Vy, S_Hx, S_Hy their shifts, K_xκ, K_yα the slip stiffnesses, D_x, D_y the peaks:
+κ_c = κ + S_Hx + S_Vx/K_xκ, α_c = α + S_Hy + S_Vy/K_yα, s = sin α_c,
+F_x = F_x0·D_y|κ_c| / √((D_y·κ_c)² + ((F_x0 − S_Vx)·s)²),
+F_y = F_y0·D_x|s| / √((D_x·s)² + ((F_y0 − S_Vy)·κ_c)²),
+M_z = −t₀·F_y + M_zr0 (the pure-slip trail and residual moment, no s·F_x term). These are
+Chrono's μ_x,c/μ_x,act and μ_y,c/μ_y,act (β = arccos(|κ_c|/√(κ_c² + s²))) with F_z cancelled,
+written without 0/0: where both terms of a root vanish (κ_c = 0 with s = 0 or F_x0 = S_Vx, as at
+κ = 0 on a file without κ shifts) the factor is its limit along the slip, D_y/√(D_y² + (K_xκ·s)²)
+(D_x/√(D_x² + (K_yα·κ_c)²)), so values and derivatives stay finite there. M_x and M_y take the
+combined F_x, F_y. At κ_c = 0 the factor of F_y is 1 (pure lateral slip unchanged) and at s = 0
+that of F_x. This M_z uses the combined F_y with its camber terms (the plain combined M_z uses F_y0
+at γ = 0). MFeval and TNO's 6.x files have no FE_METHOD: it is off for them.
+
 **Evaluation.** For batches of `FAST_MATH_POINTS` points or more, arctan, sin, cos, tan and
 the equivalent slips' sqrt are the vectorised float64 implementations of `diffsusp.tyre._math`
 (Cephes algorithms, relative error about 1e-16, exact custom derivatives) instead of XLA's
@@ -166,12 +182,16 @@ class MagicFormula6(eqx.Module):
 
     **Fields:** `coefficients` (name → float64 scalar array, library units: UNLOADED_RADIUS mm,
     LONGVL mm/s, pressures Pa; differentiable, vmappable), `version` ("5.2", "6.1" or "6.2",
-    static), `limits` (static tuple of (name, value) pairs in SI/rad: FZMIN … PRESMAX).
+    static), `limits` (static tuple of (name, value) pairs in SI/rad: FZMIN … PRESMAX),
+    `friction_ellipse` (static bool, default False: the file's `FE_METHOD = 'YES'`; combined
+    slip by the friction ellipse instead of the R* coefficients, module docstring "Friction
+    ellipse"; `check_limits` says so when the inputs combine slips).
     """
 
     coefficients: dict[str, Float[Array, ""]]
     version: str = eqx.field(static=True)
     limits: tuple[tuple[str, float], ...] = eqx.field(static=True)
+    friction_ellipse: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         if self.version not in ("5.2", "6.1", "6.2"):
@@ -188,32 +208,36 @@ class MagicFormula6(eqx.Module):
     def __getitem__(self, name: str) -> Array:
         return self.coefficients[name]
 
-    def replace(self, **values) -> "MagicFormula6":
-        """A copy with some coefficients changed (library units)."""
+    def replace(self, *, friction_ellipse: bool | None = None, **values) -> "MagicFormula6":
+        """A copy with some coefficients changed (library units); `friction_ellipse`: switch the
+        friction-ellipse combination on or off (default: kept)."""
         c = dict(self.coefficients)
         for k, v in values.items():
             if k not in c:
                 raise ValueError(f"unknown coefficient {k!r}")
             c[k] = jnp.asarray(v, dtype=float)
-        return MagicFormula6(c, self.version, self.limits)
+        fe = self.friction_ellipse if friction_ellipse is None else bool(friction_ellipse)
+        return MagicFormula6(c, self.version, self.limits, fe)
 
     @classmethod
-    def from_values(cls, values: dict, version: str = "6.1", limits: dict | None = None
-                    ) -> "MagicFormula6":
+    def from_values(cls, values: dict, version: str = "6.1", limits: dict | None = None,
+                    friction_ellipse: bool = False) -> "MagicFormula6":
         """From a dict of coefficients in library units (missing: neutral values)."""
         _check_x64()
         c = {n: jnp.asarray(float(values.get(n, _default(n, values))), dtype=float)
              for n in COEFFICIENTS}
         lim = dict(_LIMITS)
         lim.update(limits or {})
-        return cls(c, version, tuple(sorted(lim.items())))
+        return cls(c, version, tuple(sorted(lim.items())), bool(friction_ellipse))
 
     @classmethod
     def from_tir(cls, tir: TirFile) -> "MagicFormula6":
         """From a `.tir` file (SI → library units at this boundary; see the module docstring).
 
+        `FE_METHOD = 'YES'` ([MODEL], MF-Tyre 5.0 / PAC2002 files) sets `friction_ellipse`.
+
         Raises `ModelFileError` for an unknown FITTYP, a missing required coefficient (naming
-        its section) or a non-numeric one (with its line)."""
+        its section), a non-numeric one (with its line) or an FE_METHOD other than 'YES'/'NO'."""
         fittyp = tir.fittyp
         if fittyp not in FITTYP_VERSION:
             e = tir.entry("FITTYP")
@@ -238,12 +262,15 @@ class MagicFormula6(eqx.Module):
         for n in ("PRESMIN", "PRESMAX"):
             if limits.get(n) == 0.0:  # some exporters write 0 for "no range"
                 limits.pop(n)
-        return cls.from_values(values, version, limits)
+        return cls.from_values(values, version, limits, _fe_method(tir))
 
     def to_tir(self, template: TirFile) -> TirFile:
         """A copy of `template` with this model's coefficients written in (library → SI). Only
-        coefficients that differ from the template or that it lacks are written."""
+        coefficients that differ from the template or that it lacks are written; FE_METHOD is
+        written where `friction_ellipse` differs from the template's."""
         tir = template.copy()
+        if self.friction_ellipse != _fe_method(template):
+            tir.set("FE_METHOD", "YES" if self.friction_ellipse else "NO", section="MODEL")
         for n in COEFFICIENTS:
             v = float(self.coefficients[n]) / _TO_LIBRARY.get(n, 1.0)
             if n in tir and isinstance(tir[n], float):
@@ -252,6 +279,19 @@ class MagicFormula6(eqx.Module):
             elif v != _default(n, {}):
                 tir.set(n, v, section=SECTION_OF[n])
         return tir
+
+
+def _fe_method(tir: TirFile) -> bool:
+    """The file's FE_METHOD ('YES' / 'NO', any case; absent: 'NO')."""
+    e = tir.entries.get("FE_METHOD")
+    if e is None:
+        return False
+    v = str(e.value).strip().upper() if isinstance(e.value, str) else None
+    if v not in ("YES", "NO"):
+        raise ModelFileError(f"FE_METHOD = {e.text}: expected 'YES' (friction ellipse for "
+                             "combined slip) or 'NO'", path=tir.path, line=e.line,
+                             field="FE_METHOD")
+    return v == "YES"
 
 
 def _check_x64():
@@ -433,6 +473,9 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     want_mx, want_my, want_mz = ("mx" in outputs, "my" in outputs, "mz" in outputs)
     need_fx = "fx" in outputs or want_my or (want_mz and combined)
     need_fy = "fy" in outputs or want_mx or want_mz
+    ellipse = combined and model.friction_ellipse
+    if ellipse:  # each combined force needs both pure-slip forces
+        need_fx = need_fy = need_fx or need_fy
     c = model.coefficients
     v52 = model.version == "5.2"
     if turn_slip is not None and v52:
@@ -545,6 +588,21 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
                 Cr = _zeta7(Mzp90, Drp)
             t0 = Dt * _cosmf(Bt, Ct, Et, at, fm) * cos_ap
             Mz = -t0 * Fy0_g0 + Dr * fm.cos(Cr * fm.arctan(Br * ar)) * cos_ap
+    elif ellipse:
+        # friction ellipse (FE_METHOD = 'YES'; module docstring "Friction ellipse")
+        Kxp = Kxk + EPS * _sgn(Kxk)
+        Kyp = Kya + EPS * _sgn(Kya)
+        kc = kappa + SHx + SVx / Kxp
+        sc = fm.sin(a_s + SHy + SVy / Kyp)
+        dx, dy = jnp.abs(Dx), jnp.abs(muy * fz * zeta2)
+        ax, ay = jnp.abs(Fx0 - SVx), jnp.abs(Fy0 - SVy)
+        Fx = Fx0 * _ellipse_factor(dy * kc, ax * sc, dy, Kxk * sc)
+        Fy = Fy0 * _ellipse_factor(dx * sc, ay * kc, dx, Kya * kc)
+        if want_mz:
+            if ts is not None:
+                Cr = _zeta7(Mzp90, Drp)
+            t0 = Dt * _cosmf(Bt, Ct, Et, at, fm) * cos_ap
+            Mz = -t0 * Fy + Dr * fm.cos(Cr * fm.arctan(Br * ar)) * cos_ap
     else:
         if need_fx:
             # combined longitudinal (4.E50–4.E57)
@@ -619,6 +677,20 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     return TyreForces(Fx, Fy, Mx, My, Mz)
 
 
+def _ellipse_factor(u, v, w, z):
+    """|u|/√(u² + v²), the friction ellipse's F/F0 (module docstring), with u, v = D_y·κ_c,
+    |F_x0 − S_Vx|·sin α_c for F_x (D_x·sin α_c, |F_y0 − S_Vy|·κ_c for F_y). Where u = v = 0
+    (κ_c = 0 and sin α_c = 0 or F_x0 = S_Vx, e.g. κ = 0 on a file without κ shifts) it is the
+    limit along the slip, |w|/√(w² + z²) with w, z = D_y, K_x·sin α_c (D_x, K_y·κ_c), and 1
+    where that too is 0/0 (F_z = 0): finite values and derivatives (the double-where form)."""
+    n2 = u * u + v * v
+    ok = n2 > 0.0
+    m2 = w * w + z * z
+    ok2 = m2 > 0.0
+    lim = jnp.where(ok2, jnp.abs(w) / jnp.sqrt(jnp.where(ok2, m2, 1.0)), 1.0)
+    return jnp.where(ok, jnp.abs(u) / jnp.sqrt(jnp.where(ok, n2, 1.0)), lim)
+
+
 def _alpha_eq(a, k2, fm):
     """atan(√(tan²a + k2))·sgn a (A54–A55), = a where k2 = 0 (κ = 0): the same value, and a
     derivative there instead of the 0·∞ of √ at a = κ = 0."""
@@ -642,11 +714,20 @@ def _sgn_strict(x):
 
 
 def check_limits(model: MagicFormula6, fz=None, kappa=None, alpha=None, gamma=None,
-                 pressure=None, *, where: str = "") -> dict[str, int]:
+                 pressure=None, *, where: str = "", combined: bool = True) -> dict[str, int]:
     """Warn (`ModelWarning`) about inputs outside the file's ranges, which `evaluate` saturates
-    as MF-Tyre does; returns {limit name: count of inputs beyond it}. Units as `evaluate`."""
+    as MF-Tyre does; returns {limit name: count of inputs beyond it}. Units as `evaluate`.
+
+    On a model with `friction_ellipse` (FE_METHOD = 'YES') and `combined` inputs (some point
+    with κ ≠ 0 and α ≠ 0), one further `ModelWarning` says that combined slip is the friction
+    ellipse's, not the file's R* coefficients' (not counted in the result)."""
     lim = model.limit
     counts = {}
+    if (combined and model.friction_ellipse and kappa is not None and alpha is not None
+            and np.any((np.asarray(kappa, float) != 0.0) & (np.asarray(alpha, float) != 0.0))):
+        warnings.warn(f"{where}FE_METHOD = 'YES': combined slip by the friction ellipse "
+                      "(MF-Tyre 5.0 / PAC2002, as Chrono's ChPac02Tire), not the file's "
+                      "combined-slip coefficients RBX*, RBY*, ...", ModelWarning, stacklevel=2)
     for name, x, lo, hi in (("FZ", fz, None, "FZMAX"), ("SL", kappa, "KPUMIN", "KPUMAX"),
                             ("SA", alpha, "ALPMIN", "ALPMAX"), ("IA", gamma, "CAMMIN", "CAMMAX"),
                             ("P", pressure, "PRESMIN", "PRESMAX")):
