@@ -8,7 +8,11 @@ verdict rate.
 
 Uses `diffsusp.identify.rehearse` when it exists, else its own loop with the same numbers.
 
-    python benchmarks/rehearse_mf_fit.py [--n 200] [--scenario fy|fy-outliers|fy-mz|all]
+    python benchmarks/rehearse_mf_fit.py [--n 200]
+        [--scenario fy|fy-outliers|fy-mz|fy-70from60|fy-70from60-outliers|all]
+
+fy-70from60: the truths around the neighbouring 70 psi file (renormalised to the start's FNOMIN),
+fitted from the 60 psi file.
 """
 
 import argparse
@@ -25,6 +29,7 @@ from diffsusp.io.tir import read_tir  # noqa: E402
 from diffsusp.tyre import MagicFormula6  # noqa: E402
 from diffsusp.tyre import fit as F  # noqa: E402
 from diffsusp.tyre.examples import DATA  # noqa: E402
+from diffsusp.tyre.fit_start import renormalise  # noqa: E402
 
 SHARED = str(DATA) + "/"  # the shipped copies of the shared tyre files
 
@@ -35,20 +40,28 @@ DESCRIPTION = {
           "estimated by the fit; Huber loss",
     "fy-outliers": "as fy, and 2 % gross spikes of 30-60 sigma",
     "fy-mz": "truths around the 70 psi file; start: the 70 psi file; F_y and M_z",
+    "fy-70from60": "truths: the FEDA 70 psi file's F_y coefficients (written for the 60 psi "
+                   "file's FNOMIN) x(1 + 0.2 U(-1, 1)); start: the 60 psi file (a neighbouring "
+                   "real file); the 60 psi programme; sigma = 20 N + 1 % |F| estimated; Huber",
+    "fy-70from60-outliers": "as fy-70from60, and 2 % gross spikes of 30-60 sigma",
 }
 
 
 def scenario(name):
-    start_file = {"fy": 60, "fy-outliers": 60, "fy-mz": 70}[name]
+    start_file = {"fy": 60, "fy-outliers": 60, "fy-mz": 70}.get(name, 60)
     tir = read_tir(SHARED + f"335_65R22_5_G275MSA_{start_file}psi.tir")
     start = MagicFormula6.from_tir(tir)
+    centre = None
+    if name.startswith("fy-70from60"):   # a neighbouring file, in the start's normalisation
+        centre = renormalise(MagicFormula6.from_tir(read_tir(
+            SHARED + "335_65R22_5_G275MSA_70psi.tir")), float(start["FNOMIN"]))
     lim = start.limit
     channels = ("FY", "MZ") if name == "fy-mz" else ("FY",)
     prog = F.bench_programme(start, loads=np.linspace(lim["FZMIN"], lim["FZMAX"], 3),
                              cambers=[lim["CAMMIN"], 0.0, lim["CAMMAX"]], n_slip=41,
                              channels=channels)
-    return F.FitRehearsal(start, prog, spread=0.2, tir=tir,
-                          outliers=0.02 if name == "fy-outliers" else 0.0)
+    return F.FitRehearsal(start, prog, spread=0.2, tir=tir, centre=centre,
+                          outliers=0.02 if name.endswith("outliers") else 0.0)
 
 
 def own_loop(sc, n, seed):

@@ -1426,7 +1426,10 @@ class FitRehearsal:
     `noise` per channel σ or (a, b) for σ = a + b·|F| (default 20 N + 1 % |F| on forces, 20 N·m
     + 1 % on moments), `outliers` (fraction of gross spikes), `fit_noise` the noise the fit is
     told (default None: estimated from the sweeps, as a user without a noise figure runs it),
-    `loss`, `strategy`, `tir` (the start's property file: its absent coefficients are held).
+    `loss`, `strategy`, `tir` (the start's property file: its absent coefficients are held),
+    `centre` (the model the truths are drawn around, default the start: e.g. a neighbouring
+    file written for the start's FNOMIN, `fit_start.renormalise`, to rehearse a fit from
+    another file; its other coefficients are the truths' too).
 
     Each truth is simulated with its validity ranges opened to the programme (a measured tyre
     saturates nothing) and fitted by `fit`; `identify` returns the reports in the truths'
@@ -1437,7 +1440,7 @@ class FitRehearsal:
 
     def __init__(self, start_model, programme: BenchData, names=None, *, spread: float = 0.2,
                  noise: dict | None = None, outliers: float = 0.0, fit_noise=None,
-                 loss: str = "huber", strategy: str = "staged", tir=None):
+                 loss: str = "huber", strategy: str = "staged", tir=None, centre=None):
         if not (spread > 0 and math.isfinite(spread)):
             raise InputError(f"spread {spread!r}: a relative spread > 0 (0.2 = ±20 %)")
         if not 0.0 <= outliers < 0.5:
@@ -1459,7 +1462,13 @@ class FitRehearsal:
         self.start, self.programme, self.spread = start_model, programme, float(spread)
         self.outliers, self.fit_noise, self.loss, self.strategy = (outliers, fit_noise, loss,
                                                                    strategy)
-        self.x0 = np.array([float(start_model[n]) for n in self.names])
+        self.centre = start_model if centre is None else centre
+        if isinstance(start_model, mf6.MagicFormula6) and float(
+                self.centre["FNOMIN"]) != float(start_model["FNOMIN"]):
+            raise InputError(f"centre FNOMIN {float(self.centre['FNOMIN']):g} N, the start's "
+                             f"{float(start_model['FNOMIN']):g} N: the fit holds FNOMIN, so "
+                             "write the centre for the start's (fit_start.renormalise)")
+        self.x0 = np.array([float(self.centre[n]) for n in self.names])
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """(n, p) truths x₀·(1 + spread·U(−1, 1))."""
@@ -1468,7 +1477,7 @@ class FitRehearsal:
         return self.x0 * (1.0 + self.spread * rng.uniform(-1.0, 1.0, (int(n), self.x0.size)))
 
     def truth_model(self, truth):
-        return with_ranges(self.start.replace(**dict(zip(self.names, map(float, truth),
+        return with_ranges(self.centre.replace(**dict(zip(self.names, map(float, truth),
                                                          strict=True))), self.programme)
 
     def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
