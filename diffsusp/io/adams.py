@@ -31,6 +31,9 @@ grammar of `diffsusp.io.expr`.
   (TRANSLATIONAL: force along z_J, ROTATIONAL: torque about z_J); two-body TRANSLATIONAL → a
   constant tension −f along I–J (Adams: positive repels); two-body ROTATIONAL → a zero-stiffness
   bushing with torque preload f about z_J; two-body functions are evaluated at `time`;
+  two-body TRANSLATIONAL ``k * MAX(0, L - DM(i, j))`` (``-(k * MAX(0, DM(i, j) - L))``), each
+  optionally ``+ c * MAX(…)**3``, on its own I, J → a bump (rebound) stop of length L, rate k,
+  cubic c (`stop_of_function`; what `write_adm` writes for stops);
 - ``GFORCE/``, ``VFORCE/``, ``VTORQUE/`` with JFLOAT a floating marker on the ground: a load
   point on I, components in RM's axes; their FX…TZ expressions are evaluated by
   `AdmModel.loads` at the times asked for (a reaction on a moving part is not supported:
@@ -465,6 +468,30 @@ class AdmModel:
                      else self.force_to_n * self.length_to_mm)
             out[axis] = spline_stiffness(spline) * scale
         return out
+
+
+_NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:E[-+]?\d+)?)"
+_BUMP = re.compile(rf"{_NUM}\*MAX\(0,{_NUM}-DM\((\d+),(\d+)\)\)"
+                   rf"(?:\+{_NUM}\*MAX\(0,\2-DM\(\3,\4\)\)\*\*3)?")
+_REBOUND = re.compile(rf"-\({_NUM}\*MAX\(0,DM\((\d+),(\d+)\)-{_NUM}\)"
+                      rf"(?:\+{_NUM}\*MAX\(0,DM\(\2,\3\)-\4\)\*\*3)?\)")
+
+
+def stop_of_function(text: str) -> tuple[str, float, float, float, int, int] | None:
+    """(kind, length, k, cubic, i, j) in file units if `text` is the FUNCTION of a one-sided
+    stop as `diffsusp.io.adams_write.stop_function` writes it — ``k * MAX(0, L - DM(i, j))``
+    (bump) or ``-(k * MAX(0, DM(i, j) - L))`` (rebound), each with an optional
+    ``+ c * MAX(…)**3`` — else None (spaces and case free)."""
+    t = re.sub(r"\s+", "", text).upper()
+    m = _BUMP.fullmatch(t)
+    if m:
+        k, length, i, j, c = m.groups()
+        return "bump", float(length), float(k), float(c or 0.0), int(i), int(j)
+    m = _REBOUND.fullmatch(t)
+    if m:
+        k, i, j, length, c = m.groups()
+        return "rebound", float(length), float(k), float(c or 0.0), int(i), int(j)
+    return None
 
 
 def spline_stiffness(spline: AdmSpline) -> float:

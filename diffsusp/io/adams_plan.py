@@ -26,6 +26,7 @@ from .adams import (
     _Driver,
     _Load,
     _Marker,
+    stop_of_function,
 )
 from .adams_common import (
     _FORCE_TO_N,
@@ -384,6 +385,18 @@ class _Plan:
         self.calls.append((s, "spring", (name, i.id, j.id), _spring_law(k, length, force)))
 
     def _sforce(self, s):
+        arg = s.arguments.get("FUNCTION")
+        stop = None if arg is None or arg.expression is None else stop_of_function(arg.expression)
+        if stop and "TRANSLATIONAL" in s.flags and "ACTIONONLY" not in s.flags:
+            kind, length, k, cubic, i_id, j_id = stop  # the writer's stop SFORCE (adams.py)
+            i, j = self.pair(s)
+            if {i_id, j_id} == {i.id, j.id}:
+                self.use(i, "geometry")
+                self.use(j, "geometry")
+                lf, ff = self.lf, self.ff
+                self.calls.append((s, "stop", (self.element_name(s), i.id, j.id), dict(
+                    kind=kind, length=length * lf, k=k * ff / lf, cubic=cubic * ff / lf**3)))
+                return
         node = self.expression(s, "FUNCTION")
         if node is None:
             raise _error(f"{s.label}: FUNCTION is missing.", self.path, s.line, "FUNCTION")
@@ -555,6 +568,9 @@ class _Plan:
             elif kind == "driver":
                 name, i = args
                 self._call(builder.driver, lines, s.line, name, mk[i].name, **kw)
+            elif kind == "stop":
+                name, i, j = args
+                self._call(builder.stop, lines, s.line, name, mk[i].name, mk[j].name, **kw)
         for load in self.load_defs:
             i, frame = frames[load.name]
             frame_name = mk[frame].name if self.kept(mk[frame]) else None

@@ -30,10 +30,13 @@ def write_adm(mech: Mechanism, path, *, template=None) -> str:
       stiffnesses back.
     - Without: a complete dataset in mm, N: one PART per part, one MARKER per marker (QP and
       REULER in degrees, global at design), JOINT/JPRIM for joints, GCON DM(i, j) − L for
-      distance joints, BUSHING, SPRINGDAMPER, a zero GFORCE per load point (the user's loads
-      go in load cases) and a MOTION per driver. `read_adm` of the result gives the same
-      mechanism. Laws outside the .adm subset (tabulated or cubic laws, bushing splines or
-      translational offsets, stops) raise `ModelError`.
+      distance joints, BUSHING, SPRINGDAMPER, a two-body TRANSLATIONAL SFORCE per stop
+      (`stop_function`: k·p + cubic·p³ of MAX(0, …) of DM(i, j), exact; so a Chrono
+      `Spring Curve Data` spring, read as a linear spring plus stops at its knots, is written
+      exactly), a zero GFORCE per load point (the user's loads go in load cases) and a MOTION
+      per driver. `read_adm` of the result gives the same mechanism. Laws outside the .adm
+      subset (nonlinear tables, cubic laws, bushing splines or translational offsets) raise
+      `ModelError`.
 
     **Arguments:** `mech`; `path` (file to write, or None to only return the text);
     `template` (path or text).
@@ -148,8 +151,14 @@ def _write_full(mech: Mechanism) -> str:
         elements += [f"! adams_view_name='{name}'",
                      f"SPRINGDAMPER/{offset + k + 1}, TRANSLATIONAL, I = {i_id}, J = {j_id}, "
                      f"K = {_fmt(k_value)}, C = 0, LENGTH = {_fmt(length)}, FORCE = {_fmt(force)}"]
-    if mech.stops.names:
-        raise ModelError(f"stops ({', '.join(mech.stops.names)}) are outside the .adm subset.")
+    st = mech.stops
+    for k, name in enumerate(st.names):
+        elements += [f"! adams_view_name='{name}'",
+                     f"SFORCE/{k + 1}, TRANSLATIONAL, I = {ids[st.i_marker[k]]}, "
+                     f"J = {ids[st.j_marker[k]]}, FUNCTION = "
+                     + stop_function(st.kind[k], float(st.length[k]), float(st.k[k]),
+                                     float(st.cubic[k]), ids[st.i_marker[k]],
+                                     ids[st.j_marker[k]])]
     lp = mech.load_points
     for k, name in enumerate(lp.names):
         jfloat = aux_marker(floating=True)
@@ -165,6 +174,20 @@ def _write_full(mech: Mechanism) -> str:
         elements += [f"! adams_view_name='{name}'",
                      f"MOTION/{k + 1}, I = {ids[d.marker[k]]}, J = {j_id}, Z, FUNCTION = 0"]
     return "\n".join(out + aux + elements + ["END", ""])
+
+
+def stop_function(kind: str, length: float, k: float, cubic: float, i: int, j: int) -> str:
+    """The SFORCE FUNCTION of a one-sided stop (`diffsusp.model.Stops`) on markers i, j:
+    k·p + cubic·p³ with the penetration p = MAX(0, length − DM(i, j)) of a bump stop (a
+    positive SFORCE pushes the markers apart) or p = MAX(0, DM(i, j) − length) of a rebound
+    stop (the force negated: it pulls them together). Exact, where the Akima spline of an
+    AKISPL spring would round the kinks of a piecewise-linear law (Chrono's `Spring Curve
+    Data`); `diffsusp.io.adams.stop_of_function` reads it back."""
+    dm = f"DM({i}, {j})"
+    p = (f"MAX(0, {_fmt(length)} - {dm})" if kind == "bump"
+         else f"MAX(0, {dm} - {_fmt(length)})")
+    law = f"{_fmt(k)} * {p}" + (f" + {_fmt(cubic)} * {p}**3" if cubic else "")
+    return law if kind == "bump" else f"-({law})"
 
 
 def _write_with_template(mech: Mechanism, template) -> str:
