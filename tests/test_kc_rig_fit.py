@@ -148,3 +148,29 @@ def test_bad_rig_tables_exit_2(tmp_path, content, message):
     result = CliRunner().invoke(app, ["identify", "fit", "double_wishbone", "-m", str(path)])
     assert result.exit_code == 2, result.output
     assert re.search(message, " ".join(result.output.split())), result.output
+
+
+def test_rig_table_units_inputs_and_sigma(tmp_path):
+    """Reading alone: a travel table (the wheel height driven), units to the library's (deg →
+    rad, N·m → N·mm, kN → N), σ from the '# sigma:' line, replaced by the option's text, or
+    per case from sigma.<channel> columns; wheel_travel in a force table is a channel."""
+    travel = tmp_path / "travel.csv"
+    travel.write_text("# sigma: toe=0.01, half_track_change=0.05\n"
+                      "wheel_travel [mm],toe [deg],half_track_change [mm]\n"
+                      "-40,0.2,-3\n0,0,0\n40,-0.3,2\n")
+    table = read_rig_table(travel)
+    assert table.mode == "travel" and table.channels == ("toe", "half_track_change")
+    np.testing.assert_allclose(table.measured[:, 0], np.radians([0.2, 0.0, -0.3]))
+    np.testing.assert_allclose(table.sigma[:, 0], np.radians(0.01))
+    table = read_rig_table(travel, sigma="toe=0.02,half_track_change=0.1")
+    np.testing.assert_allclose(table.sigma[0], [np.radians(0.02), 0.1])
+    force = tmp_path / "force.csv"
+    force.write_text("aligning_torque [N·m],vertical_force [kN],wheel_travel,camber [deg],"
+                     "sigma.wheel_travel,sigma.camber [deg]\n"
+                     "-100,4,-1.5,0.1,0.02,0.01\n100,4,1.5,-0.1,0.04,0.02\n")
+    table = read_rig_table(force)
+    assert table.mode == "force" and table.channels == ("wheel_travel", "camber")
+    np.testing.assert_allclose(table.inputs["aligning_torque"], [-1e5, 1e5])
+    np.testing.assert_allclose(table.inputs["vertical_force"], [4000.0, 4000.0])
+    np.testing.assert_allclose(table.sigma, [[0.02, np.radians(0.01)],
+                                             [0.04, np.radians(0.02)]])
