@@ -100,27 +100,35 @@ def event(mech):
     return kc.vertical_force(mech, FZ)
 
 
-def oracle_path(doc, heights):
-    """Oracle kinematics at wheel-centre heights (mm from design): spring length, contact-patch
-    z and wheel centre, as cubic splines of the height."""
+def oracle_path(doc, heights, radius=330.0):
+    """Oracle kinematics at wheel-centre heights (mm from design): spring length, the vertical
+    rate dz/dh of the wheel carrier's material point at the ground contact point (the wheel
+    plane's lowest point, `radius` below the wheel centre: where the K&C rig applies the tyre
+    force, issue 28) and the wheel centre, as functions of the height (cubic splines)."""
     rig = read_chrono(HMMWV, wheel_travel=True, check=False)
     zero = np.zeros((len(rig.load_points.names), 3))
     k = rig.markers.index("wheel_centre")
     a, b = rig.markers.index("spring_chassis"), rig.markers.index("spring_arm")
-    cp = rig.markers.index("contact_patch.m")
-    length, patch, centre = [], [], []
+    up = rig.parts.index("upright")
+    length, centre, trans, rot, contact = [], [], [], [], []
     sol = None
     for h in heights:
         sol = oracle.solve(rig, zero, zero, np.array([h]), q0=sol)
-        pos, _ = oracle.marker_poses(rig, sol.p, sol.R)
+        pos, axes = oracle.marker_poses(rig, sol.p, sol.R)
         length.append(np.linalg.norm(pos[a] - pos[b]))
-        patch.append(pos[cp][2])
         centre.append(pos[k])
-    return (
-        CubicSpline(heights, length),
-        CubicSpline(heights, patch),
-        CubicSpline(heights, np.array(centre)),
-    )
+        s = axes[k][:, 2]
+        u = np.array([0.0, 0.0, 1.0]) - s[2] * s
+        contact.append(pos[k] - radius * u / np.linalg.norm(u))
+        trans.append(sol.p[up])
+        rot.append(sol.R[up].reshape(9))
+    p, r, c = (CubicSpline(heights, np.array(v)) for v in (trans, rot, contact))
+
+    def patch_rate(h):  # d/dh of the material point that is at the contact point at h
+        body = r(h).reshape(3, 3).T @ (c(h) - p(h))
+        return (p(h, 1) + r(h, 1).reshape(3, 3) @ body)[2]
+
+    return CubicSpline(heights, length), patch_rate, CubicSpline(heights, np.array(centre))
 
 
 def test_vertical_sweep_matches_chrono_oracle(doc, event):
@@ -136,10 +144,10 @@ def test_vertical_sweep_matches_chrono_oracle(doc, event):
     spring = np.linalg.norm(np.asarray(pos[:, a] - pos[:, b]), axis=1)
     assert np.sum(spring > 350.0) >= 3 and np.sum(spring < 350.0) >= 6  # stops engage, release
     heights = np.linspace(-185.0, 10.0, 27)
-    length, patch, wheel = oracle_path(doc, heights)
+    length, patch_rate, wheel = oracle_path(doc, heights)
 
     def load(h):  # virtual work: F·dz_cp = T·dℓ
-        return chrono_tension(length(h), doc) * length(h, 1) / patch(h, 1)
+        return chrono_tension(length(h), doc) * length(h, 1) / patch_rate(h)
 
     h_star = np.array(
         [brentq(lambda h, f=f: load(h) - f, heights[0], heights[-1], xtol=1e-12) for f in FZ]

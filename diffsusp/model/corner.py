@@ -74,7 +74,7 @@ class Corner:
     loaded_radius: float = 300.0
     design_load: float | None = 4000.0
     prefix: str = ""
-    loaded_radius_stated: bool = True
+    loaded_radius_stated: bool = dataclasses.field(default=True, compare=False)
 
     def __post_init__(self):
         if self.side not in ("left", "right", "auto"):
