@@ -317,6 +317,11 @@ TYRE_SPEC = {  # diffsusp.tyre.spec.SPEC_UNITS: the columns of tyre.specificatio
     "alpha_at_fy_peak": "the slip angle of that extremum",
     "mz_peak": "the M_z extremum on the same side (the thesis's \"minimum M_z\" in PSA signs)",
     "alpha_at_mz_peak": "the slip angle of that extremum",
+    "fx_peak": "the braking F_x extremum for κ in [−0.5, 0) (NaN: no peak inside); saturated "
+               "at the file's KPUMIN",
+    "kappa_at_fx_peak": "the slip ratio of that extremum (negative: braking)",
+    "mu_y": "lateral friction coefficient |fy_peak|/F_z",
+    "mu_x": "longitudinal (braking) friction coefficient |fx_peak|/F_z",
 }
 TYRE_VERTICAL = {  # diffsusp.tyre.vertical.VerticalState (tyre.vertical.loaded_radius)
     "rl": ("R_l", "loaded radius: wheel centre to the road along the wheel plane", "mm"),

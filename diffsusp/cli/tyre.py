@@ -224,17 +224,24 @@ def spec_command(
     if json_out:
         print_json(rows)
         return
-    show = [("fz", "FZ [N]", 1), ("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
+    # one row per quantity, one column per load: as narrow as the number of loads, whatever
+    # the quantities (issue 28 item 8: eleven columns did not fit a terminal)
+    show = [("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
             ("pneumatic_trail", "trail [mm]", 1), ("slip_stiffness", "C_kappa [N/-]", 1),
             ("camber_stiffness", "C_gamma [N/deg]", math.pi / 180),
-            ("fy_peak", "FY peak [N]", 1), ("alpha_at_fy_peak", "at [deg]", 180 / math.pi),
-            ("mz_peak", "MZ peak [N·m]", 1e-3), ("alpha_at_mz_peak", "at [deg]", 180 / math.pi),
+            ("fy_peak", "FY peak [N]", 1), ("alpha_at_fy_peak", "  at alpha [deg]", 180 / math.pi),
+            ("mu_y", "mu_y [-]", 1),
+            ("fx_peak", "FX peak, braking [N]", 1), ("kappa_at_fx_peak", "  at kappa [-]", 1),
+            ("mu_x", "mu_x [-]", 1),
+            ("mz_peak", "MZ peak [N·m]", 1e-3), ("alpha_at_mz_peak", "  at alpha [deg]",
+                                                180 / math.pi),
             ("fy_at_zero", "FY(0) [N]", 1), ("mz_at_zero", "MZ(0) [N·m]", 1e-3)]
     t = RichTable(box=box.SIMPLE)
-    for _, h, _ in show:
-        t.add_column(h, justify="right")
+    t.add_column("FZ [N]", no_wrap=True)
     for r in rows:
-        t.add_row(*(f"{r[k] * s:.5g}" for k, _, s in show))
+        t.add_column(f"{r['fz']:.6g}", justify="right", no_wrap=True)
+    for k, h, scale in show:
+        t.add_row(h, *(f"{r[k] * scale:.6g}" for r in rows))
     console(markup=False).print(t)
 
 

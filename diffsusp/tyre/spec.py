@@ -94,7 +94,8 @@ SPEC_UNITS = {
     "aligning_stiffness": "N·mm/rad", "pneumatic_trail": "mm", "camber_stiffness": "N/rad",
     "camber_torque_stiffness": "N·mm/rad", "fy_at_zero": "N", "mz_at_zero": "N·mm",
     "fx_at_zero": "N", "fy_peak": "N", "alpha_at_fy_peak": "rad", "mz_peak": "N·mm",
-    "alpha_at_mz_peak": "rad",
+    "alpha_at_mz_peak": "rad", "fx_peak": "N", "kappa_at_fx_peak": "-", "mu_y": "-",
+    "mu_x": "-",
 }
 """Units of the columns `specification` returns."""
 
@@ -140,7 +141,8 @@ def _extremum(f, alpha_max, n_grid, newton_steps):
 
 
 def specification(model, fz: ArrayLike, *, pressure=None, alpha_max: float = 0.35,
-                  n_grid: int = 351, newton_steps: int = 8) -> dict[str, Array]:
+                  kappa_max: float = 0.5, n_grid: int = 351, newton_steps: int = 8
+                  ) -> dict[str, Array]:
     """The vehicle-dynamics specification quantities at each load (spec §2.1, §7 C item 13), pure
     slip, camber 0, library units (`SPEC_UNITS`):
 
@@ -152,7 +154,12 @@ def specification(model, fz: ArrayLike, *, pressure=None, alpha_max: float = 0.3
     - `fy_at_zero`, `mz_at_zero`, `fx_at_zero`: values at zero slip and camber (the "pull");
     - `fy_peak`, `alpha_at_fy_peak`: the F_y extremum for α in (0, alpha_max] on the side of
       the slope, NaN when there is none inside (e.g. the thesis's sets with C = 1, CORRECTIONS 2);
-      `mz_peak`, `alpha_at_mz_peak`: the same for M_z (the thesis's "minimum M_z" in PSA signs).
+      `mz_peak`, `alpha_at_mz_peak`: the same for M_z (the thesis's "minimum M_z" in PSA signs);
+    - `fx_peak`, `kappa_at_fx_peak`: the braking F_x extremum for κ in [−kappa_max, 0) (braking:
+      the side every property file is measured on; a file with KPUMAX = 0 has no driving side),
+      NaN when there is none inside; saturated at the file's KPUMIN as `evaluate` is;
+    - `mu_y` = |fy_peak|/F_z and `mu_x` = |fx_peak|/F_z: the friction coefficients (the peak
+      force per unit load; NaN where the peak is).
 
     `model`: a `MagicFormula6` (pressure [Pa], default INFLPRES) or a `MagicFormula89`.
     `fz` [N]: one load or an array of loads (the spec asks for at least two).
@@ -166,6 +173,7 @@ def specification(model, fz: ArrayLike, *, pressure=None, alpha_max: float = 0.3
         kz = jax.grad(mz_a)(0.0)
         fpk, apk = _extremum(fy_a, alpha_max, n_grid, newton_steps)
         mpk, ampk = _extremum(mz_a, alpha_max, n_grid, newton_steps)
+        xpk, kpk = _extremum(lambda k: fx(-k, load), kappa_max, n_grid, newton_steps)
         return {
             "fz": load, "cornering_stiffness": ky, "slip_stiffness": jax.grad(fx)(0.0, load),
             "aligning_stiffness": kz, "pneumatic_trail": -kz / ky,
@@ -173,6 +181,8 @@ def specification(model, fz: ArrayLike, *, pressure=None, alpha_max: float = 0.3
             "camber_torque_stiffness": jax.grad(mz, argnums=1)(0.0, 0.0, load),
             "fy_at_zero": fy_a(0.0), "mz_at_zero": mz_a(0.0), "fx_at_zero": fx(0.0, load),
             "fy_peak": fpk, "alpha_at_fy_peak": apk, "mz_peak": mpk, "alpha_at_mz_peak": ampk,
+            "fx_peak": xpk, "kappa_at_fx_peak": -kpk, "mu_y": jnp.abs(fpk) / load,
+            "mu_x": jnp.abs(xpk) / load,
         }
 
     fz = jnp.atleast_1d(jnp.asarray(fz, dtype=float))
