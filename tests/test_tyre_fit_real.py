@@ -185,6 +185,7 @@ def test_cli_fit_from_a_pac2002_file(feda, tmp_path):
     assert js["verdict"].startswith("fits the data")
     fitted = MagicFormula6.from_tir(read_tir(out))
     assert float(fitted["PDY1"]) < 0
+    assert fitted.friction_ellipse  # the start file's FE_METHOD = 'YES' is kept, not reset
     assert fitted.limit["FZMIN"] == pytest.approx(float(np.min(fz)))
 
 

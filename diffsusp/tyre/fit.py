@@ -434,7 +434,8 @@ def with_ranges(model, data: BenchData):
         span(data.fz), span(data.kappa), span(data.alpha), span(data.gamma))
     lim.update(FZMIN=fmin, FZMAX=fmax, KPUMIN=kmin, KPUMAX=kmax, ALPMIN=amin, ALPMAX=amax,
                CAMMIN=gmin, CAMMAX=gmax)
-    return mf6.MagicFormula6(dict(model.coefficients), model.version, tuple(sorted(lim.items())))
+    return mf6.MagicFormula6(dict(model.coefficients), model.version, tuple(sorted(lim.items())),
+                             model.friction_ellipse)
 
 
 def _open_ranges(model):
@@ -442,7 +443,7 @@ def _open_ranges(model):
     if not isinstance(model, mf6.MagicFormula6):
         return model
     return mf6.MagicFormula6(dict(model.coefficients), model.version,
-                             tuple(sorted(mf6._LIMITS.items())))
+                             tuple(sorted(mf6._LIMITS.items())), model.friction_ellipse)
 
 
 LOSSES = ("linear", "huber", "cauchy")
@@ -501,7 +502,7 @@ class _Problem(eqx.Module):
 
 def _static(model):
     if isinstance(model, mf6.MagicFormula6):
-        return (model.version, model.limits)
+        return (model.version, model.limits, model.friction_ellipse)
     return ()
 
 
