@@ -151,7 +151,8 @@ def eval_command(
             with warnings.catch_warnings(record=True) as rec:
                 warnings.simplefilter("always")
                 check_limits(model, fz=cols["FZ"], kappa=cols["SL"], alpha=cols["SA"],
-                             gamma=cols["IA"], pressure=p, where=f"{inputs or 'grid'}: ")
+                             gamma=cols["IA"], pressure=p, where=f"{inputs or 'grid'}: ",
+                             combined=not pure)
             for w in rec:
                 warn(w.message)
         f = evaluate(model, jnp.asarray(cols["FZ"]), jnp.asarray(cols["SL"]),
