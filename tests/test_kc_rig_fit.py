@@ -92,8 +92,8 @@ def test_rig_table_fitted_back_from_the_cli(rig_table, tmp_path):
                                rtol=1e-12)
     runner = CliRunner()
     args = ["identify", "fit", str(MODEL), "-m", str(path), "--centres"]
-    out = tmp_path / "fit.csv"
-    first = runner.invoke(app, [*args, "--out", str(out)])
+    out, written = tmp_path / "fit.csv", tmp_path / "identified.toml"
+    first = runner.invoke(app, [*args, "--out", str(out), "--write-model", str(written)])
     assert first.exit_code == 0, first.output
     assert "K&C rig: toe, camber" in first.stdout and "12 cases" in first.stdout
     second = runner.invoke(app, [*args, "--json"])
@@ -120,6 +120,12 @@ def test_rig_table_fitted_back_from_the_cli(rig_table, tmp_path):
         truth_value = _truth_value(truth, names[k])
         assert abs(data["estimate"][k] - truth_value) <= 3.0 * data["sigma"][k], (
             names[k], data["estimate"][k], data["sigma"][k], truth_value)
+    # the written model is the user's (not the rig's): the estimates where the data see them
+    model = load_model(str(written))
+    assert model.load_points.names == start.load_points.names
+    for k, name in enumerate(names):
+        want = data["estimate"][k] if data["identifiable"][k] else data["start"][k]
+        assert _truth_value(model, name) == pytest.approx(want, rel=1e-9, abs=1e-9), name
     # the moved hardpoint: identified, and the fit moved it from the file's value to the truth
     centre = [k for k in identified if names[k].startswith("lca_bushing.")
               and names[k][-1] in "xyz"]
