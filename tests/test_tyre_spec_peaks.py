@@ -47,3 +47,20 @@ def test_friction_peaks_and_the_table(tmp_path):
     assert max(len(line.rstrip()) for line in lines) <= 100, result.output
     row = next(line for line in lines if line.strip().startswith("mu_x"))
     assert len(row.split()) == 2 + 5 and "…" not in result.output  # a number per load, uncut
+
+
+def test_eval_grid_stays_in_the_files_ranges(tmp_path):
+    """`tyre eval --grid` on the FEDA file (ALPMAX 11.2°, FZMAX 1.41 FNOMIN) evaluates inside
+    its ranges: no saturated point, no range warning (the grid was ±15°, to 1.5 FNOMIN)."""
+    from diffsusp.io.tables import read_table
+
+    model = mf6.MagicFormula6.from_tir(read_tir(FEDA))
+    out = tmp_path / "grid.csv"
+    result = CliRunner().invoke(app, ["tyre", "eval", str(FEDA), "--grid", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "beyond" not in result.output, result.output
+    table = read_table(out)
+    sa, fz = np.asarray(table["SA"]), np.asarray(table["FZ"])
+    lim = model.limit
+    assert lim["ALPMIN"] <= sa.min() < 0 < sa.max() <= lim["ALPMAX"]
+    assert lim["FZMIN"] <= fz.min() < fz.max() <= lim["FZMAX"] and sa.size == 93

@@ -136,8 +136,15 @@ def eval_command(
         enable_x64()
         tir, model = _load(file)
         if grid:
-            fz = np.repeat(np.array([0.5, 1.0, 1.5]) * float(model["FNOMIN"]), 31)
-            sa = np.tile(np.radians(np.linspace(-15.0, 15.0, 31)), 3)
+            # within the file's own validity ranges (0.5-1.5 FNOMIN, ±15° where they allow)
+            lim, fnom = model.limit, float(model["FNOMIN"])
+            flo = max(0.5 * fnom, lim.get("FZMIN", 0.0))
+            fhi = min(1.5 * fnom, lim.get("FZMAX", math.inf))
+            alo = max(-math.radians(15.0), lim.get("ALPMIN", -math.inf))
+            ahi = min(math.radians(15.0), lim.get("ALPMAX", math.inf))
+            fz = np.repeat(np.linspace(flo, fhi, 3) if fhi > flo else np.array([fnom]) * 1.0,
+                           31)
+            sa = np.tile(np.linspace(alo, ahi, 31), fz.size // 31)
             z = np.zeros(fz.size)
             cols = {"FZ": fz, "SL": z, "SA": sa, "IA": z, "P": z + float(model["INFLPRES"]),
                     "VX": z + float(model["LONGVL"])}
