@@ -7,10 +7,10 @@ or the model, a default said so.
 The reference is independent of the kernel's contact code: the NumPy oracle (tests/oracle.py)
 loaded at the wheel centre with the force F and the moment (C − W)×F computed here from the
 solved pose must find the same equilibrium. On the Chrono double wishbone with `Bushing Data`
-12 kN of braking (or of traction at the contact patch) winds the wheel carrier up by 2–3°: the carrier-fixed point the rig used to
-load (330 mm below the wheel centre at design) then sits more than 10 mm along the road from
-C, and loading it gives another toe under load (the issue measured 13.7 mm and 1.17° against
-0.94° on its corner).
+12 kN of braking (or of traction at the contact patch) winds the wheel carrier up by 2.5°: the
+carrier-fixed point the rig used to load (330 mm below the wheel centre at design) then sits
+14.4 mm along the road from C, and loading it gives another toe under load (−0.275° against
+−0.308° under braking; the issue measured 13.7 mm and 1.17° against 0.94° on its corner).
 
 One compiled solve (two cases) and one K&C event (the truck tyre's radius, from the CLI)."""
 
