@@ -114,6 +114,13 @@ def test_mirror_twice_is_the_identity(pm):
     for a, b in zip(*(jax.tree_util.tree_leaves(m) for m in (pm, twice)), strict=True):
         np.testing.assert_array_equal(a, b)
     assert twice.reference_points == pm.reference_points
+    # mirrored loads keep their road-contact radii (the tyre force at the wheel plane's lowest
+    # point mirrors with the wheel); they were dropped, moving the force to the marker
+    loads = thesis_load_cases(pm)
+    loads = dataclasses.replace(loads, contact_radius=jnp.full(loads.force.shape[:-1], 330.0))
+    back = mirror_loads(mirror_loads(loads))
+    np.testing.assert_array_equal(back.contact_radius, loads.contact_radius)
+    np.testing.assert_array_equal(back.force, loads.force)
 
 
 def test_combined_axle_settles_side_by_side():

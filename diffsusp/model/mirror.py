@@ -106,9 +106,10 @@ def _mirrored_corner(corner, names):
 
 def mirror_loads(loads: Loads) -> Loads:
     """Loads mirrored through y = 0: forces F' = M F, moments T' = −M T (axial vectors), driver
-    values unchanged (the mirrored drivers' directions are mirrored)."""
+    values and road-contact radii unchanged (the mirrored drivers' directions are mirrored; the
+    wheel plane's lowest point mirrors with the wheel)."""
     return Loads(force=loads.force * jnp.asarray(_M), moment=loads.moment * jnp.asarray(_AXIAL),
-                 driver=loads.driver)
+                 driver=loads.driver, contact_radius=loads.contact_radius)
 
 
 def mirror_coordinates(q: Float[Array, "*cases n"]) -> Float[Array, "*cases n"]:
