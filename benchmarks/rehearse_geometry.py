@@ -11,13 +11,15 @@ landmarks per part with σ = 0.05 mm, the joints located with the nominal model 
   ideal kinematics);
 - **chrono**: the Chrono double wishbone whose arm bushings are free in torsion
   (`tests/data/DoubleWishbone_bushings.json`): the bushings located as revolutes, their position
-  along the axis not observable, the arms' compliance carried in σ.
+  along the axis not observable, the arms' compliance carried in σ;
+- **pm** (extra): the pseudo-McPherson (`models.pseudo_mcpherson`: compliant bushings A and B
+  located as balls, the strut top F as a revolute; no steering, so F is not observable).
 
 Per coordinate: identified rate, 1/2/3σ coverage among the identified, bias/σ, spread/σ,
 false-"identified" rate (claimed and outside 3σ, of all truths); the consistent-verdict rate.
 Results to benchmarks/results/rehearse_geometry_<scenario>.json.
 
-    python benchmarks/rehearse_geometry.py [--n 200] [--scenario dw|chrono] [--seed 0]
+    python benchmarks/rehearse_geometry.py [--n 200] [--scenario dw|chrono|pm] [--seed 0]
 """
 
 import argparse
@@ -33,7 +35,7 @@ jax.config.update("jax_enable_x64", True)
 from diffsusp import load_model  # noqa: E402
 from diffsusp.cli.rehearse import corner_cases  # noqa: E402
 from diffsusp.identify.rehearse import GeometryScenario, rehearse  # noqa: E402
-from diffsusp.models import double_wishbone  # noqa: E402
+from diffsusp.models import double_wishbone, pseudo_mcpherson  # noqa: E402
 
 CHRONO = pathlib.Path(__file__).parents[1] / "tests" / "data" / "DoubleWishbone_bushings.json"
 
@@ -46,7 +48,12 @@ def main():
     ap.add_argument("--noise", type=float, default=0.05)
     ap.add_argument("--spread", type=float, default=5.0)
     args = ap.parse_args()
-    mech = load_model(str(CHRONO)) if args.scenario == "chrono" else double_wishbone()
+    if args.scenario == "chrono":
+        mech = load_model(str(CHRONO))
+    elif args.scenario == "pm":
+        mech = pseudo_mcpherson()
+    else:
+        mech = double_wishbone()
     t0 = time.perf_counter()
     scenario = GeometryScenario(mech, corner_cases(mech), noise=args.noise, spread=args.spread)
     report = rehearse(scenario, n=args.n, seed=args.seed)
