@@ -88,7 +88,8 @@ class Coordinate:
 
     **Fields:** `name` ('x', 'y', 'z' of the centre; 'axis_y'… a component of a revolute's or
     slide's unit axis, the largest component left out: the norm fixes it); `value`; `sigma`
-    the reported 1σ (landmark noise, inflated by a revolute's lack of fit, with the model's
+    the reported 1σ (landmark noise, × √(χ²/E) when the joint's equations fit worse than the
+    noise explains — × √(3χ²/E) for a revolute beyond `LACK_OF_FIT` —, with the model's
     compliance bias `bias` added in quadrature; NaN: none); `unit` ('mm' or '-');
     `determined` (the data fix it: its joint observable and nothing flags it); `seen` (False:
     the parts never move relative to each other); `reason` why it is not determined;
