@@ -28,6 +28,7 @@ import typer
 
 from .common import (
     EXIT_BAD_INPUT,
+    check_number,
     check_output,
     cli_errors,
     console,
@@ -91,9 +92,9 @@ def geometry(
     check_output(joint_table, suffixes=(".csv", ".json"), what="joint table")
     check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
     check_output(figures, what="figures folder", directory=True)
-    if not (landmark_sigma > 0 and max_sigma > 0 and min_snr > 0):
-        raise fail("--landmark-sigma, --max-sigma and --min-snr must be positive.",
-                   EXIT_BAD_INPUT)
+    for value, option, unit in ((landmark_sigma, "--landmark-sigma", "mm"),
+                                (max_sigma, "--max-sigma", "mm"), (min_snr, "--min-snr", "")):
+        check_number(value, option, positive=True, unit=unit)  # nan, inf, <= 0: exit 2
     enable_x64()
     from ..identify import geometric
     from ..identify.report import format_table, write_report
@@ -163,8 +164,9 @@ def correct(
     measured poses of one case (spec geometry §3.8)."""
     check_output(out, suffixes=(".csv", ".json", ".html", ".txt"), what="report")
     _check_paths(None, write_model)
-    if (tol is not None and tol <= 0) or max_iterations < 1:
-        raise fail("--tol must be positive and --max-iterations at least 1.", EXIT_BAD_INPUT)
+    check_number(tol, "--tol", positive=True, unit="mm")
+    if max_iterations < 1:
+        raise fail("--max-iterations must be at least 1.", EXIT_BAD_INPUT)
     enable_x64()
     from ..identify import geometric
     from ..identify.report import format_table, write_report
