@@ -111,6 +111,7 @@ def test_table_csv_json_agree_and_swapped_landmarks_are_flagged(tables, tmp_path
     assert "part 'upright'" in warning and "swapped or moved" in warning
     assert "part 'upper" not in warning and "part 'lower" not in warning
     assert f"case(s) {', '.join(str(c + 1) for c in SWAPPED)}:" in warning
+    assert any("part 'upright'" in w for w in summary["warnings"])  # the written file's list
     assert "identified" not in status.values()
     assert "INCONSISTENT" in text and "part 'upright'" in " ".join(text.split())
     # the re-ordering the warning offers matches the landmarks by their distances: consistent

@@ -378,7 +378,8 @@ class IdentificationReport:
         """The common part of every report as plain data: method, parameters (`rows()`),
         combinations, per measurement the RMS of its whitened residuals, the consistency of the
         identified model with the data (None when not checked), the fit's verdict and stop
-        reason, and where the σ % bar was judged."""
+        reason, where the σ % bar was judged, and the report's warnings (e.g. the geometric
+        location's swapped-landmark parts and cases)."""
         rms = {}
         for name, res in self.residuals.items():
             white = np.asarray(res.whitened, dtype=float)
@@ -387,7 +388,8 @@ class IdentificationReport:
                 "combinations": list(self.combinations), "residual_rms": rms,
                 "consistency": None if self.consistency is None else
                 self.consistency.summary(), "fit_verdict": self.fit_verdict,
-                "stop_reason": getattr(self, "stop_reason", ""), "judged_at": self.judged_at}
+                "stop_reason": getattr(self, "stop_reason", ""), "judged_at": self.judged_at,
+                "warnings": [str(w) for w in getattr(self, "warnings", ()) or ()]}
 
     def to_json(self, **kwargs) -> str:
         """`summary()` as JSON (NaN and inf written as null); `kwargs` go to `json.dumps`."""
