@@ -12,7 +12,8 @@ ch. 2–3, guaranteed least squares):
   equilibrium-consistent correction of the bolted-side joint frames (geometry ch. 2–3).
 - `rehearse`: before measuring, random truths around the start, the planned experiment
   simulated and the method run: how often each parameter is identified and how often
-  "identified" is right (`SuspensionScenario`; the tyre fits provide their own scenarios).
+  "identified" is right (`SuspensionScenario`, `GeometryScenario` for the joint locations;
+  the tyre fits provide their own scenarios).
 - `sensitivity` and `design_experiment`: exact ∂(K&C metric)/∂(parameter), and the choice of
   load cases that best determine chosen parameters.
 
@@ -58,7 +59,7 @@ from .least_squares import (
     whitened_residuals,
 )
 from .params import Params
-from .rehearse import RehearsalReport, SuspensionScenario, rehearse
+from .rehearse import GeometryScenario, RehearsalReport, SuspensionScenario, rehearse
 from .selection import fit_selection, measured_bushings, with_start
 from .sensitivity import (
     DesignReport,
@@ -77,6 +78,7 @@ __all__ = [
     "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
     "iterative", "fit_selection", "from_measurements", "measured_bushings", "with_start",
     "least_squares", "least_squares_batch", "predict", "RehearsalReport", "SuspensionScenario",
+    "GeometryScenario",
     "rehearse",
     "sensitivity", "sensitivity_metrics", "whitened_residuals",
 ]
