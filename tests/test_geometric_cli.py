@@ -2,6 +2,7 @@
 the arm turned about a known point (a ball joint at (10, −5, 3) mm), and a corrected model
 against a measured equilibrium."""
 
+import csv
 import json
 
 import equinox as eqx
@@ -102,6 +103,18 @@ def test_identify_correct(files, tmp_path):
     rows = report["parameters"]
     assert [r["parameter"] for r in rows] == [f"{marker}.{c}" for c in "xyz"]
     assert all(r["status"] == "identified" and r["sigma"] > 0 for r in rows), rows
+    # the printed table and the CSV say the same (one verdict, every writer)
+    out = tmp_path / "correct.csv"
+    printed = _run("correct", files["perturbed"], "--measurements", files["equilibrium"],
+                   "--case", "1", "--out", out)
+    assert printed.exit_code == 0, printed.output
+    with open(out, newline="", encoding="utf-8") as f:
+        from_csv = {r["parameter"]: r["status"] for r in csv.DictReader(f)
+                    if r["parameter"] in {x["parameter"] for x in rows}}
+    assert from_csv == {r["parameter"]: r["status"] for r in rows}
+    for name, status in from_csv.items():
+        line = next(t for t in printed.output.splitlines() if t.split()[:1] == [name])
+        assert status in line, line
     # the written model is the library's correction (same compiled solve: same model)
     perturbed = load_model(files["perturbed"])
     meas = measure.read_measurements(files["equilibrium"], perturbed)
