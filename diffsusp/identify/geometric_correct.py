@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
-from .geometric_joints import Coordinate
+from .geometric_joints import Coordinate, CoordinateRows
 from .report import IdentificationReport
 
 TOL_FLOOR = 1e-4
@@ -27,7 +27,7 @@ allow (σ: the measurements' noise, mm); converged when the error is then within
 
 
 @dataclasses.dataclass(frozen=True)
-class CorrectionReport(IdentificationReport):
+class CorrectionReport(CoordinateRows, IdentificationReport):
     """Result of `correct_geometry`.
 
     **Fields:** `pose_errors`: per equilibrium solved, the largest distance (mm) between a
@@ -64,38 +64,8 @@ class CorrectionReport(IdentificationReport):
     def iterations(self) -> int:
         return len(self.pose_errors) - 1
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(f"{m}.{c.name}" for m, c in self.coordinates)
-
-    @property
-    def estimates(self) -> np.ndarray:
-        return np.array([c.value for _, c in self.coordinates], dtype=float)
-
-    @property
-    def sigmas(self) -> np.ndarray:
-        return np.array([c.sigma for _, c in self.coordinates], dtype=float)
-
-    @property
-    def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
-
-    @property
-    def estimate_units(self) -> tuple[str, ...]:
-        return tuple(c.unit for _, c in self.coordinates)
-
-    @property
-    def identifiable(self) -> np.ndarray:
-        return np.array([c.determined for _, c in self.coordinates], dtype=bool)
-
-    @property
-    def reasons(self) -> tuple[str, ...]:
-        return tuple(c.reason for _, c in self.coordinates)
-
-    @property
-    def residuals(self) -> dict:
-        return {}
+    def _labelled(self) -> list[tuple[str, Coordinate]]:
+        return list(self.coordinates)
 
     @property
     def stop_reason(self) -> str:

@@ -170,8 +170,55 @@ class JointEstimate:
                     coordinates=[c.to_dict() for c in self.coordinates])
 
 
+class CoordinateRows:
+    """The report base's per-parameter properties of a report whose rows are `Coordinate`s,
+    each labelled by its owner (a joint, a marker): `names` '<owner>.<coordinate>', estimates,
+    σ, σ %, units, determined (`identifiable`), `seen`, `reasons`; no residual table. The
+    report provides `_labelled()` → [(owner, Coordinate)]."""
+
+    def _labelled(self) -> list[tuple[str, Coordinate]]:
+        raise NotImplementedError
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"{owner}.{c.name}" for owner, c in self._labelled())
+
+    @property
+    def estimates(self) -> np.ndarray:
+        return np.array([c.value for _, c in self._labelled()], dtype=float)
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        return np.array([c.sigma for _, c in self._labelled()], dtype=float)
+
+    @property
+    def sigma_pct(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 100.0 * self.sigmas / np.abs(self.estimates)
+
+    @property
+    def estimate_units(self) -> tuple[str, ...]:
+        return tuple(c.unit for _, c in self._labelled())
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        return np.array([c.determined for _, c in self._labelled()], dtype=bool)
+
+    @property
+    def seen(self) -> np.ndarray:
+        return np.array([c.seen for _, c in self._labelled()], dtype=bool)
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        return tuple(c.reason for _, c in self._labelled())
+
+    @property
+    def residuals(self) -> dict:
+        return {}
+
+
 @dataclasses.dataclass(frozen=True)
-class GeometricReport(IdentificationReport):
+class GeometricReport(CoordinateRows, IdentificationReport):
     """Result of `locate_joints`: one `JointEstimate` per joint of the list, in order, the
     landmark noise σ_L used for the σ (mm), and the number of cases.
 
@@ -210,42 +257,8 @@ class GeometricReport(IdentificationReport):
     def _coordinates(self) -> list[tuple[JointEstimate, Coordinate]]:
         return [(j, c) for j in self.joints for c in j.coordinates]
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(f"{j.name}.{c.name}" for j, c in self._coordinates())
-
-    @property
-    def estimates(self) -> np.ndarray:
-        return np.array([c.value for _, c in self._coordinates()], dtype=float)
-
-    @property
-    def sigmas(self) -> np.ndarray:
-        return np.array([c.sigma for _, c in self._coordinates()], dtype=float)
-
-    @property
-    def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
-
-    @property
-    def estimate_units(self) -> tuple[str, ...]:
-        return tuple(c.unit for _, c in self._coordinates())
-
-    @property
-    def identifiable(self) -> np.ndarray:
-        return np.array([c.determined for _, c in self._coordinates()], dtype=bool)
-
-    @property
-    def seen(self) -> np.ndarray:
-        return np.array([c.seen for _, c in self._coordinates()], dtype=bool)
-
-    @property
-    def reasons(self) -> tuple[str, ...]:
-        return tuple(c.reason for _, c in self._coordinates())
-
-    @property
-    def residuals(self) -> dict:
-        return {}
+    def _labelled(self) -> list[tuple[str, Coordinate]]:
+        return [(j.name, c) for j, c in self._coordinates()]
 
     @property
     def fit_verdict(self) -> str:
