@@ -1,4 +1,5 @@
-"""Shared test helpers: pytree comparison and finite-difference derivatives (issue 11, item 5).
+"""Shared test helpers: pytree comparison and finite-difference derivatives (issue 11, item 5),
+and the status column of a printed identification table (issue 27).
 
 Import from a test file as `from helpers import tree_allclose, central_fd, fd_jvp` (pytest puts
 `tests/` on `sys.path`).
@@ -37,3 +38,18 @@ def central_fd(fn, x, h):
     cols = [fd_jvp(fn, x, jnp.zeros(x.size).at[k].set(1.0).reshape(x.shape), h)
             for k in range(x.size)]
     return jnp.stack(cols, axis=-1)
+
+
+def table_statuses(text: str, names) -> dict:
+    """Parameter → status of a printed identification table (`format_table`): on each row
+    whose first word is one of `names`, the `STATUSES` entry that starts first in the line."""
+    from diffsusp.identify.report import STATUSES
+
+    out = {}
+    for line in text.splitlines():
+        words = line.split()
+        if words and words[0] in names:
+            found = sorted((line.index(s), s) for s in STATUSES if s in line)
+            assert found, line
+            out[words[0]] = found[0][1]  # the status cell starts with the status
+    return out

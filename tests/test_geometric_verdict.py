@@ -16,12 +16,12 @@ import pathlib
 
 import numpy as np
 import pytest
+from helpers import table_statuses
 from typer.testing import CliRunner
 
 from diffsusp import load_model, measure
 from diffsusp.cli import app
 from diffsusp.identify.rehearse import GeometryScenario, rehearse
-from diffsusp.identify.report import STATUSES
 from diffsusp.kc.corner import equilibrium_load
 
 MODEL = pathlib.Path(__file__).parent / "data" / "DoubleWishbone_bushings.json"
@@ -66,16 +66,6 @@ def _run(*args):
     return CliRunner().invoke(app, [*map(str, args)])
 
 
-def _table_statuses(text, names):
-    out = {}
-    for line in text.splitlines():
-        words = line.split()
-        if words and words[0] in names:
-            found = sorted((line.index(s), s) for s in STATUSES if s in line)
-            out[words[0]] = found[0][1]
-    return out
-
-
 def test_table_csv_json_agree_and_swapped_landmarks_are_flagged(tables, tmp_path):
     good, bad = tables
     report = {}
@@ -91,7 +81,7 @@ def test_table_csv_json_agree_and_swapped_landmarks_are_flagged(tables, tmp_path
         summary = json.loads(json_path.read_text())
         from_json = {p["parameter"]: p["status"] for p in summary["parameters"]}
         from_csv = {k: r["status"] for k, r in rows.items()}
-        assert from_csv == from_json == _table_statuses(printed.output, set(rows))
+        assert from_csv == from_json == table_statuses(printed.output, set(rows))
         report[name] = (printed.output, summary, from_csv)
     text, summary, status = report["good"]
     # the torsion-free bushings are revolutes: their x (along the axis, ~x) not determined,

@@ -16,6 +16,7 @@ import equinox as eqx
 import jax
 import numpy as np
 import pytest
+from helpers import table_statuses
 from typer.testing import CliRunner
 
 import diffsusp
@@ -60,17 +61,6 @@ def _stiffness(mech, name):
     return float(k[mech.bushings.index(bushing)][a % 3])
 
 
-def _table_statuses(text, names):
-    out = {}
-    for line in text.splitlines():
-        words = line.split()
-        if words and words[0] in names:
-            found = sorted((line.index(s), s) for s in STATUSES if s in line)
-            assert found, line
-            out[words[0]] = found[0][1]  # the status cell starts with the status
-    return out
-
-
 @pytest.mark.parametrize("verb", ["direct", "iterative", "fit"])
 def test_default_options_on_a_torsion_free_chrono_corner(corner, verb, tmp_path):
     start, truth, poses = corner
@@ -91,7 +81,7 @@ def test_default_options_on_a_torsion_free_chrono_corner(corner, verb, tmp_path)
     from_csv = {r["parameter"]: r["status"] for r in rows}
     from_json = {r["parameter"]: r["status"] for r in json.loads(second.stdout)["parameters"]
                  if r["status"] != "derived"}
-    from_table = _table_statuses(first.stdout, set(names))
+    from_table = table_statuses(first.stdout, set(names))
     html = paths["html"].read_text()
     assert from_csv == from_json == from_table, (from_csv, from_json, from_table)
     assert all(f"<td>{n}</td><td>" in html for n in names)
