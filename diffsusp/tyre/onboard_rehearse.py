@@ -14,8 +14,9 @@ What it found (benchmarks/rehearse_onboard.py, 200 truths, benchmarks/README.md)
 pipeline claims the load polynomials of the relaxation (b_L_2, b_L_1, b_L_0) in 92–97 % of the
 truths, every claim 6σ off, and K_δ's terms 1.7–2σ off, with a consistent verdict: the record
 means are removed from each signal before the products with the load polynomials (§5.5 item 1),
-a structural error; with the means kept the claims are right in ≥ 99 % (the scenarios
-`sine-keep-means`, `sine-delay-keep-means` there).
+a structural error; with the means kept false "identified" falls to 1.0 % (3.0 % with a 100 ms
+Correvit delay: the rare claims of b_L_*, whose σ is 1.3–1.44× too small) — the scenarios
+`sine-keep-means`, `sine-delay-keep-means` there.
 """
 
 import dataclasses
