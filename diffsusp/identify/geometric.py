@@ -63,6 +63,7 @@ import numpy as np
 from ..errors import InputError
 from .geometric_correct import CorrectionReport, correct_geometry, offset_equivalent
 from .geometric_joints import (
+    FREE_AXIS_RATIO,
     GROUND,
     JOINT_KINDS,
     Coordinate,
@@ -70,6 +71,8 @@ from .geometric_joints import (
     GeometricReport,
     JointEstimate,
     element_table,
+    free_axis,
+    model_geometry,
     read_joints,
     write_joints,
 )
@@ -109,26 +112,6 @@ __all__ = [
     "relative_operators",
     "write_joints",
 ]
-
-
-FREE_AXIS_RATIO = 1e-3
-"""A bushing is free about one of its marker axes when its rotational stiffness there (linear
-plus cubic at 0.1 rad) is at most this fraction of the smaller of the other two: the arm then
-turns about that axis (a revolute) and the bushing's position along it leaves no trace in the
-relative motion (spec geometry §4.3)."""
-
-
-def _free_axis(mech, name: str) -> int | None:
-    """The one axis (0, 1, 2 of the bushing's I marker) a bushing is free about, or None (no
-    free axis, or two or three: a ball). spec: geometry §4.3, stiffness §1.8."""
-    b = mech.bushings
-    k = list(b.names).index(name)
-    rot = np.abs(np.asarray(b.k_rot)[k]) + np.abs(np.asarray(b.cubic_rot)[k]) * 0.01
-    for a in range(3):
-        others = np.delete(rot, a)
-        if others.min() > 0 and rot[a] <= FREE_AXIS_RATIO * others.min():
-            return a
-    return None
 
 
 def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = ()
@@ -173,7 +156,7 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
         if kind in ("spherical", "universal", "bushing") and known(pi) and known(pj):
             if pi < 0 and pj < 0:
                 continue
-            free = _free_axis(mech, name) if kind == "bushing" else None
+            free = free_axis(mech, name) if kind == "bushing" else None
             if name in compliant:
                 joints.append(("compliant", name, pi, pj, at))
             elif free is not None:
@@ -239,34 +222,6 @@ def joints_from_model(mech, parts: Sequence[str], *, compliant: Sequence[str] = 
     if unknown:
         raise InputError(f"compliant: {', '.join(unknown)} not bushings of '{mech.name}'.")
     return tuple(out), tuple(notes)
-
-
-def model_geometry(mech, joint: GeometricJoint):
-    """The model's own location of `joint` as `locate_joints` reports it: `(centre, axis)`, the
-    centre the design position of the I marker of its first element, the axis (a revolute: the
-    joint's marker z, or a bushing's free axis; an unknown slide: the z of the slide joint's
-    marker on S1; else None) — or None when the joint names no element of `mech`. The truth a
-    located joint is compared with (the rehearsal), and the reference of the compliance bias."""
-    table = element_table(mech)
-    if not joint.elements or joint.elements[0] not in table:
-        return None
-    name = joint.elements[0]
-    group, _, _, _, mi, _ = table[name]
-    pos = np.asarray(mech.markers.position)
-    ori = np.asarray(mech.markers.orientation)
-    axis = None
-    if joint.kind == "revolute":
-        free = _free_axis(mech, name) if group == "bushing" else None
-        axis = ori[mi][:, 2 if free is None else free]
-    elif joint.kind == "ball_unknown_slide":
-        s1 = mech.part_index(joint.parts[0]) if joint.parts[0] != GROUND else -1
-        for _, kind, pi, pj, ma, mb in table.values():
-            if kind in ("translational", "cylindrical") and s1 in (pi, pj):
-                axis = ori[ma if pi == s1 else mb][:, 2]
-                break
-        if axis is None:
-            return None
-    return pos[mi].copy(), (np.zeros(3) if axis is None else np.asarray(axis, float))
 
 
 def displace_joints(mech, joints: Sequence[GeometricJoint], offsets):

@@ -16,7 +16,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
-from .geometric_joints import GROUND, Coordinate, GeometricJoint, GeometricReport, JointEstimate
+from .geometric_joints import (
+    GROUND,
+    Coordinate,
+    GeometricJoint,
+    GeometricReport,
+    JointEstimate,
+    model_geometry,
+)
 from .report import CONSISTENCY_ALPHA, Consistency, chi2_quantile
 
 START_OFFSETS = 150.0
@@ -764,10 +771,9 @@ def _coordinates(j: GeometricJoint, centre, axis, block, *, observable, moving, 
 def _model_located(model, measurements, joints, loads, run):
     """Per joint (located, truth): the model's own equilibria at the measured cases located as
     the measurements are (same compiled program), and the model's hardpoint and axis
-    (`geometric.model_geometry`); None where the model has no element for it. Returns the
+    (`model_geometry`); None where the model has no element for it. Returns the
     list and a note (or "")."""
     from ..statics import Status, part_poses, solve_statics
-    from .geometric import model_geometry
 
     loads = measurements.loads if loads is None else loads
     missing = [p for p in measurements.parts if p not in model.parts]
