@@ -13,6 +13,7 @@ selected on import.
 import os
 import pathlib
 import sys
+import textwrap
 from collections.abc import Sequence
 
 import matplotlib
@@ -77,6 +78,10 @@ def _new_axes(n: int, ax, width=6.4, height=2.6):
     return axes[0].figure, axes
 
 
+LEGEND_WIDTH = 32
+"""Characters per legend line of `kc_curves` (longer labels wrap)."""
+
+
 def kc_curves(events, metrics=("toe", "camber", "half_track_change"), *, labels=None,
               measured=None, ax=None, title: str | None = None) -> Figure:
     """K&C curves: each metric against the events' input, one panel per metric, one line per
@@ -114,7 +119,7 @@ def kc_curves(events, metrics=("toe", "camber", "half_track_change"), *, labels=
             for suffix, values in _series(ev, metric):
                 name = f"{label} ({suffix})" if suffix else label
                 a.plot(x, display(metric, values), marker="." if x.size < 30 else None,
-                       label=name)
+                       label=textwrap.fill(name, LEGEND_WIDTH))
         for data in measured:
             if metric not in data:
                 continue
@@ -123,7 +128,10 @@ def kc_curves(events, metrics=("toe", "camber", "half_track_change"), *, labels=
                    mfc="none", label=data.get("label", "measured"))
         a.set_ylabel(_metric_label(metric))
         a.grid(True, alpha=0.3)
-        a.legend(fontsize="small")
+        # beside the axes, not on them: an axle's default label (its two corners' model
+        # names) runs to ~90 characters and squeezed the curves (issue 28 item 8)
+        a.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                 borderaxespad=0.0)
     for a in axes:
         a.set_xlabel(xlabel)
     if title:

@@ -89,3 +89,21 @@ def test_sensitivity_bars(tmp_path):
     assert all(p.stat().st_size > 5_000 for p in paths)
     with pytest.raises(ValueError, match="4 values for 3 names"):
         plot.sensitivity_bars(values, names[:3])
+
+
+def test_kc_curves_legend_beside_the_axes_with_an_axles_long_label():
+    """An axle's default label (its two corners' model names, ~90 characters) wraps and its
+    legend stands beside the panel, not on the curves (issue 28 item 8)."""
+    label = "axle(left/=Chrono double wishbone with bushings; right/=Chrono double wishbone)"
+    fig = plot.kc_curves(event(label, 1e-4, axle=True), ["toe", "camber"])
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    for ax in fig.axes:
+        legend = ax.get_legend()
+        texts = [t.get_text() for t in legend.get_texts()]
+        assert all(max(len(line) for line in t.splitlines()) <= plot.LEGEND_WIDTH for t in texts)
+        assert texts[0].replace("\n", " ") == f"{label} (left)"
+        box, panel = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert box.x0 >= panel.x1  # beside the panel
