@@ -681,19 +681,22 @@ def steering(mech: Mechanism, rack_travel, *, travel: float = 0.0, rack: str = "
 
 
 def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw: bool = True,
-               label: str | None = None, **solver) -> KCEvent:
+               label: str | None = None, contact: str = "road", **solver) -> KCEvent:
     """A table of (F_vert, F_lat, F_long) load cases (N) at the contact point, per side
     (vertical up, lateral inboard, longitudinal rearward = braking), e.g. `TABLES['table_5_1']`
-    (13 cases) or `TABLES['table_4_4']` (17). On the pseudo-McPherson (Adams/Car frame, left
-    wheel) this is exactly `diffsusp.models.thesis_load_cases`. x = case number (1-based).
-    The loads alone, without the event: `corner_loads(mech, table)`."""
+    (13 cases) or `TABLES['table_4_4']` (17). `contact` as `force_rig`: 'road' (default) at
+    the ground contact point moving with the wheel; 'fixed' at the corner's contact-patch load
+    point, where the thesis applies them: on the pseudo-McPherson (Adams/Car frame, left wheel)
+    `contact='fixed'` is exactly `diffsusp.models.thesis_load_cases` (the 4 500 N case then
+    holds the design position; at the road contact point, 0.3 mm from it, it does not).
+    x = case number (1-based). The loads alone, without the event: `corner_loads(mech, table)`."""
     table = np.asarray(table, dtype=float)
     if table.ndim != 2 or table.shape[1] != 3 or not np.all(np.isfinite(table)):
         raise InputError(
             f"table must be a finite (cases, 3) array of (F_vert, F_lat, F_long) in N; got "
             f"shape {table.shape}."
         )
-    rig = force_rig(mech, corner)
+    rig = force_rig(mech, corner, contact=contact)
     loads = corner_loads(rig.mech, table, corner=corner)
     x = np.arange(1.0, table.shape[0] + 1)
     return _run("load_table", rig, loads, x, "case", "", "vertical load", q0, throw, label,
