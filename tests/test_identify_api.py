@@ -77,7 +77,8 @@ def test_three_methods_one_measurement_one_selection_one_report_api(case):
         summary = json.loads(report.to_json())
         assert summary["method"] == method and summary["parameters"] == rows
         assert set(summary) == {"method", "parameters", "combinations", "residual_rms",
-                                "consistency", "fit_verdict", "stop_reason", "judged_at"}
+                                "consistency", "fit_verdict", "stop_reason", "judged_at",
+                                "warnings"}
         assert [r["status"] for r in rows] == list(report.statuses)
         # Issue 12: every report says whether the identified model reproduces the data
         # (noise-free here: the exact methods do; the iterative loop stops at a 1 % change).

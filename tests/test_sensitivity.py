@@ -185,6 +185,14 @@ def test_sensitivity_command(tmp_path):
     assert (tmp_path / "sensitivity_toe.png").stat().st_size > 0
     out = json.loads(runner.invoke(app, [*args, "--json"]).output)
     assert set(out["metrics"]) == {"toe", "camber"}
+    # the table is narrow and uncut: every ranked parameter with its number (issue 28 item 8:
+    # a column per rank cut them, "1.1992e…", even at 200 columns)
+    table = runner.invoke(app, args, env={"COLUMNS": "100"}).output
+    rows = [line for line in table.splitlines() if "bushing_" in line or "spring." in line]
+    assert "…" not in table and max(len(line.rstrip()) for line in rows) <= 60
+    for name in ("toe", "camber"):
+        for p, v in out["metrics"][name]["ranked"][:5]:
+            assert any(p in line and f"{v:+.4g}" in line for line in table.splitlines()), p
     mech = pseudo_mcpherson()
     # The spring rate's column against a central difference of two re-runs of the event (the
     # same compiled program).

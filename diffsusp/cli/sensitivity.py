@@ -103,14 +103,17 @@ def sensitivity_command(
 
 
 def _table(report, mech_name, ev, params, top) -> Table:
+    """One row per metric and rank (metric, rank, parameter, elasticity): as narrow as the
+    longest names, whatever `top` (issue 28 item 8: a column per rank cut the numbers)."""
     table = Table(title=f"{mech_name}: sensitivities over {ev.name.replace('_', ' ')} "
                   f"({params})", box=box.SIMPLE_HEAD)
-    table.add_column("metric", no_wrap=True)
-    for k in range(top):
-        table.add_column(f"#{k + 1}", no_wrap=True)
+    for head in ("metric", "#", "parameter"):
+        table.add_column(head, no_wrap=True)
+    table.add_column("elasticity", justify="right", no_wrap=True)
     for name in report.elasticity:
-        ranks = report.ranked(name)[:top]
-        table.add_row(name, *[f"{p} {v:+.3g}" for p, v in ranks])
+        for k, (p, v) in enumerate(report.ranked(name)[:top]):
+            table.add_row(name if k == 0 else "", str(k + 1), p, f"{v:+.4g}",
+                          end_section=k == min(top, len(report.params)) - 1)
     return table
 
 

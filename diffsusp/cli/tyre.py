@@ -149,7 +149,7 @@ def eval_command(
             cols = {"FZ": fz, "SL": z, "SA": sa, "IA": z, "P": z + float(model["INFLPRES"]),
                     "VX": z + float(model["LONGVL"])}
         else:
-            from diffsusp.io.tyre_tables import read_tyre_table
+            from diffsusp.tyre.input_tables import read_tyre_table
 
             cols = F.input_columns(read_tyre_table(inputs, "input table"))
         p = np.where(np.isnan(cols["P"]), float(model["INFLPRES"]), cols["P"])
@@ -388,7 +388,7 @@ def fit_command(
     noise): the report and the files are still written, nothing is called identified. Exit
     code 3 too when the optimiser did not converge: the report is written, the fitted .tir only
     with --keep-unconverged (and marked NOT CONVERGED in its first line). Checked before the
-    fit (exit 2): the table (`diffsusp.io.tyre_tables`), data that vary (at least as many
+    fit (exit 2): the table (`diffsusp.tyre.input_tables`), data that vary (at least as many
     distinct input points as free coefficients). Channels the model has no output for (MX, MY
     for mf1989) are noted and left out."""
     from diffsusp.tyre import MagicFormula89
@@ -435,7 +435,7 @@ def fit_command(
                                              "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
                                              "c3": -1.0, "c4": -10.0, "c9": 0.5})
             tir = None
-        from diffsusp.io.tyre_tables import read_tyre_table
+        from diffsusp.tyre.input_tables import read_tyre_table
 
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")

@@ -220,7 +220,7 @@ def identify_command(
     check_number(cutoff, "--cutoff", positive=True, unit="Hz")
     c = console(markup=False)
     with cli_errors():
-        from diffsusp.io.tyre_tables import read_tyre_table
+        from diffsusp.tyre.input_tables import read_tyre_table
 
         raw = read_tyre_table(data, "Flat Trac table")   # regular file, UTF-8, FZ >= 0, units
         table = _columns(raw)

@@ -452,8 +452,8 @@ class TyreFit(Recipe):
         return tyre.MagicFormula6.from_tir(read_tir(spec))
 
     def read(self, model, path):
-        from ..io.tyre_tables import read_tyre_table
         from ..tyre import fit as F
+        from ..tyre.input_tables import read_tyre_table
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

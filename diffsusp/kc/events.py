@@ -688,7 +688,7 @@ def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw:
     the ground contact point moving with the wheel; 'fixed' at the corner's contact-patch load
     point, where the thesis applies them: on the pseudo-McPherson (Adams/Car frame, left wheel)
     `contact='fixed'` is exactly `diffsusp.models.thesis_load_cases` (the 4 500 N case then
-    holds the design position; at the road contact point, 0.3 mm from it, it does not).
+    holds the design position; at the road contact point the wheel sits 0.3 mm lower).
     x = case number (1-based). The loads alone, without the event: `corner_loads(mech, table)`."""
     table = np.asarray(table, dtype=float)
     if table.ndim != 2 or table.shape[1] != 3 or not np.all(np.isfinite(table)):

@@ -29,8 +29,8 @@ import warnings
 import numpy as np
 
 from ..errors import ModelFileError, ModelWarning
-from .files import check_input, read_input
-from .tables import Table, _decode, _suffix
+from ..io.files import check_input, read_input
+from ..io.tables import Table, _decode, _suffix
 
 __all__ = ["PLAUSIBLE", "ROUND_TRIP", "read_tyre_table"]
 
@@ -52,7 +52,7 @@ def read_tyre_table(path, what: str = "tyre input table") -> Table:
 
     **Raises:** `ModelFileError` (file, line, column) for anything it refuses;
     `FileNotFoundError` when there is no file."""
-    from ..tyre import fit as F
+    from . import fit as F
 
     path = os.fspath(path)
     kind = _suffix(path)
