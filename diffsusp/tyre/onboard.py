@@ -307,13 +307,22 @@ def names(offset=False):
 # Delay (§5.5 item 2; not in the thesis)
 
 
-def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float):
+def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float,
+                   return_sigma: bool = False):
     """Delay (s) of the Correvit's lateral velocity behind the inertial unit, by kinematic
     consistency: d/dt v_{B5,y} (body-frame component) must equal [a_{B5} − ω × v_{B5}]_y with
     a_{B5} = f + g + ω̇ × (B5 − C0) + ω × (ω × (B5 − C0)) from the inertial unit (specific force
     f, gravity −9.81·z_r in the body frame, flat road). Cross-correlation of the two over lags
     0…`max_delay` (and 8 samples below 0), peak refined by a parabola (sub-sample); `dt` the
-    sampling step (s)."""
+    sampling step (s).
+
+    `return_sigma`: also its σ (s), (delay, σ). The estimate τ̂ maximises S(τ) = Σ m(t+τ) g(t)
+    (m the Correvit's derivative, g the inertial unit's target); to first order τ̂ − τ =
+    −S′(τ)/S″ and the random part of S′ is −Σ ġ(t) e(t), e(t) = m(t+τ̂) − g(t) the residual.
+    Both signals are windowed and differentiated, so e is far from white (the white-noise
+    formula gives half the spread over noise draws): the variance of Σ ġ e is a Newey–West
+    (Bartlett) sum of the autocovariances of u = ġ e up to `DELAY_HAC_WINDOWS` windows, and
+    S″ the parabola's curvature."""
     _, smooth, slope, _ = kernels
     w = _conv(data["imu_omega"], smooth)
     wd = _conv(data["imu_omega"], slope)
@@ -342,7 +351,28 @@ def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float):
     k = jnp.clip(jnp.argmax(xc), 1, lags + neg - 1)
     y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
     frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-    return (k - neg + frac) * dt
+    tau = (k - neg + frac) * dt
+    if not return_sigma:
+        return tau
+    i = jnp.arange(n, dtype=target.dtype)
+    pos = i + tau / dt
+    inside = (pos >= 0) & (pos <= n - 1)
+    u = jnp.gradient(target) / dt * (jnp.interp(pos, i, meas) - target) * inside
+    ac = jnp.fft.irfft(jnp.abs(jnp.fft.rfft(u, nfft)) ** 2, nfft)
+    band = DELAY_HAC_WINDOWS * len(smooth)
+    bartlett = 1.0 - np.arange(1, band) / band
+    var = ac[0] + 2.0 * jnp.sum(bartlett * ac[1:band])
+    curvature = (y0 - 2 * y1 + y2) / dt**2
+    return tau, jnp.sqrt(jnp.abs(var)) / jnp.abs(curvature)
+
+
+DELAY_HAC_WINDOWS = 2
+"""The Newey–West bandwidth of the delay's σ (`correvit_delay`), in windows (0.1 s at the
+default 0.05 s): the residual is the sensors' noise through the window and the derivative
+kernels, whose autocorrelation spans two windows. On the synthetic car's 6 s sine (40 noise
+draws, Correvit on time / 100 ms late) bandwidths of 2, 4 and 8 windows gave medians of
+0.41/0.44, 0.37/0.40 and 0.35/0.36 ms, the white-noise formula 0.18 ms; the estimates spread
+0.29/0.43 ms there and 0.41/0.39 ms over the rehearsal's 200 truths."""
 
 
 def shift_channel(x, time, delay):
@@ -517,14 +547,32 @@ def iv_solve(W_e, y_e, W_o, y_o, mask, n_wheels):
     return xs / s, cov / jnp.outer(s, s)
 
 
-def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=()) -> lsq.Fit:
+def _iv_x(W_e, y_e, W_o, y_o, cols):
+    """The IV solution (Zᵀ W)⁻¹ Zᵀ y on the columns `cols` (NumPy; rows already masked)."""
+    A = np.concatenate([W_e, W_o])[:, cols]
+    Z = np.concatenate([W_o, W_e])[:, cols]
+    s = np.linalg.norm(A, axis=0)
+    s = np.where(s > 0, s, 1.0)
+    return np.linalg.solve((Z / s).T @ (A / s), (Z / s).T @ np.concatenate([y_e, y_o])) / s
+
+
+def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=(), delay_sigma=0.0,
+           delay_rows=None) -> lsq.Fit:
     """`iv_solve` with `diffsusp.lsq`'s identifiability report (NumPy inputs, rows already
     masked, ordered (instant, wheel)): two-stage least squares — each free column of
     W = [W_e; W_o] projected on the instruments Z = [W_o; W_e] (Ŵ = Z (ZᵀZ)⁻¹ Zᵀ W), then
     `lsq.solve(Ŵ, y)` gives the IV solution, the identifiability and the regroupings; its
     covariance (from y − Ŵ x, which holds the regressors' noise too) is replaced by
     `iv_solve`'s clustered sandwich on the structural residual y − W x, and σ, σ %, the
-    relations' σ and their confidence indices follow from it."""
+    relations' σ and their confidence indices follow from it.
+
+    The Correvit's delay removed before is itself an estimate (σ `delay_sigma`, s), and its
+    error is one number shared by every row, which no sandwich over the rows can see: it
+    enters as J J ᵀ σ_τ², J = ∂x/∂τ the central difference of the IV solution between the
+    rows `delay_rows` = ((W_e, y_e, W_o, y_o) at τ + h, (…) at τ − h, 2h) (the two-step
+    estimator's covariance of Murphy and Topel, 1985, without its cross term: the delay comes
+    from the Correvit and the inertial unit, the regression's residual mostly from the
+    dynamometric wheels)."""
     A = np.concatenate([W_e, W_o])
     Z = np.concatenate([W_o, W_e])
     y = np.concatenate([y_e, y_o])
@@ -546,6 +594,10 @@ def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=()) -> lsq.Fit:
     cov = np.zeros_like(fit.covariance)
     se = s[est[free]]
     cov[np.ix_(est, est)] = cov_s / np.outer(se, se)
+    if delay_rows is not None and delay_sigma > 0:
+        plus, minus, width = delay_rows
+        jac = (_iv_x(*plus, est) - _iv_x(*minus, est)) / width
+        cov[np.ix_(est, est)] += delay_sigma**2 * np.outer(jac, jac)
     sigma = np.where(est, np.sqrt(np.abs(np.diagonal(cov))), np.nan)
     G_ = fit.regrouping
     comb_sigma = np.where(np.isfinite(fit.combination_sigma),
@@ -617,12 +669,14 @@ class Report(IdentificationReport):
     """One grouping's identification (Tables 32/33 layout): the `lsq.Fit`, the grouping, whether
     camber was in the model, the Correvit delay removed (s), the regression rows used and the
     regression instants excluded (`n_rows`, `excluded`: fewer than 3 lasers in a window; the
-    last `delay` s plus a window, where the Correvit's shifted copy has no value), and its
-    `consistency`.
+    last `delay` s plus a window, where the Correvit's shifted copy has no value), its
+    `consistency`, and the delay's σ (s, `delay_sigma`; 0 when the delay was given), which is
+    in the coefficients' σ (`iv_fit`).
 
     As the shared report (`IdentificationReport`): the coefficients (SI, F_z in kN), σ from
-    the clustered IV sandwich, a coefficient determined when the data identify it (`lsq`) and
-    |x|/σ ≥ 3.29 (`SIGNIFICANCE`), b_gamma_1 held at 0 when camber is left out."""
+    the clustered IV sandwich and the delay's σ, a coefficient determined when the data
+    identify it (`lsq`) and |x|/σ ≥ 3.29 (`SIGNIFICANCE`), b_gamma_1 held at 0 when camber
+    is left out."""
 
     grouping: str
     camber: bool
@@ -631,6 +685,7 @@ class Report(IdentificationReport):
     n_rows: int
     excluded: int
     consistency: Consistency | None = None
+    delay_sigma: float = 0.0
 
     family = "onboard"
 
@@ -709,14 +764,16 @@ class Report(IdentificationReport):
 
     def table(self) -> str:
         head = (f"{self.grouping} wheels, camber {'in' if self.camber else 'out'}, Correvit "
-                f"delay removed {1000 * self.delay:.1f} ms, {self.n_rows} rows, "
+                f"delay removed {1000 * self.delay:.1f} ± {1000 * self.delay_sigma:.2f} ms "
+                f"(in sigma), {self.n_rows} rows, "
                 f"{self.excluded} instants excluded (laser dropouts; the end of the record "
                 "where the delayed Correvit has no value)")
         return head + "\n" + self.fit.table()
 
     def to_dict(self) -> dict:
         return {"grouping": self.grouping, "camber": self.camber, "delay_s": self.delay,
-                "rows": self.n_rows, "excluded": self.excluded, "fit": self.fit.to_dict(),
+                "delay_sigma_s": self.delay_sigma, "rows": self.n_rows,
+                "excluded": self.excluded, "fit": self.fit.to_dict(),
                 "consistency": None if self.consistency is None else self.consistency.summary()}
 
     def plot(self, axes=None):
@@ -744,7 +801,7 @@ def _delay_program(data, options, half, dt):
     kernels = _kernels(options.window, 2 * half + 1, dt)
     normal, R = ground_plane(data["lasers"], data["laser_positions"], data["laser_window_ok"],
                              kernels[0])
-    return correvit_delay(data, normal, R, kernels, dt=dt)
+    return correvit_delay(data, normal, R, kernels, dt=dt, return_sigma=True)
 
 
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
@@ -772,7 +829,13 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
     b_L_* ~6σ off and called "identified" in 92–94 % of truths with it, 1 % without. A record
     whose sensors carry offsets needs them removed at the sensor, or `offset=True`.
 
-    **Returns:** {"delay": s, "reports": [Report, …], "excluded": int}.
+    An estimated delay's σ (`correvit_delay`) is carried into every coefficient's σ (`iv_fit`;
+    two more runs of the signals program at τ ± `DELAY_STEP`): left out, the relaxation's load
+    polynomials b_L_* had σ 1.3–1.44× too small over the rehearsal's 200 truths (their errors
+    correlated 0.7 with the delay's).
+
+    **Returns:** {"delay": s, "delay_sigma": s (0 when given), "reports": [Report, …],
+    "excluded": int}.
     """
     for grouping in groupings:
         if grouping not in GROUPINGS:
@@ -782,31 +845,52 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
         raise InputError(f"window of {options.window_time} s is longer than each half of the "
                          f"record ({data['time'].shape[0] // 2} samples at half the rate); "
                          "shorten window_time or give a longer record.")
-    if delay is None:
-        delay = (float(_delay_program(data, options, _window_length(options, data["time"]),
-                                      _step(data["time"])))
-                 if estimate_delay else 0.0)
+    delay_sigma = 0.0
+    if delay is None and estimate_delay:
+        est, est_sigma = _delay_program(data, options, _window_length(options, data["time"]),
+                                        _step(data["time"]))
+        delay, delay_sigma = float(est), float(est_sigma)
+    elif delay is None:
+        delay = 0.0
     half, dt = _window_length(options, data["time"][::2]), 2 * _step(data["time"])
-    sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay, float),
-                               jnp.asarray(1.0 if remove_offsets else 0.0))
-    sig = {k: np.asarray(v) for k, v in sig.items()}
-    ok = np.asarray(ok)
+    ro = jnp.asarray(1.0 if remove_offsets else 0.0)
+    # the delay's σ goes into the coefficients' (`iv_fit`): the signals again at τ ± h
+    shifts = (0.0, DELAY_STEP, -DELAY_STEP) if delay_sigma > 0 else (0.0,)
+    runs = []
+    for shift in shifts:
+        sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay + shift, float),
+                                   ro)
+        runs.append(({k: np.asarray(v) for k, v in sig.items()}, np.asarray(ok)))
+    ok = runs[0][1]
     reports = []
     for grouping in groupings:
         wheels = np.asarray(GROUPINGS[grouping])
+        rows = np.repeat(ok, len(wheels))
         for cam in camber:
-            (W_e, y_e), (W_o, y_o) = (
-                (np.asarray(a) for a in regressor({k: v[h] for k, v in sig.items()}, wheels,
-                                                  camber=cam, offset=offset))
-                for h in (0, 1))
-            rows = np.repeat(ok, len(wheels))
+            per_run = []
+            for sig, _ in runs:
+                (W_e, y_e), (W_o, y_o) = (
+                    (np.asarray(a) for a in regressor({k: v[h] for k, v in sig.items()},
+                                                      wheels, camber=cam, offset=offset))
+                    for h in (0, 1))
+                per_run.append((W_e[rows], y_e[rows], W_o[rows], y_o[rows]))
             fixed = () if cam else ("b_gamma_1",)
-            fit = iv_fit(W_e[rows], y_e[rows], W_o[rows], y_o[rows], names=names(offset),
-                         n_wheels=len(wheels), fixed=fixed)
+            fit = iv_fit(*per_run[0], names=names(offset), n_wheels=len(wheels), fixed=fixed,
+                         delay_sigma=delay_sigma,
+                         delay_rows=((per_run[1], per_run[2], 2 * DELAY_STEP)
+                                     if len(per_run) == 3 else None))
             reports.append(Report(grouping, cam, delay, fit, 2 * int(rows.sum()),
                                   int(np.sum(~ok)),
-                                  consistency(fit, len(wheels), tuple(wheels.tolist()))))
-    return {"delay": delay, "reports": reports, "excluded": int(np.sum(~ok))}
+                                  consistency(fit, len(wheels), tuple(wheels.tolist())),
+                                  delay_sigma))
+    return {"delay": delay, "delay_sigma": delay_sigma, "reports": reports,
+            "excluded": int(np.sum(~ok))}
+
+
+DELAY_STEP = 1e-3
+"""The step h (s) of the central difference ∂x/∂τ that carries the delay's σ into the
+coefficients' (`identify`, `iv_fit`): half the half-rate records' sampling step at 1 kHz
+(the shift interpolates linearly between samples, so x(τ) is piecewise linear)."""
 
 
 def quantities(loads_kn):
@@ -830,7 +914,9 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     thesis's pipeline) and "corrected" (the estimated delay removed), each with the
     coefficients x (8,), their covariance, the `QUANTITIES` (C x) and their σ (`iv_solve`;
     without camber its column is left out and x, covariance hold 0 there). `delay` (s) delays
-    the Correvit in the noisy copies. No laser dropouts (use `identify`). Each copy goes
+    the Correvit in the noisy copies, "delay_sigma" is the estimate's σ (`correvit_delay`; the
+    σ here are the sandwich's alone, without the delay's, which `identify` adds). No laser
+    dropouts (use `identify`). Each copy goes
     through `check` and the compiled programs of `identify` (delay, signals), so a Monte-Carlo
     and an identification of records of one length compile them once.
 
@@ -843,11 +929,12 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     out = []
     for key in keys:
         d = check(_noisy(truth, sensors, key, jnp.asarray(delay, float)), options)
-        est = _delay_program(d, options, half, dt)
+        est, est_sigma = _delay_program(d, options, half, dt)
         fits = [_iv_program(*_signals_program(d, options, half2, dt2, shift, ro),
                             tuple(wheels), camber, tuple(loads_kn))
                 for shift in (jnp.zeros_like(est), est)]
-        out.append({"delay": est, "naive": fits[0], "corrected": fits[1]})
+        out.append({"delay": est, "delay_sigma": est_sigma, "naive": fits[0],
+                    "corrected": fits[1]})
     return jax.tree.map(lambda *a: np.stack([np.asarray(x) for x in a]), *out)
 
 
@@ -873,7 +960,8 @@ def _iv_program(sig, ok, wheels, camber, loads_kn):
 
 __all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "SIGNIFICANCE", "Options",
            "Report", "consistency", "MISFIT_RATIO",
-           "body_twist", "check", "correvit_delay", "ground_plane", "halves", "identify",
+           "DELAY_HAC_WINDOWS", "DELAY_STEP", "body_twist", "check", "correvit_delay",
+           "ground_plane", "halves", "identify",
            "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
            "regressor", "shift_channel", "split_signals", "window_weights"]
 _ = WHEELS
