@@ -83,10 +83,7 @@ from .direct_data import _check_measurements, _pose_covariance_jit
 from .direct_equations import _r_factor, _system_arrays, _whiteners
 from .direct_report import DEG, DirectReport
 from .params import Params, selected_entries
-from .report import (
-    check_consistency,
-    check_data,
-)
+from .report import MAX_SIGMA_PCT, check_consistency, check_data, within_bar
 
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
            "direct_system"]
@@ -98,13 +95,13 @@ DEFAULT_THRESHOLD = 1e-5
 """Default identifiability threshold of the direct method (relative, on unit-norm columns: see
 `lsq.solve`). Far above rounding, so that stiffnesses told apart only by second-order effects of
 large rotations — which no measurement resolves — are reported as combinations (spec §7 R3)."""
-MAX_SIGMA_PCT = 10.0
-"""Identifiable parameters with a relative standard deviation above this (%) are reported as
-not determined by the data (no value in the table). Engineering accuracy rather than the
-statistical limit of spec guaranteed_least_squares §3.8 (beyond 100 % the 68 % interval contains
-0): with noisy poses the regressors themselves are noisy (errors in variables), which biases
-stiff, little-deformed directions toward 0 by more than their σ says; they are the ones with a
-large σ%."""
+# MAX_SIGMA_PCT (`report.MAX_SIGMA_PCT`, 10): identifiable parameters with a relative standard
+# deviation above it, judged at the model's values (`report.sigma_pct_at_start`), are reported
+# as not determined by the data (no value in the table). Engineering accuracy rather than the
+# statistical limit of spec guaranteed_least_squares §3.8 (beyond 100 % the 68 % interval
+# contains 0): with noisy poses the regressors themselves are noisy (errors in variables),
+# which biases stiff, little-deformed directions toward 0 by more than their σ says; they are
+# the ones with a large σ%.
 
 METHODS = ("basic", "min_norm", "tsvd", "tikhonov", "nonneg")
 
@@ -637,7 +634,11 @@ def direct(
       reweighting passes. "none": the scaled equations as they are (the thesis).
     - `threshold`: relative identifiability threshold of `lsq` on unit-norm columns (default
       `DEFAULT_THRESHOLD` = 1e-5; also the singular-value cut of "tsvd").
-    - `max_sigma_pct`: identifiable unknowns with a larger σ% are reported as not determined.
+    - `max_sigma_pct`: identifiable unknowns with a larger σ% *at the model's values*
+      (100·σ/|model value|: the linear σ does not depend on θ; the one rule of `direct`,
+      `iterative` and `least_squares`, `report.sigma_pct_at_start`, `judged_at`) are reported
+      as not determined; an unknown whose model value is 0 (an offset) has no relative bar
+      (identifiability alone). The reported σ% stays the one at the estimate.
     - `polish`: errors in variables (issue 12). The rows Lᵀ·D and L are built from the
       *measured* poses, so with noisy landmarks the regressors are noisy and the linear
       estimate is biased (A.Krz of the pseudo-McPherson by ≈ 3 of its own σ at 0.05 mm), a bias
@@ -693,15 +694,17 @@ def direct(
     system = raw
     if weighting == "noise":
         for _ in range(2):
-            analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold)
-            good = analysis.identifiable & ~(np.nan_to_num(analysis.sigma_pct) > max_sigma_pct)
+            analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold,
+                                raw.prior)
+            good = analysis.identifiable & within_bar(analysis.gate_pct, max_sigma_pct)
             at = np.where(good, np.asarray(fit.x, float), raw.prior)
             system = ctx.system(ctx.whitener(at))
             fit, eliminated = _estimate(system, method, hold, eliminate, threshold, prior_sigma,
                                         max_sigma_pct, held)
-    analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold)
+    analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold, raw.prior)
     params = raw.parameters
-    identified = analysis.identifiable & ~(np.nan_to_num(analysis.sigma_pct) > max_sigma_pct)
+    # The one rule of the suspension methods (issue 27): σ % at the model's values.
+    identified = analysis.identifiable & within_bar(analysis.gate_pct, max_sigma_pct)
     values = np.asarray(fit.x, float)
     # A negative stiffness is not a result, however small its σ: typically the forces of
     # unknowns held at wrong values (hold="model" with a poor model) or noisy deformations used
@@ -741,7 +744,7 @@ def direct(
         case_scale=case_scale, cases=raw.cases, notes=tuple(notes), fit=fit, method=method,
         rank=int(np.sum(structure.kept)), n_equations=len(raw.y), max_sigma_pct=max_sigma_pct,
         weighted=system.weighted, equation_residuals=residual.reshape(n_cases, -1),
-        whitened_equation_residuals=whitened,
+        whitened_equation_residuals=whitened, gate_sigma_pct=analysis.gate_pct,
     )
     fitted = _apply(mech, params, values, write)
     if polish not in (True, False, "auto"):

@@ -1,12 +1,15 @@
 """What the data determine in the direct identification (spec stiffness §1.11–1.14, §7 R3):
 the identifiability of each unknown from the unweighted equations (no effect, independent, or
 only in an identifiable combination such as `bushing_1.Krx + bushing_2.Krx`), and the verdict
-per unknown from its σ%.
+per unknown from its σ% at the model's values (the start: `report.sigma_pct_at_start`, the one
+rule of the suspension methods, issue 27).
 """
 
 import dataclasses
 
 import numpy as np
+
+from .report import bar_reason, sigma_pct_at_start, within_bar
 
 __all__: list[str] = []  # used by `identify.direct`
 
@@ -54,14 +57,16 @@ def _structure(fit, negligible: np.ndarray) -> _Structure:
 class _Analysis:
     identifiable: np.ndarray  # (p,) determined alone (and not eliminated)
     sigma: np.ndarray  # (p,)
-    sigma_pct: np.ndarray  # (p,)
+    sigma_pct: np.ndarray  # (p,) at the estimate (reported)
+    gate_pct: np.ndarray  # (p,) at the model's values (judged: `sigma_pct_at_start`)
     relations: tuple  # (text, value, sigma)
     status: tuple
 
 
 def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
-             hold) -> _Analysis:
-    """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations."""
+             hold, prior) -> _Analysis:
+    """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations;
+    σ % judged at `prior`, the model's values (the linear σ does not depend on θ)."""
     from ..lsq import format_combination
 
     p = len(fit.names)
@@ -72,6 +77,8 @@ def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
     sigma = np.where(identifiable, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         pct = np.where(identifiable, 100.0 * sigma / np.abs(x), np.nan)
+    gate = sigma_pct_at_start(sigma, prior)
+    passes = within_bar(gate, max_sigma_pct)
     texts = {}
     relations = []
     for j, g in structure.relations:
@@ -91,8 +98,8 @@ def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
             status.append(f"not identifiable alone: in {texts[structure.relation_of[i]]}")
         elif not identifiable[i]:
             status.append("not identifiable")
-        elif np.nan_to_num(pct[i]) > max_sigma_pct:
-            status.append(f"not determined: sigma {pct[i]:.3g}% > {max_sigma_pct:g}%")
+        elif not passes[i]:
+            status.append("not determined: " + bar_reason(gate[i], max_sigma_pct))
         else:
             status.append("identified")
-    return _Analysis(identifiable, sigma, pct, tuple(relations), tuple(status))
+    return _Analysis(identifiable, sigma, pct, gate, tuple(relations), tuple(status))

@@ -24,7 +24,7 @@ from .direct import (
 )
 from .direct_report import DirectReport
 from .params import Params
-from .report import check_consistency, check_data
+from .report import bar_reason, check_consistency, check_data
 
 __all__ = ["POLISH_CHI2", "direct_batch"]
 
@@ -122,6 +122,8 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
     held_values = _prior(model, params)  # the returned model's values, table units
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
+    gate = (np.full(len(values), np.nan) if report.gate_sigma_pct is None else
+            np.array(report.gate_sigma_pct, dtype=float))
     status = list(report.status)
     conv = report.parameters_to_model
     for i, j in plan.index.items():
@@ -129,11 +131,12 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
         sigma_pct[i] = 100.0 * fit.sigma[j] / abs(fit.estimate[j])
         ok = bool(determined[j])
         identified[i] = ok
+        gate[i] = fit.judged_sigma_pct[j]  # the fit's gate: at the model's values
         status[i] = ("identified (polished through the equilibrium)" if ok else
-                     f"not determined after the polish (sigma {sigma_pct[i]:.3g}% at the "
-                     f"estimate, {fit.gate_sigma_pct[j]:.3g}% at the model's values)"
-                     if fit.gate_sigma_pct is not None else
-                     f"not determined: sigma {sigma_pct[i]:.3g}% after the polish")
+                     "not determined: not seen by the data after the polish"
+                     if not fit.identifiable[j] else
+                     f"not determined: {bar_reason(gate[i], fit.max_sigma_pct)} (after the "
+                     f"polish; {sigma_pct[i]:.3g}% at the estimate)")
     held = [i for i in np.flatnonzero(report.identified) if i not in plan.index]
     for i in held:
         what = {"constant": " (its offset δ0; K·δ0 with the polished K)",
@@ -143,6 +146,7 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
                      f"{report.values[i]:.6g} ± {report.sigma[i]:.2g}, biased by the errors "
                      "in variables")
         values[i], sigma[i], sigma_pct[i], identified[i] = held_values[i], np.nan, np.nan, False
+        gate[i] = np.nan
     notes = list(report.notes)
     notes.append(f"errors in variables: {len(plan.index)} stiffness(es) polished by least "
                  f"squares through the equilibrium from the linear estimate ({fit.message}, "
@@ -157,8 +161,8 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
                        identified)
     report = dataclasses.replace(
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
-        status=tuple(status), notes=tuple(notes), polished=fit, linear_values=report.values,
-        consistency=fit.consistency, derived=derived)
+        gate_sigma_pct=gate, status=tuple(status), notes=tuple(notes), polished=fit,
+        linear_values=report.values, consistency=fit.consistency, derived=derived)
     return model, report.judged()
 
 

@@ -10,7 +10,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import index_of
-from .report import Consistency, IdentificationReport, MeasurementResiduals
+from .report import AT_START, Consistency, IdentificationReport, MeasurementResiduals
 
 __all__ = ["DirectReport"]
 
@@ -27,7 +27,8 @@ class DirectReport(IdentificationReport):
 
     **Per unknown (p,)**, aligned with `names`: `values` (the least-squares solution; for the
     basic method non-identifiable ones are 0, the thesis's zeros), `sigma`, `sigma_pct`,
-    `identified` (individually determined by the data with σ% ≤ `max_sigma_pct`),
+    `identified` (individually determined by the data with σ% ≤ `max_sigma_pct` at the
+    model's values, `gate_sigma_pct`; `sigma_pct` is at the estimate),
     `identifiable` (individually determined, whatever its σ%), `status` (a phrase: e.g.
     "identified (polished through the equilibrium)", "held at the model's value in the
     polish (linear estimate …)"), `units`, `prior` (the model's values). After a polish
@@ -68,14 +69,20 @@ class DirectReport(IdentificationReport):
     consistency: Consistency | None = None
     polished: object = None
     linear_values: np.ndarray | None = None
+    gate_sigma_pct: np.ndarray | None = None
 
     family: ClassVar[str] = "direct"
 
     @property
     def determined(self) -> np.ndarray:
-        """Identifiable with σ% ≤ `max_sigma_pct` (`identified` before the consistency
-        check)."""
+        """Identifiable with σ% at the model's values ≤ `max_sigma_pct` (`gate_sigma_pct`,
+        the one rule of the suspension methods: `report.sigma_pct_at_start`), not negative
+        (`identified` before the consistency check)."""
         return np.asarray(self.identified, dtype=bool)
+
+    @property
+    def judged_at(self) -> str:
+        return "the estimate" if self.gate_sigma_pct is None else AT_START
 
     @property
     def held(self) -> np.ndarray:

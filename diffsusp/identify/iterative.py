@@ -36,11 +36,14 @@ from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, bushing_states, solve_statics
 from .params import Params, selected_entries
 from .report import (
+    AT_START,
+    MAX_SIGMA_PCT,
     Consistency,
     IdentificationReport,
     MeasurementResiduals,
     check_consistency,
     check_data,
+    sigma_pct_at_start,
 )
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
@@ -100,6 +103,8 @@ class IterativeReport(IdentificationReport):
     polished: object = None
     sigma_data: np.ndarray | None = None
     notes: tuple[str, ...] = ()
+    gate_sigma_pct: np.ndarray | None = None
+    max_sigma_pct: float = MAX_SIGMA_PCT
     _mech: Mechanism | None = dataclasses.field(default=None, repr=False, compare=False)
     _data: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
 
@@ -155,29 +160,34 @@ class IterativeReport(IdentificationReport):
 
     @property
     def determined(self) -> np.ndarray:
-        """The gate passed and, when checked, σ% ≤ `MAX_SIGMA_PCT` by the measurements' σ."""
+        """The correlation gate passed and, when checked, σ% ≤ `max_sigma_pct` judged at the
+        start values (`gate_sigma_pct`: the measurements' information at the start model, the
+        one rule of the suspension methods, `report.sigma_pct_at_start`; the σ of the loop's
+        values depends on θ, and a bar at the estimate selects the draws by their noise).
+        A report built by hand without `gate_sigma_pct` judges `sigma_pct`, at the estimate."""
         ok = np.asarray(self.identifiable, bool)
-        if self.sigma_data is None:
+        if self.sigma_data is None and self.gate_sigma_pct is None:
             return ok
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pct = 100.0 * self.sigma_data / np.abs(self.estimates)
-        return ok & (pct <= MAX_SIGMA_PCT)
+        return ok & self.within_bar()
+
+    @property
+    def judged_at(self) -> str:
+        return "the estimate" if self.gate_sigma_pct is None else AT_START
 
     @property
     def sigma_pct(self) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             return 100.0 * self.sigmas / np.abs(self.estimates)
 
-    max_sigma_pct: ClassVar[float] = 10.0
-
     @property
     def reasons(self) -> tuple[str, ...]:
         """Why a selected direction is not determined: the correlation gate never passed (its
         start value kept), or σ % above the bar."""
-        gate, det, pct = self.identifiable, self.determined, self.sigma_pct
+        gate, det, pct = self.identifiable, self.determined, self.judged_sigma_pct
         return tuple("" if det[k] else
                      "the regression never passed the correlation gate: start value kept"
-                     if not gate[k] else f"σ% {pct[k]:.3g} > {MAX_SIGMA_PCT:g} at the estimate"
+                     if not gate[k] else
+                     f"σ% {pct[k]:.3g} > {self.max_sigma_pct:g} at {self.judged_at}"
                      for k in range(len(self.names)))
 
     @property
@@ -336,6 +346,7 @@ def iterative(
     check: bool = True,
     polish: bool = False,
     sigma: tuple[float, float] | None = None,
+    max_sigma_pct: float = MAX_SIGMA_PCT,
 ) -> tuple[Mechanism, IterativeReport]:
     """Identify bushing stiffnesses by the correlation loop of spec stiffness §2.
 
@@ -371,6 +382,9 @@ def iterative(
       its `FitReport` (the loop's own values stay in `report.stiffness`).
     - `sigma`: (mm, rad) noise of deformations given as plain arrays, for the check (default
       the measuring arm's 0.05 mm and 0.05 mm over the model's length scale).
+    - `max_sigma_pct`: with `check`, a direction whose σ % at the start values (the
+      measurements' information at `mech`, `report.sigma_pct_at_start`: the rule of `direct`
+      and `least_squares` too) exceeds this is not determined, and keeps its start value.
 
     **Returns:** the identified mechanism and an `IterativeReport`.
     """
@@ -455,7 +469,7 @@ def iterative(
     final = _with_stiffness(mech, index, k)
     sol = solve_statics(final, loads, q0=q, throw=False)
     model = np.asarray(_states(final, sol.q, tuple(int(i) for i in index))[0])
-    consistency, check_items, sigma_data = None, None, None
+    consistency, check_items, sigma_data, gate_pct = None, None, None, None
     if check or polish:
         if isinstance(data, Loads):
             from ..measure.noise import ARM_SIGMA
@@ -468,6 +482,7 @@ def iterative(
         consistency = check_consistency(final, check_items, int(np.sum(ever & chosen)))
         sigma_data, consistency = _least_squares_gap(mech, final, names, chosen, check_items,
                                                      consistency)
+        gate_pct = _start_gate(mech, names, chosen, check_items, start)
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
         r=r, offset=offset, residual=model - (delta - offset), iterations=len(history),
@@ -475,6 +490,7 @@ def iterative(
         selected=chosen, weight=weight, consistency=consistency, _mech=final,
         notes=(free_note,) if free_note else (),
         _data=check_items, sigma_data=sigma_data if check or polish else None,
+        gate_sigma_pct=gate_pct, max_sigma_pct=float(max_sigma_pct),
     )
     # The returned model carries the values the report determines; a direction the data do
     # not determine (gate never passed, or σ% above the bar) keeps the model's start value.
@@ -505,9 +521,38 @@ def _relative_change(new: np.ndarray, old: np.ndarray, chosen: np.ndarray) -> fl
     return float(rel.max()) if rel.size else 0.0
 
 
-MAX_SIGMA_PCT = 10.0
-"""A stiffness whose σ by the measurements exceeds this (%) is not reported identified (as
-`direct` and `least_squares`)."""
+def _selected_params(mech, names, chosen):
+    """The selected directions as `Params` of `mech` (its values the start) and their order
+    as the report names them: bushing by bushing, axis by axis."""
+    index = np.array([mech.bushings.index(n) for n in names], dtype=int)
+    kt = np.zeros((len(mech.bushings.names), 3), bool)
+    kr = np.zeros_like(kt)
+    kt[index], kr[index] = chosen[:, :3], chosen[:, 3:]
+    params = Params.leaves(mech, lambda m: (m.bushings.k_trans, m.bushings.k_rot), (kt, kr))
+    order = [params.names.index(f"{n}.{a}") for i, n in enumerate(names)
+             for j, a in enumerate(AXES) if chosen[i, j]]
+    return params, order
+
+
+def _start_gate(mech, names, chosen, items, start) -> np.ndarray:
+    """σ % of the selected stiffnesses judged at the start values (`report.sigma_pct_at_start`):
+    the measurements' information (whitened Jacobian through the equilibrium) at the start
+    model `mech`, the same for every noise draw, as `least_squares` judges. inf where the
+    data carry no information, or where the start model has no equilibrium in a case."""
+    from .least_squares import whitened_residuals
+
+    params, order = _selected_params(mech, names, chosen)
+    try:
+        _, jac = whitened_residuals(mech, items, params, params.start)
+    except InputError:  # the start model has no equilibrium in a measured case
+        return np.full(len(order), np.inf)
+    jac = np.asarray(jac, float)[:, order]
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = s > s[0] * 1e-12 if s.size and s[0] > 0 else np.zeros(s.size, bool)
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
+    sigma = np.sqrt((vt.T ** 2) @ inv)
+    sigma[((vt.T ** 2) @ (~keep).astype(float)) > 1e-12] = np.inf
+    return sigma_pct_at_start(sigma, np.asarray(start)[chosen])
 
 
 def _least_squares_gap(mech, final, names, chosen, items, consistency):

@@ -14,6 +14,8 @@ import numpy as np
 
 from .params import Params
 from .report import (
+    AT_START,
+    MAX_SIGMA_PCT,
     Consistency,
     IdentificationReport,
     MeasurementResiduals,
@@ -96,7 +98,7 @@ class FitReport(IdentificationReport):
     units: tuple[str, ...] = ()
     consistency: Consistency | None = None
     stop_reason: str = ""
-    max_sigma_pct: float = 10.0
+    max_sigma_pct: float = MAX_SIGMA_PCT
     gate_sigma_pct: np.ndarray | None = None
 
     family: ClassVar[str] = "least_squares"
@@ -106,7 +108,9 @@ class FitReport(IdentificationReport):
         """`identifiable`, and for a log-scaled parameter (stiffness) σ% ≤ `max_sigma_pct`
         (the direct method's bar; beyond it the linearised σ no longer describes the spread of
         the estimate, which is not Gaussian in θ), σ% taken from `gate_sigma_pct`: the
-        experiment's information at the start values, not at the estimate.
+        experiment's information at the start values, not at the estimate — the one rule of
+        the suspension methods (`report.sigma_pct_at_start`, `IdentificationReport.within_bar`;
+        `direct` and `iterative` apply it too).
 
         Why not the σ% at the estimate (issue 12): the σ of log θ depends on θ (a stiff
         bushing's effect on the poses goes as 1/K, so its relative σ grows with K), so a bar
@@ -120,14 +124,11 @@ class FitReport(IdentificationReport):
         from the truth the bar is applied at the wrong place by up to that factor — the price
         of an unbiased decision; the reported σ stays the one at the estimate. Without
         `gate_sigma_pct` (a report built by hand) the σ% at the estimate is used."""
-        pct = np.asarray(self.sigma_percent if self.gate_sigma_pct is None
-                         else self.gate_sigma_pct, dtype=float)
-        return np.asarray(self.identifiable, bool) & ~(np.isfinite(pct) &
-                                                        (pct > self.max_sigma_pct))
+        return np.asarray(self.identifiable, bool) & self.within_bar()
 
     @property
     def judged_at(self) -> str:
-        return "the estimate" if self.gate_sigma_pct is None else "the start values"
+        return "the estimate" if self.gate_sigma_pct is None else AT_START
 
     @property
     def seen(self) -> np.ndarray:
@@ -138,8 +139,7 @@ class FitReport(IdentificationReport):
     @property
     def reasons(self) -> tuple[str, ...]:
         """Why each parameter is not determined (the σ % with its bar), "" otherwise."""
-        gate = self.sigma_percent if self.gate_sigma_pct is None else self.gate_sigma_pct
-        det = self.determined
+        gate, det = self.judged_sigma_pct, self.determined
         return tuple("" if det[k] else "in a combination the data cannot see"
                      if not self.identifiable[k]
                      else f"σ% {gate[k]:.3g} > {self.max_sigma_pct:g} at {self.judged_at}"
@@ -187,8 +187,7 @@ class FitReport(IdentificationReport):
         above `max_sigma_pct` where `determined` judges it); "determined, but not identified:
         the model is inconsistent with the data"."""
         det, out = self.determined, []
-        gate = self.sigma_percent if self.gate_sigma_pct is None else self.gate_sigma_pct
-        where = "the estimate" if self.gate_sigma_pct is None else "the start values"
+        gate, where = self.judged_sigma_pct, self.judged_at
         for k in range(len(self.names)):
             if not self.identifiable[k]:
                 out.append("not determined: not seen by the data")
