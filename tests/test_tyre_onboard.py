@@ -80,6 +80,12 @@ def test_correvit_delay_flips_the_camber_stiffness_and_is_found(run):
     naive = np.asarray(late["naive"]["quantities"])[:, 4]
     assert np.all(np.sign(naive) == -np.sign(k_gamma))
     assert np.all(np.abs(np.asarray(late["delay"]) - 0.1) < 0.005)
+    # its σ (Newey–West on the kinematic residual, `correvit_delay`) against the spread of the
+    # 20 estimates, on time and late (a white-residual σ is 0.4–0.6× the spread, and the
+    # pipeline before carried no σ of the delay)
+    for mc in (run[3], late):
+        ratio = np.median(mc["delay_sigma"]) / np.std(mc["delay"], ddof=1)
+        assert 0.7 < ratio < 1.8, ratio
     fixed = np.asarray(late["corrected"]["quantities"])[:, 4]
     assert np.all(np.sign(fixed) == np.sign(k_gamma))
     bias, ratio, *_ = _stats(late["corrected"], exact)

@@ -285,6 +285,16 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
     return s, ok
 
 
+def _row_index(n, half, opts: Options, dt):
+    """The regression instants of a (half-rate) record of n samples, as `_signals` and
+    `regression_signals` take them."""
+    half2 = max(int(round(opts.regression_window_time / dt / 2)), 0)
+    second = 2 * half2 + 1 if half2 else 1
+    stride = opts.stride or 2 * max(half, half2) + 1
+    margin = half + 1 + second // 2
+    return np.arange(margin, n - margin, stride)
+
+
 def regressor(signals, wheels, *, camber=True, offset=False):
     """Rows of (4-16…4-18) pooled over `wheels`: columns b_delta_2, b_delta_1, b_delta_0,
     b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (+ b_offset_1). y = F_y."""
@@ -316,7 +326,9 @@ def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float,
     0…`max_delay` (and 8 samples below 0), peak refined by a parabola (sub-sample); `dt` the
     sampling step (s).
 
-    `return_sigma`: also its σ (s), (delay, σ). The estimate τ̂ maximises S(τ) = Σ m(t+τ) g(t)
+    `return_sigma`: also its σ (s) and influence, (delay, σ, ψ): ψ (n,) per sample of the
+    record (0 at its ends) with τ̂ − τ ≈ Σ ψ, to correlate the delay's error with another
+    estimate's (`iv_fit`). The estimate τ̂ maximises S(τ) = Σ m(t+τ) g(t)
     (m the Correvit's derivative, g the inertial unit's target); to first order τ̂ − τ =
     −S′(τ)/S″ and the random part of S′ is −Σ ġ(t) e(t), e(t) = m(t+τ̂) − g(t) the residual.
     Both signals are windowed and differentiated, so e is far from white (the white-noise
@@ -363,7 +375,8 @@ def correvit_delay(data, normal, R, kernels, max_delay=0.6, *, dt: float,
     bartlett = 1.0 - np.arange(1, band) / band
     var = ac[0] + 2.0 * jnp.sum(bartlett * ac[1:band])
     curvature = (y0 - 2 * y1 + y2) / dt**2
-    return tau, jnp.sqrt(jnp.abs(var)) / jnp.abs(curvature)
+    psi = jnp.zeros(n + 2 * half).at[half:half + n].set(u / curvature)
+    return tau, jnp.sqrt(jnp.abs(var)) / jnp.abs(curvature), psi
 
 
 DELAY_HAC_WINDOWS = 2
@@ -557,7 +570,7 @@ def _iv_x(W_e, y_e, W_o, y_o, cols):
 
 
 def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=(), delay_sigma=0.0,
-           delay_rows=None) -> lsq.Fit:
+           delay_rows=None, delay_influence=None) -> lsq.Fit:
     """`iv_solve` with `diffsusp.lsq`'s identifiability report (NumPy inputs, rows already
     masked, ordered (instant, wheel)): two-stage least squares — each free column of
     W = [W_e; W_o] projected on the instruments Z = [W_o; W_e] (Ŵ = Z (ZᵀZ)⁻¹ Zᵀ W), then
@@ -567,12 +580,15 @@ def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=(), delay_sigma=0.0,
     relations' σ and their confidence indices follow from it.
 
     The Correvit's delay removed before is itself an estimate (σ `delay_sigma`, s), and its
-    error is one number shared by every row, which no sandwich over the rows can see: it
-    enters as J J ᵀ σ_τ², J = ∂x/∂τ the central difference of the IV solution between the
-    rows `delay_rows` = ((W_e, y_e, W_o, y_o) at τ + h, (…) at τ − h, 2h) (the two-step
-    estimator's covariance of Murphy and Topel, 1985, without its cross term: the delay comes
-    from the Correvit and the inertial unit, the regression's residual mostly from the
-    dynamometric wheels)."""
+    error is one number shared by every row, which no sandwich over the rows can see. The
+    two-step estimator's covariance (Murphy and Topel, 1985) adds J σ_τ² Jᵀ + J cᵀ + c Jᵀ:
+    J = ∂x/∂τ the central difference of the IV solution between the rows `delay_rows` =
+    ((W_e, y_e, W_o, y_o) at τ + h, (…) at τ − h, 2h), c = Cov(x̂, τ̂) from the two influences
+    side by side, the IV's M⁻¹ g_i per instant and the delay's ψ summed over each instant's
+    stretch of the record (`delay_influence`, (instants,), `correvit_delay`), with Bartlett
+    weights over `DELAY_HAC_WINDOWS` + 1 instants (one window apart). Both see the Correvit's
+    noise: left out, c made the σ of the relaxation's b_L_* 1.6× too wide (their z spread 0.78
+    over 200 truths; 1.3-1.44 without the delay's σ at all)."""
     A = np.concatenate([W_e, W_o])
     Z = np.concatenate([W_o, W_e])
     y = np.concatenate([y_e, y_o])
@@ -597,7 +613,18 @@ def iv_fit(W_e, y_e, W_o, y_o, *, names, n_wheels, fixed=(), delay_sigma=0.0,
     if delay_rows is not None and delay_sigma > 0:
         plus, minus, width = delay_rows
         jac = (_iv_x(*plus, est) - _iv_x(*minus, est)) / width
-        cov[np.ix_(est, est)] += delay_sigma**2 * np.outer(jac, jac)
+        extra = delay_sigma**2 * np.outer(jac, jac)
+        if delay_influence is not None:
+            g = (Zf[:, est[free]] * r[:, None]).reshape(2, -1, n_wheels, p).sum(axis=(0, 2))
+            infl = g @ Minv.T / se  # (instants, p): x̂ − x ≈ Σ_i infl_i
+            psi = np.asarray(delay_influence, float)
+            band = DELAY_HAC_WINDOWS + 1
+            cross = infl.T @ psi
+            for lag in range(1, band):
+                w = 1.0 - lag / band
+                cross += w * (infl[:-lag].T @ psi[lag:] + infl[lag:].T @ psi[:-lag])
+            extra += np.outer(jac, cross) + np.outer(cross, jac)
+        cov[np.ix_(est, est)] += extra
     sigma = np.where(est, np.sqrt(np.abs(np.diagonal(cov))), np.nan)
     G_ = fit.regrouping
     comb_sigma = np.where(np.isfinite(fit.combination_sigma),
@@ -845,10 +872,11 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
         raise InputError(f"window of {options.window_time} s is longer than each half of the "
                          f"record ({data['time'].shape[0] // 2} samples at half the rate); "
                          "shorten window_time or give a longer record.")
-    delay_sigma = 0.0
+    delay_sigma, psi = 0.0, None
     if delay is None and estimate_delay:
-        est, est_sigma = _delay_program(data, options, _window_length(options, data["time"]),
-                                        _step(data["time"]))
+        est, est_sigma, psi = _delay_program(data, options,
+                                             _window_length(options, data["time"]),
+                                             _step(data["time"]))
         delay, delay_sigma = float(est), float(est_sigma)
     elif delay is None:
         delay = 0.0
@@ -862,6 +890,13 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
                                    ro)
         runs.append(({k: np.asarray(v) for k, v in sig.items()}, np.asarray(ok)))
     ok = runs[0][1]
+    if psi is not None:  # the delay's influence summed over each regression instant's stretch
+        idx = _row_index(data["time"].shape[0] // 2, half, options, dt)
+        assert len(idx) == len(ok), (len(idx), len(ok))
+        stride = idx[1] - idx[0] if len(idx) > 1 else 1
+        t = np.arange(data["time"].shape[0])
+        block = np.clip(np.round((t - 2 * idx[0] - 0.5) / (2 * stride)), 0, len(idx) - 1)
+        psi = np.bincount(block.astype(int), np.asarray(psi), minlength=len(idx))[ok]
     reports = []
     for grouping in groupings:
         wheels = np.asarray(GROUPINGS[grouping])
@@ -878,7 +913,7 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
             fit = iv_fit(*per_run[0], names=names(offset), n_wheels=len(wheels), fixed=fixed,
                          delay_sigma=delay_sigma,
                          delay_rows=((per_run[1], per_run[2], 2 * DELAY_STEP)
-                                     if len(per_run) == 3 else None))
+                                     if len(per_run) == 3 else None), delay_influence=psi)
             reports.append(Report(grouping, cam, delay, fit, 2 * int(rows.sum()),
                                   int(np.sum(~ok)),
                                   consistency(fit, len(wheels), tuple(wheels.tolist())),
@@ -929,7 +964,7 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     out = []
     for key in keys:
         d = check(_noisy(truth, sensors, key, jnp.asarray(delay, float)), options)
-        est, est_sigma = _delay_program(d, options, half, dt)
+        est, est_sigma, _ = _delay_program(d, options, half, dt)
         fits = [_iv_program(*_signals_program(d, options, half2, dt2, shift, ro),
                             tuple(wheels), camber, tuple(loads_kn))
                 for shift in (jnp.zeros_like(est), est)]
