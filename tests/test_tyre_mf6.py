@@ -223,7 +223,9 @@ def test_limits_saturate_and_warn(files):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert check_limits(m, fz=[3000.0], alpha=[0.1]) == {}
-    a = evaluate(m, fz, 0.0, sa)
+    with pytest.warns(ModelWarning, match="FZMAX = 10000 .* SA beyond ALPMAX") as record:
+        a = evaluate(m, fz, 0.0, sa)   # announced once per call (issue 28 item 7)
+    assert len(record) == 1
     b = evaluate(m, np.minimum(fz, 10000.0), 0.0, np.minimum(sa, 1.5))
     for k in ("fx", "fy", "mx", "mz"):
         np.testing.assert_array_equal(np.asarray(getattr(a, k)), np.asarray(getattr(b, k)))

@@ -164,7 +164,8 @@ def eval_command(
                 warn(w.message)
         f = evaluate(model, jnp.asarray(cols["FZ"]), jnp.asarray(cols["SL"]),
                      jnp.asarray(cols["SA"]), jnp.asarray(cols["IA"]), jnp.asarray(vx),
-                     jnp.asarray(p), combined=not pure, limits=limits, alpha_star=alpha_star)
+                     jnp.asarray(p), combined=not pure, limits=limits, alpha_star=alpha_star,
+                     announce=False)   # check_limits above named the table's rows
         res = {"FZ": cols["FZ"], "SL": cols["SL"], "SA": cols["SA"], "IA": cols["IA"], "P": p,
                "VX": vx / 1000.0, "FX": np.asarray(f.fx), "FY": np.asarray(f.fy),
                "MX": np.asarray(f.mx) / 1000.0, "MY": np.asarray(f.my) / 1000.0,

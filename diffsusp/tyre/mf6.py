@@ -16,7 +16,10 @@ dimensionless or already N, rad, Pa); `to_tir` converts back.
   limit), F_z < 0 set to 0, the curvature factors E_x, E_y, E_t, E_xα, E_yκ clipped at 1, and
   F_z raised to FZMIN in D_t and D_r (M_z) only; below FZMIN, M_x uses F_z·(F_z/FZMIN)² and M_y
   F_z·(F_z/FZMIN) (MF-Tyre's low-load reductions). `check_limits` reports (warns about) the
-  inputs that will be saturated; the traced evaluation saturates silently.
+  inputs that will be saturated. `evaluate` called eagerly (concrete inputs and model) announces
+  its own saturation once per call (one `ModelWarning` naming each saturated input, its count and
+  first row; issue 28 item 7); traced (under `jax.jit`, `vmap`, `grad`: any input or coefficient
+  a tracer) it checks nothing and saturates silently.
 - `alpha_star=False` (default, as MF-Tyre): α* = α and γ* = γ; True: α* = tan α, γ* = sin γ
   (the book's (4.E3)–(4.E4)).
 - `turn_slip=None` (default): no turn slip, all ζ = 1 (ζ0 = 1); no low-speed model: the
@@ -449,7 +452,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
              gamma: ArrayLike = 0.0, vx: ArrayLike | None = None, pressure: ArrayLike | None = None,
              *, combined: bool = True, limits: bool = True, alpha_star: bool = False,
              outputs: tuple[str, ...] = ("fx", "fy", "mx", "my", "mz"),
-             turn_slip: ArrayLike | None = None, omega: ArrayLike | None = None) -> TyreForces:
+             turn_slip: ArrayLike | None = None, omega: ArrayLike | None = None,
+             announce: bool = True) -> TyreForces:
     """Steady-state forces and moments of a MF 5.2/6.1/6.2 tyre (spec: tyre §7 C; Pacejka 2012
     §4.3.2; deviations in the module docstring). Elementwise: inputs broadcast together.
 
@@ -464,6 +468,14 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     no turn slip, every ζ = 1. `omega` [rad/s]: the wheel spin Ω used by turn slip (default from
     V_x, κ and the effective rolling radius, `diffsusp.tyre.vertical.spin`, which needs the
     file's VERTICAL_STIFFNESS, BREFF, DREFF, FREFF).
+
+    **Saturation** (`limits=True`, issue 28 item 7): called with concrete inputs and a concrete
+    model, one `ModelWarning` per call lists every input beyond the file's ranges (its count and
+    first row, flattened order, as `check_limits`), e.g. a driving slip on a file with KPUMAX = 0,
+    whose F_x is then 0. Under `jax.jit`, `vmap` or `grad` (any input or coefficient a tracer)
+    nothing is checked: the traced program saturates silently (call `check_limits` on the data
+    beforehand). `announce=False` skips the check (for callers that ran `check_limits` already,
+    as the CLI does).
 
     **Returns:** `TyreForces` (fx, fy [N]; mx, my, mz [N·mm]), ISO-W axes.
     """
@@ -481,6 +493,8 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     if turn_slip is not None and v52:
         raise ValueError("turn slip is defined for MF 6.1 / 6.2 files (FITTYP 61, 62), not 5.2")
     lim = model.limit
+    if limits and announce:
+        _announce(model, fz, kappa, alpha, gamma, pressure)
     ukappa = kappa
     fz, ufz, kappa, alpha, gamma, vx, p = _inputs(model, fz, kappa, alpha, gamma, vx, pressure,
                                                   limits)
@@ -713,6 +727,46 @@ def _sgn_strict(x):
     return jnp.sign(x)
 
 
+def _beyond(model: MagicFormula6, fz, kappa, alpha, gamma, pressure):
+    """(input name, limit name, count, first flat index) of each file range an input exceeds."""
+    lim = model.limit
+    out = []
+    for name, x, lo, hi in (("FZ", fz, None, "FZMAX"), ("SL", kappa, "KPUMIN", "KPUMAX"),
+                            ("SA", alpha, "ALPMIN", "ALPMAX"), ("IA", gamma, "CAMMIN", "CAMMAX"),
+                            ("P", pressure, "PRESMIN", "PRESMAX")):
+        if x is None:
+            continue
+        x = np.asarray(x, dtype=float)
+        for key, bad in ((lo, x < lim[lo] if lo else None), (hi, x > lim[hi])):
+            if key is None or bad is None:
+                continue
+            n = int(np.count_nonzero(bad))
+            if n:
+                out.append((name, key, n, int(np.flatnonzero(bad.ravel())[0])))
+    return out
+
+
+def _announce(model: MagicFormula6, fz, kappa, alpha, gamma, pressure):
+    """`evaluate`'s one warning per eager call (module docstring "Modes"); nothing when any
+    input or coefficient is a JAX tracer (inside jit, vmap, grad)."""
+    import jax
+
+    leaves = jax.tree_util.tree_leaves((model.coefficients, fz, kappa, alpha, gamma, pressure))
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return
+    if pressure is None:
+        pressure = model.coefficients["INFLPRES"]
+    hits = _beyond(model, fz, kappa, alpha, gamma, pressure)
+    if hits:
+        lim = model.limit
+        parts = "; ".join(f"{n} value(s) of {name} beyond {key} = {lim[key]:g} "
+                          f"[{_LIMIT_SECTION[key]}] (first at row {first})"
+                          for name, key, n, first in hits)
+        warnings.warn(f"evaluate: inputs saturated at the tyre file's ranges as MF-Tyre does: "
+                      f"{parts} (limits=False evaluates the formulas as they are)",
+                      ModelWarning, stacklevel=3)
+
+
 def check_limits(model: MagicFormula6, fz=None, kappa=None, alpha=None, gamma=None,
                  pressure=None, *, where: str = "", combined: bool = True) -> dict[str, int]:
     """Warn (`ModelWarning`) about inputs outside the file's ranges, which `evaluate` saturates
@@ -728,20 +782,9 @@ def check_limits(model: MagicFormula6, fz=None, kappa=None, alpha=None, gamma=No
         warnings.warn(f"{where}FE_METHOD = 'YES': combined slip by the friction ellipse "
                       "(MF-Tyre 5.0 / PAC2002, as Chrono's ChPac02Tire), not the file's "
                       "combined-slip coefficients RBX*, RBY*, ...", ModelWarning, stacklevel=2)
-    for name, x, lo, hi in (("FZ", fz, None, "FZMAX"), ("SL", kappa, "KPUMIN", "KPUMAX"),
-                            ("SA", alpha, "ALPMIN", "ALPMAX"), ("IA", gamma, "CAMMIN", "CAMMAX"),
-                            ("P", pressure, "PRESMIN", "PRESMAX")):
-        if x is None:
-            continue
-        x = np.asarray(x, dtype=float)
-        for key, bad in ((lo, x < lim[lo] if lo else None), (hi, x > lim[hi])):
-            if key is None or bad is None:
-                continue
-            n = int(np.count_nonzero(bad))
-            if n:
-                counts[key] = n
-                first = int(np.flatnonzero(bad.ravel())[0])
-                warnings.warn(f"{where}{n} value(s) of {name} beyond {key} = {lim[key]:g} "
-                              f"[{_LIMIT_SECTION[key]}] (first at row {first}); saturated as "
-                              "MF-Tyre does", ModelWarning, stacklevel=2)
+    for name, key, n, first in _beyond(model, fz, kappa, alpha, gamma, pressure):
+        counts[key] = n
+        warnings.warn(f"{where}{n} value(s) of {name} beyond {key} = {lim[key]:g} "
+                      f"[{_LIMIT_SECTION[key]}] (first at row {first}); saturated as "
+                      "MF-Tyre does", ModelWarning, stacklevel=2)
     return counts
