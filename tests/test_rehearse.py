@@ -115,8 +115,35 @@ def test_a_small_direct_rehearsal_claims_nothing_wrong(tmp_path):
     (["direct", "isolated_bushing", "--spread", "1,1"], "0 < low < high"),
     (["direct", "isolated_bushing", "--params", "bush.Kqq"], "unknown parameter"),
     (["iterative", "isolated_bushing", "--out", "r.txt"], "rehearsal"),
+    (["onboard", "synthetic", "--n", "0"], "at least 1 random truth"),
+    (["onboard", "synthetic", "--spread", "0"], "relative spread in (0, 1)"),
+    (["onboard", "synthetic", "--noise", "0"], "positive factor"),
+    (["onboard", "synthetic", "--params", "b_L_9"], "unknown parameter"),
+    (["onboard", "my_car.json"], "MODEL must be one of synthetic"),
+    (["onboard", "synthetic", "--delay", "-0.1"], "--delay must be"),
 ])
 def test_cli_bad_input_exits_2(args, message):
     result = CliRunner().invoke(app, ["rehearse", *args])
     assert result.exit_code == 2, result.output
     assert message in " ".join(result.output.split())
+
+
+def test_cli_onboard_rehearsal(tmp_path):
+    """`diffsusp rehearse onboard synthetic`: 2 random tyres of the synthetic car (only the
+    relaxation's b_L_1 and the cornering b_delta_1 drawn), a 2 s sine, the Correvit 50 ms
+    late: the same table, `--json` and `--out` as the other methods, one row per coefficient of
+    the reduced model, every truth identified (none failed)."""
+    out = tmp_path / "onboard.csv"
+    result = CliRunner().invoke(app, [
+        "rehearse", "onboard", "synthetic", "--n", "2", "--duration", "2", "--delay", "0.05",
+        "--params", "b_L_1,b_delta_1", "--seed", "3", "--json", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    from diffsusp.tyre.onboard import NAMES
+
+    assert doc["method"] == "onboard" and doc["truths"] == 2 and doc["failed"] == 0, doc
+    assert [p["parameter"] for p in doc["parameters"]] == list(NAMES)
+    # the cornering stiffness's linear term is identified in both truths, within 3σ
+    row = {p["parameter"]: p for p in doc["parameters"]}["b_delta_1"]
+    assert row["identified"] == 2 and row["false_identified"] == 0, row
+    assert len(out.read_text().splitlines()) == 1 + len(NAMES)

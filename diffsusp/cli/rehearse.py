@@ -10,7 +10,13 @@ file; the truths its coefficients × (1 ± `--spread`), default ±20 %; the meas
 bench programme with σ = a + b·|F|, `--noise a,b`, default 20 N + 1 %), `geometry` (MODEL: a
 built-in model or a model file; the truths its located joints' hardpoints displaced by a uniform
 ±`--spread` mm per coordinate, default 5; `--params`: the joints to locate, default every joint
-the model implies; the measurements four landmarks per part with σ `--noise` mm, default 0.05).
+the model implies; the measurements four landmarks per part with σ `--noise` mm, default 0.05),
+`onboard` (MODEL: `synthetic`, the library's synthetic 12-DOF car, `diffsusp.tyre.vehicle`;
+the truths the 8 coefficients of its reduced tyre model (4-16…4-18) × (1 ± `--spread`), default
+±20 %, `--params` the coefficients drawn; the measurements the steering-wheel sine of
+`--duration` s (default 6) recorded by its sensors with their σ × `--noise` (default 1), the
+Correvit `--delay` s late (default 0); the pipeline `diffsusp.tyre.onboard.identify`, the
+delay estimated and removed, "all" wheels pooled, camber in).
 """
 
 import enum
@@ -23,7 +29,8 @@ import typer
 from .common import EXIT_BAD_INPUT, check_output, cli_errors, console, enable_x64, fail, print_json
 
 Method = enum.StrEnum("Method", {v: v for v in ("direct", "iterative", "least-squares",
-                                                 "mf-fit", "geometry")})
+                                                 "mf-fit", "geometry", "onboard")})
+ONBOARD_MODELS = ("synthetic",)
 Cases = enum.StrEnum("Cases", {v: v for v in ("corner", "thesis")})
 
 
@@ -76,23 +83,30 @@ def _params(mech, names: str | None):
 def rehearse_command(
     method: Annotated[Method, typer.Argument(help="The identification to rehearse.")],
     model: Annotated[str, typer.Argument(
-        help="Start model: built-in name or model file (mf-fit: the start .tir file).")],
+        help="Start model: built-in name or model file (mf-fit: the start .tir file; "
+        "onboard: 'synthetic', the synthetic car).")],
     n: Annotated[int, typer.Option("--n", help="Random truths.")] = 200,
     seed: Annotated[int, typer.Option(help="Seed of the truths and the noise.")] = 0,
     noise: Annotated[str | None, typer.Option(
         help="Measurement noise: landmark σ in mm (suspension, default 0.05); 'a,b' for "
-        "σ = a + b·|F| in N (mf-fit, default 20,0.01).")] = None,
+        "σ = a + b·|F| in N (mf-fit, default 20,0.01); a factor on the car's sensor σ "
+        "(onboard, default 1).")] = None,
     spread: Annotated[str | None, typer.Option(
         help="Spread of the truths: 'low,high' factors on the stiffnesses (default 0.5,2); "
-        "a relative ± on the MF coefficients (default 0.2); ± mm on the joint hardpoints "
-        "(geometry, default 5).")] = None,
+        "a relative ± on the MF coefficients / the on-board tyre coefficients (default 0.2); "
+        "± mm on the joint hardpoints (geometry, default 5).")] = None,
     params: Annotated[str | None, typer.Option(
         help="Parameters to draw and identify, comma-separated (default: every non-zero "
         "bushing stiffness / every coefficient the fit estimates / every joint the model "
-        "implies, by joint name for geometry).")] = None,
+        "implies, by joint name for geometry / every on-board tyre coefficient).")] = None,
     cases: Annotated[Cases, typer.Option(
         help="Load cases (suspension): the corner's combined-load grid, or the thesis's "
         "Table 5-1.")] = Cases.corner,
+    delay: Annotated[float, typer.Option(
+        help="onboard: the Correvit's delay [s] in the simulated records (the pipeline "
+        "estimates and removes it).")] = 0.0,
+    duration: Annotated[float, typer.Option(
+        help="onboard: length of the steering-wheel sine [s].")] = 6.0,
     out: Annotated[Path | None, typer.Option(help="Write the rehearsal (.csv or .json).")]
     = None,
     json_output: Annotated[bool, typer.Option("--json", help="JSON on stdout.")] = False,
@@ -111,6 +125,8 @@ def rehearse_command(
             scenario = _mf_scenario(model, noise, spread, params)
         elif method == "geometry":
             scenario = _geometry_scenario(model, noise, spread, params, cases)
+        elif method == "onboard":
+            scenario = _onboard_scenario(model, noise, spread, params, delay, duration, n)
         else:
             from .common import load_model_file
 
@@ -197,3 +213,45 @@ def _geometry_scenario(model: str, noise, spread, params, cases):
     else:
         loads = corner_cases(mech)
     return GeometryScenario(mech, loads, joints, noise=sigma[0], spread=mm[0])
+
+
+def _onboard_scenario(model: str, noise, spread, params, delay, duration, n):
+    import dataclasses
+
+    from ..tyre import onboard
+    from ..tyre.onboard_rehearse import OnboardScenario
+    from ..tyre.vehicle import Sensors
+
+    if model not in ONBOARD_MODELS:
+        raise fail(f"onboard: MODEL must be one of {', '.join(ONBOARD_MODELS)} (the library's "
+                   f"synthetic 12-DOF car); got {model!r}.", EXIT_BAD_INPUT)
+    scale = _floats(noise, "noise") if noise is not None else [1.0]
+    if len(scale) != 1 or not scale[0] > 0:
+        raise fail(f"--noise must be one positive factor on the sensors' σ; got {noise!r} (a "
+                   "noise of 0 would call everything identified with σ = 0).", EXIT_BAD_INPUT)
+    rel = _floats(spread, "spread") if spread is not None else [0.2]
+    if len(rel) != 1 or not 0 < rel[0] < 1:
+        raise fail(f"--spread must be one relative spread in (0, 1) (0.2 = ±20 %); got "
+                   f"{spread!r}.", EXIT_BAD_INPUT)
+    for value, option in ((delay, "--delay"), (duration, "--duration")):
+        if not (math.isfinite(value) and value >= 0):
+            raise fail(f"{option} must be a finite number of seconds >= 0; got {value}.",
+                       EXIT_BAD_INPUT)
+    wanted = None
+    if params:
+        wanted = tuple(n.strip() for n in params.split(",") if n.strip())
+        unknown = [n for n in wanted if n not in onboard.NAMES]
+        if unknown or not wanted:
+            raise fail(f"unknown parameter(s) {', '.join(unknown) or repr(params)}; the reduced "
+                       f"tyre model's: {', '.join(onboard.NAMES)}.", EXIT_BAD_INPUT)
+    default = Sensors()
+    fields = ("sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity",
+              "sigma_accelerometer", "sigma_travel", "sigma_steer", "sigma_spin", "sigma_force",
+              "sigma_moment")
+    sensors = Sensors(**{f: scale[0] * getattr(default, f) for f in fields})
+    weights = onboard.Options()
+    options = dataclasses.replace(weights, **{f: scale[0] * getattr(weights, f) for f in (
+        "sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity")})
+    return OnboardScenario(sensors=sensors, spread=rel[0], delay=float(delay),
+                           duration=float(duration), options=options, params=wanted,
+                           batch=min(n, 20))

@@ -61,7 +61,9 @@ class OnboardScenario:
     measure it with their noise (σ per sensor, `Sensors`), the Correvit `delay` s late; the
     pipeline (`onboard.identify`, `options`, the delay estimated and removed) identifies the
     `grouping`'s pooled model with camber (`camber`), one report per truth;
-    `remove_offsets` (default False, as `onboard.identify`) rehearses the thesis's mean removal.
+    `remove_offsets` (default False, as `onboard.identify`) rehearses the thesis's mean removal;
+    `params` (default all) the coefficients drawn, the others kept at the start's values (all 8
+    are estimated and judged either way).
 
     `batch` truths are simulated in one vmapped program (the last batch padded); a record the
     pipeline refuses (`InputError`: a truth whose simulation left the model's range) is a
@@ -82,6 +84,7 @@ class OnboardScenario:
     options: onboard.Options = dataclasses.field(default_factory=onboard.Options)
     batch: int = 20
     remove_offsets: bool = False
+    params: tuple | None = None
 
     method = "onboard"
 
@@ -99,6 +102,12 @@ class OnboardScenario:
                              f"{self.grouping!r}.")
         if not (isinstance(self.batch, int) and self.batch >= 1):
             raise InputError(f"batch {self.batch!r}: at least 1 truth per program.")
+        if self.params is not None:
+            self.params = tuple(self.params)
+            unknown = [p for p in self.params if p not in onboard.NAMES]
+            if unknown or not self.params:
+                raise InputError(f"unknown parameter(s) {', '.join(unknown) or '(none)'}; the "
+                                 f"reduced tyre model's: {', '.join(onboard.NAMES)}.")
         sig = [float(getattr(self.sensors, f)) for f in ("sigma_laser", "sigma_correvit",
                                                           "sigma_gyro", "sigma_force")]
         if not all(s > 0 for s in sig):
@@ -114,11 +123,15 @@ class OnboardScenario:
         return np.array([float(getattr(self.vehicle.tyre, n)) for n in self.names])
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """(n, 8) truths x₀·(1 + spread·U(−1, 1))."""
+        """(n, 8) truths x₀·(1 + spread·U(−1, 1)) (U = 0 for the coefficients not in
+        `params`)."""
         if int(n) < 1:
             raise InputError(f"{n} truths: at least 1")
         x0 = self.start()
-        return x0 * (1.0 + self.spread * rng.uniform(-1.0, 1.0, (int(n), x0.size)))
+        u = rng.uniform(-1.0, 1.0, (int(n), x0.size))
+        if self.params is not None:
+            u = u * np.isin(self.names, self.params)
+        return x0 * (1.0 + self.spread * u)
 
     def records(self, truths: np.ndarray, keys) -> dict:
         """The noisy records of `truths` (m, 8) with noise keys `keys` (m,): dict of NumPy
