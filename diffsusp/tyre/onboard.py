@@ -14,7 +14,9 @@ unit), the wheels' travel, steer and spin, and the wheel-carrier wrenches (dynam
    variables (below);
 5. the Correvit's delay (8–512 ms in the thesis, unknown there) estimated by kinematic
    consistency — the derivative of the Correvit's lateral velocity against the inertial unit's
-   lateral acceleration at the same point — and removed.
+   lateral acceleration at the same point — and removed; its σ (a Newey–West σ of the
+   estimate) is carried into the coefficients' σ with the cross term of the two estimates
+   (`iv_fit`, Murphy–Topel).
 
 Windows: Hamming or Blackman of length T (default 0.05 s, §5.3), used three ways with the same
 weights w: stacking rows (normal equations convolved with w²), smoothing (weighted mean) and
@@ -40,7 +42,7 @@ Units SI as `diffsusp.tyre.vehicle` (m, N, s, rad); F_z in kN inside the load po
 Coefficient names follow the thesis: b_delta_2, b_delta_1, b_delta_0 (K_δ = c_{Fy,δ′,1}(F_z)),
 b_phi_1, b_gamma_1, b_L_2, b_L_1, b_L_0 (L_R), and b_offset_1 (S_v) when asked for.
 
-**Size.** About 730 lines, one file: the stages (ground plane, body twist, tyre inputs,
+**Size.** About 1 000 lines, one file: the stages (ground plane, body twist, tyre inputs,
 regression signals, Correvit delay, even/odd IV fit) are one pipeline whose programs are
 compiled together (`_signals_program`, `_iv_program`) and whose windowing choices (`Options`)
 every stage reads; they follow the thesis's chapter 4 section by section.
