@@ -17,7 +17,7 @@ spread/σ, false-"identified" rate (claimed and outside 3σ, of all truths); per
 consistent-verdict rate. Results to benchmarks/results/rehearse_<scenario>.json.
 
     python benchmarks/rehearse.py [--n 200] [--scenario isolated|thesis|chrono]
-                                   [--methods direct,...]
+                                   [--methods direct,...] [--out FILE]
 """
 
 import argparse
@@ -64,10 +64,14 @@ def main():
     ap.add_argument("--scenario", default="isolated")
     ap.add_argument("--methods", default="direct,least_squares,iterative")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=None,
+                    help="results file (default results/rehearse_<scenario>.json; another "
+                         "one lets methods run in parallel processes, merged by hand)")
     args = ap.parse_args()
     mech, loads, params = scenario(args.scenario)
     out = {}
-    path = RESULTS / f"rehearse_{args.scenario}.json"
+    path = (pathlib.Path(args.out) if args.out else
+            RESULTS / f"rehearse_{args.scenario}.json")
     if path.exists():
         out = json.loads(path.read_text())
     for method in args.methods.split(","):
