@@ -316,3 +316,59 @@ def test_round_trip_and_unconverged_fit(tmp_path, grid_table, monkeypatch):
     deg.write_text("FZ,SA\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in rows[:, :2]))
     r = _run("tyre", "eval", MF61, "--inputs", deg, "--out", tmp_path / "deg_out.csv")
     assert r.exit_code == 0 and "beyond ±90°" in _text(r) and "SA [deg]" in _text(r), r.output
+
+
+_SLOW_COMPILE = r'''
+import sys
+import jax
+import jax.numpy as jnp
+import typer
+from diffsusp.cli.common import _App, cli_errors
+
+app = _App() if sys.argv.pop() == "app" else typer.Typer()   # "plain": the old entry
+
+
+@app.command()
+def compile_long():
+    with cli_errors():
+        def body(c, x):
+            c = jnp.sin(c) * 1.0001 + jnp.cos(c * x) - jnp.tanh(c + x)
+            return c, c
+
+        f = jax.jit(lambda x: jax.lax.scan(body, 0.0, x, unroll=2000)[0])
+        lowered = f.lower(jnp.ones(2000))
+        print("compiling", flush=True)
+        lowered.compile()   # about 40 s of XLA here
+
+
+app()
+'''
+
+
+def test_sigterm_during_compile_exits_at_once(tmp_path):
+    """D16: SIGTERM in the middle of a long XLA compilation ends the command at once (exit 130,
+    the message printed). JAX returns from the interrupted compile, but the interpreter's
+    shutdown used to wait for XLA's compiling threads (the whole compile: ~40 s here, 10 min on
+    10⁶ rows) and then crash; the entry point (`common._App`) now ends with os._exit."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "slow.py"
+    script.write_text(_SLOW_COMPILE)
+    env = dict(os.environ, JAX_ENABLE_COMPILATION_CACHE="false", DIFFSUSP_CACHE="")
+    p = subprocess.Popen([sys.executable, str(script), "app"], env=env, text=True,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        assert p.stdout.readline() == "compiling\n"
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=8.0)
+        took = time.monotonic() - t0
+    finally:
+        p.kill()
+        p.wait()
+    assert p.returncode == 130 and "terminated (SIGTERM)" in err, (p.returncode, err)
+    assert took < 3.0, took

@@ -33,7 +33,29 @@ EXIT_NOT_CONVERGED = 3
 EXIT_MODEL_ERROR = 4
 EXIT_INTERRUPTED = 130
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+class _App(typer.Typer):
+    """The console entry point (`diffsusp = diffsusp.cli:app`). An interrupted run (exit 130,
+    SIGINT or SIGTERM) ends with `os._exit` once its message is printed and what it finished is
+    written (bad_inputs D16): JAX abandons a compilation that a signal interrupts, but XLA's
+    threads carry on, and the interpreter's normal shutdown waited for them (the rest of the
+    compile: ~10 min on 10⁶ rows) and then crashed (SIGSEGV). Typer's test runner calls the
+    click command, not this, so tests keep their process."""
+
+    def __call__(self, *args, **kwargs):
+        try:
+            return super().__call__(*args, **kwargs)
+        except SystemExit as e:
+            if e.code == EXIT_INTERRUPTED:
+                for stream in (sys.stdout, sys.stderr):
+                    try:
+                        stream.flush()
+                    except (OSError, ValueError):
+                        pass
+                os._exit(EXIT_INTERRUPTED)
+            raise
+
+
+app = _App(add_completion=False, no_args_is_help=True,
                   help="Differentiable K&C suspension solver (units: mm, N, deg at the edge).")
 
 
