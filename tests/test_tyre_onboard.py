@@ -112,8 +112,12 @@ def test_cli_report_dropouts_and_bad_input(run, tmp_path):
     res = CliRunner().invoke(app, ["tyre", "onboard", str(path), "--grouping", "all", "--json"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
-    assert abs(out["delay_s"] - 0.1) < 0.005
+    # the delay within 3 of its σ (3 ms here: the dropouts' placeholder planes are not masked
+    # out of the delay's kinematic residual, which its σ sees; 0.4 ms without dropouts)
+    sd = out["delay_sigma_s"]
+    assert abs(out["delay_s"] - 0.1) < min(0.005, 3 * sd) and 2e-4 < sd < 5e-3, sd
     rep = out["reports"][0]
+    assert rep["delay_sigma_s"] == out["delay_sigma_s"]
     # 0.1 s + a window each side at one row per 0.05 s (3–5 instants, not the 0.4 s outage of
     # one laser), and the last 0.1 s + a window with no Correvit once its delay is removed
     assert rep["camber"] and 3 <= rep["excluded"] <= 9, rep["excluded"]

@@ -144,14 +144,16 @@ def register(tyre_app: typer.Typer) -> None:
         if figures is not None:
             _figures(out, figures)
         if report is not None:
-            write_reports(report, out["reports"], labels, extra={"delay_s": out["delay"]})
+            write_reports(report, out["reports"], labels,
+                          extra={"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"]})
         if json_out:
-            print_json({"delay_s": out["delay"],
+            print_json({"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"],
                         "reports": [r.to_dict() | {"parameters": report_rows(r)}
                                     for r in out["reports"]]})
             return
         con = console(markup=False)
-        con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} ms; "
+        con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} "
+                  f"± {1000 * out['delay_sigma']:.2f} ms (its σ is in the coefficients'); "
                   f"instants excluded (laser dropouts, end of the delayed Correvit): "
                   f"{out['excluded']}")
         cols = [f"{r.grouping}{'' if r.camber else ', γ = 0'}" for r in out["reports"]]
