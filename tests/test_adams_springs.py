@@ -79,3 +79,49 @@ def test_stop_function_grammar(tmp_path):
         model = parse_adm(bad)
     assert len(rec) == 1
     assert "spring_knot_1" not in model.build().stops.names
+
+
+def test_cli_write_model_adm_of_a_chrono_corner(tmp_path):
+    """`identify fit <Chrono .json> --measurements rig.csv --write-model x.adm` end to end (issue
+    28 item 5 through the CLI): a travel-rig table of the HMMWV rear corner (toe and camber at
+    ±40 mm, the corner's own curve to the rig's 0.0001° resolution), the spring rate the
+    unknown (not seen by a travel table: the start is written). The written .adm holds the
+    spline spring's 30 stops as SFORCEs, reads back, and its equilibria (the loads of the
+    round-trip test above: its compiled program) equal the Chrono model's to 1e-9 mm."""
+    from typer.testing import CliRunner
+
+    import diffsusp.cli.identify  # noqa: F401  (registers `identify`)
+    from diffsusp.cli import app
+    from diffsusp.measure.rig import write_rig_table
+
+    rig = tmp_path / "travel.csv"
+    write_rig_table(rig, {"wheel_travel": np.array([-40.0, 0.0, 40.0])},
+                    {"toe": np.array([-0.0567, 0.0, 0.0367]),
+                     "camber": np.array([1.2230, 0.0, -1.5366])},
+                    {"toe": 0.01, "camber": 0.01}, {"toe": "deg", "camber": "deg"})
+    adm = tmp_path / "hmmwv.adm"
+    r = CliRunner().invoke(app, ["identify", "fit", str(HMMWV), "-m", str(rig), "--springs",
+                                 "--write-model", str(adm)])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.output.split())
+    assert "consistent with the data" in text and "INCONSISTENT" not in text, text
+    assert f"identified model written to {adm}" in text, text
+    mech = read_chrono(HMMWV)
+    written = adm.read_text()
+    assert written.count("SFORCE/") == len(mech.stops.names) and "MAX(0, " in written
+    back = read_adm(adm)
+    assert back.stops.names == mech.stops.names and back.stops.kind == mech.stops.kind
+    np.testing.assert_array_equal(np.asarray(back.stops.k), np.asarray(mech.stops.k))
+    np.testing.assert_allclose(np.asarray(back.springs.k), np.asarray(mech.springs.k),
+                               rtol=1e-15)
+    force = np.zeros((8, 3))
+    force[:7, 2] = np.linspace(0.0, 30000.0, 7)
+    force[7] = (0.0, 4000.0, 15000.0)
+    sols = [diffsusp.solve_statics(m, m.loads(forces={"contact_patch": force}))
+            for m in (mech, back)]
+    for s in sols:
+        assert np.all(np.asarray(s.status) == 0)
+    qa, qb = (np.asarray(s.q).reshape(8, -1, 6) for s in sols)
+    assert np.abs(qa[..., :3]).max() > 10.0
+    np.testing.assert_allclose(qb[..., :3], qa[..., :3], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(qb[..., 3:], qa[..., 3:], rtol=0, atol=1e-12)
