@@ -287,7 +287,7 @@ TYRE_INPUTS = {  # the parameters of diffsusp.tyre.evaluate (the options are lef
                   "every ζ = 1", "1/mm"),
     "omega": ("Ω", "wheel spin used by turn slip (default from V_x, κ and R_e)", "rad/s"),
 }
-_TYRE_OPTIONS = ("model", "combined", "limits", "alpha_star", "outputs")
+_TYRE_OPTIONS = ("model", "combined", "limits", "alpha_star", "outputs", "announce")
 TYRE_OUTPUTS = {  # diffsusp.tyre.TyreForces
     "fx": ("F_x", "longitudinal force along the heading (x); driving positive", "N"),
     "fy": ("F_y", "lateral force along y (to the left of the heading)", "N"),
