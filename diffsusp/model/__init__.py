@@ -1,9 +1,8 @@
 """Mechanism pytree, builder and validation."""
 
 from .builder import MechanismBuilder, frame_from_axes
+from .kinds import GROUND, JOINT_ROWS
 from .mechanism import (
-    GROUND,
-    JOINT_ROWS,
     Bushings,
     Drivers,
     Joints,

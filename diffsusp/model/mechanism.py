@@ -13,22 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-GROUND = -1
-"""Part index of the ground (it has no coordinates)."""
-
-JOINT_ROWS = {
-    "spherical": 3,
-    "revolute": 5,
-    "cylindrical": 4,
-    "translational": 5,
-    "universal": 4,
-    "fixed": 6,
-    "inline": 2,
-    "inplane": 1,
-    "perpendicular": 1,
-    "distance": 1,
-}
-"""Constraint rows per joint kind (Adams definitions, spec stiffness §1.6)."""
+from .kinds import GROUND, JOINT_ROWS
+from .topology import Topology
 
 BUSHING_AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -285,8 +271,6 @@ class Mechanism(eqx.Module):
     """Index data of the solver (`diffsusp.model.topology.Topology`), resolved once here."""
 
     def __post_init__(self):
-        from .topology import Topology
-
         self.__check_init__()
         self.topology = Topology(self)
 
@@ -386,17 +370,6 @@ class Mechanism(eqx.Module):
             f"{len(self.springs.names)} springs, {len(self.stops.names)} stops, "
             f"{len(self.load_points.names)} load points."
         )
-
-
-def row_blocks(joints: Joints) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """Group joints by kind: (kind, joint indices, row offsets of each joint), in row order."""
-    offsets = np.cumsum([0] + [JOINT_ROWS[k] for k in joints.kind])[:-1]
-    blocks = []
-    for kind in JOINT_ROWS:
-        idx = np.array([i for i, k in enumerate(joints.kind) if k == kind], dtype=int)
-        if idx.size:
-            blocks.append((kind, idx, offsets[idx]))
-    return blocks
 
 
 def field_unit(tree, path: tuple[str, ...]) -> str:

@@ -14,7 +14,7 @@ Slots of the full unknown vector: coordinates of part a at 6a…6a+5 (a < P), th
 
 import numpy as np
 
-from .mechanism import GROUND, JOINT_ROWS, row_blocks
+from .kinds import GROUND, JOINT_ROWS, row_blocks
 
 # Rows of each joint kind that measure an angle (dimensionless) rather than a length (mm).
 ANGULAR_ROWS = {
