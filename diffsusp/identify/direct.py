@@ -696,7 +696,9 @@ def direct(
         for _ in range(2):
             analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold,
                                 raw.prior)
-            good = analysis.identifiable & within_bar(analysis.gate_pct, max_sigma_pct)
+            # where to linearise the noise model (not a verdict): the estimate where it is
+            # plausible (σ % at the estimate within the bar), the model's value elsewhere
+            good = analysis.identifiable & within_bar(analysis.sigma_pct, max_sigma_pct)
             at = np.where(good, np.asarray(fit.x, float), raw.prior)
             system = ctx.system(ctx.whitener(at))
             fit, eliminated = _estimate(system, method, hold, eliminate, threshold, prior_sigma,

@@ -88,8 +88,7 @@ def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan 
 
 def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
     """Start of the polish: the linear estimate where it determined a positive value whose σ %
-    at the estimate is also within the bar, the model's value elsewhere; the model's values
-    throughout when the linear estimate's model has no equilibrium in a measured case.
+    at the estimate is also within the bar, the model's value elsewhere.
 
     Not a verdict (that is the polish's, judged at the start values): a starting point. The
     errors in variables pull a little-deformed direction's linear estimate toward 0 by more
@@ -97,8 +96,6 @@ def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
     determined, and starting there the Chrono rehearsal lost 3 of 200 truths (no equilibrium
     at the polish's start)."""
     start = np.array(plan.params.start)
-    if report.consistency is not None and report.consistency.failed_cases:
-        return start
     plausible = within_bar(report.sigma_pct, report.max_sigma_pct)
     for i, j in plan.index.items():
         v = report.values[i] * report.parameters_to_model[i]
