@@ -52,6 +52,7 @@ from ..compilation import filter_jit
 from ..errors import ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from .linearize import linearize
+from .outputs import bushing_states
 
 STABILITY_TOLERANCE = 1e-9
 """Smallest margin λ_min(S)/max|λ(S)| of a stable equilibrium (see the module docstring)."""
@@ -148,8 +149,6 @@ def law_validity(mech: Mechanism, q: Float[Array, " n"], *, angles=None) -> Floa
     if not mech.bushings.names:
         return jnp.zeros((), jnp.result_type(q if angles is None else angles))
     if angles is None:
-        from .outputs import bushing_states
-
         angles = bushing_states(mech, q)[1]
     ratio = jnp.abs(angles) / jnp.radians(jnp.asarray(ANGLE_LIMITS_DEG))
     return jnp.max(jnp.where(_carried_rotations(mech), ratio, 0.0))

@@ -24,7 +24,6 @@ from .kernel import (
     spring_tension,
     to_internal,
 )
-from .solve import StaticSolution
 
 
 def _batched(fn):
@@ -106,8 +105,9 @@ def spring_states(mech: Mechanism, q):
 
 
 @filter_jit
-def joint_reactions(mech: Mechanism, sol: StaticSolution):
-    """Reaction wrench of every joint on its I part, at the I marker, global components.
+def joint_reactions(mech: Mechanism, sol):
+    """Reaction wrench of every joint on its I part, at the I marker, global components, from
+    `sol` (a `diffsusp.statics.StaticSolution`: its `q` and `multipliers`).
 
     **Returns:** force (n_joints, 3) (N) and moment (n_joints, 3) (N·mm), with a leading case
     axis if `sol` has one. Rows dropped as redundant carry no reaction (Adams does the same).

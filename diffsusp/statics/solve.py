@@ -36,6 +36,7 @@ from ..model.mechanism import Loads, Mechanism
 from .checks import warn_law_validity, with_flags
 from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
 from .linearize import linearize_internal, scaled_solve
+from .outputs import bushing_states
 
 
 class Status(enum.IntEnum):
@@ -405,8 +406,6 @@ def _report(sol: StaticSolution, throw: bool, what: str):
 
 @filter_jit
 def _bushing_angles(mech, q):
-    from .outputs import bushing_states
-
     return bushing_states(mech, q)[1]
 
 
