@@ -13,13 +13,16 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..model import Mechanism
+from ..model import Loads, Mechanism
 from ..model.corner import (  # noqa: F401  (re-exported: diffsusp.kc.Corner)
     FRAMES,
     Corner,
     PointRef,
     ResolvedCorner,
 )
+from ..model.validate import design_terms
+from ..statics import Status, marker_poses, solve_statics
+from .rig import add_road_contact, remove_drivers
 
 
 def default_corner(mech: Mechanism, prefix: str = "") -> Corner:
@@ -88,11 +91,6 @@ def equilibrium_load(mech: Mechanism, contact_point: str, up=(0.0, 0.0, 1.0),
     hit = _LOADS.get(id(mech))
     if hit is not None and hit[0] is mech and hit[1] == key:
         return hit[2]
-    from ..model import Loads
-    from ..model.validate import design_terms
-    from ..statics import Status, marker_poses, solve_statics
-    from .rig import add_road_contact, remove_drivers
-
     base = remove_drivers(mech, mech.drivers.names)
     if loaded_radius is None:
         k, radius = base.load_points.index(contact_point), None

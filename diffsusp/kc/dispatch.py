@@ -9,13 +9,15 @@ torque is given in N·m, as on the command line).
 """
 
 import dataclasses
+import math
 
 import numpy as np
 
 from ..errors import InputError
 from ..model.combine import combine, component_names
 from ..model.mirror import mirror
-from .corner import Corner, corners_of, default_corner
+from ..tyre.vertical import loaded_radius as vertical_radius
+from .corner import Corner, corners_of, default_corner, equilibrium_load
 from .events import (
     TABLES,
     aligning_torque,
@@ -28,6 +30,7 @@ from .events import (
     traction,
     vertical_force,
 )
+from .metrics import display, display_unit
 from .rig import with_rack
 
 EVENTS = {
@@ -111,9 +114,6 @@ def tyre_loaded_radius(mech, tyre, corner=None, *, tol: float = 1e-6, steps: int
     point (the radius sets the load's lever arm, the load the tyre's deflection), iterated
     until the radius moves less than `tol` mm (two or three rounds: a millimetre of radius
     changes the load by little). `corner`: default the model's."""
-    from ..tyre.vertical import loaded_radius as vertical_radius
-    from .corner import equilibrium_load
-
     c = corner or default_corner(mech)
 
     def radius(load: float) -> float:
@@ -257,10 +257,6 @@ def event_json(ev, model_name: str) -> dict:
     iterations and flags, every metric in its display unit (`kc.display`), and the wheel-centre
     compliance matrices when the event has them. A non-finite value (a case that did not
     converge) is None (null)."""
-    import math
-
-    from .metrics import display, display_unit
-
     def clean(a):
         a = np.asarray(a, dtype=float)
         if a.ndim == 0:

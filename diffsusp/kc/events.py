@@ -45,7 +45,7 @@ from ..statics import (
 )
 from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margins, warn_law_validity
 from .corner import Corner, ResolvedCorner, corners_of
-from .metrics import METRICS, Derivatives, corner_geometry
+from .metrics import DERIVATIVE_METRICS, METRICS, Derivatives, corner_geometry
 from .rig import ROAD_CONTACT, add_driver, add_road_contact, remove_drivers
 
 TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
@@ -705,8 +705,6 @@ def load_table(mech: Mechanism, table=TABLE_5_1, *, corner=None, q0=None, throw:
 
 def derivative_metrics(ev: KCEvent) -> dict:
     """The derivative metrics of an event (bump steer, wheel rate, compliances, ...)."""
-    from .metrics import DERIVATIVE_METRICS
-
     return {k: v for k, v in ev.metrics.items() if k.rsplit("/", 1)[-1] in DERIVATIVE_METRICS}
 
 

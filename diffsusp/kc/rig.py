@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import GROUND, Mechanism
+from ..model.builder import frame_from_axes
 
 
 def _insert_joint_rows(mech: Mechanism, n_new: int) -> tuple[int, ...]:
@@ -103,8 +104,6 @@ def with_rack(mech: Mechanism, tie_rod: str = "tie_rod", *, direction=None,
         direction = (0.0, 1.0, 0.0) if frame == "iso" else (0.0, -1.0, 0.0)
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
-    from ..model.builder import frame_from_axes
-
     orient = jnp.asarray(frame_from_axes(d))
     rack = len(mech.parts)
     at = mk.position[inner]

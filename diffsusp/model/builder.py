@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..geometry import reuler_deg_to_matrix
+from .corner import Corner
 from .mechanism import (
     BUSHING_AXES,
     GROUND,
@@ -34,6 +35,7 @@ from .mechanism import (
     Springs,
     Stops,
 )
+from .validate import finalize
 
 
 def frame_from_axes(z=None, x=None) -> np.ndarray:
@@ -267,8 +269,6 @@ class MechanismBuilder:
         """Say which markers are the wheel: a `diffsusp.model.corner.Corner`, or its fields
         (`wheel_centre`, `contact_point`, `kingpin`, `side`, `frame`, `loaded_radius`,
         `design_load`, ...). The names are checked at build."""
-        from .corner import Corner
-
         if corner is None:
             corner = Corner(**fields)
         elif fields:
@@ -282,8 +282,6 @@ class MechanismBuilder:
 
     def build(self, *, check: bool = True) -> Mechanism:
         """Stack everything into a `Mechanism`; with `check`, validate it (see `validate`)."""
-        from .validate import finalize
-
         names = list(self._markers)
         index = {n: k for k, n in enumerate(names)}
         part_index = {p: k for k, p in enumerate(self._parts)} | {"ground": GROUND}

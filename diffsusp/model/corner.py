@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ModelError
 
 FRAMES = {
     # rearward, right (unit vectors in the model's global frame)
@@ -114,8 +114,6 @@ class Corner:
     def check_names(self, mech) -> None:
         """Raise `ModelError` if a marker, load point or part this corner names is not in
         `mech` (what the builder and the file readers check)."""
-        from ..errors import ModelError
-
         p = self.prefix
         wanted = [
             ("wheel_centre", self.wheel_centre, mech.markers.names),

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..compilation import filter_jit
 from ..errors import ModelError
+from ..statics.kernel import assemble, constraint_values, to_internal
 from .mechanism import JOINT_ROWS, Mechanism
 
 
@@ -57,8 +58,6 @@ def _row_names(mech: Mechanism) -> list[str]:
 
 @filter_jit
 def _at_design(mech: Mechanism, loads):
-    from ..statics.kernel import assemble, constraint_values, to_internal
-
     q0 = to_internal(mech, jnp.zeros(mech.n_coordinates))
     phi = constraint_values(mech, loads, q0)
     r, jac = assemble(mech, loads, q0, jnp.zeros(mech.topology.m))
