@@ -8,6 +8,10 @@ that the shipped files equal the Python-built models and this script's output.
 import os
 
 import numpy as np
+import tomlkit
+
+from ..io.native import model_to_toml
+from . import DOUBLE_WISHBONE_DESIGN_LOAD, TABLE_4_4, TABLE_5_1, ZOO
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
 
@@ -21,8 +25,6 @@ def _thesis_table(table) -> dict:
 
 def load_tables(name: str) -> dict:
     """The named load tables shipped with built-in model `name` (N, mm)."""
-    from . import DOUBLE_WISHBONE_DESIGN_LOAD, TABLE_4_4, TABLE_5_1
-
     if name.startswith("pseudo_mcpherson"):
         tables = {"table_5_1": _thesis_table(TABLE_5_1), "table_4_4": _thesis_table(TABLE_4_4)}
         if name.endswith("wheel_travel"):
@@ -36,11 +38,6 @@ def load_tables(name: str) -> dict:
 
 def model_text(name: str, mech=None) -> str:
     """The text of the shipped file of built-in model `name`."""
-    import tomlkit
-
-    from ..io.native import model_to_toml
-    from . import ZOO
-
     mech = ZOO[name]() if mech is None else mech
     doc = model_to_toml(
         mech, load_tables=load_tables(name),
@@ -54,7 +51,6 @@ def main():
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from . import ZOO
 
     os.makedirs(DATA, exist_ok=True)
     for name in ZOO:

@@ -11,6 +11,9 @@ subsystem: x forward, y to the left, z up; the left side.
 import numpy as np
 
 from ..model import Mechanism, MechanismBuilder
+from ..model.corner import Corner
+
+__all__ = ["DOUBLE_WISHBONE_DESIGN_LOAD", "double_wishbone"]
 
 _M_TO_MM = 1000.0
 
@@ -71,7 +74,7 @@ DOUBLE_WISHBONE_DESIGN_LOAD = 9018.1007
 revolute model (see `double_wishbone`)."""
 
 
-def _pivot_frame(front, back, outer) -> np.ndarray:
+def pivot_frame(front, back, outer) -> np.ndarray:
     """Chrono's revolute frame: z along front − back, y normal to the arm's plane."""
     front, back, outer = (np.asarray(v, dtype=float) for v in (front, back, outer))
     v = np.cross(back - outer, front - outer)
@@ -179,7 +182,7 @@ def double_wishbone(bushings: bool = False, wheel_travel: bool = False, *,
         b.marker(f"{prefix}_chassis_back", "ground", back)
         b.marker(f"{prefix}_upright", "upright", outer)
         centre = 0.5 * (np.asarray(front) + np.asarray(back))
-        frame = _pivot_frame(front, back, outer)
+        frame = pivot_frame(front, back, outer)
         if bushings:
             b.bushing(f"{prefix}_bushing", parts=("ground", arm), at=centre, orientation=frame,
                       k_trans=bushing_k_trans, k_rot=(bushing_k_rot, bushing_k_rot, 0.0))
@@ -216,7 +219,5 @@ def corner():
     spin axis +y, contact patch `LOADED_RADIUS` below the wheel centre, steering axis through
     the two ball joints, design load `DOUBLE_WISHBONE_DESIGN_LOAD` (the Chrono importer
     attaches the same corner to the file, with the design load computed: None)."""
-    from ..model.corner import Corner
-
     return Corner(kingpin=("uca_upright", "lca_upright"), side="left", frame="iso",
                   loaded_radius=LOADED_RADIUS, design_load=DOUBLE_WISHBONE_DESIGN_LOAD)

@@ -13,7 +13,7 @@ from .double_wishbone import (
     LOADED_RADIUS,
     SPRING_FREE_LENGTH,
     SPRING_RATE,
-    _pivot_frame,
+    pivot_frame,
 )
 
 PAIR_K_RADIAL = 5000.0
@@ -69,7 +69,7 @@ def double_wishbone_bushing_pairs(spring: bool = False, *, k_torsion: float = 0.
     for arm, prefix in (("upper_control_arm", "uca"), ("lower_control_arm", "lca")):
         front, back = p[f"{prefix}_chassis_front"], p[f"{prefix}_chassis_back"]
         outer = p[f"{prefix}_upright"]
-        frame = _pivot_frame(front, back, outer)  # z along the pair's axis
+        frame = pivot_frame(front, back, outer)  # z along the pair's axis
         for end, at in (("front", front), ("back", back)):
             b.bushing(f"{prefix}_{end}", parts=("ground", arm), at=at, orientation=frame,
                       k_trans=(k_radial, k_radial, k_axial), k_rot=(k_tilt, k_tilt, k_torsion))

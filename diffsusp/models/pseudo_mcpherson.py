@@ -4,6 +4,9 @@
 import math
 
 from ..model import Mechanism, MechanismBuilder
+from ..model.corner import Corner, common_perpendicular_midpoint, design_offset
+
+__all__ = ["pseudo_mcpherson"]
 
 # Table 2.2: joint poses of the loaded half axle (4500 N vertical), Adams/Car frame, mm and
 # REULER (ψ, θ, φ) in degrees. Ball joints have no orientation.
@@ -64,7 +67,8 @@ near 2 050 N of vertical load), force 100·p + 2.0·p³ N (3 kN at 10 mm, 18 kN 
 than the bump stop like the hydraulic/elastomer rebound stop inside a damper (Adams/Car `.reb`).
 Chosen: the thesis tabulates no stop."""
 
-_NMM_PER_DEG_TO_RAD = 180.0 / math.pi
+NMM_PER_DEG_TO_RAD = 180.0 / math.pi
+"""N·mm/deg → N·mm/rad (the thesis states rotational rates per degree)."""
 
 
 def virtual_lower_pivot() -> tuple[float, float, float]:
@@ -73,8 +77,6 @@ def virtual_lower_pivot() -> tuple[float, float, float]:
     (front arm L1–L8, rear arm L2–L7, Table 2.2), at (−1.62, −716.49, 197.11) mm in the
     Adams/Car frame. The two lines pass 70 mm apart vertically; in plan view they cross 8–12 %
     beyond the ball joints."""
-    from ..model.corner import common_perpendicular_midpoint, design_offset
-
     p = JOINT_POSITIONS
     pivot = common_perpendicular_midpoint(p["L1"], p["L8"], p["L2"], p["L7"])
     return design_offset(pivot, p["L9"], "adams", "left")
@@ -86,8 +88,6 @@ def corner(*, strut: bool = True):
     contact patch `LOADED_RADIUS` below it, steering axis from the strut top L4 (None without
     the strut) to the design virtual lower pivot of the two lower links (`virtual_lower_pivot`,
     fixed on the hub carrier), design load `DESIGN_LOAD`."""
-    from ..model.corner import Corner
-
     kingpin = ("L4_strut_top", ("hub_carrier", virtual_lower_pivot())) if strut else None
     return Corner(kingpin=kingpin, frame="adams", loaded_radius=LOADED_RADIUS,
                   design_load=DESIGN_LOAD)
@@ -252,7 +252,7 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
     ):
         k_trans, k_rot_deg = BUSHING_STIFFNESS[name]
         b.bushing(name, parts=parts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
-                  k_rot=tuple(k * _NMM_PER_DEG_TO_RAD for k in k_rot_deg))
+                  k_rot=tuple(k * NMM_PER_DEG_TO_RAD for k in k_rot_deg))
 
     if tie_rod_part:
         b.part("tie_rod")
