@@ -26,6 +26,8 @@ if (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from .kc.metrics import METRICS, display  # noqa: E402
+
 _X_LABELS = {
     "wheel_travel": "wheel travel",
     "vertical_force": "vertical force",
@@ -41,8 +43,6 @@ _X_DISPLAY = {"N·mm": ("N·m", 1e-3)}
 
 
 def _metric_label(name: str) -> str:
-    from .kc.metrics import METRICS
-
     unit, shown, _, description = METRICS.get(name, ("", "", 1.0, name.replace("_", " ")))
     return f"{description} ({shown})" if shown not in ("", "-") else description
 
@@ -100,8 +100,6 @@ def kc_curves(events, metrics=("toe", "camber", "half_track_change"), *, labels=
 
     **Returns:** the Figure.
     """
-    from .kc.metrics import display
-
     events = list(events) if isinstance(events, list | tuple) else [events]
     if not events:
         raise ValueError("kc_curves needs at least one event.")
@@ -129,7 +127,7 @@ def kc_curves(events, metrics=("toe", "camber", "half_track_change"), *, labels=
         a.set_ylabel(_metric_label(metric))
         a.grid(True, alpha=0.3)
         # beside the axes, not on them: an axle's default label (its two corners' model
-        # names) runs to ~90 characters and squeezed the curves (issue 28 item 8)
+        # names) runs to ~90 characters and would squeeze the curves
         a.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1.0),
                  borderaxespad=0.0)
     for a in axes:

@@ -48,6 +48,29 @@ from .corner import Corner, ResolvedCorner, corners_of
 from .metrics import DERIVATIVE_METRICS, METRICS, Derivatives, corner_geometry
 from .rig import ROAD_CONTACT, add_driver, add_road_contact, remove_drivers
 
+__all__ = [
+    "TABLES",
+    "KCEvent",
+    "Rig",
+    "aligning_torque",
+    "anti_pitch",
+    "braking",
+    "compliance_matrix",
+    "corner_loads",
+    "derivative_metrics",
+    "evaluate",
+    "force_rig",
+    "lateral_force",
+    "load_table",
+    "longitudinal_force",
+    "opposite_travel",
+    "parallel_travel",
+    "steering",
+    "traction",
+    "travel_rig",
+    "vertical_force",
+]
+
 TABLES = {"table_5_1": TABLE_5_1, "table_4_4": TABLE_4_4}
 """The thesis load tables (F_vert, F_lat, F_long) in N: Table 5-1 (13 cases, spec stiffness
 §2.7) and Table 4.4 (17 K&C bench cases, §1.13). `load_table` applies them per side."""
@@ -189,7 +212,7 @@ def force_rig(mech: Mechanism, corner=None, *, rack: str = "rack_travel",
     of the wheel carrier does not carry it along the road. A load point `<prefix>road_contact`
     on the wheel-centre marker is added for it (`add_road_contact`) and the loads carry
     `contact_radius`. 'fixed': at the corner's `contact_point` load point, fixed on the
-    wheel carrier (the behaviour before issue 28)."""
+    wheel carrier (the load does not follow a wind-up of the carrier along the road)."""
     if contact not in ("road", "fixed"):
         raise InputError(f"contact must be 'road' or 'fixed'; got '{contact}'.")
     corners = _resolve(mech, corner)
@@ -434,7 +457,7 @@ def _cases(values, what: str) -> np.ndarray:
     return arr
 
 
-def _loads(rig: Rig, n: int, *, vertical=0.0, lateral=0.0, longitudinal=0.0, aligning=0.0,
+def event_loads(rig: Rig, n: int, *, vertical=0.0, lateral=0.0, longitudinal=0.0, aligning=0.0,
            at: str = "contact_patch", travel=0.0, rack=0.0) -> Loads:
     """The event's load table: per-side components applied at every corner (× pattern for the
     primary input)."""
@@ -524,7 +547,7 @@ def corner_loads(mech: Mechanism, table=None, *, vertical=0.0, lateral=0.0,
               travel_drivers=tuple(-1 for _ in corners),
               road=road if len(road) == len(corners) else ())
     n = shape[0] if shape else 1
-    return _loads(rig, n, vertical=values[0], lateral=values[1], longitudinal=values[2],
+    return event_loads(rig, n, vertical=values[0], lateral=values[1], longitudinal=values[2],
                   aligning=values[3], at=at)
 
 
@@ -572,7 +595,7 @@ def parallel_travel(mech: Mechanism, travel, *, corner=None, drive: str = "wheel
     """
     x = _cases(travel, "travel")
     rig = travel_rig(mech, corner, drive=drive)
-    loads = _loads(rig, x.size, travel=x)
+    loads = event_loads(rig, x.size, travel=x)
     ev = _run("parallel_travel", rig, loads, x, "wheel_travel", "mm", "wheel height", q0,
               throw, label, **solver)
     for key in [k for k in ev.metrics if METRICS.get(k.rsplit("/", 1)[-1], ()) and
@@ -597,7 +620,7 @@ def opposite_travel(axle: Mechanism, travel, *, corner=None, drive: str = "wheel
         )
     pattern = [1.0 if rc.side == "left" else -1.0 for rc in corners]
     rig = travel_rig(axle, corner, drive=drive, pattern=pattern)
-    loads = _loads(rig, x.size, travel=x)
+    loads = event_loads(rig, x.size, travel=x)
     return _run("opposite_travel", rig, loads, x, "wheel_travel", "mm", "wheel heights", q0,
                 throw, label, **solver)
 
@@ -608,7 +631,7 @@ def vertical_force(mech: Mechanism, fz, *, corner=None, q0=None, throw: bool = T
     metrics hold the vertical load and differentiate along it (wheel rate = 1/(dz/dF_z))."""
     x = _cases(fz, "fz")
     rig = force_rig(mech, corner)
-    loads = _loads(rig, x.size, vertical=x)
+    loads = event_loads(rig, x.size, vertical=x)
     return _run("vertical_force", rig, loads, x, "vertical_force", "N", "vertical load", q0,
                 throw, label, **solver)
 
@@ -619,7 +642,7 @@ def lateral_force(mech: Mechanism, fy, *, fz=None, corner=None, q0=None, throw: 
     load `fz` (N; default the corner's design load)."""
     x = _cases(fy, "fy")
     rig = force_rig(mech, corner)
-    loads = _loads(rig, x.size, vertical=_fz(rig, fz), lateral=x)
+    loads = event_loads(rig, x.size, vertical=_fz(rig, fz), lateral=x)
     return _run("lateral_force", rig, loads, x, "lateral_force", "N", "vertical load", q0,
                 throw, label, **solver)
 
@@ -634,7 +657,7 @@ def longitudinal_force(mech: Mechanism, fx, *, fz=None, at: str = "contact_patch
         raise InputError(f"at must be 'contact_patch' or 'wheel_centre'; got '{at}'.")
     x = _cases(fx, "fx")
     rig = force_rig(mech, corner)
-    loads = _loads(rig, x.size, vertical=_fz(rig, fz), longitudinal=x, at=at)
+    loads = event_loads(rig, x.size, vertical=_fz(rig, fz), longitudinal=x, at=at)
     return _run("longitudinal_force", rig, loads, x, "longitudinal_force", "N",
                 "vertical load", q0, throw, label, **solver)
 
@@ -662,7 +685,7 @@ def aligning_torque(mech: Mechanism, mz, *, fz=None, corner=None, q0=None, throw
     load `fz`."""
     x = _cases(mz, "mz")
     rig = force_rig(mech, corner)
-    loads = _loads(rig, x.size, vertical=_fz(rig, fz), aligning=x)
+    loads = event_loads(rig, x.size, vertical=_fz(rig, fz), aligning=x)
     return _run("aligning_torque", rig, loads, x, "aligning_torque", "N·mm", "vertical load",
                 q0, throw, label, **solver)
 
@@ -675,7 +698,7 @@ def steering(mech: Mechanism, rack_travel, *, travel: float = 0.0, rack: str = "
     (`diffsusp.kc.with_rack`)."""
     x = _cases(rack_travel, "rack_travel")
     rig = travel_rig(mech, corner, rack=rack, require_rack=True)
-    loads = _loads(rig, x.size, travel=travel, rack=x)
+    loads = event_loads(rig, x.size, travel=travel, rack=x)
     return _run("steering", rig, loads, x, "rack_travel", "mm", "wheel height", q0, throw,
                 label, **solver)
 

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .. import lsq
 from ..errors import ModelError
 from .tree import LOCKED, PRISMATIC, REVOLUTE, Tree, joint_transforms
 
@@ -227,8 +228,6 @@ def base_parameters(tree: Tree, seed: int = 0, *, samples: int | None = None,
     **Returns:** (`lsq.Fit` whose `rank` is the number of base parameters and `relations` the
     regrouped combinations, the names of the columns used).
     """
-    from .. import lsq
-
     samples = samples or max(4 * tree.n * N_PER_JOINT // max(tree.dof, 1), 8)
     rng = np.random.default_rng(seed)
     Q, QD, QDD = rng.uniform(-1.0, 1.0, (3, samples, tree.dof))

@@ -29,6 +29,7 @@ from jaxtyping import Array, Float
 from ..errors import InputError
 from ..model.mechanism import GROUND, Loads, Mechanism
 from ..statics import bushing_states, part_poses
+from .measurements import Measurements, bushing_deformations, from_poses
 
 
 def _as_measured(value, core_shape: tuple[int | None, ...], what: str, n_cases: int | None):
@@ -345,8 +346,6 @@ def as_fit_data(data) -> tuple[Measurement, ...]:
     own σ: `Measurements.sigma`, `sigma_rotation`).
 
     **Raises:** `InputError` for anything else, or repeated measurement names."""
-    from .measurements import Measurements
-
     items = (data,) if isinstance(data, Measurement | Measurements) else tuple(data)
     items = tuple(
         from_measurements(m, m.sigma, _pose_sigma_rotation(m))
@@ -389,8 +388,6 @@ def as_equilibria(data):
 
     **Raises:** `InputError` when `data` carries no part poses (the direct method needs the pose
     of every moving part at every equilibrium: spec stiffness §1.1)."""
-    from .measurements import Measurements, from_poses
-
     found = _single(data, (Measurements, Poses),
                     "the direct method needs measured part poses: a measure.Measurements "
                     "(from_landmarks, from_poses, synthesize, read_measurements) or a Poses")
@@ -410,8 +407,6 @@ def as_deformations(mech: Mechanism, data, bushings: Sequence[str]) -> Deformati
 
     **Raises:** `InputError` when `data` has neither, a bushing is missing, or an entry is
     masked (the correlation method regresses over every case)."""
-    from .measurements import Measurements, bushing_deformations
-
     found = _single(data, (Deformations, Measurements, Poses),
                     "the iterative method needs measured bushing deformations: a Deformations, "
                     "or measured part poses (measure.Measurements, Poses)")

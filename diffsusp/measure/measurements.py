@@ -23,6 +23,7 @@ from ..errors import InputError
 from ..geometry.registration import register_landmarks
 from ..geometry.rotations import GIBBS_SINGULARITY_TOL, matrix_to_quaternion
 from ..model.mechanism import GROUND, Loads, Mechanism
+from ..statics import bushing_states, part_poses, solve_statics
 from .landmarks import (
     MIN_LANDMARKS,
     REORDER_TOLERANCE,
@@ -366,8 +367,6 @@ def synthesize(
     **Returns:** `Measurements` with landmarks (their `sigma` the noise's landmark σ, or
     `ARM_SIGMA` without noise); noise-free poses are exact to rounding.
     """
-    from ..statics import part_poses, solve_statics
-
     if loads.n_cases is None:
         loads = jax.tree.map(lambda a: a[None], loads)
     layout = place_landmarks(mech, per_part, seed=seed) if layout is None else layout
@@ -397,8 +396,6 @@ def bushing_deformations(mech: Mechanism, meas: Measurements, bushings=None):
 
     **Raises:** `InputError` if a part of a requested bushing has no measured pose.
     """
-    from ..statics import bushing_states
-
     if bushings is None:
         delta_t, delta_r, _, _ = bushing_states(mech, meas.coordinates(mech))
         return delta_t, delta_r

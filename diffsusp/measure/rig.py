@@ -1,8 +1,7 @@
 """K&C-rig tables: what an SPMM/MTS rig reports — toe, camber, wheel-centre displacement, ...
-against the loads or the wheel travel of each case — as a least-squares `Channel` (issue 28
-item 10), so that `identify.least_squares` (and `diffsusp identify fit MODEL --measurements
-rig.csv`) correlates a model to rig curves with the same report and verdict as the landmark
-fits.
+against the loads or the wheel travel of each case — as a least-squares `Channel`, so that
+`identify.least_squares` (and `diffsusp identify fit MODEL --measurements rig.csv`) correlates
+a model to rig curves with the same report and verdict as the landmark fits.
 
 **The table** (CSV or Parquet, `diffsusp.io.tables`: one header row, `#` lines skipped, a unit
 in brackets after a column name, no unit = the library's units mm, N, N·mm, rad):
@@ -39,7 +38,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import kc
 from ..errors import InputError, ModelFileError
+from ..io.files import read_input, write_text_atomic
+from ..io.tables import read_table, split_header, unit_factor
+from ..kc.events import event_loads
+from ..kc.metrics import METRICS, corner_geometry
+from .data import Channel
 
 FORCE_INPUTS = ("vertical_force", "lateral_force", "longitudinal_force", "aligning_torque")
 """Force-rig inputs (per side: up, inboard, rearward, toe-out), as the metric registry names
@@ -86,15 +91,11 @@ class RigTable:
 
 
 def _metric_unit(name: str) -> str:
-    from ..kc.metrics import METRICS
-
     return METRICS[name].unit
 
 
 def _factor(unit, name, path, line):
     """Factor to the library unit of metric or input `name` from a column's `unit`."""
-    from ..io.tables import unit_factor
-
     dimension = _DIMENSION.get(_metric_unit(name))
     if dimension is None:
         if unit not in (None, "-", "1"):
@@ -112,8 +113,6 @@ def is_rig_table(path) -> bool:
     """Whether the table at `path` is a K&C-rig table: its header names a rig input
     (`wheel_travel` or a force input) and no landmark, pose or load-point column. Reads the
     header only; False for anything it cannot read (the landmark reader then says why)."""
-    from ..io.tables import split_header
-
     try:
         if str(path).lower().endswith((".parquet", ".pq")):
             import pyarrow.parquet as pq
@@ -158,8 +157,6 @@ def _parse_sigma(text: str, path, line) -> dict[str, float]:
 def _header_sigma(path) -> tuple[dict[str, float], int | None]:
     if str(path).lower().endswith((".parquet", ".pq")):
         return {}, None
-    from ..io.files import read_input
-
     text = read_input(path, "table", "table").decode("utf-8-sig", errors="replace")
     for number, line in enumerate(text.splitlines(), 1):
         match = _SIGMA_LINE.match(line)
@@ -180,8 +177,6 @@ def read_rig_table(path, *, sigma=None) -> RigTable:
     **Raises:** `ModelFileError` (file, line, column): an unknown column, travel and force
     inputs together, no channel, a channel without σ, a non-finite value or σ ≤ 0.
     """
-    from ..io.tables import read_table
-
     table = read_table(path)
     path = table.path or str(path)
     header = table.header_line
@@ -275,8 +270,6 @@ class RigChannels:
     channels: tuple[str, ...]
 
     def __call__(self, mech, q):
-        from ..kc.metrics import corner_geometry
-
         rc = self.corner
         up, o, r = (jnp.asarray(v) for v in (rc.up, rc.outboard, rc.rearward))
         geo0 = corner_geometry(mech, rc, jnp.zeros(mech.n_coordinates))
@@ -303,14 +296,10 @@ def rig_measurement(mech, table: RigTable, corner=None):
     `rig.mech` (its parameters are `mech`'s: `Params` built on either apply to both), e.g.
     `identify.least_squares(rig.mech, channel, params)`. The channel's name is 'kc_rig'; its
     residual rows are the table's cases × channels, whitened by their σ."""
-    from .. import kc
-    from ..kc.events import _loads
-    from .data import Channel
-
     notes = list(table.notes)
     if table.mode == "travel":
         rig = kc.travel_rig(mech, corner)
-        loads = _loads(rig, table.n_cases, travel=table.inputs[TRAVEL_INPUT])
+        loads = event_loads(rig, table.n_cases, travel=table.inputs[TRAVEL_INPUT])
     else:
         rig = kc.force_rig(mech, corner)
         if len(rig.corners) != 1:
@@ -326,7 +315,7 @@ def rig_measurement(mech, table: RigTable, corner=None):
                       "height")
             notes.append(f"the table gives no vertical_force: every case holds the design load "
                          f"{vertical:.6g} N ({origin}).")
-        loads = _loads(rig, table.n_cases, vertical=vertical,
+        loads = event_loads(rig, table.n_cases, vertical=vertical,
                        lateral=given.get("lateral_force", 0.0),
                        longitudinal=given.get("longitudinal_force", 0.0),
                        aligning=given.get("aligning_torque", 0.0))
@@ -344,8 +333,6 @@ def write_rig_table(path, inputs: dict, channels: dict, sigma: dict, units: dict
     unit (`units`: name → unit, default the library's), `sigma` channel → σ in the same unit:
     a number (the `# sigma:` line) or (cases,) values (a column `sigma.<channel>`). What
     `read_rig_table` reads back."""
-    from ..io.files import write_text_atomic
-
     units = dict(units or {})
     scalar = {k: float(v) for k, v in sigma.items() if np.ndim(v) == 0}
     columns = {**inputs, **channels,

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError, ModelFileError
+from ..geometry import matrix_to_reuler, reuler_to_matrix
 from ..io.measurements import (
     ANGLE_COLUMNS,
     ANGLE_LIMIT,
@@ -103,8 +104,6 @@ def _landmark_table(raw: MeasurementRows, mech, reorder, tolerance) -> Measureme
 
 
 def _pose_table(raw: MeasurementRows, mech) -> Measurements:
-    from ..geometry import reuler_to_matrix
-
     labels, order = raw.cases()
     parts = raw.text("part")
     xyz = np.stack([raw.numbers(c, raw.factor(c, "length"), limit=LENGTH_LIMIT, unit="mm")
@@ -156,8 +155,6 @@ def _load_columns(mech: Mechanism, meas: Measurements) -> dict[str, np.ndarray]:
 def write_measurements(meas: Measurements, path, mech: Mechanism) -> None:
     """Write `meas` as a landmark table (if it has landmarks) or a pose table, CSV or Parquet
     (from the suffix), with the loads as `<load point>.fx` … columns of `mech` (N, N·mm)."""
-    from ..geometry import matrix_to_reuler
-
     cases = meas.cases or tuple(str(c + 1) for c in range(meas.n_cases))
     loads = _load_columns(mech, meas)
     rows = []

@@ -1,6 +1,6 @@
 """Which markers are the wheel: the static description of a suspension corner, stored with the
 model (`Mechanism.corners`), so that K&C events, sensitivity and identification find the wheel
-of a built-in model or a model file without being told (issue 11: not guessed from names).
+of a built-in model or a model file without being told (nothing is guessed from names).
 
 A `Corner` names the wheel-centre marker (its z axis is the spin axis), the load points where
 contact-patch and wheel-centre loads act, the steering (kingpin) axis, the side of the vehicle
