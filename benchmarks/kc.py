@@ -94,8 +94,8 @@ def bench_travel(pm, n_points, baseline_points):
 def bench_designs(pm, n_designs, baseline_designs, rng):
     rig = kc.force_rig(pm)
     table = TABLE_5_1
-    loads = kc.events._loads(rig, len(table), vertical=table[:, 0], lateral=table[:, 1],
-                             longitudinal=table[:, 2])
+    loads = kc.events.event_loads(rig, len(table), vertical=table[:, 0], lateral=table[:, 1],
+                                  longitudinal=table[:, 2])
     scale_b = rng.uniform(0.8, 1.2, (n_designs, *pm.bushings.k_trans.shape))
     scale_r = rng.uniform(0.8, 1.2, (n_designs, *pm.bushings.k_rot.shape))
     scale_s = rng.uniform(0.95, 1.05, (n_designs, *pm.springs.k.shape))

@@ -199,11 +199,11 @@ def test_travel_rig_table_fitted_back_from_the_cli(tmp_path):
     ends = np.array([start.bushings.i_marker[b], start.bushings.j_marker[b]])
     truth = eqx.tree_at(lambda m: m.markers.position, start,
                         start.markers.position.at[ends].add(MOVE))
-    from diffsusp.kc.events import _loads
+    from diffsusp.kc.events import event_loads
 
     travel = np.linspace(-80.0, 80.0, 9)
     rig = kc.travel_rig(truth)
-    sol = diffsusp.solve_statics(rig.mech, _loads(rig, travel.size, travel=travel))
+    sol = diffsusp.solve_statics(rig.mech, event_loads(rig, travel.size, travel=travel))
     assert np.all(np.asarray(sol.status) == 0)
     rc = rig.corners[0]
     geometry = [kc.corner_geometry(rig.mech, rc, q) for q in sol.q]

@@ -38,7 +38,7 @@ def test_solve_statics_program_within_budget(mech):
 
 def test_kc_evaluation_program_within_budget(mech):
     rig = events.force_rig(mech)
-    loads = events._loads(rig, 13, vertical=jnp.linspace(1500.0, 7500.0, 13))
+    loads = events.event_loads(rig, 13, vertical=jnp.linspace(1500.0, 7500.0, 13))
     closed = jax.make_jaxpr(lambda l: events.evaluate(rig, l))(loads)
     size = equations(closed.jaxpr)
     assert 1000 < size <= KC_BUDGET, size
