@@ -1,32 +1,23 @@
-"""Errors in variables for the direct method (issue 12): the polish of its linear estimate by
-least squares through the equilibrium, and `direct_batch` (many measurement sets, one batched
-polish). spec: stiffness §1.10 (the regressors are built from measured poses), §6 item 8 (the
-gradient-based fit through the equilibrium, `identify.least_squares`, which the polish runs)."""
+"""Errors in variables for the direct method: the polish of its linear estimate by least
+squares through the equilibrium (`polish_linear`; `direct_batch`, in `identify.direct`, polishes
+many measurement sets at once with the same plan). spec: stiffness §1.10 (the regressors are
+built from measured poses), §6 item 8 (the gradient-based fit through the equilibrium,
+`identify.least_squares`, which the polish runs)."""
 
 import dataclasses
-from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
-from .direct import (
-    MAX_SIGMA_PCT,
-    STIFFNESS_NAMES,
-    Parameter,
-    _default_where,
-    _parameters,
-    _selected_fields,
-    _selection_of,
-    direct,
-)
 from .direct_report import DirectReport
+from .direct_unknowns import STIFFNESS_NAMES, Parameter, derived, prior
+from .least_squares import least_squares_batch
 from .params import Params
-from .report import bar_reason, check_consistency, check_data, within_bar
+from .report import MAX_SIGMA_PCT, bar_reason, check_consistency, within_bar
 
-__all__ = ["POLISH_CHI2", "direct_batch"]
+__all__ = ["POLISH_CHI2"]  # re-exported by `identify.direct`
 
 
 POLISH_CHI2 = 1e-6
@@ -36,7 +27,7 @@ rounding, and the linear estimate is then exact)."""
 
 
 @dataclasses.dataclass(frozen=True)
-class _PolishPlan:
+class PolishPlan:
     """What the polish fits: `params` (the `Params` of `identify.least_squares`, started at
     the model's values) and `index` {unknown: its parameter} for the stiffnesses and spring
     rates polished."""
@@ -49,8 +40,8 @@ class _PolishPlan:
         return sorted(self.index)
 
 
-def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan | None:
-    """The plan of the polish (see `_PolishPlan`), None when nothing can be polished.
+def polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> PolishPlan | None:
+    """The plan of the polish (see `PolishPlan`), None when nothing can be polished.
 
     Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
     value is positive — log-scaled, started at `mech`'s values, the weak prior centred there.
@@ -83,10 +74,10 @@ def _polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> _PolishPlan 
         leaves.append(lambda m: m.springs.k)
         masks.append(ks)
     lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
-    return _PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
+    return PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
 
 
-def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
+def polish_start(plan: PolishPlan, report: DirectReport) -> np.ndarray:
     """Start of the polish: the linear estimate where it determined a positive value whose σ %
     at the estimate is also within the bar, the model's value elsewhere.
 
@@ -96,7 +87,7 @@ def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
     determined, and starting there the Chrono rehearsal lost 3 of 200 truths (no equilibrium
     at the polish's start)."""
     start = np.array(plan.params.start)
-    plausible = within_bar(report.sigma_pct, report.max_sigma_pct)
+    plausible = within_bar(report.sigma_pct, MAX_SIGMA_PCT)  # a start, not the caller's bar
     for i, j in plan.index.items():
         v = report.values[i] * report.parameters_to_model[i]
         if report.identified[i] and v > 0 and plausible[i]:
@@ -104,7 +95,7 @@ def _polish_start(plan: _PolishPlan, report: DirectReport) -> np.ndarray:
     return start
 
 
-def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Parameter, ...],
+def merge_polish(report: DirectReport, plan: PolishPlan, fit, params: tuple[Parameter, ...],
                   mech: Mechanism) -> tuple[Mechanism, DirectReport]:
     """The model the polish fitted and the direct report of exactly that model.
 
@@ -119,14 +110,12 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
     the errors in variables, stays in `linear_values` and in the status), or neither (not
     determined by the linear estimate: unchanged). Derived quantities (L0, δ0) need a held
     unknown and are recomputed with the new verdicts."""
-    from .direct import _derived, _prior
-
     # What the report calls identified is what the model carries: a polished value the data do
     # not determine keeps the model's value (its polished estimate stays in the report).
     determined = np.asarray(fit.determined, bool)
     model = plan.params.apply(mech, jnp.asarray(
         np.where(determined, fit.estimate, np.asarray(plan.params.start))))
-    held_values = _prior(model, params)  # the returned model's values, table units
+    held_values = prior(model, params)  # the returned model's values, table units
     values, sigma = report.values.copy(), report.sigma.copy()
     sigma_pct, identified = report.sigma_pct.copy(), report.identified.copy()
     gate = (np.full(len(values), np.nan) if report.gate_sigma_pct is None else
@@ -164,12 +153,13 @@ def _merge_polish(report: DirectReport, plan: _PolishPlan, fit, params: tuple[Pa
                      "stiffnesses per axis and spring rates whose model value is positive; a "
                      "K·L0 keeps the spring's free length); their linear estimates are in "
                      "linear_values")
-    derived = _derived(params, values, np.asarray(report.fit.covariance, float), model,
+    derived_values = derived(params, values, np.asarray(report.fit.covariance, float), model,
                        identified)
     report = dataclasses.replace(
         report, values=values, sigma=sigma, sigma_pct=sigma_pct, identified=identified,
         gate_sigma_pct=gate, status=tuple(status), notes=tuple(notes), polished=fit,
-        linear_values=report.values, consistency=fit.consistency, derived=derived)
+        linear_values=report.values, consistency=fit.consistency,
+        derived=derived_values)
     return model, report.judged()
 
 
@@ -180,18 +170,16 @@ def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Paramet
     positive model value, the other unknowns held at the model's values (a linear K·L0 biased
     by the errors in variables would bias the polish: notebook 02's data, max_steps with
     χ²/dof ≈ 4000), the weak default prior centred on the model's values. Returns the polished
-    model (held values included) and its report (`_merge_polish`); `fitted` (the linear
+    model (held values included) and its report (`merge_polish`); `fitted` (the linear
     estimate's model) when there is nothing to polish."""
-    from .least_squares import least_squares_batch
-
-    plan = _polish_plan(mech, params)
+    plan = polish_plan(mech, params)
     if plan is None or not report.identified[plan.unknowns].any():
         return fitted, report  # nothing determined to polish (e.g. all came out negative)
-    start = _polish_start(plan, report)
-    batch = least_squares_batch(mech, _as_batch(data, 1), plan.params, start=start[None],
+    start = polish_start(plan, report)
+    batch = least_squares_batch(mech, as_batch(data, 1), plan.params, start=start[None],
                                 max_sigma_pct=max_sigma_pct)
     fit = batch.reports[0]
-    model, merged = _merge_polish(report, plan, fit, params, mech)
+    model, merged = merge_polish(report, plan, fit, params, mech)
     if not np.all(fit.determined):  # the returned model differs from the fit's: judge it
         consistency = check_consistency(model, data, int(np.sum(fit.determined)),
                                         cases=report.cases)
@@ -199,7 +187,7 @@ def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Paramet
     return model, merged
 
 
-def _as_batch(data, n: int, items=None):
+def as_batch(data, n: int, items=None):
     """Measurements (one data set each) stacked along a leading data-set axis: `data` repeated
     `n` times, or the measured values of `items` (lists of measurements like `data`)."""
     out = []
@@ -212,48 +200,4 @@ def _as_batch(data, n: int, items=None):
             values = tuple(jnp.stack([getattr(it[k], f) for it in items]) for f in fields)
         out.append(eqx.tree_at(lambda mm, fields=fields: tuple(getattr(mm, f) for f in fields),
                                m, values))
-    return tuple(out)
-
-
-def direct_batch(
-    mech: Mechanism,
-    measurements: Sequence[Measurements],
-    params: Params | Callable[[Mechanism], object] | None = None,
-    *,
-    polish: bool | str = "auto",
-    max_sigma_pct: float = MAX_SIGMA_PCT,
-    **options,
-) -> tuple[DirectReport, ...]:
-    """`direct` on many measurement sets of one layout under one load table (e.g. a
-    Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
-    shared), then the polish of every set that needs one at once (`least_squares_batch`, one
-    vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
-    per set (with `polished`; a polished set's identified mechanism is `mech` with its
-    polished values, every other unknown held at the model's value, as `direct` returns)."""
-    from .least_squares import least_squares_batch
-
-    linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
-              for m in measurements]
-    if not polish:
-        return tuple(linear)
-    unknowns = _parameters(mech, _selected_fields(mech, _selection_of(params, None)
-                                                  or _default_where),
-                           options.get("elements"), options.get("axisymmetric", ()))
-    plan = _polish_plan(mech, unknowns)
-    if plan is None:
-        return tuple(linear)
-    # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
-    # noise-free accuracy, or determined nothing, keep it.
-    todo = [k for k, r in enumerate(linear)
-            if r.identified[plan.unknowns].any() and (
-                polish is True or r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof)]
-    out = list(linear)
-    if not todo:
-        return tuple(out)
-    data = [check_data(mech, measurements[k]) for k in todo]
-    starts = np.stack([_polish_start(plan, linear[k]) for k in todo])
-    batch = least_squares_batch(mech, _as_batch(data[0], len(data), data), plan.params,
-                                start=starts, max_sigma_pct=max_sigma_pct)
-    for k, fit in zip(todo, batch.reports, strict=True):
-        out[k] = _merge_polish(linear[k], plan, fit, unknowns, mech)[1]
     return tuple(out)
