@@ -74,15 +74,36 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
-from ..errors import InputError, ModelError
+from .. import lsq
+from ..errors import InputError
 from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
-from .direct_analysis import _analyse, _structure
-from .direct_data import _check_measurements, _pose_covariance_jit
-from .direct_equations import _r_factor, _system_arrays, _whiteners
-from .direct_report import DEG, DirectReport
-from .params import Params, selected_entries
+from .direct_analysis import analyse, structure_of
+from .direct_data import check_measurements, pose_covariance_jit
+from .direct_equations import r_factor, system_arrays, whiteners
+from .direct_polish import (
+    POLISH_CHI2,
+    as_batch,
+    merge_polish,
+    polish_linear,
+    polish_plan,
+    polish_start,
+)
+from .direct_report import DirectReport
+from .direct_unknowns import (
+    STIFFNESS_NAMES,
+    Parameter,
+    default_where,
+    derived,
+    free_axes,
+    parameters,
+    prior,
+    selected_fields,
+    selection_of,
+)
+from .least_squares import least_squares_batch
+from .params import Params
 from .report import MAX_SIGMA_PCT, check_consistency, check_data, within_bar
 
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
@@ -223,26 +244,26 @@ class _Context:
             raise InputError("the identification equations are not finite: check that the "
                              "measured poses are sensible (no part rotated by 180°).")
         return DirectSystem(W=W, y=y, rows_per_case=r, parameters=self.params, cases=cases,
-                            prior=_prior(self.mech, self.params), notes=tuple(self.meas.notes),
+                            prior=prior(self.mech, self.params), notes=tuple(self.meas.notes),
                             weighted=whitener is not None,
-                            R=np.asarray(_r_factor(jnp.asarray(W), jnp.asarray(y))))
+                            R=np.asarray(r_factor(jnp.asarray(W), jnp.asarray(y))))
 
     def whitener(self, x) -> np.ndarray:
-        cov = _pose_covariance_jit(self.mech, self.meas)
-        return np.asarray(_whiteners(self.eval_mech, jnp.asarray(self.selection),
+        cov = pose_covariance_jit(self.mech, self.meas)
+        return np.asarray(whiteners(self.eval_mech, jnp.asarray(self.selection),
                                      jnp.asarray(self.q), self.null, jnp.asarray(x, float),
                                      cov))
 
 
 def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
     measurements = as_equilibria(measurements)
-    q = _check_measurements(mech, measurements)
-    fields = _selected_fields(mech, where or _default_where)
-    params = _parameters(mech, fields, elements, axisymmetric,
+    q = check_measurements(mech, measurements)
+    fields = selected_fields(mech, where or default_where)
+    params = parameters(mech, fields, elements, axisymmetric,
                          free=free_axes(mech) if where is None and elements is None else ())
     eval_mech = _evaluation_model(mech, params)
     selection = _selection(mech, params)
-    rows, rhs, null = _system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
+    rows, rhs, null = system_arrays(eval_mech, jnp.asarray(selection), jnp.asarray(q),
                                      measurements.loads)
     return _Context(mech, measurements, q, params, eval_mech, selection, np.asarray(rows),
                     np.asarray(rhs), null)
@@ -266,7 +287,7 @@ def direct_system(
     unknowns, table units), each case's rows are whitened by the covariance that pose errors
     cause at those values (see `direct`, `weighting="noise"`).
     """
-    selected = _selection_of(params, where)
+    selected = selection_of(params, where)
     ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
     return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
 
@@ -455,12 +476,12 @@ def direct(
     if not max_sigma_pct > 0:
         raise InputError(f"max_sigma_pct must be positive; got {max_sigma_pct!r}.")
     threshold = DEFAULT_THRESHOLD if threshold is None else float(threshold)
-    selected = _selection_of(params, where)
+    selected = selection_of(params, where)
     ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
     raw = ctx.system()
     # Structure: what the equations determine (unweighted, as the thesis writes them).
     negligible = _negligible(raw, threshold)
-    structure = _structure(_fit(raw, "basic", "zero", threshold, 0.5, negligible), negligible)
+    structure = structure_of(_fit(raw, "basic", "zero", threshold, 0.5, negligible), negligible)
     # Estimate: the structurally undetermined unknowns held for the basic solution.
     held = negligible | (~structure.kept if method in ("basic", "nonneg") else negligible)
     fit, eliminated = _estimate(raw, method, hold, eliminate, threshold, prior_sigma,
@@ -468,7 +489,7 @@ def direct(
     system = raw
     if weighting == "noise":
         for _ in range(2):
-            analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold,
+            analysis = analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold,
                                 raw.prior)
             # where to linearise the noise model (not a verdict, so not the caller's bar): the
             # estimate where it is plausible (σ % at the estimate within the default bar), the
@@ -478,7 +499,7 @@ def direct(
             system = ctx.system(ctx.whitener(at))
             fit, eliminated = _estimate(system, method, hold, eliminate, threshold, prior_sigma,
                                         max_sigma_pct, held)
-    analysis = _analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold, raw.prior)
+    analysis = analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold, raw.prior)
     params = raw.parameters
     # The one rule of the suspension methods (issue 27): σ % at the model's values.
     identified = analysis.identifiable & within_bar(analysis.gate_pct, max_sigma_pct)
@@ -517,7 +538,7 @@ def direct(
         names=raw.names, values=values, sigma=analysis.sigma, sigma_pct=analysis.sigma_pct,
         identified=identified, identifiable=analysis.identifiable, status=status,
         units=tuple(p.unit for p in params), prior=raw.prior, relations=analysis.relations,
-        derived=_derived(params, values, cov, mech, identified), case_residuals=case_res,
+        derived=derived(params, values, cov, mech, identified), case_residuals=case_res,
         case_scale=case_scale, cases=raw.cases, notes=tuple(notes), fit=fit, method=method,
         rank=int(np.sum(structure.kept)), n_equations=len(raw.y), max_sigma_pct=max_sigma_pct,
         weighted=system.weighted, equation_residuals=residual.reshape(n_cases, -1),
@@ -531,8 +552,6 @@ def direct(
     data = check_data(mech, measurements)
     consistency = check_consistency(fitted, data, int(np.sum(write)), cases=raw.cases)
     report = dataclasses.replace(report, consistency=consistency)
-    from .direct_polish import polish_linear
-
     noisy = consistency.chi2 > POLISH_CHI2 * consistency.dof
     if polish is True or (polish == "auto" and noisy):
         fitted, report = polish_linear(fitted, report, params, data, max_sigma_pct, mech)
@@ -542,8 +561,6 @@ def direct(
 def _fit(system: DirectSystem, method, hold, threshold, prior_sigma, fixed, eliminate=False,
          max_sigma_pct=MAX_SIGMA_PCT):
     """One `lsq` solve (or elimination loop) of `system` with the `fixed` unknowns held."""
-    from .. import lsq
-
     params = system.parameters
     names = system.names
     options = dict(method=method, threshold=threshold,
@@ -573,4 +590,44 @@ def _estimate(system, method, hold, eliminate, threshold, prior_sigma, max_sigma
     return fit, eliminated
 
 
-from .direct_polish import POLISH_CHI2, direct_batch  # noqa: E402  (it uses `direct`)
+
+def direct_batch(
+    mech: Mechanism,
+    measurements: Sequence[Measurements],
+    params: Params | Callable[[Mechanism], object] | None = None,
+    *,
+    polish: bool | str = "auto",
+    max_sigma_pct: float = MAX_SIGMA_PCT,
+    **options,
+) -> tuple[DirectReport, ...]:
+    """`direct` on many measurement sets of one layout under one load table (e.g. a
+    Monte-Carlo of noise draws): the linear estimate of each set (one compiled assembly,
+    shared), then the polish of every set that needs one at once (`least_squares_batch`, one
+    vmapped program per LM step). `options` go to `direct`. **Returns:** one `DirectReport`
+    per set (with `polished`; a polished set's identified mechanism is `mech` with its
+    polished values, every other unknown held at the model's value, as `direct` returns)."""
+    linear = [direct(mech, m, params, polish=False, max_sigma_pct=max_sigma_pct, **options)[1]
+              for m in measurements]
+    if not polish:
+        return tuple(linear)
+    unknowns = parameters(mech, selected_fields(mech, selection_of(params, None)
+                                                or default_where),
+                          options.get("elements"), options.get("axisymmetric", ()))
+    plan = polish_plan(mech, unknowns)
+    if plan is None:
+        return tuple(linear)
+    # As `direct(polish="auto")`: sets whose linear estimate reproduces the data to
+    # noise-free accuracy, or determined nothing, keep it.
+    todo = [k for k, r in enumerate(linear)
+            if r.identified[plan.unknowns].any() and (
+                polish is True or r.consistency.chi2 > POLISH_CHI2 * r.consistency.dof)]
+    out = list(linear)
+    if not todo:
+        return tuple(out)
+    data = [check_data(mech, measurements[k]) for k in todo]
+    starts = np.stack([polish_start(plan, linear[k]) for k in todo])
+    batch = least_squares_batch(mech, as_batch(data[0], len(data), data), plan.params,
+                                start=starts, max_sigma_pct=max_sigma_pct)
+    for k, fit in zip(todo, batch.reports, strict=True):
+        out[k] = merge_polish(linear[k], plan, fit, unknowns, mech)[1]
+    return tuple(out)

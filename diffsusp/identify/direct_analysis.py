@@ -31,7 +31,7 @@ class _Structure:
     relations: tuple  # (kept index j, coefficient row g)
 
 
-def _structure(fit, negligible: np.ndarray) -> _Structure:
+def structure_of(fit, negligible: np.ndarray) -> _Structure:
     """Identifiability from an `lsq.Fit` of the unweighted equations, with the relations
     cleaned of spurious terms (`RELATION_TOL`) and the no-effect unknowns left out."""
     p = len(fit.names)
@@ -63,7 +63,7 @@ class _Analysis:
     status: tuple
 
 
-def _analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
+def analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
              hold, prior) -> _Analysis:
     """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations;
     σ % judged at `prior`, the model's values (the linear σ does not depend on θ)."""

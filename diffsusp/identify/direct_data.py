@@ -18,7 +18,7 @@ from ..model.mechanism import Mechanism
 __all__: list[str] = []  # used by `identify.direct`
 
 
-def _check_measurements(mech: Mechanism, meas: Measurements):
+def check_measurements(mech: Mechanism, meas: Measurements):
     if not isinstance(meas, Measurements):
         raise InputError(f"measurements must be a diffsusp.measure.Measurements; got "
                          f"{type(meas).__name__}.")
@@ -149,4 +149,4 @@ def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
     return full.reshape(n_c, 6 * n_p, 6 * n_p)
 
 
-_pose_covariance_jit = eqx.filter_jit(_pose_covariance)
+pose_covariance_jit = eqx.filter_jit(_pose_covariance)

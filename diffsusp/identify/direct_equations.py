@@ -218,7 +218,7 @@ _QR_CHUNK = 1024
 
 
 @jax.jit
-def _r_factor(W, y):
+def r_factor(W, y):
     """R-factor (positive diagonal) of [W, −y], by a tall-skinny QR: chunks of rows reduced
     separately, then their R's (one tall QR is several times slower for 10⁵ rows)."""
     from ..lsq import qr_r
@@ -234,11 +234,11 @@ def _r_factor(W, y):
 
 
 @eqx.filter_jit
-def _system_arrays(eval_mech: Mechanism, selection, q, loads):
+def system_arrays(eval_mech: Mechanism, selection, q, loads):
     return jax.vmap(lambda q_, l_: _case_rows(eval_mech, selection, q_, l_))(q, loads)
 
 
 @eqx.filter_jit
-def _whiteners(eval_mech: Mechanism, selection, q, null, x, pose_cov):
+def whiteners(eval_mech: Mechanism, selection, q, null, x, pose_cov):
     return jax.vmap(lambda q_, n_, c_: _case_whitener(eval_mech, selection, q_, n_, x, c_))(
         q, null, pose_cov)

@@ -43,8 +43,7 @@ from .. import measure
 from ..errors import ConvergenceError, InputError
 from ..io.files import write_text_atomic
 from ..model.mechanism import Loads, Mechanism
-from .direct import direct
-from .direct_polish import direct_batch
+from .direct import direct, direct_batch
 from .iterative import iterative
 from .least_squares import least_squares, least_squares_batch
 from .report import check_data, rows_csv

@@ -1,0 +1,247 @@
+"""The unknowns of the direct method: which stiffnesses and constants a selection (`params=`,
+`where=`, `elements=`, `axisymmetric=`) makes unknown, their values in the model (the prior),
+and the quantities derived from them (free lengths, offsets). spec: stiffness §1.10 (the
+internal forces are linear in these parameters), §7 R3."""
+
+import dataclasses
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..errors import InputError, ModelError
+from ..model.mechanism import Mechanism
+from .direct_report import DEG
+from .params import selected_entries
+
+__all__ = ["Parameter"]  # re-exported by `identify.direct`; the rest serves direct, direct_polish
+
+AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+STIFFNESS_NAMES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
+
+
+OFFSET_NAMES = ("Fx0", "Fy0", "Fz0", "Mx0", "My0", "Mz0")
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """One unknown of the linear system (static description).
+
+    `kind`: 'stiffness' (bushing axis, column ∂Q/∂k), 'constant' (bushing axis: K·δ0 + preload),
+    'spring_k' (spring K, with the model's L0 if `spring_c` is not also unknown), 'spring_c'
+    (K·L0); `element` the bushing/spring index; `axes` the bushing axes it covers (two for an
+    axisymmetric pair); `unit` of the table value; `to_internal` factor from the table unit to
+    the model's (N·mm/deg → N·mm/rad).
+    """
+
+    name: str
+    kind: str
+    element: int
+    axes: tuple[int, ...]
+    unit: str
+    to_internal: float
+
+
+_FIELDS = {
+    "bushings.k_trans": ("bushing", "k", (0, 1, 2)),
+    "bushings.k_rot": ("bushing", "k", (3, 4, 5)),
+    "bushings.offset_trans": ("bushing", "offset", (0, 1, 2)),
+    "bushings.offset_rot": ("bushing", "offset", (3, 4, 5)),
+    "springs.k": ("spring", "k", ()),
+    "springs.free_length": ("spring", "free_length", ()),
+}
+
+
+def default_where(m: Mechanism):
+    return (m.bushings.k_trans, m.bushings.k_rot, m.springs.k, m.springs.free_length)
+
+
+def selected_fields(mech: Mechanism, where) -> dict[str, np.ndarray]:
+    """{field: flat indices of the selected entries} of a `Params` or a `where` function."""
+    selected = {}
+    for path, idx in selected_entries(mech, where).items():
+        key = ".".join(path)
+        if key not in _FIELDS:
+            raise InputError(
+                "where= selected something the direct method cannot identify: it identifies "
+                "the parameters the internal forces are linear in, entries of "
+                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements with elements=(...) "
+                "or entries with a Params; for other parameters (hardpoints, nonlinear laws) "
+                "use a least-squares fit through the equilibrium."
+            )
+        if idx.size:
+            selected[key] = idx
+    return selected
+
+
+def free_axes(mech: Mechanism) -> list[tuple[int, int]]:
+    """(bushing, axis) pairs whose stiffness is 0 in the model: free directions (e.g. a Chrono
+    bushing's torsion about its pivot axis), which the default selection leaves out."""
+    k = np.concatenate([np.asarray(mech.bushings.k_trans), np.asarray(mech.bushings.k_rot)],
+                       axis=1).reshape(-1, 6)
+    return [(int(e), int(a)) for e, a in np.argwhere(k == 0)]
+
+
+def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axisymmetric,
+                offsets_alone_ok=True, free=()) -> tuple[Parameter, ...]:
+    b, s = mech.bushings, mech.springs
+    names = set(b.names) | set(s.names)
+    if elements is None:
+        elements = tuple(b.names) + tuple(s.names)
+    elements = tuple(elements)
+    unknown = [e for e in elements if e not in names]
+    if unknown:
+        raise InputError(
+            f"elements= names {', '.join(map(repr, unknown))}, which model '{mech.name}' does "
+            f"not have; its bushings: {', '.join(b.names) or 'none'}; springs: "
+            f"{', '.join(s.names) or 'none'}."
+        )
+    axisym = tuple(axisymmetric)
+    bad = [e for e in axisym if e not in b.names]
+    if bad:
+        raise InputError(f"axisymmetric= names {', '.join(map(repr, bad))}, which are not "
+                         f"bushings of the model ({', '.join(b.names) or 'none'}).")
+    # Selected axes per bushing: k (stiffness) and c (offset), (bushings, 6).
+    k_sel = np.zeros((len(b.names), 6), bool)
+    c_sel = np.zeros((len(b.names), 6), bool)
+    spring_sel = {"k": np.zeros(len(s.names), bool), "free_length": np.zeros(len(s.names), bool)}
+    for path, idx in fields.items():
+        group, kind, axes = _FIELDS[path]
+        if group == "bushing":
+            (k_sel if kind == "k" else c_sel)[idx // 3, np.asarray(axes)[idx % 3]] = True
+        else:
+            spring_sel[kind][idx] = True
+    spline = np.asarray(b.spline_axes, dtype=bool).reshape(len(b.names), 6)
+    cubic = np.concatenate([np.asarray(b.cubic_trans), np.asarray(b.cubic_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    params = []
+    for e, name in enumerate(b.names):
+        if name not in elements:
+            continue
+        sym = name in axisym
+        if sym:  # an axisymmetric pair is one unknown: selected if either axis is
+            for sel in (k_sel, c_sel):
+                for x in (0, 3):
+                    sel[e, x:x + 2] = sel[e, x:x + 2].any()
+        k_axes, c_axes = set(np.flatnonzero(k_sel[e])), set(np.flatnonzero(c_sel[e]))
+        k_axes -= {a for f, a in free if f == e and not (sym and a in (0, 1, 3, 4))}
+        for a in sorted(k_axes | c_axes):
+            if spline[e, a]:
+                raise ModelError(
+                    f"bushing '{name}' uses a spline law on axis {AXES[a]}; the direct method "
+                    "identifies linear stiffness. Leave it out (elements=...) or replace the "
+                    "spline by its slope."
+                )
+        for a in sorted(c_axes):
+            if cubic[e, a] != 0:
+                raise ModelError(
+                    f"bushing '{name}' has a cubic term on axis {AXES[a]}, which makes its "
+                    "offset enter nonlinearly; identify its offsets with a linear law only."
+                )
+        for a in sorted(k_axes):
+            if sym and a in (1, 4):
+                continue
+            rot = a >= 3
+            if sym and a in (0, 3):
+                label, axes = ("Krr" if rot else "Ktr"), (a, a + 1)
+            else:
+                label, axes = STIFFNESS_NAMES[a], (a,)
+            params.append(Parameter(f"{name}.{label}", "stiffness", e, axes,
+                                    "N·mm/deg" if rot else "N/mm", 1.0 / DEG if rot else 1.0))
+        for a in sorted(c_axes):
+            params.append(Parameter(f"{name}.{OFFSET_NAMES[a]}", "constant", e, (a,),
+                                    "N·mm" if a >= 3 else "N", 1.0))
+    for e, name in enumerate(s.names):
+        spring_k, spring_c = spring_sel["k"][e], spring_sel["free_length"][e]
+        if name not in elements or not (spring_k or spring_c):
+            continue
+        if s.tabulated[e]:
+            raise ModelError(f"spring '{name}' has a tabulated law; the direct method "
+                             "identifies linear springs (K, L0). Leave it out (elements=...).")
+        if spring_k:
+            params.append(Parameter(f"{name}.K", "spring_k", e, (), "N/mm", 1.0))
+        if spring_c:
+            params.append(Parameter(f"{name}.KL0", "spring_c", e, (), "N", 1.0))
+    if not params:
+        raise InputError("nothing to identify: the selection (where=, elements=) picks no "
+                         "stiffness of this model.")
+    return tuple(params)
+
+
+def prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
+    b, s = mech.bushings, mech.springs
+    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    off = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)], axis=1) \
+        if b.names else np.zeros((0, 6))
+    out = []
+    for p in params:
+        if p.kind == "stiffness":
+            out.append(np.mean(k[p.element, list(p.axes)]) / p.to_internal)
+        elif p.kind == "constant":
+            a = p.axes[0]
+            out.append(k[p.element, a] * off[p.element, a] + pre[p.element, a])
+        elif p.kind == "spring_k":
+            out.append(float(s.k[p.element]))
+        else:
+            out.append(float(s.k[p.element] * s.free_length[p.element]))
+    return np.asarray(out, dtype=float)
+
+
+def selection_of(params, where):
+    """The one selector of `params=` (positional, as in every identification method) and
+    `where=` (this method's historical keyword)."""
+    if params is not None and where is not None:
+        raise InputError("give the selection once: params= or where=, not both.")
+    return where if params is None else params
+
+
+def derived(params, values, cov, mech, identified_mask):
+    """Spring free lengths and bushing offsets from (K, K·L0) and (K, K·δ0 + P), with σ by
+    first-order propagation of the covariance."""
+    out = {}
+    index = {p.name: i for i, p in enumerate(params)}
+    b, s = mech.bushings, mech.springs
+    for i, p in enumerate(params):
+        if p.kind == "spring_c":
+            name = s.names[p.element]
+            j = index.get(f"{name}.K")
+            c = values[i]
+            if j is None:
+                k, var = float(s.k[p.element]), cov[i, i] / float(s.k[p.element]) ** 2
+                value = c / k
+            else:
+                k = values[j]
+                value = c / k if k else np.nan
+                grad = np.zeros(len(values))
+                grad[i], grad[j] = 1.0 / k, -c / k**2
+                var = grad @ cov @ grad if k else np.nan
+            ok = identified_mask[i] and (j is None or identified_mask[j])
+            out[f"{name}.L0"] = (value if ok else np.nan, float(np.sqrt(max(var, 0.0)))
+                                 if ok else np.nan, "mm")
+        elif p.kind == "constant":
+            name = b.names[p.element]
+            a = p.axes[0]
+            k_name = f"{name}.{STIFFNESS_NAMES[a]}"
+            j = index.get(k_name)
+            pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)],
+                                 axis=1)[p.element, a]
+            unit_k = 1.0 / DEG if a >= 3 else 1.0  # table K → model K
+            k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)],
+                                     axis=1)[p.element, a] / unit_k
+            k = values[j] if j is not None else k_model
+            c = values[i] - pre
+            value = c / k if k else np.nan
+            grad = np.zeros(len(values))
+            grad[i] = 1.0 / k if k else np.nan
+            if j is not None:
+                grad[j] = -c / k**2 if k else np.nan
+            var = grad @ cov @ grad
+            ok = identified_mask[i] and (j is None or identified_mask[j])
+            unit = "deg" if a >= 3 else "mm"
+            out[f"{name}.d{AXES[a][1]}0" if a < 3 else f"{name}.a{AXES[a][1]}0"] = (
+                value if ok else np.nan, float(np.sqrt(max(var, 0.0))) if ok else np.nan, unit)
+    return out
