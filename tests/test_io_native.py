@@ -634,7 +634,7 @@ TOKENS = ["nan", "inf", "-inf", "1e400", "-1e309", "1e20", "1e15", "0", "-0.0", 
 def _no_validation():
     """Replace the build-time validation by the identity: each fuzzed file that parses is a new
     static structure, and validating it would trace a Jacobian per example."""
-    return mock.patch.object(importlib.import_module("diffsusp.model.validate"), "finalize",
+    return mock.patch.object(importlib.import_module("diffsusp.model.builder"), "finalize",
                              lambda mech, check=True: mech)
 
 

@@ -175,8 +175,8 @@ def rig():
 def _unvalidated(builder):
     """Build without the validation step (it traces a Jacobian per structure; only names and
     load points matter to these tests)."""
-    validate = importlib.import_module("diffsusp.model.validate")
-    with mock.patch.object(validate, "finalize", lambda mech, check=True: mech):
+    builder_module = importlib.import_module("diffsusp.model.builder")
+    with mock.patch.object(builder_module, "finalize", lambda mech, check=True: mech):
         return builder.build()
 
 
