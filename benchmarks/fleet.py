@@ -1,4 +1,4 @@
-"""Fleet throughput (issue 18): N least-squares fits of the pseudo-McPherson (N noisy landmark
+"""Fleet throughput: N least-squares fits of the pseudo-McPherson (N noisy landmark
 tables, bushings A and B's Ktx through the equilibrium), in-process batched vs a local Dask
 cluster of 2 worker processes; items/s, programs compiled, scaling efficiency, and a paper
 calculation for 100 nodes.

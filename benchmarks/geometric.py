@@ -1,5 +1,5 @@
 """Benchmark of the geometric identification (joint localisation from relative motion), spec
-geometry §4 / issue 14.
+geometry §4.
 
 Run by hand: `python benchmarks/geometric.py [--quick]`. The problem: the tie-rod
 pseudo-McPherson (`pseudo_mcpherson_steering`), 25 cases (5 vertical loads × 5 rack positions),

@@ -1,4 +1,5 @@
-"""Benchmark of the direct stiffness identification and of landmark registration (issue 5).
+"""Benchmark of the direct stiffness identification and of landmark registration (spec
+stiffness §2).
 
 Run by hand: `python benchmarks/identify_direct.py [--quick]`. Prints a table and writes
 benchmarks/results/identify_direct.json (identify_direct_quick.json with --quick). Measures,

@@ -1,4 +1,4 @@
-"""Issue 12: the held-out Monte-Carlo of tests/test_identify_trust.py, with its numbers printed
+"""The held-out Monte-Carlo of tests/test_identify_trust.py, with its numbers printed
 (per method and parameter: seeds identified, bias/σ, spread/σ; consistency; LM convergence) and
 the CPU time. `--extra N`: N more noise draws of the same truth (σ = 0.05 mm, new keys) fitted
 by `least_squares_batch` alone, for the spread/σ with a tighter interval (its relative standard

@@ -1,4 +1,4 @@
-"""Benchmark of K&C events with exact derivative metrics (issue: K&C).
+"""Benchmark of K&C events with exact derivative metrics (docs/reference/metrics.md).
 
 Run by hand: `python benchmarks/kc.py [--quick]`. Prints a table and writes
 benchmarks/results/kc.json (kc_quick.json with --quick). Measures, after compilation:

@@ -1,4 +1,4 @@
-"""Rehearsal of the bench identification (issue 27; spec: tyre §3.3–3.5, §4.3): how often is
+"""Rehearsal of the bench identification (spec: tyre §3.3–3.5, §4.3): how often is
 an "identified" polynomial coefficient or K_y right?
 
 Two scenarios (`diffsusp.tyre.bench_batch.BenchScenario`), each N random tyres (default 200)

@@ -1,4 +1,4 @@
-"""Rehearsal of the on-board tyre identification (issue 27; spec: tyre §5.3–5.5): how often is
+"""Rehearsal of the on-board tyre identification (spec: tyre §5.3–5.5): how often is
 an "identified" coefficient of the reduced tyre model (4-16…4-18) right?
 
 `diffsusp.tyre.onboard_rehearse.OnboardScenario`, N random tyres (default 200) around the

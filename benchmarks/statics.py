@@ -1,4 +1,4 @@
-"""Benchmark of the static-equilibrium solver (issue: core solver).
+"""Benchmark of the static-equilibrium solver.
 
 Run by hand: `python benchmarks/statics.py [--quick]`. Prints a table and writes
 benchmarks/results/statics.json. Measures, after compilation: equilibria per second for batches

@@ -1,4 +1,4 @@
-"""Benchmark of the Magic Formula (diffsusp.tyre), issue 15.
+"""Benchmark of the Magic Formula (diffsusp.tyre; docs/reference/tyre.md).
 
 Run by hand: `python benchmarks/tyre.py [--quick]`. Prints a table and writes
 benchmarks/results/tyre.json. Timings are never asserted anywhere.

@@ -1,5 +1,5 @@
 """Benchmark: the bench identification of a steering-feel campaign, 4 tyres × 3 pressures
-batched (issue 16).
+batched (spec tyre §3.3–3.5).
 
 Data: for each of the 12 Annex G F_y tables (Tables 34–45) with its G.2 stiffness, a synthetic
 Flat Trac campaign through the simulation model (slip sines ±1° at 3/4.5/6 Hz, load sines,

@@ -1,5 +1,5 @@
-"""Benchmark of the on-board tyre identification (issue 17): the pipeline over the thesis's
-60 s steering-wheel sine at 1 kHz (ground plane, body twist, tyre inputs of 4 wheels, delay
+"""Benchmark of the on-board tyre identification (spec tyre §5.3–5.5): the pipeline over the
+thesis's 60 s steering-wheel sine at 1 kHz (ground plane, body twist, tyre inputs of 4 wheels, delay
 estimate, both half-rate records, pooled instrumental-variable regression), after
 compilation; and a plain NumPy per-instant baseline of the
 body-twist step for the ratio. Run: python benchmarks/tyre_onboard.py"""

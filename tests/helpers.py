@@ -1,5 +1,5 @@
-"""Shared test helpers: pytree comparison and finite-difference derivatives (issue 11, item 5),
-and the status column of a printed identification table (issue 27).
+"""Shared test helpers: pytree comparison and finite-difference derivatives,
+and the status column of a printed identification table (docs/guides/trust.md).
 
 Import from a test file as `from helpers import tree_allclose, central_fd, fd_jvp` (pytest puts
 `tests/` on `sys.path`).

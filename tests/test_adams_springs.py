@@ -1,4 +1,4 @@
-"""A Chrono tabulated spring to Adams and back (issue 28 item 5).
+"""A Chrono tabulated spring to Adams and back (an Adams spline spring).
 
 Chrono's HMMWV rear double wishbone (tests/data/chrono/HMMWV_DoubleWishboneRear.json: a 21-point
 'Spring Curve Data' and Minimum/Maximum Length stops) is read as a linear spring plus 30
@@ -82,8 +82,8 @@ def test_stop_function_grammar(tmp_path):
 
 
 def test_cli_write_model_adm_of_a_chrono_corner(tmp_path):
-    """`identify fit <Chrono .json> --measurements rig.csv --write-model x.adm` end to end (issue
-    28 item 5 through the CLI): a travel-rig table of the HMMWV rear corner (toe and camber at
+    """`identify fit <Chrono .json> --measurements rig.csv --write-model x.adm` end to end (through
+    the CLI): a travel-rig table of the HMMWV rear corner (toe and camber at
     ±40 mm, the corner's own curve to the rig's 0.0001° resolution), the spring rate the
     unknown (not seen by a travel table: the start is written). The written .adm holds the
     spline spring's 30 stops as SFORCEs, reads back, and its equilibria (the loads of the

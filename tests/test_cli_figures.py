@@ -1,4 +1,4 @@
-"""The figures the CLI saves are the library reports' `plot()` (issue 11: a thin CLI): the
+"""The figures the CLI saves are the library reports' `plot()` (a thin CLI): the
 on-board tyre report's residual figure shows the fit's residuals, written by `diffsusp.plot.save`
 under the CLI's file name."""
 

@@ -1,4 +1,4 @@
-"""`diffsusp info` and `diffsusp simulate` accept every model format (issue: model files):
+"""`diffsusp info` and `diffsusp simulate` accept every model format (docs/guides/models.md):
 native TOML (tests/test_cli_model.py), Adams datasets and Chrono::Vehicle JSON templates."""
 
 import json

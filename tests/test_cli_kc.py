@@ -116,7 +116,7 @@ def test_pm_load_table_matches_thesis_mapping_and_oracle(pm, pm_table):
     """On the left pseudo-McPherson (Adams/Car frame) the per-side mapping (lateral inboard,
     longitudinal rearward) is exactly `thesis_load_cases`; metrics against the oracle."""
     loads = thesis_load_cases(pm, TABLE_5_1)
-    # applied at the ground contact point (kc.force_rig's road_contact, issue 28 item 3)
+    # applied at the ground contact point (kc.force_rig's road_contact)
     road, cp = pm_table.rig.road[0], pm.load_points.index("contact_patch")
     np.testing.assert_array_equal(pm_table.loads.force[:, road], loads.force[:, cp])
     assert float(np.abs(pm_table.loads.force).sum()) == float(np.abs(loads.force).sum())

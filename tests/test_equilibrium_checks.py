@@ -1,4 +1,4 @@
-"""Issue 13 items 9–11: every equilibrium carries a stability flag and a law-validity flag,
+"""Every equilibrium carries a stability flag and a law-validity flag,
 checked against an independent NumPy computation (the oracle's finite-difference tangent and its
 own projected angles), and the built-in axles with bump and rebound stops have an equilibrium
 for every load of the thesis envelope (vertical 1 500–7 500 N, lateral and longitudinal

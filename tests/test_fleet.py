@@ -1,4 +1,4 @@
-"""Fleets (diffsusp.fleet, issue 18): 42 landmark data sets of the pseudo-McPherson (40 noise
+"""Fleets (diffsusp.fleet): 42 landmark data sets of the pseudo-McPherson (40 noise
 draws made with diffsusp.measure, two broken files) identified by the direct method in-process
 and on a local Dask cluster of two worker processes, one of which is killed mid-run: every good
 item's report equals the in-process one (1e-12), the broken ones carry their error, the two
@@ -37,7 +37,7 @@ distributed = pytest.importorskip("distributed")  # the 'fleet' extra, in 'test'
 
 N_DRAWS = 40
 BATCH = 4
-# The cheap linear method, whatever default other issues give `direct` (no polishing fit).
+# The cheap linear method, whatever the default of `direct` (no polishing fit).
 OPTIONS = {"polish": False} if "polish" in inspect.signature(identify.direct).parameters else {}
 
 

@@ -227,7 +227,7 @@ def test_bushing_pair_axis_on_a_model():
 
 def test_revolute_axis_and_prior():
     """A part turning about a known axis (a wishbone on its two bushings taken as a revolute,
-    Table 3.3's axis and point): axis to 1e-12 rad (the issue asks < 1e-6 rad), the point
+    Table 3.3's axis and point): axis to 1e-12 rad (1e-6 rad required), the point
     along the axis from the prior's x (as the thesis fixed X = 177.00)."""
     axis = np.array([0.997, 0.081, 0.009])
     axis /= np.linalg.norm(axis)
@@ -267,7 +267,7 @@ def test_revolute_axis_and_prior():
     assert np.all(np.isnan(rep["wishbone_pivot"].sigma))
     (row,) = rep.joint_rows()
     assert row["joint"] == "wishbone_pivot" and row["observable"] and row["x"] == 177.0
-    # the report base's rows (issue 27): the line cut at the prior's x, x itself the prior's
+    # the report base's rows: the line cut at the prior's x, x itself the prior's
     # (not determined), the axis' y and z components; poses only: consistency not checked
     rows = {r["parameter"]: r for r in rep.rows()}
     assert list(rows) == [f"wishbone_pivot.{c}" for c in ("x", "y", "z", "axis_y", "axis_z")]
@@ -469,7 +469,7 @@ def test_joint_files_and_figure(solved, steering, tmp_path):
 
 
 def test_compliant_bushing_taken_as_a_ball(solved, steering):
-    """Issue 27: the stiff bushing A located as a ball is 3.98 mm off (its axial direction
+    """The stiff bushing A located as a ball is 3.98 mm off (its axial direction
     deflects under the arm load) with a noise σ of 0.06 mm. Without the model it is flagged
     "not determined (compliant: …)"; with the model (its own equilibria at the 25 steering
     cases located the same way: the compliance bias) its σ carries the bias and the truth is

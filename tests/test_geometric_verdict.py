@@ -1,4 +1,4 @@
-"""The geometric location on the one verdict (issue 27) and its rehearsal, on the Chrono double
+"""The geometric location on the one verdict and its rehearsal, on the Chrono double
 wishbone with torsion-free arm bushings (tests/data/DoubleWishbone_bushings.json; the 24
 contact-patch cases of test_geometric_free_axis, so that the compiled programs are shared):
 

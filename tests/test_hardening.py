@@ -1,4 +1,4 @@
-"""Hostile inputs (issue 13): every file, table and run fails safely, with the library's own
+"""Hostile inputs: every file, table and run fails safely, with the library's own
 message and exit code, and never a Python traceback or source line.
 
 Almost everything here exercises parsers and argument handling without compiling a solve; the

@@ -1,6 +1,6 @@
 """IGES reader (spec geometry §3.6, Annex B; CORRECTIONS 12): the thesis's sample file (repaired:
 the spaces the text extraction put inside numbers and Hollerith strings deleted, records
-re-padded to 80 columns), the issue's reference numbers, transformations, units, bad files, and
+re-padded to 80 columns), the reference numbers, transformations, units, bad files, and
 fuzzing (random and mutated files raise ModelFileError or parse, nothing else)."""
 
 import pathlib

@@ -325,7 +325,7 @@ def test_write_refuses_what_the_subset_cannot_express(all_elements):
     stops = diffsusp.model.mechanism.Stops(
         length=jnp.ones(1), k=jnp.ones(1), cubic=jnp.zeros(1), i_marker=(0,), j_marker=(1,),
         kind=("bump",), names=("bump",))
-    # stops are written since issue 28 item 5 (SFORCE of MAX(0, ...); tests/test_adams_springs.py)
+    # stops are written (SFORCE of MAX(0, ...); tests/test_adams_springs.py)
     assert "SFORCE/1, TRANSLATIONAL" in write_adm(dataclasses.replace(all_elements, stops=stops),
                                                   None)
 

@@ -304,7 +304,7 @@ def test_spin_axis_toe_and_camber(side, toe_deg, camber_deg):
 
 def test_loaded_radius(models):
     """The contact patch is `loaded_radius` below the wheel centre (default 330 mm), and the
-    corner the importer attaches has the same loaded radius (issue 12: no 300 mm default)."""
+    corner the importer attaches has the same loaded radius (no 300 mm default)."""
     mech = models(CHRONO / "DoubleWishbone.json")
     pos = np.asarray(mech.markers.position)
     centre = pos[mech.markers.index("wheel_centre")]

@@ -1,4 +1,4 @@
-"""The tyre force at the ground contact point (issue 28 item 3): the K&C force events load the
+"""The tyre force at the ground contact point (docs/guides/kc.md): the K&C force events load the
 wheel at the wheel plane's lowest point on the road, C = W − R_l·u (u the unit vector in the
 wheel plane pointing up from the road), which moves with the wheel, not at a point fixed to the
 wheel carrier; the loaded radius R_l from the tyre (its `.tir` at the design load), the option
@@ -10,7 +10,7 @@ solved pose must find the same equilibrium. On the Chrono double wishbone with `
 12 kN of braking (or of traction at the contact patch) winds the wheel carrier up by 2.5°: the
 carrier-fixed point the rig used to load (330 mm below the wheel centre at design) then sits
 14.4 mm along the road from C, and loading it gives another toe under load (−0.275° against
-−0.308° under braking; the issue measured 13.7 mm and 1.17° against 0.94° on its corner).
+−0.308° under braking; another corner, 2.4° of wind-up: 13.7 mm and 1.17° against 0.94°).
 
 One compiled solve (two cases) and one K&C event (the truck tyre's radius, from the CLI)."""
 

@@ -1,4 +1,4 @@
-"""K&C-rig correlation from the command line (issue 28 item 10): `diffsusp identify fit MODEL
+"""K&C-rig correlation from the command line (docs/guides/kc_rig.md): `diffsusp identify fit MODEL
 --measurements rig.csv` fits rig curves — toe, camber, wheel-centre x/y/z against the loads of
 each case, σ per channel — with the least-squares report and verdict of the landmark fits.
 

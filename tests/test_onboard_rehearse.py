@@ -1,4 +1,4 @@
-"""The rehearsal of the on-board tyre identification (`diffsusp.tyre.onboard_rehearse`; issue 27,
+"""The rehearsal of the on-board tyre identification (`diffsusp.tyre.onboard_rehearse`;
 spec tyre §5.3–5.5): a small rehearsal of the user's experiment — 3 random tyres ±20 % around
 the synthetic car's, each driving a short steering-wheel sine with a 100 ms late Correvit and the
 sensors' noise, identified by the default pipeline. The 200-truth runs are

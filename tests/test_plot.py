@@ -93,7 +93,7 @@ def test_sensitivity_bars(tmp_path):
 
 def test_kc_curves_legend_beside_the_axes_with_an_axles_long_label():
     """An axle's default label (its two corners' model names, ~90 characters) wraps and its
-    legend stands beside the panel, not on the curves (issue 28 item 8)."""
+    legend stands beside the panel, not on the curves."""
     label = "axle(left/=Chrono double wishbone with bushings; right/=Chrono double wishbone)"
     fig = plot.kc_curves(event(label, 1e-4, axle=True), ["toe", "camber"])
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -185,8 +185,8 @@ def test_sensitivity_command(tmp_path):
     assert (tmp_path / "sensitivity_toe.png").stat().st_size > 0
     out = json.loads(runner.invoke(app, [*args, "--json"]).output)
     assert set(out["metrics"]) == {"toe", "camber"}
-    # the table is narrow and uncut: every ranked parameter with its number (issue 28 item 8:
-    # a column per rank cut them, "1.1992e…", even at 200 columns)
+    # the table is narrow and uncut: every ranked parameter with its number (a
+    # column per rank would cut them, "1.1992e…", even at 200 columns)
     table = runner.invoke(app, args, env={"COLUMNS": "100"}).output
     rows = [line for line in table.splitlines() if "bushing_" in line or "spring." in line]
     assert "…" not in table and max(len(line.rstrip()) for line in rows) <= 60

@@ -1,5 +1,5 @@
 """The thesis's Magic Formula (Annex B) and its Tables 14–29; specification quantities,
-macro-coefficients, similarity (issue 15, "Done when" items 1–2; spec tyre §2, §4.6, §8.5).
+macro-coefficients, similarity (spec tyre §2, §4.6, §8.5).
 """
 
 import math

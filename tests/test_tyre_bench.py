@@ -1,5 +1,5 @@
 """The Flat Trac pipeline: conditioning, the simulation model, the two-step identification on a
-synthetic campaign, its Monte-Carlo and bad input (issue 16; spec: tyre §3.3–3.6, §4.1–4.3,
+synthetic campaign, its Monte-Carlo and bad input (spec: tyre §3.3–3.6, §4.1–4.3,
 §7 D items 16–20)."""
 
 import math

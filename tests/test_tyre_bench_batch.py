@@ -1,4 +1,4 @@
-"""The batched bench identification (`diffsusp.tyre.bench_batch.identify_many`, issue 16; spec:
+"""The batched bench identification (`diffsusp.tyre.bench_batch.identify_many`; spec:
 tyre §3.3–3.5): one compiled program for many data sets runs the library's structure search
 (σ % under the noise-model sandwich σ, F-test) and two-step estimate; the reference is the
 library's NumPy search set by set (`bench.identify_output`)."""

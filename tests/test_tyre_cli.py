@@ -1,4 +1,4 @@
-"""`diffsusp tyre info|eval|spec|fit` (issue 15 item 4): the CLI equals the library, units at
+"""`diffsusp tyre info|eval|spec|fit` (docs/reference/cli.md): the CLI equals the library, units at
 the edge, exit codes for bad input."""
 
 import json
@@ -124,7 +124,7 @@ def test_rig_bad_inputs_exit_2():
 
 
 def test_identify_bad_input_and_options(tmp_path):
-    """`tyre identify` (issue 16 item 8): bad input exits 2 before anything compiles
+    """`tyre identify`: bad input exits 2 before anything compiles
     (missing channel, an unknown --structure or an out-of-range --significance: Typer
     choices); --significance and --sigma-pct reach the structure search (its removal
     reasons quote them); the report says why camber powers are not determined; the

@@ -1,4 +1,4 @@
-"""Magic Formula fitting (issue 15, "Done when" item 4 and the bad-input item): recovery of known
+"""Magic Formula fitting (docs/guides/tyres.md): recovery of known
 coefficients from noisy synthetic data within the reported 3σ, the unseen ones reported, robust vs
 plain loss with gross outliers, exact write → read of the fitted .tir, batched fits, tables."""
 

@@ -1,4 +1,4 @@
-"""MF-Tyre's friction ellipse (FE_METHOD = 'YES', issue 28 item 6) on the FEDA truck tyre.
+"""MF-Tyre's friction ellipse (FE_METHOD = 'YES') on the FEDA truck tyre.
 
 Reference: an independent NumPy transcription (below, SI, from the .tir file) of the MF 5.2
 pure-slip functions and of the ellipse as Chrono's ChPac02Tire writes it (β, tan β, μ_act,

@@ -1,4 +1,4 @@
-"""MF 5.2 / 6.1 / 6.2 from the shipped .tir files (issue 15, "Done when" item 3).
+"""MF 5.2 / 6.1 / 6.2 from the shipped .tir files (docs/reference/tyre.md).
 
 References: an independent NumPy transcription (tests/test_tyre_oracle.py, SI, different code
 path) to 1e-10 relative; closed forms of the slope and asymptote; exact symmetries of the
@@ -224,7 +224,7 @@ def test_limits_saturate_and_warn(files):
         warnings.simplefilter("error")
         assert check_limits(m, fz=[3000.0], alpha=[0.1]) == {}
     with pytest.warns(ModelWarning, match="FZMAX = 10000 .* SA beyond ALPMAX") as record:
-        a = evaluate(m, fz, 0.0, sa)   # announced once per call (issue 28 item 7)
+        a = evaluate(m, fz, 0.0, sa)   # announced once per call
     assert len(record) == 1
     b = evaluate(m, np.minimum(fz, 10000.0), 0.0, np.minimum(sa, 1.5))
     for k in ("fx", "fy", "mx", "mz"):

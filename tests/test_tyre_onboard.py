@@ -1,5 +1,5 @@
 """diffsusp.tyre.onboard on the synthetic vehicle (spec: tyre_contact_model §5.3–5.6, §7 F
-items 24–25; issue 17): Monte-Carlo recovery of the tyre parameters within their reported σ,
+items 24–25): Monte-Carlo recovery of the tyre parameters within their reported σ,
 the wrong-sign camber stiffness of a 100 ms Correvit delay and its estimate, bad input.
 
 The noise-free record (6 s of steering-wheel sine at 1 kHz, `vehicle.simulate` +

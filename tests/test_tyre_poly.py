@@ -1,5 +1,5 @@
 """Polynomial tyre models, Annex G, the model algebra and the conversion to the Magic Formula
-(issue 16; spec: tyre §3.1–3.8, §4.5–4.7, §8 items 1, 2, 7, 8; CORRECTIONS 3–5, 10)."""
+(spec: tyre §3.1–3.8, §4.5–4.7, §8 items 1, 2, 7, 8; CORRECTIONS 3–5, 10)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""The tyre on the K&C rig (`diffsusp.tyre.rig`, issue 15 item 6).
+"""The tyre on the K&C rig (`diffsusp.tyre.rig`).
 
 References:
 - a wheel held at its contact point by one six-axis bushing (axes along the global ones): a

@@ -1,4 +1,4 @@
-"""`tyre.evaluate` announces its limit saturation once per eager call (issue 28 item 7; module
+"""`tyre.evaluate` announces its limit saturation once per eager call (module
 docstring of `diffsusp.tyre.mf6`, "Modes"), silently traced under jit / vmap / grad, and the CLI
 (which runs `check_limits` on the table first) does not announce it twice."""
 

@@ -1,7 +1,7 @@
-"""The specification's friction quantities (issue 28 item 7): the braking F_x peak and the
+"""The specification's friction quantities (docs/reference/tyre.md): the braking F_x peak and the
 friction coefficients μ_x, μ_y, checked against a dense grid of the model itself; and the
 `tyre spec` table, one row per quantity and one column per load, within 100 columns whatever
-the file (issue 28 item 8: eleven columns were cut)."""
+the file (no column cut)."""
 
 import pathlib
 

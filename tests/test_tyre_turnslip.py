@@ -1,5 +1,5 @@
 """MF 6.1/6.2 turn slip (ζ0…ζ8) and the vertical model (loaded radius, stiffness, effective
-rolling radius), issue 15 (spec: tyre §7 C).
+rolling radius) (spec: tyre §7 C).
 
 References: the independent NumPy transcription of tests/test_tyre_oracle.py (Pacejka 2012 §4.3.3
 written in SI from the .tir dict; the vertical force solved there by bracketing, scipy's brentq),

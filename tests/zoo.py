@@ -1,4 +1,4 @@
-"""The test zoo (issue 11, item 5): every built-in mechanism × its load sets, built once per
+"""The test zoo: every built-in mechanism × its load sets, built once per
 run, exposed as module-scoped fixtures a test file imports:
 
 ```python
