@@ -48,7 +48,7 @@ from diffsusp.tyre.spec import similarity, similarity_primitive
 # %% [markdown]
 # ## The thesis's twelve sets at 4.5 kN
 # Tables 14–17 are the Dunlop R16 (the thesis captions them "Michelin"; spec §0.5.8). Every F_y
-# set has C = a0 = 1: D_y is an asymptote, not a peak (CORRECTIONS 2).
+# set has C = a0 = 1: D_y is an asymptote, not a peak (with C = 1 and E < 1 the curve is monotone).
 
 # %%
 delta = jnp.linspace(-12.0, 12.0, 121)

@@ -133,7 +133,8 @@ for name in ("b_Fy_delta_1_1", "b_Fy_delta_1_3", "b_Fy_delta_3_1", "b_Fy_phi_1_1
 
 # %% [markdown]
 # ## Polynomial → Magic Formula, step 1
-# The slip stiffness converted with a radius of 0.33 m (CORRECTIONS 4), (a3, a4) by total least
+# The slip stiffness converted with a radius of 0.33 m (the thesis's tables match 0.32–0.35 m, not
+# R_r = 0.294 m), (a3, a4) by total least
 # squares; the F_y polynomial has no extremum (C = 1 sets are monotone), so D comes from the
 # value at the domain's edge. Step 2 (`convert.refine`) refines them with the MF fitter.
 
