@@ -11,8 +11,8 @@ instrumental variables; the pooled "all wheels" model with camber):
 - **sine**: the Correvit on time;
 - **sine-delay**: the Correvit 100 ms late (the pipeline must estimate and remove it);
 - **sine-remove-means** (a diagnosis, not in "all"): as **sine**, with the signals' record means
-  removed as the thesis does (§5.5 item 1; `onboard.identify(remove_offsets=True)`, the
-  default until this rehearsal found its bias in the load polynomials);
+  removed as the thesis does (§5.5 item 1; `onboard.identify(remove_offsets=True)`),
+  which biases the load polynomials: the mean of a product is not the product of the means;
   **sine-delay-remove-means** the same with the 100 ms delay.
 
 Per coefficient the harness's rows (`diffsusp.identify.rehearse`); besides, per truth, the
