@@ -36,7 +36,7 @@ EXIT_INTERRUPTED = 130
 class _App(typer.Typer):
     """The console entry point (`diffsusp = diffsusp.cli:app`). An interrupted run (exit 130,
     SIGINT or SIGTERM) ends with `os._exit` once its message is printed and what it finished is
-    written (bad_inputs D16): JAX abandons a compilation that a signal interrupts, but XLA's
+    written: JAX abandons a compilation that a signal interrupts, but XLA's
     threads carry on, and the interpreter's normal shutdown waited for them (the rest of the
     compile: ~10 min on 10⁶ rows) and then crashed (SIGSEGV). Typer's test runner calls the
     click command, not this, so tests keep their process."""
@@ -143,7 +143,7 @@ def show_warnings(caught, *, skip=()) -> list[str]:
     return seen
 
 
-class _Terminated(KeyboardInterrupt):
+class Terminated(KeyboardInterrupt):
     """SIGTERM, delivered as an interruption so that long runs save what they finished."""
 
 
@@ -152,7 +152,7 @@ def interruptible():
     """SIGTERM raises `KeyboardInterrupt` (like SIGINT) inside the block, so that long runs
     can write the cases finished so far before they exit."""
     def handler(signum, frame):
-        raise _Terminated()
+        raise Terminated()
 
     try:
         previous = signal.signal(signal.SIGTERM, handler)
@@ -202,7 +202,7 @@ def cli_errors(*, record_warnings: bool = True):
             code = EXIT_BAD_INPUT if getattr(e, "bad_input", False) else EXIT_MODEL_ERROR
             raise failed(str(e), code) from None
         except KeyboardInterrupt as e:
-            what = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+            what = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
             raise failed(f"{what}.", EXIT_INTERRUPTED) from None
         except MemoryError:
             raise failed("out of memory; use a smaller model or table.",
@@ -210,7 +210,7 @@ def cli_errors(*, record_warnings: bool = True):
         except Exception as e:
             if isinstance(e, OSError) and e.errno in _WRITE_ERRNOS:
                 # a full disk, a file-size limit, a read-only file system: what could not be
-                # known before the work (bad_inputs D11); atomic writers leave no half file
+                # known before the work; atomic writers leave no half file
                 raise failed(f"cannot write {e.filename or 'an output file'}: {e.strerror}",
                              EXIT_BAD_INPUT) from None
             if os.environ.get("DIFFSUSP_DEBUG"):
@@ -265,7 +265,7 @@ def check_number(value, option: str, *, positive: bool = False, nonnegative: boo
                  unit: str = ""):
     """Fail (exit 2, before any work) unless the value of `option` is a finite number (and > 0
     with `positive`, >= 0 with `nonnegative`): `--cutoff 0`, `--radius nan` and the like are
-    bad input, not a run that ends in NaN or an internal error (bad_inputs D14). None passes
+    bad input, not a run that ends in NaN or an internal error. None passes
     (an option not given)."""
     if value is None:
         return value
@@ -300,12 +300,73 @@ def side_value(side) -> str | None:
     return None if side is None else Side(side).value
 
 
+MODEL_SUFFIXES = (".toml", ".adm", ".json")
+"""The model file formats every verb that takes a MODEL reads (`diffsusp.io.read_model_file`)."""
+
+
 def load_model_file(model, *, check: bool = True, side=None):
-    """`diffsusp.resolve.load_model_file` (built-in names, the stop variants included), on
-    `side` (a `SideOption` value)."""
+    """The one model loader of the verbs that take a MODEL: a built-in name (`diffsusp.models.
+    ZOO` or `STOP_VARIANTS`) or a model file (.toml, .adm, .json), through the library's one
+    resolver (`diffsusp.resolve.load_model_file`), on `side` (a `SideOption` value). A name that
+    is neither a built-in model nor an existing path is bad input (`InputError`, exit 2) that
+    lists the built-in models."""
+    import os
+
+    from ..errors import InputError
+    from ..resolve import builtin_models
     from ..resolve import load_model_file as load
 
-    return load(model, check=check, side=side_value(side))
+    text = os.fspath(model)
+    builtin = builtin_models()
+    if text not in builtin and not os.path.exists(text):
+        why = ("no such file" if os.path.splitext(text)[1].lower() in MODEL_SUFFIXES else
+               "not a model file or a built-in model")
+        raise InputError(
+            f"model '{text}' is neither a built-in model ({', '.join(builtin)}) nor an existing "
+            f"file ({why}). Give a built-in name or the path of a model file "
+            f"({', '.join(MODEL_SUFFIXES)}).")
+    return load(text, check=check, side=side_value(side))
+
+
+def check_identify_outputs(out, write_model, figures=None):
+    """The outputs of an identification verb, checked before any work (suffix, folder exists
+    and is writable): the report (.csv, .json, .html), the identified model (.toml, .adm) and
+    the figures folder."""
+    check_output(out, suffixes=(".csv", ".json", ".html"), what="report")
+    check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
+    check_output(figures, what="figures folder", directory=True)
+
+
+def write_model_file(mech, path, model_file) -> None:
+    """An identified or corrected model to `path` by its suffix: .toml the native file; .adm
+    the values written into the Adams dataset the model came from (`model_file.path`), or a
+    complete dataset when it came from elsewhere."""
+    import os
+
+    if os.path.splitext(os.fspath(path))[1].lower() == ".toml":
+        from ..io import save_model
+
+        save_model(mech, path)
+        return
+    from ..io.adams import write_adm
+
+    source = model_file.path
+    template = source if source and os.path.splitext(str(source))[1].lower() == ".adm" else None
+    write_adm(mech, path, template=template)
+
+
+def nan_to_none(obj):
+    """`obj` (nested dicts and lists) with every non-finite float replaced by None: valid JSON
+    (`--json` output of the K&C verbs)."""
+    import math
+
+    if isinstance(obj, dict):
+        return {k: nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [nan_to_none(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def print_json(obj) -> None:

@@ -27,7 +27,12 @@ def _timed(fn):
     return out, time.perf_counter() - t0
 
 
-def demo(
+def register(app: typer.Typer) -> None:
+    """Add `demo` to `app`."""
+    app.command("demo")(demo_command)
+
+
+def demo_command(
     out: Annotated[pathlib.Path, typer.Option(
         help="Folder for the figures (PNG and SVG); created if missing.")] = pathlib.Path(
         "diffsusp-demo"),

@@ -36,6 +36,17 @@ fleet_app = typer.Typer(add_completion=False, no_args_is_help=True,
                         help="Many identifications, one per data set, in-process or on a Dask "
                         "cluster; resumable.")
 
+
+def register(app: typer.Typer) -> None:
+    """Add the `fleet` group to `app`, with its verbs (one per recipe, and `status`)."""
+    app.add_typer(fleet_app, name="fleet")
+    fleet_app.command("direct")(direct_command)
+    fleet_app.command("iterative")(iterative_command)
+    fleet_app.command("least-squares")(least_squares_command)
+    fleet_app.command("kc")(kc_command)
+    fleet_app.command("tyre-fit")(tyre_fit_command)
+    fleet_app.command("status")(status_command)
+
 ItemsOpt = Annotated[list[str], typer.Option(
     "--items", "-i", help="Data sets: a glob ('data/*.csv', quoted), a table, or a .txt list "
     "of paths (repeatable).")]
@@ -127,63 +138,64 @@ def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, 
         raise typer.Exit(code=EXIT_NOT_CONVERGED)
 
 
-@fleet_app.command("direct")
-def direct(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-           scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-           option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-           devices: DevicesOpt = None):
+def direct_command(
+    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+    devices: DevicesOpt = None,
+):
     """The direct (linear) stiffness identification on every data set."""
     _run("direct", items, out, model, workers, scheduler, batch_size, time_limit, option,
          retry_failed, json_output, devices)
 
 
-@fleet_app.command("iterative")
-def iterative(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-              scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
-              time_limit: TimeOpt = None, option: OptionOpt = None,
-              retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-              devices: DevicesOpt = None):
+def iterative_command(
+    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+    devices: DevicesOpt = None,
+):
     """The iterative (correlation loop) identification on every data set."""
     _run("iterative", items, out, model, workers, scheduler, batch_size, time_limit, option,
          retry_failed, json_output, devices)
 
 
-@fleet_app.command("least-squares")
-def least_squares(items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-                  scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
-                  time_limit: TimeOpt = None, option: OptionOpt = None,
-                  retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-                  devices: DevicesOpt = None):
+def least_squares_command(
+    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+    devices: DevicesOpt = None,
+):
     """Least squares through the equilibrium on every data set, a batch at a time (vmapped)."""
     _run("least_squares", items, out, model, workers, scheduler, batch_size, time_limit,
          option, retry_failed, json_output, devices)
 
 
-@fleet_app.command("kc")
-def kc(items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
-       scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-       option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-       devices: DevicesOpt = None):
+def kc_command(
+    items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+    devices: DevicesOpt = None,
+):
     """A K&C event on every item: load tables (F_vert, F_lat, F_long, N) on --model, or with
     --option event=NAME (and its ranges, e.g. travel=-80:80:161) every item a model file."""
     _run("kc", items, out, model, workers, scheduler, batch_size, time_limit, option,
          retry_failed, json_output, devices)
 
 
-@fleet_app.command("tyre-fit")
-def tyre_fit(items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
-             scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16,
-             time_limit: TimeOpt = None, option: OptionOpt = None,
-             retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-             devices: DevicesOpt = None):
+def tyre_fit_command(
+    items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+    devices: DevicesOpt = None,
+):
     """A Magic Formula fit of every bench table from the start tyre --model START.tir
     (options: groups, names, loss, noise, ...; a batch is one vmapped fit)."""
     _run("tyre_fit", items, out, model, workers, scheduler, batch_size, time_limit, option,
          retry_failed, json_output, devices)
 
 
-@fleet_app.command("status")
-def status(
+def status_command(
     out: Annotated[pathlib.Path, typer.Argument(help="The fleet's output folder.")],
     json_output: JsonOpt = False,
 ):

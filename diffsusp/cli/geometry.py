@@ -28,27 +28,28 @@ import typer
 
 from .common import (
     EXIT_BAD_INPUT,
+    check_identify_outputs,
     check_number,
     check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
+    load_model_file,
     print_json,
+    write_model_file,
 )
-from .identify import (
-    JsonOpt,
-    MeasurementsOpt,
-    ModelArg,
-    ReorderOpt,
-    _check_paths,
-    _write_model,
-)
+from .identify import JsonOpt, MeasurementsOpt, ModelArg, ReorderOpt
+
+
+def register(identify_app: typer.Typer) -> None:
+    """Add `geometry` and `correct` to the `identify` group (`cli.identify.identify_app`)."""
+    identify_app.command("geometry")(geometry_command)
+    identify_app.command("correct")(correct_command)
 
 
 def _load(model, measurements, reorder):
     from .. import measure
-    from .common import load_model_file
 
     model_file = load_model_file(model)
     mech = model_file.mechanism
@@ -56,7 +57,7 @@ def _load(model, measurements, reorder):
     return model_file, mech, meas
 
 
-def geometry(
+def geometry_command(
     model: ModelArg,
     measurements: MeasurementsOpt,
     joints: Annotated[Path | None, typer.Option(
@@ -119,7 +120,7 @@ def geometry(
             geometric.write_joints(report, joint_table)
         if write_model is not None:
             located, _ = geometric.apply_locations(mech, report, joint_list)
-            _write_model(located, write_model, model_file)
+            write_model_file(located, write_model, model_file)
         if figures is not None:
             from .. import plot
 
@@ -141,7 +142,7 @@ def geometry(
             con.print(f"{label} written to {path}", highlight=False, soft_wrap=True)
 
 
-def correct(
+def correct_command(
     model: ModelArg,
     measurements: MeasurementsOpt,
     case: Annotated[str, typer.Option(
@@ -163,7 +164,7 @@ def correct(
     """Move the bolted-side joint frames so that the model's equilibrium reproduces the
     measured poses of one case (spec geometry §3.8)."""
     check_output(out, suffixes=(".csv", ".json", ".html", ".txt"), what="report")
-    _check_paths(None, write_model)
+    check_identify_outputs(None, write_model)
     check_number(tol, "--tol", positive=True, unit="mm")
     if max_iterations < 1:
         raise fail("--max-iterations must be at least 1.", EXIT_BAD_INPUT)
@@ -180,7 +181,7 @@ def correct(
             mech, meas, case=meas.cases.index(case), elements=element or None, tol=tol,
             max_iterations=max_iterations)
         if write_model is not None:
-            _write_model(corrected, write_model, model_file)
+            write_model_file(corrected, write_model, model_file)
         if out is not None:
             write_report(report, out)
     if json_output:

@@ -20,7 +20,6 @@ CSV rows and figures `diffsusp.identify.tables`; this module parses, calls and f
 
 import contextlib
 import enum
-import os
 from pathlib import Path
 from typing import Annotated
 
@@ -32,16 +31,28 @@ from .common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_CONVERGED,
     SideOption,
-    check_output,
+    check_identify_outputs,
     cli_errors,
     console,
     enable_x64,
     fail,
+    load_model_file,
     print_json,
+    write_model_file,
 )
 
 identify_app = typer.Typer(add_completion=False, no_args_is_help=True,
                            help="Identify stiffnesses from measurements (spec stiffness ch. 4).")
+"""The `identify` group: `direct`, `iterative`, `fit` here, `geometry` and `correct` in
+`cli.geometry` (registered on it by `cli.geometry.register`)."""
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `identify` group to `app`, with its verbs `direct`, `iterative` and `fit`."""
+    app.add_typer(identify_app, name="identify")
+    identify_app.command("direct")(direct_command)
+    identify_app.command("iterative")(iterative_command)
+    identify_app.command("fit")(fit_command)
 
 # The choices of the direct method's options (Typer checks them: exit code 2).
 Method = enum.StrEnum("Method", {v: v for v in ("basic", "min_norm", "tsvd", "tikhonov",
@@ -67,7 +78,7 @@ ReorderOpt = Annotated[bool, typer.Option(
 JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable report.")]
 
 
-def direct(
+def direct_command(
     model: ModelArg,
     measurements: MeasurementsOpt,
     side: SideOption = None,
@@ -104,10 +115,9 @@ def direct(
     """
     method, hold, weighting, polish = (Method(method).value, Hold(hold).value,
                                        Weighting(weighting).value, Polish(polish).value)
-    _check_paths(out, write_model)
+    check_identify_outputs(out, write_model)
     enable_x64()
     from .. import identify, measure
-    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model, side=side)
@@ -126,7 +136,7 @@ def direct(
         if out is not None:
             _write_report(report, out)
         if write_model is not None:
-            _write_model(fitted, write_model, model_file)
+            write_model_file(fitted, write_model, model_file)
     if json_output:
         print_json(report.to_dict())
     else:
@@ -161,19 +171,6 @@ def _exit_if_unsolvable(report):
         raise fail(f"the identified model has no equilibrium in case(s) "
                    f"{', '.join(cons.failed_cases)}: the values written do not describe the "
                    "measurements; start closer to the expected values.", EXIT_NOT_CONVERGED)
-
-
-def _write_model(mech, path: Path, model_file):
-    if path.suffix.lower() == ".toml":
-        from ..io import save_model
-
-        save_model(mech, path)
-        return
-    from ..io.adams import write_adm
-
-    source = model_file.path
-    template = source if source and os.path.splitext(str(source))[1].lower() == ".adm" else None
-    write_adm(mech, path, template=template)
 
 
 def _print(report, mech, measurements, out, write_model):
@@ -222,13 +219,6 @@ def _print(report, mech, measurements, out, write_model):
 _DEG = 3.141592653589793 / 180.0
 
 
-def _check_paths(out, write_model, figures=None):
-    """Every output checked before any work (suffix, folder exists and is writable)."""
-    check_output(out, suffixes=(".csv", ".json", ".html"), what="report")
-    check_output(write_model, suffixes=(".toml", ".adm"), what="identified model")
-    check_output(figures, what="figures folder", directory=True)
-
-
 def _save_figures(figures: dict, folder: Path) -> list:
     """Save each figure as folder/<name>.png and .svg; the paths written."""
     from .. import plot
@@ -240,13 +230,13 @@ def _save_figures(figures: dict, folder: Path) -> list:
 def _save_on_interrupt(out, rows, what):
     """On SIGINT / SIGTERM, write the last estimate (`rows()`: the report rows of the last
     accepted step, each with status 'interrupted') to `out` before exiting with 130."""
-    from .common import EXIT_INTERRUPTED, _Terminated, interruptible
+    from .common import EXIT_INTERRUPTED, Terminated, interruptible
 
     try:
         with interruptible():
             yield
     except KeyboardInterrupt as e:
-        how = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+        how = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
         data = rows()
         where = ""
         if out is not None and data:
@@ -311,7 +301,7 @@ def iterative_command(
     """
     import numpy as np
 
-    _check_paths(out, write_model, figures)
+    check_identify_outputs(out, write_model, figures)
     res = None
     if resolution.strip().lower() != "none":
         try:
@@ -325,7 +315,6 @@ def iterative_command(
     from ..identify.iterative import iterative
     from ..identify.selection import measured_bushings, with_start
     from ..identify.tables import interrupted_iterative_rows, iterative_figures
-    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model, side=side)
@@ -355,7 +344,7 @@ def iterative_command(
 
             _write_report(report, out, iterative_rows(report))
         if write_model is not None:
-            _write_model(fitted, write_model, model_file)
+            write_model_file(fitted, write_model, model_file)
         paths = []
         if figures is not None:
             paths = _save_figures(iterative_figures(report, mech0, fitted, meas), figures)
@@ -436,7 +425,7 @@ def fit_command(
     """
     from ..identify.tables import fit_rows
 
-    _check_paths(out, write_model, figures)
+    check_identify_outputs(out, write_model, figures)
     loss = Loss(loss).value
     if not (sigma > 0 and sigma_rotation > 0):
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
@@ -447,13 +436,12 @@ def fit_command(
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements
     from ..measure.rig import is_rig_table, read_rig_table, rig_measurement
-    from .common import load_model_file
 
     with cli_errors():
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         fit_mech, rig_notes = mech, []
-        if is_rig_table(measurements):  # K&C-rig curves (issue 28 item 10)
+        if is_rig_table(measurements):  # K&C-rig curves (`diffsusp.measure.rig`)
             meas = read_rig_table(measurements, sigma=rig_sigma)
             rig, data, rig_notes = rig_measurement(mech, meas)
             fit_mech = rig.mech
@@ -487,7 +475,7 @@ def fit_command(
         if out is not None:
             _write_report(report, out, fit_rows(report))
         if write_model is not None:
-            _write_model(fitted, write_model, model_file)
+            write_model_file(fitted, write_model, model_file)
         paths = []
         if figures is not None and fit_mech is not mech:
             notes.append("--figures: the fit figures are drawn for landmark and pose tables; "

@@ -26,12 +26,11 @@ from rich import box
 from rich.table import Table
 from rich.text import Text
 
-from ..kc.dispatch import (  # noqa: F401  (parse_range: re-exported for the other verbs)
+from ..kc.dispatch import (
     EVENTS,
     corner_with,
     default_load,
     loaded_radius_origin,
-    parse_range,
     reference_case,
     run_event,
 )
@@ -41,9 +40,9 @@ from .common import (
     cli_errors,
     console,
     enable_x64,
+    load_model_file,
     print_json,
     show_warnings,
-    side_value,
     warn,
 )
 
@@ -63,20 +62,9 @@ EventOption = Annotated[Event, typer.Option(
 """The one `--event` option of the verbs that run a K&C event (`kc`, `sensitivity`)."""
 
 
-def _model(name: str, side=None):
-    """A built-in model (`diffsusp.models.ZOO` or `STOP_VARIANTS`) or a model file, through the
-    library's one resolver (`diffsusp.resolve.load_model_file`), on `side` (`SideOption`)."""
-    from diffsusp.errors import InputError
-    from diffsusp.resolve import builtin_models, load_model_file
-
-    builtin = builtin_models()
-    if name not in builtin and not pathlib.Path(name).exists():
-        raise InputError(
-            f"model '{name}' is neither a built-in model ({', '.join(builtin)}) "
-            "nor an existing file. Give a built-in name or the path of a model file (.toml, "
-            ".adm, .json)."
-        )
-    return load_model_file(name, side=side_value(side)).mechanism
+def register(app: typer.Typer) -> None:
+    """Add `kc` to `app`."""
+    app.command("kc")(kc_command)
 
 
 def _corner(mech, frame, loaded_radius, kingpin, tyre=None):
@@ -118,18 +106,6 @@ def _flag_notes(ev) -> list[str]:
             notes.append(f"{cases.size} converged case{'s' * (cases.size != 1)} of the event "
                          f"with {what}: {shown} ('{flag}' is false in --json).")
     return notes
-
-
-def _nan_to_none(obj):
-    import math
-
-    if isinstance(obj, dict):
-        return {k: _nan_to_none(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_nan_to_none(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _table(ev, mech_name: str) -> Table:
@@ -188,7 +164,7 @@ def kc_command(
     err = console(stderr=True, markup=False)
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        mech = _model(model, side)
+        mech = load_model_file(model, side=side).mechanism
         corner = _corner(mech, frame, loaded_radius, kingpin, tyre)
         radius = loaded_radius_origin(mech, corner, given=loaded_radius, tyre_file=tyre)
         t0 = time.perf_counter()

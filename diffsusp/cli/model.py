@@ -21,11 +21,14 @@ from .common import (
     EXIT_INTERRUPTED,
     EXIT_NOT_CONVERGED,
     SideOption,
+    Terminated,
     check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
+    interruptible,
+    load_model_file,
     print_json,
     warn,
 )
@@ -35,18 +38,18 @@ _CHUNK = 256
 chunk reuses one compiled shape)."""
 
 
-def _load(model: str, *, check: bool = True, side=None):
-    from .common import load_model_file
-
-    return load_model_file(model, check=check, side=side)
-
-
 ModelArgument = Annotated[str, typer.Argument(
     help="Model file (.toml, .adm, .json) or built-in name.")]
 """MODEL of `info` and `simulate`."""
 
 
-def info(
+def register(app: typer.Typer) -> None:
+    """Add `info` and `simulate` to `app`."""
+    app.command("info")(info_command)
+    app.command("simulate")(simulate_command)
+
+
+def info_command(
     model: ModelArgument,
     side: SideOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable output.")]
@@ -58,7 +61,7 @@ def info(
     with cli_errors():
         from ..model import validate
 
-        mf = _load(model, check=False, side=side)
+        mf = load_model_file(model, check=False, side=side)
         mech = mf.mechanism
         report = validate(mech)
     described = describe(mech)
@@ -197,7 +200,6 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
 
     from ..io.tables import TableWriter
     from ..statics import solve_statics_chunks
-    from .common import _Terminated, interruptible
 
     err = console(stderr=True, markup=False)
     n = loads.n_cases
@@ -223,7 +225,7 @@ def _solve_and_write(mech, loads, table, out, max_steps: int, quiet: bool) -> _R
                 run.record(start, stop, sol)
                 bar.update(task, completed=stop)
     except KeyboardInterrupt as e:
-        run.interrupted = "terminated (SIGTERM)" if isinstance(e, _Terminated) else "interrupted"
+        run.interrupted = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
     finally:
         if run.done < n:
             # The rest: their loads and status -1, every output NaN.
@@ -267,7 +269,7 @@ def _unsolved(mech, n):
         law_valid=np.zeros(n, bool))
 
 
-def simulate(
+def simulate_command(
     model: ModelArgument,
     loads: Annotated[str, typer.Option(
         "--loads", "-l", help="Load table (.csv, .parquet) or a load table of the model.")],
@@ -300,7 +302,7 @@ def simulate(
     enable_x64()
     t0 = time.perf_counter()
     with cli_errors():
-        mf = _load(model, side=side)
+        mf = load_model_file(model, side=side)
         mech = mf.mechanism
         table = _load_table(mf, loads)
         if table.n_rows == 0:

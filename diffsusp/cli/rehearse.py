@@ -80,6 +80,11 @@ def _params(mech, names: str | None):
     return params
 
 
+def register(app: typer.Typer) -> None:
+    """Add `rehearse` to `app`."""
+    app.command("rehearse")(rehearse_command)
+
+
 def rehearse_command(
     method: Annotated[Method, typer.Argument(help="The identification to rehearse.")],
     model: Annotated[str, typer.Argument(

@@ -18,6 +18,7 @@ from rich import box
 from rich.table import Table
 
 from ..identify.sensitivity import PARAMETER_SETS
+from ..kc.dispatch import corner_with, run_event
 from .common import (
     EXIT_BAD_INPUT,
     SideOption,
@@ -26,9 +27,11 @@ from .common import (
     console,
     enable_x64,
     fail,
+    load_model_file,
+    nan_to_none,
     print_json,
 )
-from .kc import Event, EventOption, _corner, _model, _nan_to_none, _run_event
+from .kc import Event, EventOption
 
 ParameterSet = enum.StrEnum("ParameterSet", {name: name for name in PARAMETER_SETS})
 """The `--params` choices: the named sets of `identify.sensitivity.PARAMETER_SETS`."""
@@ -36,6 +39,11 @@ ParameterSet = enum.StrEnum("ParameterSet", {name: name for name in PARAMETER_SE
 ParamsOption = Annotated[ParameterSet, typer.Option(
     "--params", "-p", help="parameters: " + "; ".join(f"{k}: {v}" for k, v in
                                                      PARAMETER_SETS.items()))]
+
+
+def register(app: typer.Typer) -> None:
+    """Add `sensitivity` to `app`."""
+    app.command("sensitivity")(sensitivity_command)
 
 
 def sensitivity_command(
@@ -73,12 +81,13 @@ def sensitivity_command(
 
     err = console(stderr=True, markup=False)
     with cli_errors():
-        mech = _model(model, side)
-        corner = _corner(mech, None, None, None)
+        mech = load_model_file(model, side=side).mechanism
+        corner = corner_with(mech, frame=None, loaded_radius=None, kingpin=None, tyre=None)
         t0 = time.perf_counter()
         with err.status(f"running {event.value} on {mech.name} and differentiating (the first run "
                         "compiles, 1–3 min)..."):
-            ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
+            ev = run_event(mech, Event(event).value, corner, travel=travel, fz=fz, force=force,
+                           torque=torque, rack=rack)
             selection = parameter_set(ev.rig.mech, params.value)
             names = sensitivity_metrics(ev, metric, derivatives=derivatives)
             report = sensitivity(ev, selection, metrics=names, derivatives=derivatives)
@@ -91,7 +100,7 @@ def sensitivity_command(
                 fig = report.plot(name, top=max(top, 12))
                 paths += plot.save(fig, out / f"sensitivity_{name.replace('/', '_')}")
     if as_json:
-        print_json(_nan_to_none(_json(report, mech.name, ev)))
+        print_json(nan_to_none(_json(report, mech.name, ev)))
         return
     con = console(markup=False)
     con.print(_table(report, mech.name, ev, params, top))
@@ -104,7 +113,7 @@ def sensitivity_command(
 
 def _table(report, mech_name, ev, params, top) -> Table:
     """One row per metric and rank (metric, rank, parameter, elasticity): as narrow as the
-    longest names, whatever `top` (issue 28 item 8: a column per rank cut the numbers)."""
+    longest names, whatever `top` (a column per rank would cut the numbers)."""
     table = Table(title=f"{mech_name}: sensitivities over {ev.name.replace('_', ' ')} "
                   f"({params})", box=box.SIMPLE_HEAD)
     for head in ("metric", "#", "parameter"):

@@ -1,5 +1,6 @@
-"""`diffsusp tyre info|eval|spec|fit`: Magic Formula tyre property files (spec: tyre §7 C; issue
-15 item 4).
+"""`diffsusp tyre info|eval|spec|rig|fit`: Magic Formula tyre property files (spec: tyre §7 C);
+`identify` and `onboard` (the polynomial and on-board identifications) are in `cli.tyre_identify`
+and `cli.tyre_onboard`.
 
 - `info FILE.tir`: version, dimensions, nominal load, ranges, coefficient counts.
 - `eval FILE.tir --inputs TABLE --out RESULTS` (or `--grid`): steady-state forces and moments.
@@ -41,13 +42,13 @@ from rich.table import Table as RichTable
 
 from .common import (
     EXIT_BAD_INPUT,
-    app,
     check_number,
     check_output,
     cli_errors,
     console,
     enable_x64,
     fail,
+    load_model_file,
     plain,
     print_json,
     warn,
@@ -55,7 +56,18 @@ from .common import (
 
 tyre_app = typer.Typer(add_completion=False, no_args_is_help=True,
                        help="Magic Formula tyre models (.tir files): evaluate, specify, fit.")
-app.add_typer(tyre_app, name="tyre")
+"""The `tyre` group: `info`, `eval`, `spec`, `rig`, `fit` here, `identify` in
+`cli.tyre_identify`, `onboard` in `cli.tyre_onboard` (each registered by its `register`)."""
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `tyre` group to `app`, with its verbs `info`, `eval`, `spec`, `rig` and `fit`."""
+    app.add_typer(tyre_app, name="tyre")
+    tyre_app.command("info")(info_command)
+    tyre_app.command("eval")(eval_command)
+    tyre_app.command("spec")(spec_command)
+    tyre_app.command("rig")(rig_command)
+    tyre_app.command("fit")(fit_command)
 
 _MODES = {"pure_lateral", "pure_longitudinal", "pure_aligning", "combined_longitudinal",
           "combined_lateral", "pressure", "overturning", "mf1989_lateral", "mf1989_aligning",
@@ -74,8 +86,7 @@ def _load(path: Path):
     return tir, MagicFormula6.from_tir(tir)
 
 
-@tyre_app.command("info")
-def info(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
+def info_command(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
          json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False):
     """Summary of a .tir file: Magic Formula version, dimensions, ranges."""
     with cli_errors():
@@ -107,7 +118,6 @@ def info(file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")
     c.print(f"{out['coefficients_in_file']} entries in {len(out['sections'])} sections")
 
 
-@tyre_app.command("eval")
 def eval_command(
     file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
     inputs: Annotated[Path | None, typer.Option(
@@ -191,7 +201,7 @@ def eval_command(
 
 
 def _parse_loads(text: str) -> list[float]:
-    """The loads of `--loads`: finite and > 0 [N], at least one (bad_inputs D7)."""
+    """The loads of `--loads`: finite and > 0 [N], at least one."""
     try:
         loads = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
@@ -207,7 +217,6 @@ def _parse_loads(text: str) -> list[float]:
     return loads
 
 
-@tyre_app.command("spec")
 def spec_command(
     file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
     loads: Annotated[str | None, typer.Option(
@@ -234,7 +243,7 @@ def spec_command(
         print_json(rows)
         return
     # one row per quantity, one column per load: as narrow as the number of loads, whatever
-    # the quantities (issue 28 item 8: eleven columns did not fit a terminal)
+    # the quantities (eleven columns would not fit a terminal)
     show = [("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
             ("pneumatic_trail", "trail [mm]", 1), ("slip_stiffness", "C_kappa [N/-]", 1),
             ("camber_stiffness", "C_gamma [N/deg]", math.pi / 180),
@@ -254,7 +263,6 @@ def spec_command(
     console(markup=False).print(t)
 
 
-@tyre_app.command("rig")
 def rig_command(
     file: Annotated[Path, typer.Argument(help="Tyre property file (.tir).")],
     model: Annotated[str, typer.Option(
@@ -277,9 +285,8 @@ def rig_command(
     import jax.numpy as jnp
 
     from diffsusp.io.tables import write_table
+    from diffsusp.kc.dispatch import parse_range
     from diffsusp.tyre import rig as tyre_rig
-
-    from .kc import parse_range
 
     check_output(out, suffixes=(".csv", ".parquet"), what="results table")
     check_number(fz, "--fz", positive=True, unit="N")
@@ -292,8 +299,8 @@ def rig_command(
                        f"{MAX_RIG_CASES} finite angles [deg]", EXIT_BAD_INPUT)
         enable_x64()
         _, tyre = _load(file)
-        mech = _suspension(model)
-        if hasattr(tyre, "limit"):   # the range warnings of `tyre eval` (bad_inputs D17)
+        mech = load_model_file(model).mechanism
+        if hasattr(tyre, "limit"):   # the range warnings of `tyre eval`
             from diffsusp.tyre import check_limits
 
             check_limits(tyre, fz=None if fz is None else [fz],
@@ -334,26 +341,9 @@ def rig_command(
 
 
 MAX_RIG_CASES = 10_000
-"""Most commanded slip angles of one `tyre rig` run (10⁷ cases exhausted memory: D17)."""
+"""Most commanded slip angles of one `tyre rig` run (10⁷ cases exhaust memory)."""
 
 
-def _suspension(name: str):
-    """A built-in model (`diffsusp.models.ZOO`) or a model file (`diffsusp.load_model`)."""
-    from diffsusp.errors import InputError
-    from diffsusp.models import ZOO
-
-    if name in ZOO:
-        return ZOO[name]()
-    path = Path(name)
-    if not path.exists():
-        raise InputError(f"model '{name}' is neither a built-in model ({', '.join(ZOO)}) nor "
-                         "an existing file (.toml, .adm, .json).")
-    from diffsusp.resolve import load_model
-
-    return load_model(path)
-
-
-@tyre_app.command("fit")
 def fit_command(
     data: Annotated[Path, typer.Argument(
         help="Bench data (.csv/.parquet): inputs and FX, FY, MZ.")],
@@ -445,7 +435,7 @@ def fit_command(
                        if any(F.COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
             outputs = MODEL_OUTPUTS[model]
             left = [ch for ch in present if ch not in outputs]
-            if left and len(left) < len(present):   # bad_inputs D23: fit what the model has
+            if left and len(left) < len(present):   # fit what the model has
                 warn(f"{data}: {', '.join(left)} not fitted: {model} has no such output "
                      f"(fitting {', '.join(ch for ch in present if ch in outputs)})")
             bench = F.bench_data(table, channels=[ch for ch in present if ch in outputs]
@@ -472,7 +462,7 @@ def fit_command(
                             tir=tir, strategy=strategy, max_steps=max_steps)
         c.print(rep.table(), highlight=False)
         converged = bool(rep.converged)
-        if not converged:   # bad_inputs D4: never a success, the model only on request
+        if not converged:   # never a success, the model only on request
             warn(f"the fit did NOT converge in {rep.steps} steps (max {max_steps} per stage): "
                  "the coefficients are not a minimum; "
                  + ("the fitted .tir is written, marked NOT CONVERGED" if out is not None and
@@ -512,7 +502,7 @@ MODEL_OUTPUTS = {"mf61": ("FX", "FY", "MX", "MY", "MZ"), "mf62": ("FX", "FY", "M
 def _check_varies(data, bench, n_free: int) -> None:
     """Bench data with fewer distinct input points (FZ, SL, SA, IA, VX, P over the rows
     kept) than free coefficients cannot determine them: an error before anything is compiled
-    (10⁶ rows of one repeated point ran for minutes: bad_inputs D16)."""
+    (10⁶ rows of one repeated point would run for minutes)."""
     from diffsusp.errors import InputError
 
     keep = np.asarray(bench.valid).any(axis=0)
@@ -523,12 +513,3 @@ def _check_varies(data, bench, n_free: int) -> None:
         raise InputError(f"{data}: the data hold {distinct} distinct input point(s) (FZ, SL, "
                          f"SA, IA, VX, P) in {int(keep.sum())} rows, fewer than the {n_free} "
                          "coefficients to fit; a fit needs sweeps of slip and load")
-
-
-from .tyre_identify import register as _register_identify  # noqa: E402  (issue 16)
-
-_register_identify(tyre_app)
-
-from .tyre_onboard import register as _register_onboard  # noqa: E402  (issue 17)
-
-_register_onboard(tyre_app)

@@ -1,5 +1,5 @@
 """`diffsusp tyre identify DATA`: the polynomial tyre model and the lateral stiffnesses from a
-Flat Trac table (spec: tyre §3.3–3.8; issue 16 item 8).
+Flat Trac table (spec: tyre §3.3–3.8).
 
 DATA (.csv/.parquet) has the columns of `diffsusp.tyre.bench.REQUIRED`: `t` [s], `segment`,
 `steer`, `camber` [rad], `speed` [mm/s], `omega` [rad/s], `FZ`, `FX`, `FY` [N], `MZ` [N·mm]
@@ -66,12 +66,12 @@ def _columns(table) -> dict:
 
 SPEED_RATIO = (0.5, 2.0)
 """Accepted range of the belt speed over ω·R_r (median over the rows): a speed column without
-its unit (km/h read as mm/s: 278× off, bad_inputs D5) or ω in rpm read as rad/s falls outside."""
+its unit (km/h read as mm/s: 278× off) or ω in rpm read as rad/s falls outside."""
 
 
 def _check_bench(table, cols: dict, rolling_radius: float, cutoff: float) -> None:
     """The plausibility of a Flat Trac table, each error naming the file, the line and the
-    column (bad_inputs D5, D20): finite channels, time increasing, loads >= 0 (the reader), the
+    column: finite channels, time increasing, loads >= 0 (the reader), the
     belt speed consistent with the wheel spin and the rolling radius."""
     path = table.path
 
@@ -175,6 +175,7 @@ Structure = enum.StrEnum("Structure", {v: v for v in ("apriori", "just-necessary
 
 
 def register(tyre_app: typer.Typer) -> None:
+    """Add `identify` to the `tyre` group (`cli.tyre.tyre_app`)."""
     tyre_app.command("identify")(identify_command)
 
 

@@ -1,5 +1,5 @@
 """`diffsusp tyre onboard DATA`: tyre identification from on-board vehicle measurements (spec:
-tyre §5.3–5.6; issue 17 item 5).
+tyre §5.3–5.6).
 
 DATA is a .npz archive with the channels of `diffsusp.tyre.onboard.CHANNELS` (SI units, as
 `diffsusp.tyre.vehicle.measure` writes them; laser dropouts as NaN). The report has one column
@@ -33,7 +33,7 @@ from .common import (
 
 def _load(path: Path) -> dict:
     """The arrays of a .npz record: a regular file within the table size limit (a FIFO or a
-    device is refused before it is opened: bad_inputs D1), an archive (a renamed .npy is not)."""
+    device is refused before it is opened), an archive (a renamed .npy is not)."""
     from diffsusp.io.files import check_input
 
     if path.suffix != ".npz":
@@ -61,7 +61,7 @@ def _load(path: Path) -> dict:
 
 def _check_record(path: Path, record: dict, window_time: float) -> None:
     """The checks the pipeline's own (`onboard.check`) do not make, with the file and the
-    channel named (bad_inputs D9, D10): numeric channels; a 1-D time of at least two samples,
+    channel named: numeric channels; a 1-D time of at least two samples,
     finite and increasing, in seconds (a step of 0.5 s or more, e.g. milliseconds or whole
     seconds, leaves the window `--window-time` fewer than three samples); a wheel spin that is
     never zero (the slip divides by it)."""
@@ -98,76 +98,79 @@ def _check_record(path: Path, record: dict, window_time: float) -> None:
 
 
 def register(tyre_app: typer.Typer) -> None:
-    @tyre_app.command("onboard")
-    def onboard_command(
-        data: Annotated[Path, typer.Argument(help="On-board record (.npz, SI channels).")],
-        grouping: Annotated[str, typer.Option(
-            help="Wheel groupings, comma separated: all, front, rear.")] = "all,front,rear",
-        delay: Annotated[float | None, typer.Option(
-            help=plain("Correvit delay to remove [s] (default: estimated)."))] = None,
-        estimate_delay: Annotated[bool, typer.Option(
-            help="Estimate the Correvit delay when --delay is not given.")] = True,
-        window: Annotated[str, typer.Option(help="hamming or blackman.")] = "hamming",
-        window_time: Annotated[float, typer.Option(help=plain("Window length T [s]."))]
-        = 0.05,
-        json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
-        figures: Annotated[Path | None, typer.Option(
-            help="Folder for measured-vs-model figures.")] = None,
-        report: Annotated[Path | None, typer.Option(
-            help="Write the reports: .json or .csv (one line per parameter and report).")]
-        = None,
-    ):
-        """Identify the reduced lateral tyre model (4-16…4-18) from on-board measurements."""
-        from diffsusp.tyre import onboard
+    """Add `onboard` to the `tyre` group (`cli.tyre.tyre_app`)."""
+    tyre_app.command("onboard")(onboard_command)
 
-        check_output(figures, what="figures folder", directory=True)
-        check_output(report, suffixes=(".json", ".csv"), what="report")
-        check_number(window_time, "--window-time", positive=True, unit="s")
-        check_number(delay, "--delay")
-        groups = tuple(g.strip() for g in grouping.split(",") if g.strip())
-        if not groups:
-            raise fail(f"--grouping '{grouping}' names no grouping; give all, front or rear "
-                       "(comma separated).", EXIT_BAD_INPUT)
-        with cli_errors():
-            record = _load(data)
-            _check_record(data, record, window_time)
-            enable_x64()
-            out = onboard.identify(record, groupings=groups, camber=(True, False),
-                                   delay=delay, estimate_delay=estimate_delay,
-                                   options=onboard.Options(window=window,
-                                                           window_time=window_time))
-        from diffsusp.tyre.bench import format_report, report_rows
 
-        from .tyre_identify import write_reports
+def onboard_command(
+    data: Annotated[Path, typer.Argument(help="On-board record (.npz, SI channels).")],
+    grouping: Annotated[str, typer.Option(
+        help="Wheel groupings, comma separated: all, front, rear.")] = "all,front,rear",
+    delay: Annotated[float | None, typer.Option(
+        help=plain("Correvit delay to remove [s] (default: estimated)."))] = None,
+    estimate_delay: Annotated[bool, typer.Option(
+        help="Estimate the Correvit delay when --delay is not given.")] = True,
+    window: Annotated[str, typer.Option(help="hamming or blackman.")] = "hamming",
+    window_time: Annotated[float, typer.Option(help=plain("Window length T [s]."))]
+    = 0.05,
+    json_out: Annotated[bool, typer.Option("--json", help="Machine-readable.")] = False,
+    figures: Annotated[Path | None, typer.Option(
+        help="Folder for measured-vs-model figures.")] = None,
+    report: Annotated[Path | None, typer.Option(
+        help="Write the reports: .json or .csv (one line per parameter and report).")]
+    = None,
+):
+    """Identify the reduced lateral tyre model (4-16…4-18) from on-board measurements."""
+    from diffsusp.tyre import onboard
 
-        labels = [f"{r.grouping}{'' if r.camber else ', gamma = 0'}" for r in out["reports"]]
-        if figures is not None:
-            _figures(out, figures)
-        if report is not None:
-            write_reports(report, out["reports"], labels,
-                          extra={"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"]})
-        if json_out:
-            print_json({"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"],
-                        "reports": [r.to_dict() | {"parameters": report_rows(r)}
-                                    for r in out["reports"]]})
-            return
-        con = console(markup=False)
-        con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} "
-                  f"± {1000 * out['delay_sigma']:.2f} ms (its σ is in the coefficients'); "
-                  f"instants excluded (laser dropouts, end of the delayed Correvit): "
-                  f"{out['excluded']}")
-        cols = [f"{r.grouping}{'' if r.camber else ', γ = 0'}" for r in out["reports"]]
-        width = max(len(c) for c in cols) + 2
-        con.print("parameter".ljust(14) + "".join(c.rjust(max(width, 22)) for c in cols))
-        for i, name in enumerate(onboard.NAMES):
-            cells = []
-            for r in out["reports"]:
-                x, s = r.estimates[i], r.sigma_pct[i]
-                cells.append(("0" if x == 0 else f"{x:.5g} ({s:.2g}%)").rjust(max(width, 22)))
-            con.print(name.ljust(14) + "".join(cells))
-        for r, label in zip(out["reports"], labels, strict=True):
-            con.print("")
-            con.print(format_report(r, label=f"== {label}"))
+    check_output(figures, what="figures folder", directory=True)
+    check_output(report, suffixes=(".json", ".csv"), what="report")
+    check_number(window_time, "--window-time", positive=True, unit="s")
+    check_number(delay, "--delay")
+    groups = tuple(g.strip() for g in grouping.split(",") if g.strip())
+    if not groups:
+        raise fail(f"--grouping '{grouping}' names no grouping; give all, front or rear "
+                   "(comma separated).", EXIT_BAD_INPUT)
+    with cli_errors():
+        record = _load(data)
+        _check_record(data, record, window_time)
+        enable_x64()
+        out = onboard.identify(record, groupings=groups, camber=(True, False),
+                               delay=delay, estimate_delay=estimate_delay,
+                               options=onboard.Options(window=window,
+                                                       window_time=window_time))
+    from diffsusp.tyre.bench import format_report, report_rows
+
+    from .tyre_identify import write_reports
+
+    labels = [f"{r.grouping}{'' if r.camber else ', gamma = 0'}" for r in out["reports"]]
+    if figures is not None:
+        _figures(out, figures)
+    if report is not None:
+        write_reports(report, out["reports"], labels,
+                      extra={"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"]})
+    if json_out:
+        print_json({"delay_s": out["delay"], "delay_sigma_s": out["delay_sigma"],
+                    "reports": [r.to_dict() | {"parameters": report_rows(r)}
+                                for r in out["reports"]]})
+        return
+    con = console(markup=False)
+    con.print(f"Correvit delay removed: {1000 * out['delay']:.1f} "
+              f"± {1000 * out['delay_sigma']:.2f} ms (its σ is in the coefficients'); "
+              f"instants excluded (laser dropouts, end of the delayed Correvit): "
+              f"{out['excluded']}")
+    cols = [f"{r.grouping}{'' if r.camber else ', γ = 0'}" for r in out["reports"]]
+    width = max(len(c) for c in cols) + 2
+    con.print("parameter".ljust(14) + "".join(c.rjust(max(width, 22)) for c in cols))
+    for i, name in enumerate(onboard.NAMES):
+        cells = []
+        for r in out["reports"]:
+            x, s = r.estimates[i], r.sigma_pct[i]
+            cells.append(("0" if x == 0 else f"{x:.5g} ({s:.2g}%)").rjust(max(width, 22)))
+        con.print(name.ljust(14) + "".join(cells))
+    for r, label in zip(out["reports"], labels, strict=True):
+        con.print("")
+        con.print(format_report(r, label=f"== {label}"))
 
 
 def _figures(out, folder: Path) -> None:
