@@ -21,7 +21,7 @@ reported as the best and the median wall time and the median CPU time of this pr
 the share the scheduler gave us, the CPU time what the computation costs. The load average
 (`os.getloadavg`) is recorded before and after. `--compare-libm` (default on) also times the
 same program with XLA's own float64 arctan/sin/cos/tan/sqrt (scalar calls: the evaluation before
-`diffsusp.tyre._math`, and still the one of batches below `mf6.FAST_MATH_POINTS`) in the same
+`diffsusp.tyre.fast_math`, and still the one of batches below `mf6.FAST_MATH_POINTS`) in the same
 process.
 """
 

@@ -35,11 +35,11 @@ def test_filter_derivative_and_conversions():
     np.testing.assert_allclose(jax.jit(bench.filtfilt)(sos, x), scipy.signal.sosfiltfilt(ref, x),
                                atol=1e-10)
     t = np.arange(200) / 200.0
-    d = np.asarray(bench._centred_derivative(np.sin(2 * np.pi * 6 * t), 1 / 200.0))
+    d = np.asarray(bench.centred_derivative(np.sin(2 * np.pi * 6 * t), 1 / 200.0))
     np.testing.assert_allclose(d[2:-2], 2 * np.pi * 6 * np.cos(2 * np.pi * 6 * t[2:-2]),
                                rtol=0, atol=2e-4 * 2 * np.pi * 6)
     np.testing.assert_allclose(bench.difference_matrix(200, 1 / 200.0) @ np.sin(t),
-                               bench._centred_derivative(np.sin(t), 1 / 200.0), rtol=1e-12)
+                               bench.centred_derivative(np.sin(t), 1 / 200.0), rtol=1e-12)
     # (2-101…2-104) and their inverse; δ′ = −R_r·tan δ
     k, dl, ph, pb = 0.03, math.radians(2.0), 0.01, -0.02
     out = bench.deformation_from_psa(k, dl, ph, pb, rolling_radius=0.3)

@@ -80,7 +80,7 @@ def test_oracle_agreement(files, name):
 @pytest.mark.parametrize("name", ["MagicFormula61_Paramerters.tir",
                                   "MagicFormula52_Paramerters.tir"])
 def test_oracle_agreement_of_large_batches(files, name):
-    """Batches of FAST_MATH_POINTS or more use the vectorised functions of tyre._math: the same
+    """Batches of FAST_MATH_POINTS or more use the vectorised functions of tyre.fast_math: the same
     1e-10 agreement with the NumPy oracle (MF 6.1 and MF 5.2 code paths)."""
     from diffsusp.tyre.mf6 import FAST_MATH_POINTS
 
@@ -286,42 +286,43 @@ def test_no_retrace_on_new_values(files):
 
 
 def test_vectorised_transcendentals_match_numpy():
-    """diffsusp.tyre._math (Cephes arctan, sin, cos, tan; Newton sqrt and cos∘arctan), which
+    """diffsusp.tyre.fast_math (Cephes arctan, sin, cos, tan; Newton sqrt and cos∘arctan), which
     the MF 6.x evaluation uses instead of XLA's scalar float64 calls: values to a few ulps over the
     Magic Formula's range and beyond, exact derivatives (custom JVPs)."""
     import jax
 
-    from diffsusp.tyre import _math
+    from diffsusp.tyre import fast_math
 
     rng = np.random.default_rng(3)
     x = np.concatenate([rng.uniform(-1, 1, 4000), rng.uniform(-50, 50, 4000),
                         rng.uniform(-1e6, 1e6, 2000), np.logspace(-12, 7.9, 200),
                         [0.0, 0.66, 2.414213562373095, math.pi / 4, 3 * math.pi / 4, -math.pi]])
     xj = jnp.asarray(x)
-    for f, ref in ((_math.arctan, np.arctan), (_math.sin, np.sin), (_math.cos, np.cos)):
+    for f, ref in ((fast_math.arctan, np.arctan), (fast_math.sin, np.sin), (fast_math.cos, np.cos)):
         np.testing.assert_allclose(np.asarray(f(xj)), ref(x), rtol=2e-15, atol=3e-16)
     small = x[np.abs(x) < 1.4]  # away from the poles of tan
-    np.testing.assert_allclose(np.asarray(_math.tan(jnp.asarray(small))), np.tan(small),
+    np.testing.assert_allclose(np.asarray(fast_math.tan(jnp.asarray(small))), np.tan(small),
                                rtol=3e-15, atol=3e-16)
     # Its range is [1e-30, 1e30]; np.logspace(-30, ...)[0] is 1 ulp below 1e-30 (0 there).
     pos = np.concatenate([np.abs(x), np.logspace(-30, 30, 300)[1:], [1e-30]])
-    np.testing.assert_allclose(np.asarray(_math.sqrt(jnp.asarray(pos))), np.sqrt(pos),
+    np.testing.assert_allclose(np.asarray(fast_math.sqrt(jnp.asarray(pos))), np.sqrt(pos),
                                rtol=5e-16, atol=0)
-    assert float(_math.sqrt(np.nextafter(1e-30, 0.0))) == 0.0
-    assert float(_math.sqrt(0.0)) == 0.0
+    assert float(fast_math.sqrt(np.nextafter(1e-30, 0.0))) == 0.0
+    assert float(fast_math.sqrt(0.0)) == 0.0
     g = jnp.asarray(rng.uniform(-3, 3, 50))
-    for f, d in ((_math.arctan, lambda v: 1 / (1 + v * v)), (_math.sin, np.cos),
-                 (_math.cos, lambda v: -np.sin(v)), (_math.tan, lambda v: 1 / np.cos(v) ** 2)):
+    for f, d in ((fast_math.arctan, lambda v: 1 / (1 + v * v)), (fast_math.sin, np.cos),
+                 (fast_math.cos, lambda v: -np.sin(v)),
+                 (fast_math.tan, lambda v: 1 / np.cos(v) ** 2)):
         np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(f))(g)), d(np.asarray(g)),
                                    rtol=1e-14)
     h = jnp.asarray(rng.uniform(0.1, 100, 50))
-    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(_math.sqrt))(h)),
+    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(fast_math.sqrt))(h)),
                                0.5 / np.sqrt(np.asarray(h)), rtol=1e-14)
     # cos(atan x) = 1/√(1 + x²), to |x| = 1e15
-    np.testing.assert_allclose(np.asarray(_math.cos_arctan(xj)), 1 / np.sqrt(1 + x * x),
+    np.testing.assert_allclose(np.asarray(fast_math.cos_arctan(xj)), 1 / np.sqrt(1 + x * x),
                                rtol=5e-16, atol=0)
     big = np.logspace(8, 15, 50)
-    np.testing.assert_allclose(np.asarray(_math.cos_arctan(jnp.asarray(big))),
+    np.testing.assert_allclose(np.asarray(fast_math.cos_arctan(jnp.asarray(big))),
                                1 / np.sqrt(1 + big * big), rtol=5e-16, atol=0)
-    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(_math.cos_arctan))(g)),
+    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(fast_math.cos_arctan))(g)),
                                -np.asarray(g) / (1 + np.asarray(g) ** 2) ** 1.5, rtol=1e-14)

@@ -1,4 +1,4 @@
-"""Tyre force models (spec: tyre_contact_model §2, §7 C; issue 15).
+"""Tyre force models (spec: tyre_contact_model §2, §7 C).
 
 - `mf89`: the thesis's Bakker–Pacejka 1989/1991 Magic Formula (Annex B) and its twelve
   identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);

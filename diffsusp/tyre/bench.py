@@ -77,28 +77,24 @@ from ..identify.report import (
     consistency_from_residuals,
 )
 from . import relaxation
-from .bench_condition import (  # noqa: F401  (re-exported; tests reach the private helpers)
-    _PROGRAMS,
+from .bench_condition import (  # noqa: F401  (re-exported)
     MAX_SEGMENT,
     REQUIRED,
     UNITS,
     Conditioned,
-    _centred_derivative,
-    _check_table,
-    _condition_block,
-    _filtered_regressor,
-    _kinematics,
-    _quick_jit,
-    _regressor_program,
-    _rows,
     butterworth,
+    centred_derivative,
+    check_table,
     condition,
     difference_matrix,
     filter_matrix,
     filtfilt,
+    kept_rows,
+    kinematics,
     noise_band,
     noise_dof,
     noise_model,
+    quick_jit,
 )
 from .bench_synthetic import (  # noqa: F401  (re-exported)
     Segments,
@@ -110,7 +106,14 @@ from .bench_synthetic import (  # noqa: F401  (re-exported)
     steering_feel_segments,
     synthetic_flat_trac,
 )
-from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model, table6_domains
+from .poly import (
+    INPUT_UNITS,
+    STRUCTURES,
+    PolynomialModel,
+    parse_name,
+    regressor_model,
+    table6_domains,
+)
 
 __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segments",
            "segment_inputs",
@@ -248,8 +251,6 @@ def coefficient_unit(name: str) -> str:
     """The unit of a polynomial coefficient b_<F>_<X>_<i>_<j> (spec tyre §3.2: F in N or
     N·m, the inputs in `poly.INPUT_UNITS`, F_z in kN): F/(X^i·kN^j); a relaxation term
     b_<F>_Ly multiplies Ḟ_y/ω [N] too, the coupling b_Mz_P2_0_0 (−F_y·F_x) is K_y⁻¹ [m/N]."""
-    from .poly import INPUT_UNITS
-
     out, block, i, j = parse_name(name)
     top = "N·m" if out == "Mz" else "N"
     if block == "P2":
@@ -929,11 +930,14 @@ def _parts_fn(model):
     return run
 
 
+_PARTS_PROGRAMS: dict = {}
+
+
 def _parts_program(model):
     key = ("parts", model.names, model.inputs)
-    if key not in _PROGRAMS:
-        _PROGRAMS[key] = _quick_jit(_parts_fn(model))
-    return _PROGRAMS[key]
+    if key not in _PARTS_PROGRAMS:
+        _PARTS_PROGRAMS[key] = quick_jit(_parts_fn(model))
+    return _PARTS_PROGRAMS[key]
 
 
 def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = True,
@@ -1579,8 +1583,8 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
     if output == "Mz" and fy_keep is None:
         raise InputError("monte_carlo of Mz needs fy_keep (the F_y structure that gives M_z "
                          "its instrument)")
-    cols, n_seg, m, rate = _check_table(table, cutoff)
-    rows, _ = _rows(m, rate, cutoff, decimate, None)
+    cols, n_seg, m, rate = check_table(table, cutoff)
+    rows, _ = kept_rows(m, rate, cutoff, decimate, None)
     F = filter_matrix(float(cutoff), float(rate), m, order)
     H = jnp.asarray(F[rows])
     E = jnp.asarray(np.eye(m) - F)
@@ -1614,13 +1618,13 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
 
     # The data enter as arguments, not as constants of the program (XLA would fold the
     # products of constant matrices at compile time, slowly).
-    @_quick_jit
+    @quick_jit
     def run(keys, base, H, E, Dm):
         def one(kk):
             noisy = dict(base)
             for s, c in zip(jax.random.split(kk, len(channels)), channels, strict=True):
                 noisy[c] = base[c] + sig[c] * jax.random.normal(s, base[c].shape)
-            samples = _kinematics(noisy, Dm, rolling_radius * 1e-3)
+            samples = kinematics(noisy, Dm, rolling_radius * 1e-3)
             res = fit(fy_struct, samples, noisy["FY"])
             if mz_struct is None:
                 return summary(res)

@@ -1,5 +1,5 @@
-"""The bench identification of a campaign of many tyres in one compiled program (issue 16;
-spec: tyre §3.3–3.5, §8 items 4 and 8).
+"""The bench identification of a campaign of many tyres in one compiled program (spec:
+tyre §3.3–3.5, §8 items 4 and 8).
 
 `identify_many` runs, for the F_y of every data set (a Flat Trac table of one tyre at one
 pressure, or its `bench.condition`), the identification of `bench.identify_output` — the
@@ -66,9 +66,12 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.stats
 
+from ..compilation import CPU_OPTIONS
 from ..errors import InputError, ModelError
 from ..lsq import core
-from . import bench
+from . import bench, relaxation
+from .bench_condition import check_table, kept_rows, kinematics
+from .bench_synthetic import segment_inputs, synthetic_flat_trac
 from .poly import STRUCTURES, PolynomialModel, parse_name, regressor_model
 
 __all__ = ["identify_many", "CampaignResult", "search_program", "BenchScenario"]
@@ -282,7 +285,7 @@ def _condition_traced(cols, H, Dm, E, E_noise, rolling_radius, rows):
                                                               E_noise=E_noise,
                                                               margin=int(rows[0]) // 2)
         noise[c] = level * u
-    samples = bench._kinematics(cols, Dm, rolling_radius)
+    samples = kinematics(cols, Dm, rolling_radius)
     samples["noise_w_fy"] = profile["FY"]
     fz = samples["fz"][:, rows]
     return samples, (cols["FY"] @ H.T).ravel(), (cols["MZ"] @ H.T).ravel() * 1e-3, noise, \
@@ -360,14 +363,12 @@ _COMPILED: dict = {}
 
 def _compiled(key, make, optimize):
     """One compiled program per configuration. `optimize` False: XLA's backend optimisation
-    off (as `bench._quick_jit`: the program compiles in a third of the time and runs a little
-    slower; the right trade for one campaign), True: the default level (the benchmark)."""
+    off (as `bench_condition.quick_jit`: the program compiles in a third of the time and runs a
+    little slower; the right trade for one campaign), True: the default level (the benchmark)."""
     key = key + (optimize,)
     if key not in _COMPILED:
         options = {}
         if not optimize:
-            from ..compilation import CPU_OPTIONS
-
             options = {"xla_backend_optimization_level": 0}
             if jax.default_backend() == "cpu":
                 options.update(CPU_OPTIONS)
@@ -387,7 +388,7 @@ def _behaviour_removal(behaviour, names, active, x, stat, crit):
 
 
 def _stack_tables(tables, cutoff, decimate):
-    checked = [bench._check_table(t, cutoff) for t in tables]
+    checked = [check_table(t, cutoff) for t in tables]
     shapes = {(n, m, round(rate, 9)) for _, n, m, rate in checked}
     if len(shapes) != 1:
         raise InputError(f"identify_many: the data sets differ in shape (segments, samples, "
@@ -458,7 +459,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         raise InputError("identify_many: give tables or conditioned data, not both")
     else:
         cols, n_seg, m, rate = _stack_tables(data, cutoff, decimate)
-        rows, _ = bench._rows(m, rate, cutoff, decimate, None)
+        rows, _ = kept_rows(m, rate, cutoff, decimate, None)
         F = bench.filter_matrix(float(cutoff), float(rate), m, 4)
         dt = 1.0 / rate
         E_noise = bench.noise_band(rate, cutoff, m, 4)
@@ -502,7 +503,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
     def unexcited_of(i):  # the inputs the set does not excite (not seen)
         if conditioned:
             return bench.unexcited_inputs(data[i])
-        samples = bench._kinematics({c: cols[c][i] for c in cols}, Dm_host, r_m)
+        samples = kinematics({c: cols[c][i] for c in cols}, Dm_host, r_m)
         exc = {k: float(np.std(np.asarray(samples[k])[:, rows]))
                for k in ("kappa", "delta", "phi", "gamma", "pi_gamma_vx", "pi_gamma_bdot",
                          "pi_gamma2_bdot")}
@@ -677,8 +678,6 @@ class BenchScenario:
         return self._lip.names + ("K_Fy_y",)
 
     def _inputs(self):
-        from .bench_synthetic import segment_inputs
-
         t = jnp.arange(int(round(self.duration * self.rate))) / self.rate
         u = jax.vmap(lambda s: jax.vmap(lambda tt: segment_inputs(s, tt))(t))(self.segments)
         return {k: np.asarray(v).ravel() for k, v in u.items()}
@@ -690,8 +689,6 @@ class BenchScenario:
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """(n, p) random truths (see the class docstring), in the reports' units."""
-        from . import relaxation
-
         if n < 1:
             raise InputError(f"n = {n}: at least one truth")
         start = {k: v for k, v in self.fy.values().items() if v}
@@ -726,8 +723,6 @@ class BenchScenario:
     def _clean(self, truth) -> dict:
         """The noise-free bench table of one truth (kept: `draw` checks it is finite, every
         simulated state within the model's range; `identify` adds the noise)."""
-        from .bench_synthetic import synthetic_flat_trac
-
         key = np.asarray(truth, float).tobytes()
         cache = self.__dict__.setdefault("_tables", {})
         if key not in cache:

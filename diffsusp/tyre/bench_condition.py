@@ -15,20 +15,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compilation import CPU_OPTIONS
 from ..errors import InputError
 
 REQUIRED = ("t", "segment", "steer", "camber", "speed", "omega", "FZ", "FX", "FY", "MZ")
 UNITS = {"t": "s", "segment": None, "steer": "rad", "camber": "rad", "speed": "mm/s",
          "omega": "rad/s", "FZ": "N", "FX": "N", "FY": "N", "MZ": "N·mm"}
 
-def _quick_jit(fn):
+def quick_jit(fn):
     """`jax.jit` with XLA's backend optimisation off: this module's programs (the campaign's
     simulation, the regressors, the Monte-Carlo) are compiled once and run in well under a
     second, and compiling them at the default level costs 3× more CPU than it saves (the
     Monte-Carlo program: 2.7 s instead of 8.3 s to compile, 1.1 s instead of 0.8 s for 40
     seeds)."""
-    from ..compilation import CPU_OPTIONS
-
     compiled = {}
 
     def call(*args):
@@ -160,8 +159,8 @@ def filter_matrix(cutoff: float, rate: float, m: int, order: int = 4) -> np.ndar
 
 @functools.lru_cache(maxsize=16)
 def difference_matrix(m: int, dt: float) -> np.ndarray:
-    """`_centred_derivative` as an (m, m) matrix (NumPy, cached)."""
-    return np.asarray(_centred_derivative(np.eye(m).T, dt)).T.copy()
+    """`centred_derivative` as an (m, m) matrix (NumPy, cached)."""
+    return np.asarray(centred_derivative(np.eye(m).T, dt)).T.copy()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -225,11 +224,11 @@ def _regressor_program(model):
     call with equal shapes."""
     key = (model.names, model.inputs)
     if key not in _PROGRAMS:
-        _PROGRAMS[key] = _quick_jit(lambda s: model.regressor(s))
+        _PROGRAMS[key] = quick_jit(lambda s: model.regressor(s))
     return _PROGRAMS[key]
 
 
-def _centred_derivative(v, dt):
+def centred_derivative(v, dt):
     """dv/dt by the five-point centred difference (−v₊₂ + 8v₊₁ − 8v₋₁ + v₋₂)/12h, error
     O(h⁴) (the three-point one, O(h²), is 0.6 % off at 6 Hz sampled at 200 Hz, which biases
     the relaxation terms by several σ); three-point at the second and penultimate samples and
@@ -242,7 +241,7 @@ def _centred_derivative(v, dt):
     return xp.concatenate([first, two[..., :1], inner, two[..., -1:], last], axis=-1)
 
 
-def _kinematics(cols, Dm, rolling_radius):
+def kinematics(cols, Dm, rolling_radius):
     """(segments, samples) channels (table units) → the deformation inputs and Ḟ_y/ω at full
     rate, polynomial units; NumPy or JAX arrays (the difference as the matrix Dm)."""
     xp = np if isinstance(cols["FY"], np.ndarray) else jnp
@@ -272,8 +271,8 @@ def _condition_block(cols, sos, dt, rolling_radius):
     filtered F_y and M_z, by the scan filter (`filtfilt`): the benchmark's long-record path."""
     m = cols["FY"].shape[-1]
     eye = jnp.eye(m)
-    Dm = _centred_derivative(eye, dt).T
-    samples = _kinematics(cols, Dm, rolling_radius)
+    Dm = centred_derivative(eye, dt).T
+    samples = kinematics(cols, Dm, rolling_radius)
     return samples, filtfilt(sos, cols["FY"]), filtfilt(sos, cols["MZ"]) * 1e-3
 
 
@@ -397,7 +396,7 @@ def noise_dof(E, n_seg: int) -> float:
     return float(n_seg * np.trace(G) ** 2 / np.sum(G * G))
 
 
-def _check_table(table, cutoff):
+def check_table(table, cutoff):
     """Check a bench table; returns (channels as (segments, samples) arrays, number of
     segments, samples per segment, rate [Hz]). Segments longer than `MAX_SEGMENT` samples are
     cut into equal pieces (each filtered on its own; the tail beyond a whole number of pieces
@@ -459,7 +458,7 @@ def _check_table(table, cutoff):
     return blocks, blocks["FY"].shape[0], m, rate
 
 
-def _rows(m, rate, cutoff, decimate, trim):
+def kept_rows(m, rate, cutoff, decimate, trim):
     # (+1e-6: a rate of 199.999… Hz from the time column still thins by 4 at 25 Hz)
     k = decimate if decimate is not None else max(1, int(rate / (2 * cutoff) + 1e-6))
     trim = trim if trim is not None else max(5, int(2 * rate / cutoff + 1e-6))
@@ -482,8 +481,8 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
     each end of a segment (the filter's edge transient; default 2·rate/cutoff, at least 5);
     `outliers`: replace the F_y and M_z samples that `noise_model` flags (default on).
     """
-    cols, n_seg, m, rate = _check_table(table, cutoff)
-    rows, k = _rows(m, rate, cutoff, decimate, trim)
+    cols, n_seg, m, rate = check_table(table, cutoff)
+    rows, k = kept_rows(m, rate, cutoff, decimate, trim)
     Fm = filter_matrix(float(cutoff), float(rate), m, order)
     H = Fm[rows]
     # The noise of F_y and M_z from their content above the cut-off (the residual of the
@@ -503,7 +502,7 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
         models[c] = (float(a) * unit, float(b))
         flagged[c] = int(np.sum(bad))
     Dm = difference_matrix(m, 1.0 / rate)
-    samples = _kinematics(cols, Dm, rolling_radius * 1e-3)
+    samples = kinematics(cols, Dm, rolling_radius * 1e-3)
     inputs = {c: np.asarray(v)[:, rows].ravel() for c, v in samples.items()}
     segment = np.repeat(np.arange(n_seg, dtype=float), len(rows))
     exc = {c: float(np.std(inputs[c])) for c in ("kappa", "delta", "phi", "gamma", "fz",

@@ -14,8 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..errors import ModelError
 from . import relaxation
-from .bench_condition import _quick_jit
+from .bench_condition import quick_jit
 from .poly import PolynomialModel
 
 # --------------------------------------------------------------------------------------------
@@ -185,7 +186,7 @@ def _simulate_all_impl(fy_model, mz_model, fx_model, k_fy, k_mz, seg, t, rolling
     return jax.vmap(one)(seg)
 
 
-_simulate_all = _quick_jit(_simulate_all_impl)
+_simulate_all = quick_jit(_simulate_all_impl)
 
 
 def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *, k_fy: float,
@@ -204,8 +205,6 @@ def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *,
     roller at 9.29·V/22.225 Hz (20 N), the foundation mode 8.7 Hz (10 N) and the arm mode
     0.53 Hz (15 N). Raises `ModelError` if a segment goes beyond the grip peak of `fy_model`.
     """
-    from ..errors import ModelError
-
     if fx_model is None:
         fx_model = PolynomialModel.create("Fx", {"one": 1})
     t = jnp.arange(int(round(duration * rate))) / rate

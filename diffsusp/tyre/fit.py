@@ -44,6 +44,7 @@ range (C > 0, |μ| > 0 without a change of sign, E ≤ 1) in `report.violations`
 import dataclasses
 import json
 import math
+import os
 import warnings
 from typing import ClassVar
 
@@ -54,7 +55,7 @@ import numpy as np
 import optimistix as optx
 
 from .. import lsq
-from ..errors import InputError, ModelWarning
+from ..errors import InputError, ModelFileError, ModelWarning
 from ..identify.report import (
     CONSISTENCY_ALPHA,
     Consistency,
@@ -62,6 +63,7 @@ from ..identify.report import (
     MeasurementResiduals,
     chi2_quantile,
 )
+from ..io.tables import Table, read_table, split_header, unit_factor
 from . import fit_start, mf6, mf89
 from .fit_start import noise_sigma
 
@@ -140,9 +142,7 @@ class BenchData(eqx.Module):
         return self.measured[self.channels.index(name)]
 
 
-def _unit_scale(col: str, unit: str | None, path) -> float:
-    from ..io.tables import unit_factor
-
+def unit_scale(col: str, unit: str | None, path) -> float:
     unit = unit if unit is not None else _DEFAULT_UNITS[col]
     try:
         if col == "P":
@@ -201,7 +201,7 @@ def bench_data(table, *, channels=None, mapping: dict | None = None, defaults: d
     def column(c):
         if c not in canon:
             return np.full(n, defaults[c], dtype=float)
-        return np.asarray(table[canon[c]], dtype=float) * _unit_scale(
+        return np.asarray(table[canon[c]], dtype=float) * unit_scale(
             c, table.units.get(canon[c]), path)
 
     inputs = {c: column(c) for c in ("FZ", "SL", "SA", "IA", "P", "VX")}
@@ -238,11 +238,6 @@ def read_bench_table(path):
     Python's float reads them (`nan` allowed: an explicit exclusion); anything else is an error
     naming the file, the line and the column. Parquet goes through `read_table` (P in Pa and VX
     in m/s without unit metadata)."""
-    import os
-
-    from ..errors import ModelFileError
-    from ..io.tables import Table, read_table, split_header
-
     path = os.fspath(path)
     if not path.lower().endswith(".csv"):
         return read_table(path)
@@ -297,7 +292,7 @@ def input_columns(table) -> dict[str, np.ndarray]:
     for name in table.names:
         c = COLUMN_ALIASES.get(name.upper())
         if c in ("FZ", "SL", "SA", "IA", "P", "VX"):
-            cols[c] = np.asarray(table[name], float) * _unit_scale(c, table.units.get(name),
+            cols[c] = np.asarray(table[name], float) * unit_scale(c, table.units.get(name),
                                                                    path)
     if "FZ" not in cols:
         raise InputError(f"{path or '<table>'}: no FZ column; columns are "
@@ -1378,9 +1373,7 @@ def default_groups(model, channels) -> list[str]:
     """The coefficient groups fitted, in order, when none are named (`diffsusp tyre fit`, the
     fleet's tyre fits): `mf1989_lateral` for a 1989 tyre (`MagicFormula89`), otherwise
     pure_lateral, pure_longitudinal and pure_aligning as the bench data's `channels` allow."""
-    from .mf89 import MagicFormula89
-
-    if isinstance(model, MagicFormula89):
+    if isinstance(model, mf89.MagicFormula89):
         return ["mf1989_lateral"]
     return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
                             ("pure_aligning", "MZ")) if ch in channels]

@@ -1,6 +1,5 @@
 """The tyre verbs' input tables (`tyre eval --inputs`, `tyre fit`, `fleet tyre-fit` items), read
-safely and checked before any work (issue 28 item 11, `reviews/bad_inputs.md` D1, D8, D15, D20
-and the round trip of `tyre eval --out`).
+safely and checked before any work (the checks below and the round trip of `tyre eval --out`).
 
 `read_tyre_table(path)` is `diffsusp.tyre.fit.read_bench_table` (the header `NAME [unit]`, the
 pressure and speed units it knows) behind the checks every other reader of `diffsusp.io` makes
@@ -31,6 +30,7 @@ import numpy as np
 from ..errors import ModelFileError, ModelWarning
 from ..io.files import check_input, read_input
 from ..io.tables import Table, _decode, _suffix
+from .fit import COLUMN_ALIASES, read_bench_table, unit_scale
 
 __all__ = ["PLAUSIBLE", "ROUND_TRIP", "read_tyre_table"]
 
@@ -52,15 +52,13 @@ def read_tyre_table(path, what: str = "tyre input table") -> Table:
 
     **Raises:** `ModelFileError` (file, line, column) for anything it refuses;
     `FileNotFoundError` when there is no file."""
-    from . import fit as F
-
     path = os.fspath(path)
     kind = _suffix(path)
     if kind == "csv":
         _decode(read_input(path, what, "table"), path)
     else:
         check_input(path, what, "table")
-    table = F.read_bench_table(path)
+    table = read_bench_table(path)
     columns, units = {}, {}
     for name in table.names:
         new, unit = name, table.units.get(name)
@@ -76,7 +74,7 @@ def read_tyre_table(path, what: str = "tyre input table") -> Table:
                              line=table.header_line)
     canon: dict[str, str] = {}
     for name in table.names:
-        c = F.COLUMN_ALIASES.get(name.upper())
+        c = COLUMN_ALIASES.get(name.upper())
         if c is None:
             continue
         if c in canon:
@@ -84,7 +82,7 @@ def read_tyre_table(path, what: str = "tyre input table") -> Table:
                                  "(or rename the other)", path=path, line=table.header_line,
                                  field=name)
         canon[c] = name
-        values = np.asarray(table[name], float) * F._unit_scale(c, table.units.get(name), path)
+        values = np.asarray(table[name], float) * unit_scale(c, table.units.get(name), path)
         _check_column(table, name, c, values, path)
     return table
 

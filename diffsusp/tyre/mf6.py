@@ -1,6 +1,6 @@
 """Magic Formula 5.2 / 6.1 / 6.2 steady-state tyre forces from `.tir` property files.
 
-spec: tyre §7 C, issue 15 (item 1, second bullet). The equations are those of Pacejka, *Tyre and
+spec: tyre §7 C. The equations are those of Pacejka, *Tyre and
 Vehicle Dynamics* (3rd ed., 2012) §4.3.2 (4.E1–4.E78) for MF 6.1/6.2 and the MF-Tyre 5.2
 equation manual for FITTYP 5/6, with the deviations that TNO's MF-Tyre adopts and MFeval
 reproduces (each listed below: "deviation"). The .tir axis system is ISO-W (TYDEX W).
@@ -18,7 +18,7 @@ dimensionless or already N, rad, Pa); `to_tir` converts back.
   F_z·(F_z/FZMIN) (MF-Tyre's low-load reductions). `check_limits` reports (warns about) the
   inputs that will be saturated. `evaluate` called eagerly (concrete inputs and model) announces
   its own saturation once per call (one `ModelWarning` naming each saturated input, its count and
-  first row; issue 28 item 7); traced (under `jax.jit`, `vmap`, `grad`: any input or coefficient
+  first row); traced (under `jax.jit`, `vmap`, `grad`: any input or coefficient
   a tracer) it checks nothing and saturates silently.
 - `alpha_star=False` (default, as MF-Tyre): α* = α and γ* = γ; True: α* = tan α, γ* = sin γ
   (the book's (4.E3)–(4.E4)).
@@ -80,7 +80,7 @@ that of F_x. This M_z uses the combined F_y with its camber terms (the plain com
 at γ = 0). MFeval and TNO's 6.x files have no FE_METHOD: it is off for them.
 
 **Evaluation.** For batches of `FAST_MATH_POINTS` points or more, arctan, sin, cos, tan and
-the equivalent slips' sqrt are the vectorised float64 implementations of `diffsusp.tyre._math`
+the equivalent slips' sqrt are the vectorised float64 implementations of `diffsusp.tyre.fast_math`
 (Cephes algorithms, relative error about 1e-16, exact custom derivatives) instead of XLA's
 scalar calls: the combined F_x, F_y, M_z cost 2.4× less CPU time per point
 (benchmarks/README.md, tyre section); smaller batches keep XLA's functions, whose program
@@ -108,7 +108,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..errors import ModelFileError, ModelWarning
 from ..io.tir import TirFile
-from . import _math
+from . import fast_math
 from .vertical import spin
 
 __all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
@@ -226,7 +226,7 @@ class MagicFormula6(eqx.Module):
     def from_values(cls, values: dict, version: str = "6.1", limits: dict | None = None,
                     friction_ellipse: bool = False) -> "MagicFormula6":
         """From a dict of coefficients in library units (missing: neutral values)."""
-        _check_x64()
+        check_x64()
         c = {n: jnp.asarray(float(values.get(n, _default(n, values))), dtype=float)
              for n in COEFFICIENTS}
         lim = dict(_LIMITS)
@@ -297,7 +297,7 @@ def _fe_method(tir: TirFile) -> bool:
     return v == "YES"
 
 
-def _check_x64():
+def check_x64():
     import jax
 
     if not jax.config.jax_enable_x64:
@@ -331,16 +331,16 @@ class _XLA:
 
 FAST_MATH_POINTS = 20_000
 """Evaluations with at least this many points (the inputs' broadcast size, known when the
-program is traced) use the vectorised functions of `diffsusp.tyre._math`; smaller ones XLA's
+program is traced) use the vectorised functions of `diffsusp.tyre.fast_math`; smaller ones XLA's
 own. Both agree to about 1e-16 relative; the vectorised ones cost 2.4× less CPU per point but
 make a program that compiles about 2.5× slower, which small batches (fits, the tyre on the K&C
 rig, tests) do not win back."""
 
 
 def _cos_atan(x, fm):
-    """cos(atan x) = 1/√(1 + x²); with the vectorised functions `_math.cos_arctan` (a float64
-    sqrt in a loop fusion stops LLVM from vectorising it, see `diffsusp.tyre._math`)."""
-    if fm is _math:
+    """cos(atan x) = 1/√(1 + x²); with the vectorised functions `fast_math.cos_arctan` (a float64
+    sqrt in a loop fusion stops LLVM from vectorising it, see `diffsusp.tyre.fast_math`)."""
+    if fm is fast_math:
         return fm.cos_arctan(x)
     return 1.0 / jnp.sqrt(1.0 + x * x)
 
@@ -469,7 +469,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     V_x, κ and the effective rolling radius, `diffsusp.tyre.vertical.spin`, which needs the
     file's VERTICAL_STIFFNESS, BREFF, DREFF, FREFF).
 
-    **Saturation** (`limits=True`, issue 28 item 7): called with concrete inputs and a concrete
+    **Saturation** (`limits=True`): called with concrete inputs and a concrete
     model, one `ModelWarning` per call lists every input beyond the file's ranges (its count and
     first row, flattened order, as `check_limits`), e.g. a driving slip on a file with KPUMAX = 0,
     whose F_x is then 0. Under `jax.jit`, `vmap` or `grad` (any input or coefficient a tracer)
@@ -499,7 +499,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
     fz, ufz, kappa, alpha, gamma, vx, p = _inputs(model, fz, kappa, alpha, gamma, vx, pressure,
                                                   limits)
     shapes = [jnp.shape(x) for x in (fz, kappa, alpha, gamma, vx, p)]
-    fm = _math if math.prod(jnp.broadcast_shapes(*shapes)) >= FAST_MATH_POINTS else _XLA
+    fm = fast_math if math.prod(jnp.broadcast_shapes(*shapes)) >= FAST_MATH_POINTS else _XLA
     Fz0 = c["FNOMIN"]
     Fz0p = c["LFZO"] * Fz0
     R0 = c["UNLOADED_RADIUS"]

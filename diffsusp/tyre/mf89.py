@@ -27,7 +27,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .. import lsq
 from . import thesis_sets
+from .mf6 import check_x64
 
 __all__ = ["MagicFormula89", "NAMES", "fx0", "fy0", "mz0", "combined", "evaluate", "macro",
            "longitudinal_relaxation_rate", "lateral_relaxation_rate", "transient_slips"]
@@ -62,9 +64,7 @@ class MagicFormula89(eqx.Module):
 
     @classmethod
     def from_values(cls, values: dict) -> "MagicFormula89":
-        from .mf6 import _check_x64
-
-        _check_x64()
+        check_x64()
         unknown = set(values) - set(NAMES)
         if unknown:
             raise ValueError(f"unknown coefficient(s) {sorted(unknown)}; known: {NAMES}")
@@ -90,8 +90,6 @@ class MagicFormula89(eqx.Module):
         C (a0, c0) and E (a7, c9) are a-priori values (the thesis fixes C and fits E in step 2).
         `fz` [kN], at least two loads (three for the TLS)."""
         import numpy as np
-
-        from .. import lsq
 
         fz = np.asarray(fz, float)
         K = np.asarray(cornering_stiffness, float)

@@ -1,6 +1,6 @@
 """A rehearsal of the on-board tyre identification (`diffsusp.tyre.onboard`; spec:
-tyre_contact_model §5.3–5.5, §7 F items 24–25; issue 27 "a rehearsal of the user's own
-experiment"): random tyres around the user's start, the steering-wheel sine of §5.4 driven by
+tyre_contact_model §5.3–5.5, §7 F items 24–25; a rehearsal of the user's own
+experiment): random tyres around the user's start, the steering-wheel sine of §5.4 driven by
 the synthetic 12-DOF car (`diffsusp.tyre.vehicle`) with each of them, the sensors' noise added
 (and the Correvit delayed), the default pipeline run on each record — the scenario of
 `diffsusp.identify.rehearse`.

@@ -34,6 +34,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..errors import InputError
 from ..lsq import algebra
+from . import annex_g
 
 __all__ = ["APRIORI", "JUST_NECESSARY", "STRUCTURES", "DEFORMATION_INPUTS", "INPUT_UNITS",
            "PolynomialModel", "regressor_model", "parse_name", "table6_domains"]
@@ -156,8 +157,6 @@ class PolynomialModel(eqx.Module):
                      ) -> "PolynomialModel":
         """The interaction model F_pneu of one Annex G table (Tables 34–57); `ly=True` keeps the
         table's relaxation coefficients too (spec §4.7)."""
-        from . import annex_g
-
         values = annex_g.coefficients(tyre, pressure, output, include_ly=ly, include_p2=False)
         return cls.create(output, degrees, ly=ly, values=values)
 

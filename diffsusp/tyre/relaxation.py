@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..compilation import CPU_OPTIONS
 from ..errors import ModelError
 from .poly import PolynomialModel
 
@@ -117,8 +118,6 @@ def simulate(fy_model: PolynomialModel, mz_model: PolynomialModel,
         return _simulate(fy_model, mz_model, inputs, t, k_fy, k_mz, fx, rtol, atol, max_steps)
     # One compiled program (the inputs are a Python function: one program per call), with
     # XLA's backend optimisation off (the solver's loop compiles 3× faster, runs once).
-    from ..compilation import CPU_OPTIONS
-
     options = {"xla_backend_optimization_level": 0}
     if jax.default_backend() == "cpu":
         options.update(CPU_OPTIONS)

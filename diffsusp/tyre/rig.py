@@ -1,5 +1,5 @@
 """The tyre on the K&C rig: contact-patch forces from a tyre model whose slip angle and
-inclination follow the suspension's compliance (issue 15, item 6).
+inclination follow the suspension's compliance (spec: tyre §7 C).
 
 A force rig (`diffsusp.kc.force_rig`: the wheel free, loaded at its contact point) with the
 contact-patch force no longer prescribed but produced by a Magic Formula tyre (`MagicFormula6`,

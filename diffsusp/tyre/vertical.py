@@ -1,7 +1,7 @@
 """The Magic Formula's vertical model: loaded radius, deflection, vertical stiffness, effective
 rolling radius and wheel spin (MF 5.2 / 6.1 / 6.2 `.tir` files).
 
-spec: tyre §7 C, issue 15 (the MF 6.2 vertical model). Equations: Pacejka, *Tyre and Vehicle
+spec: tyre §7 C (the MF 6.2 vertical model). Equations: Pacejka, *Tyre and Vehicle
 Dynamics* (3rd ed., 2012) Appendix 3 (A3.2–A3.3) and Besselink, Schmeitz & Pacejka, "An improved
 Magic Formula/Swift tyre model that can handle inflation pressure changes" (VSD 48, 2010), eqs.
 (1)–(8), for MF 5.2/6.1; the MF-Swift 6.2 equation manual's vertical force for FITTYP 62, in the

@@ -15,7 +15,7 @@ point with these than with XLA's calls (545 → 230 ns), not the 10× the functi
 promise — a loop fusion that also holds a float64 `sqrt` is not vectorised (one Magic Formula
 cosine term with a sqrt in its B factor: 49 ns per element against 9 ns without), hence `sqrt`
 here (for the equivalent slips) and `cos_arctan` for 1/√(1 + x²) (a float32 reciprocal square
-root refined by Newton steps: 245 → 213 ns per point against cos(arctan x), issue 15 session 6);
+root refined by Newton steps: 245 → 213 ns per point against cos(arctan x));
 what is left is the fusion structure XLA picks for the three outputs.
 The program they make compiles about 2.5× slower, so `mf6` uses them only for batches of
 `mf6.FAST_MATH_POINTS` points or more.
