@@ -12,6 +12,7 @@ import functools
 import os
 
 from .io import ModelFile, library_model_file, read_model_file, read_model_toml
+from .models import STOP_VARIANTS, ZOO
 
 __all__ = ["builtin_models", "load_model", "load_model_file"]
 
@@ -20,8 +21,6 @@ _DATA = os.path.join(os.path.dirname(__file__), "models", "data")
 
 def _builtin(name: str) -> ModelFile:
     """A built-in model with the load tables of its shipped file `models/data/<name>.toml`."""
-    from .models import ZOO
-
     data = os.path.join(_DATA, f"{name}.toml")
     tables = read_model_toml(data, check=False).load_tables if os.path.exists(data) else {}
     return dataclasses.replace(library_model_file(ZOO[name]()), load_tables=tables)
@@ -29,8 +28,6 @@ def _builtin(name: str) -> ModelFile:
 
 def _stop_variant(name: str) -> ModelFile:
     """An axle with bump and rebound stops: the load tables of the model it adds them to."""
-    from .models import STOP_VARIANTS
-
     base = _builtin(name.removesuffix("_stops"))
     return dataclasses.replace(base, mechanism=STOP_VARIANTS[name]())
 
@@ -38,8 +35,6 @@ def _stop_variant(name: str) -> ModelFile:
 def builtin_models() -> dict:
     """Name → zero-argument reader (`ModelFile`) of every built-in model: `diffsusp.models.ZOO`,
     then `STOP_VARIANTS` (the order error messages list them in)."""
-    from .models import STOP_VARIANTS, ZOO
-
     named = {name: functools.partial(_builtin, name) for name in ZOO}
     named.update({name: functools.partial(_stop_variant, name) for name in STOP_VARIANTS})
     return named

@@ -1,4 +1,4 @@
-"""Chrono fidelity (issue 12 item 4) on Chrono's HMMWV rear double wishbone
+"""Chrono fidelity on Chrono's HMMWV rear double wishbone
 (tests/data/chrono/HMMWV_DoubleWishboneRear.json: a 21-point 'Spring Curve Data' and
 'Minimum/Maximum Length' stops): the spring curve interpolated linearly and the length stops as
 Chrono evaluates them, the wheel corner carried by the imported model, `--side`.
@@ -27,9 +27,8 @@ from typer.testing import CliRunner
 import diffsusp
 import diffsusp.cli.kc  # noqa: F401  (registers `kc`)
 import diffsusp.cli.sensitivity  # noqa: F401  (registers `sensitivity`)
-from diffsusp import kc
+from diffsusp import kc, load_model, save_model
 from diffsusp.cli import app
-from diffsusp.io import load_model, save_model
 from diffsusp.io.chrono import STOP_CURVE, read_chrono
 from diffsusp.kc.corner import default_corner, equilibrium_load
 
@@ -104,7 +103,7 @@ def oracle_path(doc, heights, radius=330.0):
     """Oracle kinematics at wheel-centre heights (mm from design): spring length, the vertical
     rate dz/dh of the wheel carrier's material point at the ground contact point (the wheel
     plane's lowest point, `radius` below the wheel centre: where the K&C rig applies the tyre
-    force, issue 28) and the wheel centre, as functions of the height (cubic splines)."""
+    force) and the wheel centre, as functions of the height (cubic splines)."""
     rig = read_chrono(HMMWV, wheel_travel=True, check=False)
     zero = np.zeros((len(rig.load_points.names), 3))
     k = rig.markers.index("wheel_centre")

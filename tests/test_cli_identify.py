@@ -10,9 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 import diffsusp.cli.identify  # noqa: F401  (registers `identify` on the app)
-from diffsusp import measure
+from diffsusp import load_model, measure
 from diffsusp.cli import app
-from diffsusp.io import load_model
 from diffsusp.models import isolated_bushing
 
 
@@ -192,7 +191,7 @@ def test_identify_fit_from_landmarks(tables, tmp_path):
     assert result.exit_code == 0, result.output
     text = _text(result)
     assert text.count("not determined: σ%") == 2 and " identified " not in text, text
-    # A fit stopped before it converged is exit 3 (issue 13), with its report still printed.
+    # A fit stopped before it converged is exit 3, with its report still printed.
     result = _invoke("fit", "isolated_bushing", "-m", tables["marks"], "--start", "1e4",
                      "--max-steps", "1", "--json")
     assert result.exit_code == 3, result.output

@@ -1,4 +1,4 @@
-"""Fleet recipes and placement (issue 18, session 8), in-process: K&C load tables and design
+"""Fleet recipes and placement (docs/guides/fleets.md), in-process: K&C load tables and design
 variants (a model per item, several models in one batch), Magic Formula fits of bench tables
 (a start tyre per item), and a least-squares batch split over two CPU devices (jax.sharding).
 Every report is checked against the library function run on the same item; the scheduling on
@@ -17,10 +17,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from diffsusp import fleet, kc, measure
+from diffsusp import fleet, kc, load_model, measure, save_model
 from diffsusp.cli import app
 from diffsusp.identify import Params, least_squares_batch
-from diffsusp.io import load_model, save_model
 from diffsusp.measure.data import from_measurements
 from diffsusp.models import isolated_bushing, pseudo_mcpherson
 from diffsusp.tyre import MagicFormula89
@@ -151,7 +150,7 @@ def test_tyre_fits(tmp_path):
     _, reports = F.fit_many([start, start, start, own], datas, names, noise={"FY": 20.0},
                             combined=False)
     # a fit whose optimiser did not converge is a failure with its report, never "ok"
-    # (issue 28 item 11, bad_inputs D4)
+    # (`reviews/bad_inputs.md` D4)
     stuck = sum(not r.converged for r in reports)
     assert (result.ok, result.failed, result.batches) == (4 - stuck, 1 + stuck, 2)
     for item, ref in zip(("p0", "p1", "p2", "own"), reports, strict=True):

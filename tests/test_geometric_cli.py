@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from diffsusp import measure
+from diffsusp import load_model, measure, save_model
 from diffsusp.cli import app
 from diffsusp.geometry import rotvec_to_matrix
 from diffsusp.identify.geometric import correct_geometry
-from diffsusp.io import load_model, save_model
 from diffsusp.models import isolated_bushing
 
 CENTRE = np.array([10.0, -5.0, 3.0])

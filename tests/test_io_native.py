@@ -17,8 +17,6 @@ import pathlib
 import re
 import string
 import subprocess
-import sys
-import types
 from unittest import mock
 
 import equinox as eqx
@@ -30,16 +28,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from diffsusp.errors import ModelError, ModelFileError
-from diffsusp.io import (
-    load_model,
-    load_model_file,
-    loads_from_table,
-    model_from_toml,
-    save_model,
-)
+from diffsusp.io import loads_from_table, model_from_toml, save_model
 from diffsusp.model import MechanismBuilder, frame_from_axes
 from diffsusp.models import TABLE_4_4, TABLE_5_1, ZOO, thesis_load_cases
 from diffsusp.models._write_data import model_text
+from diffsusp.resolve import load_model, load_model_file
 
 DATA = pathlib.Path(importlib.import_module("diffsusp.models").__file__).parent / "data"
 
@@ -157,9 +150,8 @@ def test_builtin_name_loads_the_builtin_model(zoo):
 
 def test_io_depends_on_the_model_layer_only():
     """No module of `diffsusp.io` imports a package above `diffsusp.model` (solvers, K&C,
-    identification, built-in models, CLI), at module level or inside a function; the one
-    upward name is the compatibility forwarding of `diffsusp.io.load_model` to
-    `diffsusp.resolve`. And the file reader knows no built-in name of its own."""
+    identification, built-in models, CLI, the resolver `diffsusp.resolve`), at module level or
+    inside a function. And the file reader knows no built-in name of its own."""
     import ast
 
     from diffsusp.io import read_model_file
@@ -179,20 +171,19 @@ def test_io_depends_on_the_model_layer_only():
             else:
                 continue
             found |= {(path.name, n.split(".")[0]) for n in names}
-    assert {(f, n) for f, n in found if n not in below} == {("__init__.py", "resolve")}
+    assert {(f, n) for f, n in found if n not in below} == set()
     with pytest.raises(ModelFileError, match=r"expected a \.toml, \.adm or \.json path\."):
         read_model_file("isolated_bushing")
-    assert load_model_file is importlib.import_module("diffsusp.resolve").load_model_file
+    assert not hasattr(importlib.import_module("diffsusp.io"), "load_model_file")
 
 
 def test_dispatch_on_suffix(tmp_path, monkeypatch):
     calls = []
-    fake_adams = types.ModuleType("diffsusp.io.adams")
-    fake_adams.read_adm = lambda path, **kw: calls.append(("adm", path)) or "adm-model"
-    fake_chrono = types.ModuleType("diffsusp.io.chrono")
-    fake_chrono.read_chrono = lambda path: calls.append(("json", path)) or "chrono-model"
-    monkeypatch.setitem(sys.modules, "diffsusp.io.adams", fake_adams)
-    monkeypatch.setitem(sys.modules, "diffsusp.io.chrono", fake_chrono)
+    io = importlib.import_module("diffsusp.io")
+    monkeypatch.setattr(io, "read_adm",
+                        lambda path, **kw: calls.append(("adm", path)) or "adm-model")
+    monkeypatch.setattr(io, "read_chrono",
+                        lambda path: calls.append(("json", path)) or "chrono-model")
     for suffix in (".adm", ".json"):
         (tmp_path / f"m{suffix}").write_text("x")
     assert load_model(tmp_path / "m.adm") == "adm-model"

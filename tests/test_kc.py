@@ -589,7 +589,7 @@ def test_corner_loads_per_side_table_without_an_event(pm, axle):
     frame's left wheel (x forward, the Chrono strut): (−F_long, −F_lat, F_vert), the guides'
     hand-made vectors; a mirrored right wheel: lateral inboard is −y; load_table applies the
     same loads."""
-    from diffsusp.io import load_model
+    from diffsusp import load_model
     from diffsusp.models import thesis_load_cases
     from diffsusp.models.loadcases import TABLE_5_1
 

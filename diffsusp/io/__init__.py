@@ -4,15 +4,17 @@ lines and planes) and tyre property files (.tir, MF 5.2/6.1/6.2).
 
 `read_model_file(source)` reads a model file: a `.toml` native file, an Adams `.adm` dataset or
 a Chrono `.json` template. io depends on `diffsusp.model` only: the resolver that also knows
-the built-in models by name is `diffsusp.load_model` / `diffsusp.load_model_file`
-(`diffsusp.resolve`); `diffsusp.io.load_model` and `load_model_file` are that resolver, kept
-under these names.
+the built-in models by name is `diffsusp.load_model` (and `diffsusp.resolve.load_model_file`).
 """
 
 import dataclasses
 import os
 from collections.abc import Callable, Mapping
 
+from ..errors import InputError, ModelFileError
+from ..model.mirror import mirror
+from .adams import read_adm
+from .chrono import read_chrono
 from .iges import IgesFile, read_iges
 from .native import ModelFile, model_from_toml, read_model_toml
 from .native_write import model_to_toml, write_model_toml
@@ -30,7 +32,6 @@ from .tir import TirFile, read_tir, tir_from_text, write_tir
 __all__ = [
     "IgesFile", "TirFile", "read_iges", "read_tir", "tir_from_text", "write_tir",
     "SIDES", "ModelFile", "NamedModels", "Table", "library_model_file", "load_columns",
-    "load_model", "load_model_file",
     "loads_from_table", "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml",
     "read_model_file", "read_table", "results_table", "save_model", "write_model_toml",
     "write_table",
@@ -53,8 +54,8 @@ def read_model_file(source, *, check: bool = True, side: str | None = None,
     is): a Chrono file is read on that side (`read_chrono(side=...)`); any other half axle whose
     corner (`Mechanism.corners`) is on the other side is mirrored (`diffsusp.model.mirror.mirror`,
     its corner follows); `named`: the models known by name (an existing path wins over a name).
-    `diffsusp.load_model_file` passes the built-in models (`diffsusp.resolve`): this module
-    depends on `diffsusp.model` only.
+    `diffsusp.resolve.load_model_file` passes the built-in models: this module depends on
+    `diffsusp.model` only.
 
     **Returns:** a `ModelFile`.
 
@@ -62,14 +63,10 @@ def read_model_file(source, *, check: bool = True, side: str | None = None,
     file nor a name of `named`; `InputError` for a `side` on a model without a corner, or with
     more than one (an axle).
     """
-    from ..errors import InputError
-
     if side is not None and side not in SIDES:
         raise InputError(f"side must be 'left' or 'right'; got '{side}'.")
     text = os.fspath(source)
     if side is not None and os.path.splitext(text)[1].lower() == ".json":
-        from .chrono import read_chrono
-
         if os.path.isfile(text):
             return ModelFile(mechanism=read_chrono(text, side=side), load_tables={},
                              units=dict(_LIBRARY), path=text)
@@ -84,15 +81,11 @@ def read_model_file(source, *, check: bool = True, side: str | None = None,
             "of a native file, or load the model without a side.")
     if mech.corners[0].side_in(mech) == side:
         return out
-    from ..model.mirror import mirror
-
     return dataclasses.replace(out, mechanism=mirror(mech, name=f"{mech.name} ({side})"))
 
 
 def _read_model_file(source, *, check: bool, named: NamedModels) -> ModelFile:
     """A model file by its suffix, or a named model (see `read_model_file`)."""
-    from ..errors import ModelFileError
-
     text = os.fspath(source)
     if text in named and not os.path.exists(text):
         return named[text]()
@@ -108,13 +101,9 @@ def _read_model_file(source, *, check: bool, named: NamedModels) -> ModelFile:
     if suffix == ".toml":
         return read_model_toml(text, check=check)
     if suffix == ".adm":
-        from .adams import read_adm
-
         return ModelFile(mechanism=read_adm(text, check=check), load_tables={},
                          units=dict(_LIBRARY), path=text)
     if suffix == ".json":
-        from .chrono import read_chrono
-
         return ModelFile(mechanism=read_chrono(text), load_tables={}, units=dict(_LIBRARY),
                          path=text)
     models = f", or one of {', '.join(named)}" if named else ""
@@ -140,31 +129,9 @@ def save_model(mech, path, *, load_tables: dict | None = None, units: dict | Non
     `path` is an existing native file, keep its comments (and its load tables if
     `load_tables` is None).
     """
-    from ..errors import ModelFileError
-
     if os.path.splitext(os.fspath(path))[1].lower() != ".toml":
         raise ModelFileError("save_model writes native .toml files; use a .toml path.",
                              path=path)
     write_model_toml(mech, path, load_tables=load_tables, units=units,
                      keep_comments=keep_comments)
 
-
-def __getattr__(name):
-    # The importers load on first use (they pull in their own parsers).
-    if name in ("read_adm", "parse_adm", "write_adm", "read_lcf", "write_lcf",
-                "read_bushing_property", "write_bushing_property"):
-        from . import adams
-
-        return getattr(adams, name)
-    if name in ("load_model", "load_model_file"):
-        # The public names of the model resolver (built-in names included), kept here for
-        # callers of `diffsusp.io.load_model`: the resolver lives above io, in `diffsusp.resolve`
-        # (no module of io imports the built-in models).
-        from .. import resolve
-
-        return getattr(resolve, name)
-    if name == "read_chrono":
-        from .chrono import read_chrono
-
-        return read_chrono
-    raise AttributeError(f"module 'diffsusp.io' has no attribute '{name}'")

@@ -1,38 +1,30 @@
-"""The interpreter of an Adams dataset: from the parsed statements (`adams.AdmModel`) to a
-`MechanismBuilder` (the subset and its rules are in `adams`'s docstring; spec stiffness §4.1,
-§6 item 10). Used by `AdmModel.build`; it evaluates function expressions with the grammar of
-`expr`, never by executing file content."""
+"""The interpreter of an Adams dataset: from the parsed statements (`adams_parse.AdmModel`) to
+a `MechanismBuilder` (the subset and its rules are in `adams`'s docstring; spec stiffness §4.1,
+§6 item 10), and `parse_adm`, which attaches it to the parsed model for `AdmModel.build` and
+`AdmModel.loads`. It evaluates function expressions with the grammar of `expr`, never by
+executing file content."""
 
+import dataclasses
 import math
 import re
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, ModelWarning
 from ..geometry import reuler_to_matrix
 from ..model import Loads, Mechanism, MechanismBuilder
 from ..model.builder import frame_from_axes
-from .adams import (
-    _IGNORED_IN_STATICS,
-    _INTEGER,
-    _KNOWN,
-    _REAL,
+from .adams_common import FORCE_TO_N, LENGTH_TO_MM, SYSTEMS, error
+from .adams_parse import (
     AdmModel,
     AdmSpline,
     AdmStatement,
     AdmValue,
     SkippedStatement,
-    _Driver,
-    _Load,
-    _Marker,
+    parse_statements,
     stop_of_function,
-)
-from .adams_common import (
-    _FORCE_TO_N,
-    _LENGTH_TO_MM,
-    _SYSTEMS,
-    _error,
 )
 from .expr import (
     ExpressionError,
@@ -41,26 +33,86 @@ from .expr import (
     parse_expression,
 )
 
+_IGNORED_IN_STATICS = {"MASS", "CM", "IP", "IM", "VX", "VY", "VZ", "WX", "WY", "WZ", "VM", "WM",
+                       "EXACT", "C", "CT", "IC", "ICTRAN", "ICROT", "ICDISP", "ICVEL", "DELTA_V",
+                       "MAXIMUM_DEFORMATION"}
+_KNOWN = {
+    # statement: (arguments, flags) read or deliberately ignored (masses, damping, initial
+    # conditions); anything else is reported in `AdmModel.skipped`.
+    "UNITS": ({"FORCE", "MASS", "LENGTH", "TIME", "SYSTEM"}, set()),
+    "PART": ({"QG", "REULER", "ZG", "XG"}, {"GROUND"}),
+    "MARKER": ({"PART", "QP", "REULER", "ZP", "XP"}, {"FLOATING", "USEXP"}),
+    "JOINT": ({"I", "J"}, {"SPHERICAL", "REVOLUTE", "CYLINDRICAL", "TRANSLATIONAL", "UNIVERSAL",
+                           "FIXED", "HOOKE", "PLANAR", "RACKPIN", "SCREW", "CONVEL"}),
+    "JPRIM": ({"I", "J"}, {"INLINE", "INPLANE", "PERPENDICULAR", "ATPOINT", "ORIENTATION",
+                           "PARALLEL_AXES"}),
+    "BUSHING": ({"I", "J", "K", "KT", "FORCE", "TORQUE"}, set()),
+    "SPRINGDAMPER": ({"I", "J", "K", "KT", "LENGTH", "FORCE", "ANGLE", "TORQUE"},
+                     {"TRANSLATIONAL", "ROTATIONAL"}),
+    "SFORCE": ({"I", "J", "FUNCTION"}, {"TRANSLATIONAL", "ROTATIONAL", "ACTIONONLY"}),
+    "GFORCE": ({"I", "JFLOAT", "RM", "FX", "FY", "FZ", "TX", "TY", "TZ", "FUNCTION"}, set()),
+    "VFORCE": ({"I", "JFLOAT", "RM", "FX", "FY", "FZ", "FUNCTION"}, set()),
+    "VTORQUE": ({"I", "JFLOAT", "RM", "TX", "TY", "TZ", "FUNCTION"}, set()),
+    "SPLINE": ({"X", "Y", "Z", "FILE"}, {"LINEAR_EXTRAPOLATE"}),
+    "MOTION": ({"I", "J", "JOINT", "FUNCTION"}, {"X", "Y", "Z", "B1", "B2", "B3", "TRANSLATION",
+                                                 "ROTATION", "DISPLACEMENT", "VELOCITY",
+                                                 "ACCELERATION"}),
+    "GCON": ({"I", "FUNCTION"}, set()),
+}
+_INTEGER = re.compile(r"[+-]?\d{1,18}")
+_REAL = re.compile(r"([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)([dD]?)")
+
+
+@dataclasses.dataclass
+class _Marker:
+    id: int
+    part: int
+    name: str
+    position: np.ndarray
+    orientation: np.ndarray
+    floating: bool
+    line: int
+    named: bool
+
+
+@dataclasses.dataclass
+class _Load:
+    """An external load (load point) defined by GFORCE/VFORCE/VTORQUE/action-only SFORCE."""
+
+    name: str
+    statement: AdmStatement
+    force: tuple            # 3 expression trees (or None) in the frame below
+    moment: tuple
+    rotation: np.ndarray    # file frame → load point frame (identity, or RM's axes → global)
+
+
+@dataclasses.dataclass
+class _Driver:
+    name: str
+    statement: AdmStatement
+    function: object
+    offset: float
+
 
 def _real(value: AdmValue, path, what, *, angle=False) -> float:
     m = _REAL.fullmatch(value.text)
     if m is None:
-        raise _error(f"{what}: {value.text!r} is not a number.", path, value.line, what)
+        raise error(f"{what}: {value.text!r} is not a number.", path, value.line, what)
     x = float(m.group(1))
     if not math.isfinite(x):
-        raise _error(f"{what}: {value.text} is not a finite number.", path, value.line, what)
+        raise error(f"{what}: {value.text} is not a finite number.", path, value.line, what)
     if m.group(2):
         if not angle:
-            raise _error(f"{what}: the degree suffix D is only allowed on angles.", path,
-                         value.line, what)
+            raise error(f"{what}: the degree suffix D is only allowed on angles.", path,
+                        value.line, what)
         x = math.radians(x)
     return x
 
 
 def _check_magnitude(values, path, line, what, limit=1e15):
     if any(abs(v) > limit for v in values):
-        raise _error(f"{what}: {values} exceeds {limit:g} in magnitude; check the value and "
-                     "its units.", path, line, what)
+        raise error(f"{what}: {values} exceeds {limit:g} in magnitude; check the value and "
+                    "its units.", path, line, what)
 
 
 class _Plan:
@@ -75,8 +127,8 @@ class _Plan:
             if s.id is not None:
                 key = (s.keyword, s.id)
                 if key in self.by_key:
-                    raise _error(f"{s.keyword}/{s.id} is defined twice (first at line "
-                                 f"{self.by_key[key].line}).", self.path, s.line)
+                    raise error(f"{s.keyword}/{s.id} is defined twice (first at line "
+                                f"{self.by_key[key].line}).", self.path, s.line)
                 self.by_key[key] = s
                 if s.name:
                     model.names[(s.keyword, s.id)] = s.name
@@ -100,14 +152,14 @@ class _Plan:
         arg = s.arguments.get(key)
         if arg is None:
             if default is None:
-                raise _error(f"{s.label}: {key} is missing.", self.path, s.line, key)
+                raise error(f"{s.label}: {key} is missing.", self.path, s.line, key)
             return list(default)
         if arg.expression is not None:
-            raise _error(f"{s.label}: {key} must be numbers.", self.path, arg.line, key)
+            raise error(f"{s.label}: {key} must be numbers.", self.path, arg.line, key)
         out = [_real(v, self.path, f"{s.label} {key}", angle=angle) * scale for v in arg.values]
         if count is not None and len(out) != count:
-            raise _error(f"{s.label}: {key} needs {count} value(s); got {len(out)}.",
-                         self.path, arg.line, key)
+            raise error(f"{s.label}: {key} needs {count} value(s); got {len(out)}.",
+                        self.path, arg.line, key)
         _check_magnitude(out, self.path, arg.line, f"{s.label} {key}")
         return out
 
@@ -115,10 +167,10 @@ class _Plan:
         arg = s.arguments.get(key)
         if arg is None:
             if required:
-                raise _error(f"{s.label}: {key} is missing.", self.path, s.line, key)
+                raise error(f"{s.label}: {key} is missing.", self.path, s.line, key)
             return None
         if len(arg.values) != 1 or not _INTEGER.fullmatch(arg.values[0].text):
-            raise _error(f"{s.label}: {key} must be one integer id.", self.path, arg.line, key)
+            raise error(f"{s.label}: {key} must be one integer id.", self.path, arg.line, key)
         return int(arg.values[0].text)
 
     def word(self, s, key):
@@ -126,14 +178,14 @@ class _Plan:
         if arg is None:
             return None
         if len(arg.values) != 1:
-            raise _error(f"{s.label}: {key} must be one word.", self.path, arg.line, key)
+            raise error(f"{s.label}: {key} must be one word.", self.path, arg.line, key)
         return arg.values[0].text.strip("'\"").upper()
 
     def marker(self, s, key) -> _Marker:
         ident = self.integer(s, key)
         if ident not in self.markers:
-            raise _error(f"{s.label}: {key} = {ident} is not a defined MARKER.", self.path,
-                         s.arguments[key].line, key)
+            raise error(f"{s.label}: {key} = {ident} is not a defined MARKER.", self.path,
+                        s.arguments[key].line, key)
         return self.markers[ident]
 
     def expression(self, s, key):
@@ -141,8 +193,8 @@ class _Plan:
         if arg is None:
             return None
         if arg.expression is None:
-            raise _error(f"{s.label}: {key} must be a function expression.", self.path,
-                         arg.line, key)
+            raise error(f"{s.label}: {key} must be a function expression.", self.path,
+                        arg.line, key)
         try:
             return parse_expression(arg.expression)
         except ExpressionError as e:
@@ -155,28 +207,28 @@ class _Plan:
         length, force = "MILLIMETER", "NEWTON"
         units = [s for s in self.statements if s.keyword == "UNITS"]
         if len(units) > 1:
-            raise _error("UNITS/ is given twice.", self.path, units[1].line)
+            raise error("UNITS/ is given twice.", self.path, units[1].line)
         if units:
             s = units[0]
             system = self.word(s, "SYSTEM")
             if system is not None:
-                if system not in _SYSTEMS:
-                    raise _error(f"UNITS/: SYSTEM = {system} is not one of "
-                                 f"{', '.join(_SYSTEMS)}.", self.path, s.line, "SYSTEM")
-                length, force = _SYSTEMS[system]
+                if system not in SYSTEMS:
+                    raise error(f"UNITS/: SYSTEM = {system} is not one of "
+                                f"{', '.join(SYSTEMS)}.", self.path, s.line, "SYSTEM")
+                length, force = SYSTEMS[system]
             length = self.word(s, "LENGTH") or length
             force = self.word(s, "FORCE") or force
             for key in ("FORCE", "MASS", "LENGTH", "TIME", "SYSTEM"):
                 if (value := self.word(s, key)) is not None:
                     model.units[key] = value
-            if length not in _LENGTH_TO_MM:
-                raise _error(f"UNITS/: LENGTH = {length} is not one of "
-                             f"{', '.join(_LENGTH_TO_MM)}.", self.path, s.line, "LENGTH")
-            if force not in _FORCE_TO_N:
-                raise _error(f"UNITS/: FORCE = {force} is not one of "
-                             f"{', '.join(_FORCE_TO_N)}.", self.path, s.line, "FORCE")
-        model.length_to_mm = _LENGTH_TO_MM[length]
-        model.force_to_n = _FORCE_TO_N[force]
+            if length not in LENGTH_TO_MM:
+                raise error(f"UNITS/: LENGTH = {length} is not one of "
+                            f"{', '.join(LENGTH_TO_MM)}.", self.path, s.line, "LENGTH")
+            if force not in FORCE_TO_N:
+                raise error(f"UNITS/: FORCE = {force} is not one of "
+                            f"{', '.join(FORCE_TO_N)}.", self.path, s.line, "FORCE")
+        model.length_to_mm = LENGTH_TO_MM[length]
+        model.force_to_n = FORCE_TO_N[force]
         self.lf, self.ff = model.length_to_mm, model.force_to_n
 
     def _frame(self, s, origin_key, z_key, x_key):
@@ -184,8 +236,8 @@ class _Plan:
         origin = np.array(self.reals(s, origin_key, 3, default=(0, 0, 0), scale=self.lf))
         has_euler = "REULER" in s.arguments
         if has_euler and z_key in s.arguments:
-            raise _error(f"{s.label}: give REULER or {z_key}/{x_key}, not both.", self.path,
-                         s.line, z_key)
+            raise error(f"{s.label}: give REULER or {z_key}/{x_key}, not both.", self.path,
+                        s.line, z_key)
         if has_euler:
             angles = self.reals(s, "REULER", 3, angle=True)
             rot = np.asarray(reuler_to_matrix(jnp.asarray(angles, dtype=float)))
@@ -196,7 +248,7 @@ class _Plan:
             try:
                 rot = frame_from_axes(z, x)
             except ModelError as e:
-                raise _error(f"{s.label}: {e}", self.path, s.line, z_key) from None
+                raise error(f"{s.label}: {e}", self.path, s.line, z_key) from None
         else:
             rot = np.eye(3)
         return origin, rot
@@ -210,11 +262,11 @@ class _Plan:
             if s.keyword != "PART":
                 continue
             if s.id is None:
-                raise _error("PART/ needs an id.", self.path, s.line)
+                raise error("PART/ needs an id.", self.path, s.line)
             if "GROUND" in s.flags:
                 if self.ground is not None:
-                    raise _error(f"PART/{s.id}: a second GROUND part (the first is "
-                                 f"PART/{self.ground}).", self.path, s.line)
+                    raise error(f"PART/{s.id}: a second GROUND part (the first is "
+                                f"PART/{self.ground}).", self.path, s.line)
                 self.ground = s.id
                 self.parts[s.id] = ("ground", np.zeros(3), np.eye(3), s.line)
                 continue
@@ -228,11 +280,11 @@ class _Plan:
             if s.keyword != "MARKER":
                 continue
             if s.id is None:
-                raise _error("MARKER/ needs an id.", self.path, s.line)
+                raise error("MARKER/ needs an id.", self.path, s.line)
             part = self.integer(s, "PART")
             if part not in self.parts:
-                raise _error(f"{s.label}: PART = {part} is not a defined PART.", self.path,
-                             s.arguments["PART"].line, "PART")
+                raise error(f"{s.label}: PART = {part} is not a defined PART.", self.path,
+                            s.arguments["PART"].line, "PART")
             floating = "FLOATING" in s.flags
             _, p_part, r_part, _ = self.parts[part]
             if floating:
@@ -268,7 +320,7 @@ class _Plan:
             if handler is None:
                 continue
             if s.id is None:
-                raise _error(f"{s.keyword}/ needs an id.", self.path, s.line)
+                raise error(f"{s.keyword}/ needs an id.", self.path, s.line)
             try:
                 handler(s)
             except _Unsupported as e:
@@ -303,9 +355,9 @@ class _Plan:
         i, j = self.marker(s, i_key), self.marker(s, j_key)
         for m, key in ((i, i_key), (j, j_key)):
             if m.floating:
-                raise _error(f"{s.label}: {key} = {m.id} is a FLOATING marker; only "
-                             "GFORCE/VFORCE/VTORQUE reactions (JFLOAT) may use one.",
-                             self.path, s.arguments[key].line, key)
+                raise error(f"{s.label}: {key} = {m.id} is a FLOATING marker; only "
+                            "GFORCE/VFORCE/VTORQUE reactions (JFLOAT) may use one.",
+                            self.path, s.arguments[key].line, key)
         return i, j
 
     def _joint(self, s):
@@ -335,15 +387,15 @@ class _Plan:
         a, b, length = found
         for ident in (a, b):
             if ident not in self.markers or self.markers[ident].floating:
-                raise _error(f"{s.label}: DM({a}, {b}) refers to marker {ident}, which is not "
-                             "a defined fixed MARKER.", self.path, s.line, "FUNCTION")
+                raise error(f"{s.label}: DM({a}, {b}) refers to marker {ident}, which is not "
+                            "a defined fixed MARKER.", self.path, s.line, "FUNCTION")
         i, j = self.markers[a], self.markers[b]
         design = float(np.linalg.norm(i.position - j.position))
         length *= self.lf
         if abs(design - length) > 1e-6 * max(1.0, design):
-            raise _error(f"{s.label}: DM({a}, {b}) - L with L = {length:.9g} mm, but the "
-                         f"markers are {design:.9g} mm apart at design; the design position "
-                         "must satisfy the constraint.", self.path, s.line, "FUNCTION")
+            raise error(f"{s.label}: DM({a}, {b}) - L with L = {length:.9g} mm, but the "
+                        f"markers are {design:.9g} mm apart at design; the design position "
+                        "must satisfy the constraint.", self.path, s.line, "FUNCTION")
         self.use(i, "geometry")
         self.use(j, "geometry")
         self.calls.append((s, "joint", (self.element_name(s), "distance", i.id, j.id), {}))
@@ -399,11 +451,11 @@ class _Plan:
                 return
         node = self.expression(s, "FUNCTION")
         if node is None:
-            raise _error(f"{s.label}: FUNCTION is missing.", self.path, s.line, "FUNCTION")
+            raise error(f"{s.label}: FUNCTION is missing.", self.path, s.line, "FUNCTION")
         _check_evaluable(node)
         rotational = "ROTATIONAL" in s.flags
         if not rotational and "TRANSLATIONAL" not in s.flags:
-            raise _error(f"{s.label}: give TRANSLATIONAL or ROTATIONAL.", self.path, s.line)
+            raise error(f"{s.label}: give TRANSLATIONAL or ROTATIONAL.", self.path, s.line)
         i, j = self.pair(s)
         if "ACTIONONLY" in s.flags:
             self.use(i, "geometry")
@@ -423,8 +475,8 @@ class _Plan:
             self.calls.append((s, "bushing", (name, i.id, j.id), dict(torque_function=node)))
         else:
             if np.linalg.norm(i.position - j.position) < 1e-6:
-                raise _error(f"{s.label}: a two-body TRANSLATIONAL SFORCE needs distinct I and "
-                             "J positions (it acts along their line).", self.path, s.line)
+                raise error(f"{s.label}: a two-body TRANSLATIONAL SFORCE needs distinct I and "
+                            "J positions (it acts along their line).", self.path, s.line)
             self.calls.append((s, "spring", (name, i.id, j.id), dict(force_function=node)))
 
     def _gforce(self, s, values=True):
@@ -440,15 +492,15 @@ class _Plan:
             comps[key] = node
         i = self.marker(s, "I")
         if i.floating:
-            raise _error(f"{s.label}: I = {i.id} is a FLOATING marker.", self.path, s.line, "I")
+            raise error(f"{s.label}: I = {i.id} is a FLOATING marker.", self.path, s.line, "I")
         jfloat = self.marker(s, "JFLOAT")
         rm = self.marker(s, "RM")
         if not jfloat.floating:
-            raise _error(f"{s.label}: JFLOAT = {jfloat.id} must be a FLOATING marker.",
-                         self.path, s.line, "JFLOAT")
+            raise error(f"{s.label}: JFLOAT = {jfloat.id} must be a FLOATING marker.",
+                        self.path, s.line, "JFLOAT")
         if rm.floating:
-            raise _error(f"{s.label}: RM = {rm.id} must be a fixed marker.", self.path, s.line,
-                         "RM")
+            raise error(f"{s.label}: RM = {rm.id} must be a fixed marker.", self.path, s.line,
+                        "RM")
         if jfloat.part != self.ground:
             raise _Unsupported(
                 f"the reaction marker JFLOAT = {jfloat.id} is on a moving part; only loads "
@@ -464,7 +516,7 @@ class _Plan:
     def _motion(self, s):
         node = self.expression(s, "FUNCTION")
         if node is None:
-            raise _error(f"{s.label}: FUNCTION is missing.", self.path, s.line, "FUNCTION")
+            raise error(f"{s.label}: FUNCTION is missing.", self.path, s.line, "FUNCTION")
         _check_evaluable(node)
         if any(f in s.flags for f in ("VELOCITY", "ACCELERATION")):
             raise _Unsupported("only DISPLACEMENT motions are supported")
@@ -474,8 +526,8 @@ class _Plan:
             joint = self.by_key.get(("JOINT", self.integer(s, "JOINT")))
             if joint is None or not any(f in joint.flags
                                         for f in ("TRANSLATIONAL", "CYLINDRICAL")):
-                raise _error(f"{s.label}: JOINT must be a translational or cylindrical JOINT.",
-                             self.path, s.line, "JOINT")
+                raise error(f"{s.label}: JOINT must be a translational or cylindrical JOINT.",
+                            self.path, s.line, "JOINT")
             i, j = self.pair(joint)
             axis = 2
         else:
@@ -503,11 +555,11 @@ class _Plan:
         x = np.array(self.reals(s, "X"))
         y = np.array(self.reals(s, "Y"))
         if x.size != y.size or x.size < 2:
-            raise _error(f"{s.label}: X and Y need the same number of values (at least 2); got "
-                         f"{x.size} and {y.size}.", self.path, s.arguments["Y"].line, "Y")
+            raise error(f"{s.label}: X and Y need the same number of values (at least 2); got "
+                        f"{x.size} and {y.size}.", self.path, s.arguments["Y"].line, "Y")
         if np.any(np.diff(x) <= 0):
-            raise _error(f"{s.label}: X must be strictly increasing.", self.path,
-                         s.arguments["X"].line, "X")
+            raise error(f"{s.label}: X must be strictly increasing.", self.path,
+                        s.arguments["X"].line, "X")
         self.model.splines[s.id] = AdmSpline(s.id, s.name, x, y,
                                              "LINEAR_EXTRAPOLATE" in s.flags, s.line)
 
@@ -525,13 +577,13 @@ class _Plan:
         if not any(ident != self.ground for ident in self.parts):
             what = ("the dataset holds no statement (an empty file?)" if not self.statements
                     else "the dataset defines no moving PART")
-            raise _error(f"{what}; an Adams dataset (.adm) needs PART/ statements (one with "
-                         "GROUND), MARKER/s on them and the joints and forces between them.",
-                         self.path, 1)
+            raise error(f"{what}; an Adams dataset (.adm) needs PART/ statements (one with "
+                        "GROUND), MARKER/s on them and the joints and forces between them.",
+                        self.path, 1)
         if not any(kind in ("joint", "bushing", "spring") for _, kind, _, _ in self.calls):
-            raise _error("the dataset defines no joint, bushing or spring between its parts "
-                         "(a truncated file?); nothing holds the parts.", self.path,
-                         max(s.line for s in self.statements))
+            raise error("the dataset defines no joint, bushing or spring between its parts "
+                        "(a truncated file?); nothing holds the parts.", self.path,
+                        max(s.line for s in self.statements))
         title = re.sub(r"^ADAMS/View model name:\s*", "", self.model.title, flags=re.I)
         builder = MechanismBuilder(title or (self.path.stem if self.path else "adm"))
         lines: dict[str, int] = {}
@@ -581,20 +633,20 @@ class _Plan:
         try:
             return builder.build(check=check)
         except ModelError as e:
-            error = _error(str(e), self.path, _line_of(str(e), lines, self.statements))
+            err = error(str(e), self.path, _line_of(str(e), lines, self.statements))
             # A model well written but not solvable as given (free modes, joints not assembled)
             # is exit 4 whatever its format, like a native file's.
-            error.bad_input = getattr(e, "bad_input", False)
-            raise error from None
+            err.bad_input = getattr(e, "bad_input", False)
+            raise err from None
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as e:
-            raise _error(f"the model cannot be assembled: {e}", self.path,
-                         self.statements[-1].line if self.statements else 1) from None
+            raise error(f"the model cannot be assembled: {e}", self.path,
+                        self.statements[-1].line if self.statements else 1) from None
 
     def _call(self, fn, lines, line, *args, **kw):
         try:
             return fn(*args, **kw)
         except ModelError as e:
-            raise _error(str(e), self.path, line) from None
+            raise error(str(e), self.path, line) from None
 
     def loads(self, mech: Mechanism, times) -> Loads:
         t = np.asarray(times, dtype=float)
@@ -660,10 +712,10 @@ def _evaluate(node, time, s, path) -> float:
     try:
         value = evaluate(node, time)
     except ExpressionError as e:
-        raise _error(f"{s.label}: its function cannot be evaluated at time {time}: {e}.", path,
-                     s.line) from None
+        raise error(f"{s.label}: its function cannot be evaluated at time {time}: {e}.", path,
+                    s.line) from None
     if not math.isfinite(value) or abs(value) > 1e15:
-        raise _error(f"{s.label}: its function gives {value} at time {time}.", path, s.line)
+        raise error(f"{s.label}: its function gives {value} at time {time}.", path, s.line)
     return value
 
 
@@ -700,3 +752,23 @@ def _line_of(message: str, lines: dict[str, int], statements) -> int:
         if name in lines:
             return lines[name]
     return statements[-1].line if statements else 1
+
+
+def parse_adm(source) -> AdmModel:
+    """Parse an Adams dataset (.adm) — a path, or the text itself — into an `AdmModel` ready to
+    `build` (the subset is in the docstring of `diffsusp.io.adams`).
+
+    The statements outside the subset are listed in `AdmModel.skipped` and in one
+    `ModelWarning`. Raises `ModelFileError` (with the line) for a malformed statement, an
+    unknown marker or part, a non-finite number.
+    """
+    model = parse_statements(source)
+    path = model.path
+    model._plan = _Plan(model)
+    if model.skipped:
+        warnings.warn(
+            f"{path or '<input>'}: skipped {len(model.skipped)} statement(s) outside the "
+            "supported subset: " + "; ".join(str(s) for s in model.skipped),
+            ModelWarning, stacklevel=2,
+        )
+    return model

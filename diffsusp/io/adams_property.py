@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from .adams_common import _FORCE_TO_N, _LENGTH_TO_MM, _error, _fmt, _read_source
+from .adams_common import FORCE_TO_N, LENGTH_TO_MM, error, fmt, read_source
 
 # ----------------------------------------------------------------------------- TeimOrbit files
 
@@ -55,11 +55,11 @@ def _teim_value(text: str, path, line):
     if _TEIM_NUMBER.fullmatch(text):
         value = float(text)
         if not math.isfinite(value):
-            raise _error(f"{text} is not a finite number.", path, line)
+            raise error(f"{text} is not a finite number.", path, line)
         return value
     if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.]*", text):
         return text
-    raise _error(f"value {text[:40]!r} is not a number, a quoted string or a word.", path, line)
+    raise error(f"value {text[:40]!r} is not a number, a quoted string or a word.", path, line)
 
 
 def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
@@ -69,7 +69,7 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
     number or word), ``{col1 col2 ...}`` table headers followed by rows of numbers or quoted
     strings. Raises `ModelFileError` with the line of anything else.
     """
-    text, path = _read_source(source, what)
+    text, path = read_source(source, what)
     sections: dict[str, TeimBlock] = {}
     section = block = None
     table = None
@@ -80,28 +80,28 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
         if (m := _TEIM_SECTION.match(stripped)) and _TEIM_NAME.fullmatch(m.group(1).strip()):
             name = m.group(1).strip().upper()
             if name in sections:
-                raise _error(f"section [{name}] is given twice (first at line "
-                             f"{sections[name].line}).", path, number)
+                raise error(f"section [{name}] is given twice (first at line "
+                            f"{sections[name].line}).", path, number)
             section = block = sections[name] = TeimBlock(name, number)
             table = None
         elif (m := _TEIM_SUBSECTION.match(stripped)) and _TEIM_NAME.fullmatch(
                 m.group(1).strip()):
             if section is None:
-                raise _error(f"({m.group(1).strip()}) is outside any [SECTION].", path, number)
+                raise error(f"({m.group(1).strip()}) is outside any [SECTION].", path, number)
             name = m.group(1).strip().upper()
             block = section.blocks[name] = TeimBlock(name, number)
             table = None
         elif m := _TEIM_HEADER.match(stripped):
             if block is None:
-                raise _error("a {table header} is outside any [SECTION].", path, number)
+                raise error("a {table header} is outside any [SECTION].", path, number)
             columns = tuple(m.group(1).split())
             if not columns:
-                raise _error("the table header {} names no column.", path, number)
+                raise error("the table header {} names no column.", path, number)
             table = TeimTable(columns, [], number)
             block.tables.append(table)
         elif (m := _TEIM_PAIR.match(stripped)) and not _TEIM_NUMBER.match(stripped):
             if block is None:
-                raise _error(f"'{m.group(1)}' is outside any [SECTION].", path, number)
+                raise error(f"'{m.group(1)}' is outside any [SECTION].", path, number)
             block.values[m.group(1).upper()] = _teim_value(m.group(2), path, number)
             table = None
         elif table is not None:
@@ -113,19 +113,19 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
                 cells.append(_teim_value(c.group(1), path, number))
                 pos = c.end()
             if len(cells) != len(table.columns):
-                raise _error(f"row has {len(cells)} value(s) but the table header at line "
-                             f"{table.line} names {len(table.columns)} column(s).", path, number)
+                raise error(f"row has {len(cells)} value(s) but the table header at line "
+                            f"{table.line} names {len(table.columns)} column(s).", path, number)
             table.rows.append(cells)
         else:
-            raise _error(f"unexpected line {stripped[:40]!r}: expected [SECTION], (SUBSECTION), "
-                         "key = value, {table header} or a table row.", path, number)
+            raise error(f"unexpected line {stripped[:40]!r}: expected [SECTION], (SUBSECTION), "
+                        "key = value, {table header} or a table row.", path, number)
     return sections
 
 
 def _teim_format(value) -> str:
     if isinstance(value, str):
         return f"'{value}'"
-    return _fmt(value)
+    return fmt(value)
 
 
 def _write_teim(sections: list[tuple[str, dict, list[TeimTable], dict]]) -> str:
@@ -184,29 +184,29 @@ def read_lcf(path) -> LoadCaseTable:
     [UNITS], [MODE] and the [DATA] table, parsed by column name. Raises `ModelFileError` with
     the line for anything malformed (a row with the wrong number of values, a value that is not
     a finite number, a missing [DATA] table)."""
-    text, file = _read_source(path, "load-case")
+    text, file = read_source(path, "load-case")
     sections = parse_teimorbit(text)
     n_lines = max(len(text.splitlines()), 1)
     header = sections.get("MDI_HEADER")
     if header is not None:
         kind = header.values.get("FILE_TYPE")
         if kind is not None and str(kind).lower() != "lcf":
-            raise _error(f"FILE_TYPE = {kind!r}; a load-case file has FILE_TYPE = 'lcf'.",
-                         file, header.line, "FILE_TYPE")
+            raise error(f"FILE_TYPE = {kind!r}; a load-case file has FILE_TYPE = 'lcf'.",
+                        file, header.line, "FILE_TYPE")
     data = sections.get("DATA")
     if data is None or not data.tables:
-        raise _error("no [DATA] section with a {column header} and rows.", file,
-                     data.line if data else n_lines, "DATA")
+        raise error("no [DATA] section with a {column header} and rows.", file,
+                    data.line if data else n_lines, "DATA")
     if len(data.tables) > 1:
-        raise _error("[DATA] has more than one table.", file, data.tables[1].line, "DATA")
+        raise error("[DATA] has more than one table.", file, data.tables[1].line, "DATA")
     table = data.tables[0]
     for row_index, row in enumerate(table.rows):
         if any(isinstance(c, str) for c in row):
-            raise _error(f"load case {row_index + 1} has a non-numeric value.", file,
-                         table.line + 1 + row_index, "DATA")
+            raise error(f"load case {row_index + 1} has a non-numeric value.", file,
+                        table.line + 1 + row_index, "DATA")
     columns = table.columns
     if len({c.lower() for c in columns}) != len(columns):
-        raise _error("the [DATA] header names a column twice.", file, table.line, "DATA")
+        raise error("the [DATA] header names a column twice.", file, table.line, "DATA")
     comments = []
     if header is not None and "COMMENTS" in header.blocks:
         for t in header.blocks["COMMENTS"].tables:
@@ -283,8 +283,8 @@ def _unit_factor(units: dict, key: str, table: dict, default: str, path, line) -
                "METERS": "M"}
     value = aliases.get(value, value)
     if value not in table:
-        raise _error(f"[UNITS] {key} = {value!r} is not one of {', '.join(table)}.", path, line,
-                     key)
+        raise error(f"[UNITS] {key} = {value!r} is not one of {', '.join(table)}.", path, line,
+                    key)
     return table[value]
 
 
@@ -293,13 +293,13 @@ def read_bushing_property(path) -> BushingProperty:
     [RZ_TORQUE] {rz torque} curves, [DAMPING]. Raises `ModelFileError` with the line for a
     malformed file (no curve at all, a curve whose deformations do not increase, units that
     are not known)."""
-    text, file = _read_source(path, "bushing property")
+    text, file = read_source(path, "bushing property")
     sections = parse_teimorbit(text, "bushing property")
     units_block = sections.get("UNITS")
     units = dict(units_block.values) if units_block else {}
     uline = units_block.line if units_block else 1
-    length = _unit_factor(units, "LENGTH", _LENGTH_TO_MM, "MM", file, uline)
-    force = _unit_factor(units, "FORCE", _FORCE_TO_N, "N", file, uline)
+    length = _unit_factor(units, "LENGTH", LENGTH_TO_MM, "MM", file, uline)
+    force = _unit_factor(units, "FORCE", FORCE_TO_N, "N", file, uline)
     angle = _unit_factor(units, "ANGLE", _ANGLE_TO_RAD, "DEG", file, uline)
     splines, k_trans, k_rot = {}, np.zeros(3), np.zeros(3)
     for axis, name in _BUS_SECTIONS.items():
@@ -307,24 +307,24 @@ def read_bushing_property(path) -> BushingProperty:
         if block is None:
             continue
         if len(block.tables) != 1 or len(block.tables[0].columns) != 2:
-            raise _error(f"[{name}] needs one table with two columns "
-                         f"{{{axis} {'force' if axis[0] == 't' else 'torque'}}}.", file,
-                         block.line, name)
+            raise error(f"[{name}] needs one table with two columns "
+                        f"{{{axis} {'force' if axis[0] == 't' else 'torque'}}}.", file,
+                        block.line, name)
         t = block.tables[0]
         rows = np.array(t.rows, dtype=object)
         if rows.size == 0 or any(isinstance(c, str) for r in t.rows for c in r):
-            raise _error(f"[{name}] needs numeric rows.", file, t.line, name)
+            raise error(f"[{name}] needs numeric rows.", file, t.line, name)
         x = np.asarray(rows[:, 0], float) * (length if axis[0] == "t" else angle)
         y = np.asarray(rows[:, 1], float) * (force if axis[0] == "t" else force * length)
         if x.size < 2 or np.any(np.diff(x) <= 0):
-            raise _error(f"[{name}] needs at least two rows with increasing deformation.", file,
-                         t.line, name)
+            raise error(f"[{name}] needs at least two rows with increasing deformation.", file,
+                        t.line, name)
         splines[axis] = (x, -y)
         slope = float(x @ y / (x @ x)) if np.any(x) else 0.0
         (k_trans if axis[0] == "t" else k_rot)["xyz".index(axis[1])] = slope
     if not splines:
-        raise _error("no force curve ([TX_FORCE] … [RZ_TORQUE]) in the file.", file,
-                     max(len(text.splitlines()), 1))
+        raise error("no force curve ([TX_FORCE] … [RZ_TORQUE]) in the file.", file,
+                    max(len(text.splitlines()), 1))
     damping = dict(sections["DAMPING"].values) if "DAMPING" in sections else {}
     header = dict(sections["MDI_HEADER"].values) if "MDI_HEADER" in sections else {}
     return BushingProperty(splines, k_trans, k_rot, damping, units, header, file)

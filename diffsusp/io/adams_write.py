@@ -1,6 +1,6 @@
 """Writing Adams datasets (.adm): a complete dataset from a `Mechanism`, or identified
 stiffnesses written into the dataset the model came from (spec stiffness §4.1, §6 item 10).
-`diffsusp.io.adams.write_adm` is this module's function."""
+`diffsusp.io.adams` re-exports `write_adm`."""
 
 import warnings
 from pathlib import Path
@@ -12,11 +12,11 @@ from ..errors import ModelError, ModelWarning
 from ..geometry import matrix_to_reuler_deg
 from ..model import Mechanism
 from ..model.builder import frame_from_axes
-from .adams import parse_adm
 from .adams_common import (
-    _fmt,
-    _read_source,
+    fmt,
+    read_source,
 )
+from .adams_plan import parse_adm
 
 
 def write_adm(mech: Mechanism, path, *, template=None) -> str:
@@ -60,10 +60,10 @@ def _write_full(mech: Mechanism) -> str:
         ids[k] = k + 1
         part = mech.markers.part[k]
         line = f"MARKER/{k + 1}, PART = {1 if part < 0 else part + 2}"
-        line += ", QP = " + ", ".join(_fmt(v) for v in pos[k])
+        line += ", QP = " + ", ".join(fmt(v) for v in pos[k])
         if not np.allclose(rot[k], np.eye(3), rtol=0, atol=1e-15):
             angles = np.asarray(matrix_to_reuler_deg(jnp.asarray(rot[k])))
-            line += ", REULER = " + ", ".join(_fmt(a) + "D" for a in angles)
+            line += ", REULER = " + ", ".join(fmt(a) + "D" for a in angles)
         out += [f"! adams_view_name='{name}'", line]
     next_id = len(mech.markers.names) + 1
     aux = []
@@ -76,10 +76,10 @@ def _write_full(mech: Mechanism) -> str:
         if floating:
             line += ", FLOATING"
         else:
-            line += ", QP = " + ", ".join(_fmt(v) for v in position)
+            line += ", QP = " + ", ".join(fmt(v) for v in position)
             if rotation is not None and not np.allclose(rotation, np.eye(3), rtol=0, atol=1e-15):
                 angles = np.asarray(matrix_to_reuler_deg(jnp.asarray(rotation)))
-                line += ", REULER = " + ", ".join(_fmt(a) + "D" for a in angles)
+                line += ", REULER = " + ", ".join(fmt(a) + "D" for a in angles)
         aux.append(line)
         return ident
 
@@ -97,7 +97,7 @@ def _write_full(mech: Mechanism) -> str:
         if kind == "distance":
             length = float(np.linalg.norm(pos[j.i_marker[k]] - pos[j.j_marker[k]]))
             elements.append(f"GCON/{k + 1}, I = {i_id}, FUNCTION = DM({i_id}, {j_id}) - "
-                            f"{_fmt(length)}")
+                            f"{fmt(length)}")
         else:
             elements.append(adams_joint[kind].format(k + 1) + f", I = {i_id}, J = {j_id}")
     b = mech.bushings
@@ -121,16 +121,16 @@ def _write_full(mech: Mechanism) -> str:
         if torsion and np.any(arrays["offset_rot"]):
             elements.append(
                 f"SPRINGDAMPER/{k + 1}, ROTATIONAL, I = {i_id}, J = {j_id}, "
-                f"KT = {_fmt(arrays['k_rot'][2])}, CT = 0, ANGLE = {_fmt(arrays['offset_rot'][2])}"
-                f", TORQUE = {_fmt(arrays['preload_torque'][2])}")
+                f"KT = {fmt(arrays['k_rot'][2])}, CT = 0, ANGLE = {fmt(arrays['offset_rot'][2])}"
+                f", TORQUE = {fmt(arrays['preload_torque'][2])}")
             continue
         line = (f"BUSHING/{k + 1}, I = {i_id}, J = {j_id}, K = "
-                + ", ".join(_fmt(v) for v in arrays["k_trans"]) + ", C = 0, 0, 0, KT = "
-                + ", ".join(_fmt(v) for v in arrays["k_rot"]) + ", CT = 0, 0, 0")
+                + ", ".join(fmt(v) for v in arrays["k_trans"]) + ", C = 0, 0, 0, KT = "
+                + ", ".join(fmt(v) for v in arrays["k_rot"]) + ", CT = 0, 0, 0")
         if np.any(arrays["preload_force"]):
-            line += ", FORCE = " + ", ".join(_fmt(v) for v in arrays["preload_force"])
+            line += ", FORCE = " + ", ".join(fmt(v) for v in arrays["preload_force"])
         if np.any(arrays["preload_torque"]):
-            line += ", TORQUE = " + ", ".join(_fmt(v) for v in arrays["preload_torque"])
+            line += ", TORQUE = " + ", ".join(fmt(v) for v in arrays["preload_torque"])
         elements.append(line)
     s = mech.springs
     offset = len(b.names)
@@ -150,7 +150,7 @@ def _write_full(mech: Mechanism) -> str:
             k_value, length, force = float(s.k[k]), free, 0.0
         elements += [f"! adams_view_name='{name}'",
                      f"SPRINGDAMPER/{offset + k + 1}, TRANSLATIONAL, I = {i_id}, J = {j_id}, "
-                     f"K = {_fmt(k_value)}, C = 0, LENGTH = {_fmt(length)}, FORCE = {_fmt(force)}"]
+                     f"K = {fmt(k_value)}, C = 0, LENGTH = {fmt(length)}, FORCE = {fmt(force)}"]
     st = mech.stops
     for k, name in enumerate(st.names):
         elements += [f"! adams_view_name='{name}'",
@@ -184,14 +184,14 @@ def stop_function(kind: str, length: float, k: float, cubic: float, i: int, j: i
     AKISPL spring would round the kinks of a piecewise-linear law (Chrono's `Spring Curve
     Data`); `diffsusp.io.adams.stop_of_function` reads it back."""
     dm = f"DM({i}, {j})"
-    p = (f"MAX(0, {_fmt(length)} - {dm})" if kind == "bump"
-         else f"MAX(0, {dm} - {_fmt(length)})")
-    law = f"{_fmt(k)} * {p}" + (f" + {_fmt(cubic)} * {p}**3" if cubic else "")
+    p = (f"MAX(0, {fmt(length)} - {dm})" if kind == "bump"
+         else f"MAX(0, {dm} - {fmt(length)})")
+    law = f"{fmt(k)} * {p}" + (f" + {fmt(cubic)} * {p}**3" if cubic else "")
     return law if kind == "bump" else f"-({law})"
 
 
 def _write_with_template(mech: Mechanism, template) -> str:
-    text, path = _read_source(template, "Adams dataset")
+    text, path = read_source(template, "Adams dataset")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ModelWarning)
         model = parse_adm(text)
@@ -205,14 +205,14 @@ def _write_with_template(mech: Mechanism, template) -> str:
         arg = s.arguments.get(key)
         if arg is not None and len(arg.values) == len(values):
             for v, new in zip(arg.values, values, strict=True):
-                edits.append((v.line, v.start, v.end, _fmt(new)))
+                edits.append((v.line, v.start, v.end, fmt(new)))
         else:
             if arg is not None:
                 raise ModelError(f"{s.label}: {key} has {len(arg.values)} value(s) in the "
                                  f"template; expected {len(values)}.")
             last = s.end_line
             edits.append((last, len(lines[last - 1]), len(lines[last - 1]),
-                          f", {key} = " + ", ".join(_fmt(v) for v in values)))
+                          f", {key} = " + ", ".join(fmt(v) for v in values)))
 
     bushings, springs = mech.bushings, mech.springs
     for s in model.statements:

@@ -112,6 +112,7 @@ import numpy as np
 from ..errors import ModelError, ModelFileError, ModelWarning
 from ..model import Mechanism, MechanismBuilder
 from ..model.corner import Corner, common_perpendicular_midpoint, design_offset
+from .files import read_input
 
 DEFAULT_LOADED_RADIUS = 330.0
 """Loaded tyre radius (mm) used when `loaded_radius` is None: the contact patch is this far below
@@ -206,8 +207,6 @@ class _Document:
             self.data, self.text, self.path = source, "", None
         else:
             self.path = Path(source)
-            from .files import read_input
-
             try:
                 raw = read_input(self.path, "Chrono JSON file")
             except FileNotFoundError:

@@ -105,24 +105,27 @@ import tomllib
 import numpy as np
 
 from ..errors import ModelFileError
+from ..geometry import reuler_to_matrix
 from ..model import Mechanism, MechanismBuilder
+from ..model.corner import Corner
 from ..model.mechanism import BUSHING_AXES, JOINT_ROWS
+from .files import read_input
 from .native_values import (
-    _ANG,
-    _FORCE,
-    _LEN,
-    _TORQUE,
-    _UNIT_TABLES,
+    ANG,
     ANGLE_UNITS,
+    FORCE,
     FORCE_UNITS,
+    LEN,
     LENGTH_UNITS,
     LIBRARY_UNITS,
     MAX_MAGNITUDE,
-    _kind,
-    _Reader,
-    _Source,
+    TORQUE,
+    UNIT_TABLES,
+    Reader,
+    Source,
+    shown,
 )
-from .tables import Table, split_header, unit_factor
+from .tables import Table, load_columns, split_header, unit_factor
 
 __all__ = [
     "ANGLE_UNITS", "FORCE_UNITS", "FORMAT_VERSION", "LENGTH_UNITS", "LIBRARY_UNITS",
@@ -134,14 +137,14 @@ FORMAT_VERSION = 2
 still read."""
 READ_VERSIONS = (1, 2)
 
-_BUSHING_FIELDS = {
+BUSHING_FIELDS = {
     "k_trans": (-1, 1, 0), "k_rot": (1, 1, -1),
     "cubic_trans": (-3, 1, 0), "cubic_rot": (1, 1, -3),
-    "offset_trans": _LEN, "offset_rot": _ANG,
-    "preload_force": _FORCE, "preload_torque": _TORQUE,
+    "offset_trans": LEN, "offset_rot": ANG,
+    "preload_force": FORCE, "preload_torque": TORQUE,
 }
 _ORIENTATION_KEYS = ("axes", "reuler", "z", "x")
-_LOAD_COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
+LOAD_COMPONENTS = ("fx", "fy", "fz", "mx", "my", "mz")
 _TOP_KEYS = ("diffsusp", "name", "parts", "units", "markers", "joints", "bushings", "springs",
              "stops", "drivers", "load_points", "corner", "load_tables")
 _CORNER_KEYS = ("prefix", "wheel_centre", "contact_point", "wheel_centre_load", "kingpin",
@@ -174,8 +177,6 @@ def read_model_toml(path, *, check: bool = True) -> ModelFile:
     `ModelError` for a model that is well written but cannot be solved (free modes, joints not
     assembled at design); `FileNotFoundError` if there is no file.
     """
-    from .files import read_input
-
     data = read_input(path, "model file")
     return model_from_toml(data, path=str(path), check=check)
 
@@ -212,7 +213,7 @@ def model_from_toml(data: str | bytes, *, path=None, check: bool = True) -> Mode
         raise ModelFileError("not valid TOML: values nested too deeply.", path=path,
                              line=1) from None
     if doc is not None:
-        src = _Source(text, path)
+        src = Source(text, path)
         return _build(doc, src, path, check)
     if len(text) > _TOMLKIT_MESSAGE_SIZE:
         message = re.sub(r"\s*\(at line \d+, column \d+\)$", "", str(fast_error))
@@ -267,7 +268,7 @@ def _guess_line(text: str, error: Exception) -> int:
     return 1
 
 
-def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
+def _build(doc: dict, src: Source, path, check: bool) -> ModelFile:
     unknown = [k for k in doc if k not in _TOP_KEYS]
     if unknown:
         raise src.error(
@@ -285,7 +286,7 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
         raise src.error("[[corner]] tables need format version 2: write diffsusp = 2 (a "
                         "version-1 file states no wheel corner).", ("corner",))
     units, factors = _units(doc, src)
-    rd = _Reader(src, factors)
+    rd = Reader(src, factors)
     name = doc.get("name")
     if name is None:
         name = os.path.splitext(os.path.basename(str(path)))[0] if path else "mechanism"
@@ -295,7 +296,7 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
         raise src.error("missing 'parts': list the moving parts, e.g. parts = [\"arm\"].", ())
     parts = doc["parts"]
     if not isinstance(parts, list) or not parts:
-        raise src.error(f"'parts' must be a non-empty list of part names; got {_kind(parts)}.",
+        raise src.error(f"'parts' must be a non-empty list of part names; got {shown(parts)}.",
                         ("parts",))
     with _located(src, ("parts",)):
         for p in parts:
@@ -312,7 +313,7 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
     for m_name, m, keys in section("markers"):
         rd.keys(m, keys, ("part", "position", *_ORIENTATION_KEYS), ("part", "position"))
         part = rd.string(m["part"], (*keys, "part"), "a part name or 'ground'")
-        position = rd.vector(m["position"], (*keys, "position"), _LEN)
+        position = rd.vector(m["position"], (*keys, "position"), LEN)
         with _located(src, keys):
             b.marker(m_name, part, position, **_orientation(rd, m, keys))
 
@@ -326,18 +327,18 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
             b.joint(j_name, kind, **_pair(rd, j, keys, oriented=True))
 
     for b_name, e, keys in section("bushings"):
-        rd.keys(e, keys, ("i", "j", "parts", "at", *_ORIENTATION_KEYS, *_BUSHING_FIELDS,
+        rd.keys(e, keys, ("i", "j", "parts", "at", *_ORIENTATION_KEYS, *BUSHING_FIELDS,
                           "splines"), ("k_trans", "k_rot"))
         values = {f: rd.vector(e[f], (*keys, f), dims, scalar=True)
-                  for f, dims in _BUSHING_FIELDS.items() if f in e}
+                  for f, dims in BUSHING_FIELDS.items() if f in e}
         splines = {}
         if "splines" in e:
             sp = rd.table(e["splines"], (*keys, "splines"), "[...splines.<axis>] tables")
             rd.keys(sp, (*keys, "splines"), BUSHING_AXES)
             for axis, table in sp.items():
                 rot = axis.startswith("r")
-                splines[axis] = rd.xy(table, (*keys, "splines", axis), _ANG if rot else _LEN,
-                                      _TORQUE if rot else _FORCE)
+                splines[axis] = rd.xy(table, (*keys, "splines", axis), ANG if rot else LEN,
+                                      TORQUE if rot else FORCE)
         with _located(src, keys):
             b.bushing(b_name, **_pair(rd, e, keys, oriented=True), **values,
                       splines=splines or None)
@@ -348,9 +349,9 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
         if "k" in s:
             kw["k"] = rd.number(s["k"], (*keys, "k"), (-1, 1, 0))
         if "free_length" in s:
-            kw["free_length"] = rd.number(s["free_length"], (*keys, "free_length"), _LEN)
+            kw["free_length"] = rd.number(s["free_length"], (*keys, "free_length"), LEN)
         if "table" in s:
-            kw["table"] = rd.xy(s["table"], (*keys, "table"), _LEN, _FORCE)
+            kw["table"] = rd.xy(s["table"], (*keys, "table"), LEN, FORCE)
         elif "k" not in s or "free_length" not in s:
             raise src.error("a spring needs k and free_length, or a [table] with x and y.", keys)
         with _located(src, keys):
@@ -361,7 +362,7 @@ def _build(doc: dict, src: _Source, path, check: bool) -> ModelFile:
                 ("length", "k"))
         kw = dict(
             kind=rd.string(s.get("kind", "bump"), (*keys, "kind"), "'bump' or 'rebound'"),
-            length=rd.number(s["length"], (*keys, "length"), _LEN),
+            length=rd.number(s["length"], (*keys, "length"), LEN),
             k=rd.number(s["k"], (*keys, "k"), (-1, 1, 0)),
             cubic=rd.number(s.get("cubic", 0.0), (*keys, "cubic"), (-3, 1, 0)),
         )
@@ -436,7 +437,7 @@ def _named_in(message: str, doc: dict) -> tuple[str, ...]:
 class _located:
     """Turn the builder's errors into ModelFileErrors at the element's line."""
 
-    def __init__(self, src: _Source, keys):
+    def __init__(self, src: Source, keys):
         self.src, self.keys = src, keys
 
     def __enter__(self):
@@ -450,20 +451,20 @@ class _located:
         return False
 
 
-def _units(doc, src: _Source):
+def _units(doc, src: Source):
     if "units" not in doc:
         raise src.error(
             "missing [units]: declare the file's units, e.g. [units] length = \"mm\", "
             "force = \"N\", angle = \"rad\".", ())
     u = doc["units"]
     if not isinstance(u, dict):
-        raise src.error(f"[units] must be a table; got {_kind(u)}.", ("units",))
-    unknown = [k for k in u if k not in _UNIT_TABLES]
+        raise src.error(f"[units] must be a table; got {shown(u)}.", ("units",))
+    unknown = [k for k in u if k not in UNIT_TABLES]
     if unknown:
         raise src.error(f"unknown unit '{unknown[0]}'; [units] has length, force and angle.",
                         ("units", unknown[0]))
     units, factors = {}, {}
-    for key, table in _UNIT_TABLES.items():
+    for key, table in UNIT_TABLES.items():
         if key not in u:
             raise src.error(f"[units] is missing '{key}' (one of {', '.join(table)}).",
                             ("units",))
@@ -475,7 +476,7 @@ def _units(doc, src: _Source):
     return units, factors
 
 
-def _orientation(rd: _Reader, m: dict, keys) -> dict:
+def _orientation(rd: Reader, m: dict, keys) -> dict:
     given = [k for k in ("axes", "reuler", "z") if k in m]
     if "x" in m and "z" not in m:
         raise rd.src.error("'x' needs 'z' (the x axis is made perpendicular to z).",
@@ -487,17 +488,15 @@ def _orientation(rd: _Reader, m: dict, keys) -> dict:
     if "axes" in m:
         axes = m["axes"]
         if not isinstance(axes, list) or len(axes) != 3:
-            raise rd.src.error(f"axes must be [[x axis], [y axis], [z axis]]; got {_kind(axes)}.",
+            raise rd.src.error(f"axes must be [[x axis], [y axis], [z axis]]; got {shown(axes)}.",
                                (*keys, "axes"))
         cols = [rd.vector(a, (*keys, "axes")) for a in axes]
         return dict(orientation=np.column_stack(cols))
     if "reuler" in m:
-        angles = rd.vector(m["reuler"], (*keys, "reuler"), _ANG, convert=False)
+        angles = rd.vector(m["reuler"], (*keys, "reuler"), ANG, convert=False)
         if rd.units["angle"] == ANGLE_UNITS["deg"]:
             return dict(reuler_deg=angles)
-        from ..geometry import reuler_to_matrix
-
-        return dict(orientation=np.asarray(reuler_to_matrix(angles * rd.factor(_ANG))))
+        return dict(orientation=np.asarray(reuler_to_matrix(angles * rd.factor(ANG))))
     if "z" in m:
         z = rd.vector(m["z"], (*keys, "z"))
         x = rd.vector(m["x"], (*keys, "x")) if "x" in m else None
@@ -505,27 +504,27 @@ def _orientation(rd: _Reader, m: dict, keys) -> dict:
     return {}
 
 
-def _pair(rd: _Reader, e: dict, keys, *, oriented: bool) -> dict:
+def _pair(rd: Reader, e: dict, keys, *, oriented: bool) -> dict:
     if "parts" in e:
         if "i" in e or "j" in e:
             raise rd.src.error("give markers i and j, or parts with at, not both.",
                                (*keys, "parts"))
         parts = e["parts"]
         if not isinstance(parts, list) or len(parts) != 2:
-            raise rd.src.error(f"parts must be [I part, J part]; got {_kind(parts)}.",
+            raise rd.src.error(f"parts must be [I part, J part]; got {shown(parts)}.",
                                (*keys, "parts"))
         parts = [rd.string(p, (*keys, "parts"), "a part name") for p in parts]
         if "at" not in e:
             raise rd.src.error("parts needs at = [x, y, z], the location of the markers.", keys)
         at = e["at"]
         if oriented:
-            at = rd.vector(at, (*keys, "at"), _LEN)
+            at = rd.vector(at, (*keys, "at"), LEN)
             return dict(parts=parts, at=at, **_orientation(rd, e, keys))
         if isinstance(at, list) and len(at) == 2 and all(isinstance(a, list) for a in at):
-            at = np.stack([rd.vector(a, (*keys, "at"), _LEN) for a in at])
+            at = np.stack([rd.vector(a, (*keys, "at"), LEN) for a in at])
         else:
             raise rd.src.error(
-                f"at must be [[point on I], [point on J]]; got {_kind(at)}.", (*keys, "at"))
+                f"at must be [[point on I], [point on J]]; got {shown(at)}.", (*keys, "at"))
         _no_orientation(rd, e, keys)
         return dict(parts=parts, at=at)
     for k in ("i", "j"):
@@ -547,13 +546,11 @@ def _no_orientation(rd, e, keys):
                 "orientation).", (*keys, k))
 
 
-def _read_corner(rd: _Reader, c: dict, keys):
+def _read_corner(rd: Reader, c: dict, keys):
     """A `[[corner]]` table → `Corner`: every key optional with `Corner`'s defaults, except
     `design_load` (absent: computed, the load that holds the design position);
     `wheel_centre_load = false` for none; `kingpin` two points, each a marker name or
     {part = "...", offset = [forward, outboard, up]} (length units)."""
-    from ..model.corner import Corner
-
     rd.keys(c, keys, _CORNER_KEYS)
     kw = {}
     for key in ("prefix", "wheel_centre", "contact_point", "side", "frame"):
@@ -566,7 +563,7 @@ def _read_corner(rd: _Reader, c: dict, keys):
     if "kingpin" in c:
         refs = c["kingpin"]
         if not isinstance(refs, list) or len(refs) != 2:
-            raise rd.src.error(f"kingpin must be two points [upper, lower]; got {_kind(refs)}.",
+            raise rd.src.error(f"kingpin must be two points [upper, lower]; got {shown(refs)}.",
                                (*keys, "kingpin"))
         points = []
         for ref in refs:
@@ -574,14 +571,14 @@ def _read_corner(rd: _Reader, c: dict, keys):
                 rd.keys(ref, (*keys, "kingpin"), ("part", "offset"), ("part", "offset"))
                 points.append((rd.string(ref["part"], (*keys, "kingpin"), "a part name"),
                                tuple(float(v) for v in rd.vector(ref["offset"],
-                                                                 (*keys, "kingpin"), _LEN))))
+                                                                 (*keys, "kingpin"), LEN))))
             else:
                 points.append(rd.string(ref, (*keys, "kingpin"), "a marker name or "
                                         "{part, offset}"))
         kw["kingpin"] = tuple(points)
     if "loaded_radius" in c:
-        kw["loaded_radius"] = rd.number(c["loaded_radius"], (*keys, "loaded_radius"), _LEN)
-    kw["design_load"] = (rd.number(c["design_load"], (*keys, "design_load"), _FORCE)
+        kw["loaded_radius"] = rd.number(c["loaded_radius"], (*keys, "loaded_radius"), LEN)
+    kw["design_load"] = (rd.number(c["design_load"], (*keys, "design_load"), FORCE)
                          if "design_load" in c else None)
     try:
         return Corner(**kw)
@@ -589,7 +586,7 @@ def _read_corner(rd: _Reader, c: dict, keys):
         raise rd.src.error(str(e), keys) from None
 
 
-def _point(rd: _Reader, e: dict, keys) -> dict:
+def _point(rd: Reader, e: dict, keys) -> dict:
     if "marker" in e:
         if "part" in e or "at" in e:
             raise rd.src.error("give a marker, or part with at, not both.", (*keys, "marker"))
@@ -597,19 +594,17 @@ def _point(rd: _Reader, e: dict, keys) -> dict:
     if "part" not in e or "at" not in e:
         raise rd.src.error("missing 'marker' (or 'part' and 'at').", keys)
     return dict(part=rd.string(e["part"], (*keys, "part"), "a part name"),
-                at=rd.vector(e["at"], (*keys, "at"), _LEN))
+                at=rd.vector(e["at"], (*keys, "at"), LEN))
 
 
-_DIMENSION_OF_COLUMN = {"force": _FORCE, "moment": _TORQUE, "length": _LEN}
+_DIMENSION_OF_COLUMN = {"force": FORCE, "moment": TORQUE, "length": LEN}
 
 
-def _load_table(rd: _Reader, mech: Mechanism, t: dict, keys, units) -> Table:
-    from .tables import load_columns
-
+def _load_table(rd: Reader, mech: Mechanism, t: dict, keys, units) -> Table:
     rd.keys(t, keys, ("columns", "rows"), ("columns", "rows"))
     columns = t["columns"]
     if not isinstance(columns, list) or not columns:
-        raise rd.src.error(f"columns must be a list of column names; got {_kind(columns)}.",
+        raise rd.src.error(f"columns must be a list of column names; got {shown(columns)}.",
                            (*keys, "columns"))
     valid = load_columns(mech) | {"case": "dimensionless"}
     names, col_units = [], {}
@@ -630,13 +625,13 @@ def _load_table(rd: _Reader, mech: Mechanism, t: dict, keys, units) -> Table:
         col_units[name] = unit
     rows = t["rows"]
     if not isinstance(rows, list):
-        raise rd.src.error(f"rows must be a list of rows; got {_kind(rows)}.", (*keys, "rows"))
+        raise rd.src.error(f"rows must be a list of rows; got {shown(rows)}.", (*keys, "rows"))
     values = np.empty((len(rows), len(names)))
     for r, row in enumerate(rows):
         if not isinstance(row, list) or len(row) != len(names):
             raise rd.src.error(
                 f"row {r + 1} must be a list of {len(names)} numbers (one per column); got "
-                f"{_kind(row)}.", (*keys, "rows"))
+                f"{shown(row)}.", (*keys, "rows"))
         for c, v in enumerate(row):
             values[r, c] = rd.number(v, (*keys, "rows"), convert=False)
     out_units = {}
@@ -652,11 +647,3 @@ def _load_table(rd: _Reader, mech: Mechanism, t: dict, keys, units) -> Table:
     return Table(columns={n: values[:, c].copy() for c, n in enumerate(names)},
                  units=out_units, path=rd.src.path)
 
-
-def __getattr__(name):
-    # The writer (`native_write`) loads on first use; its public names stay here too.
-    if name in ("model_to_toml", "write_model_toml"):
-        from . import native_write
-
-        return getattr(native_write, name)
-    raise AttributeError(f"module 'diffsusp.io.native' has no attribute '{name}'")

@@ -1,6 +1,6 @@
 """Reading the native model file's values where they are written: units and dimensions, the
-line of a key in the TOML text (`_Source`, for located errors) and typed values converted to
-library units (`_Reader`). Part of `diffsusp.io.native` (its format is documented there).
+line of a key in the TOML text (`Source`, for located errors) and typed values converted to
+library units (`Reader`). Part of `diffsusp.io.native` (its format is documented there).
 """
 
 import math
@@ -17,12 +17,12 @@ typo or a unit mistake, and products in the checks would overflow)."""
 LENGTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 FORCE_UNITS = {"N": 1.0, "daN": 10.0, "kN": 1000.0, "lbf": 4.4482216152605}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
-_UNIT_TABLES = {"length": LENGTH_UNITS, "force": FORCE_UNITS, "angle": ANGLE_UNITS}
+UNIT_TABLES = {"length": LENGTH_UNITS, "force": FORCE_UNITS, "angle": ANGLE_UNITS}
 LIBRARY_UNITS = {"length": "mm", "force": "N", "angle": "rad"}
 
 # Dimensions as exponents of (length, force, angle).
-_NONE, _LEN, _ANG, _FORCE = (0, 0, 0), (1, 0, 0), (0, 0, 1), (0, 1, 0)
-_TORQUE = (1, 1, 0)
+NONE, LEN, ANG, FORCE = (0, 0, 0), (1, 0, 0), (0, 0, 1), (0, 1, 0)
+TORQUE = (1, 1, 0)
 
 
 # --------------------------------------------------------------------------------- locating
@@ -62,7 +62,7 @@ def _split_keys(text: str) -> tuple[str, ...] | None:
         pos += 1
 
 
-class _Source:
+class Source:
     """The text of a file, to find the line of a key path for error messages."""
 
     _HEADER_RE = re.compile(r"^\s*\[\[?\s*(.*?)\s*\]\]?\s*(?:#.*)?$")
@@ -118,10 +118,10 @@ class _Source:
 # --------------------------------------------------------------------------------- values
 
 
-class _Reader:
+class Reader:
     """Typed access to the parsed document, with unit conversion and located errors."""
 
-    def __init__(self, source: _Source, units: dict[str, float]):
+    def __init__(self, source: Source, units: dict[str, float]):
         self.src = source
         self.units = units
 
@@ -134,7 +134,7 @@ class _Reader:
 
     def table(self, value, keys, what: str) -> dict:
         if not isinstance(value, dict):
-            raise self.src.error(f"expected a table ({what}); got {_kind(value)}.", keys)
+            raise self.src.error(f"expected a table ({what}); got {shown(value)}.", keys)
         return value
 
     def keys(self, table: dict, keys, allowed, required=()):
@@ -150,12 +150,12 @@ class _Reader:
 
     def string(self, value, keys, what="a name") -> str:
         if not isinstance(value, str):
-            raise self.src.error(f"expected a string ({what}); got {_kind(value)}.", keys)
+            raise self.src.error(f"expected a string ({what}); got {shown(value)}.", keys)
         return value
 
-    def number(self, value, keys, dims=_NONE, *, convert=True) -> float:
+    def number(self, value, keys, dims=NONE, *, convert=True) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.src.error(f"expected a number; got {_kind(value)}.", keys)
+            raise self.src.error(f"expected a number; got {shown(value)}.", keys)
         try:
             x = float(value)
         except OverflowError:
@@ -170,17 +170,17 @@ class _Reader:
                 "the number and the [units].", keys)
         return x
 
-    def vector(self, value, keys, dims=_NONE, *, scalar=False, convert=True) -> np.ndarray:
+    def vector(self, value, keys, dims=NONE, *, scalar=False, convert=True) -> np.ndarray:
         if scalar and not isinstance(value, list):
             return np.full(3, self.number(value, keys, dims, convert=convert))
         if not isinstance(value, list) or len(value) != 3:
             what = "a number or a list of 3 numbers" if scalar else "a list of 3 numbers"
-            raise self.src.error(f"expected {what}; got {_kind(value)}.", keys)
+            raise self.src.error(f"expected {what}; got {shown(value)}.", keys)
         return np.array([self.number(v, keys, dims, convert=convert) for v in value])
 
-    def numbers(self, value, keys, dims=_NONE) -> np.ndarray:
+    def numbers(self, value, keys, dims=NONE) -> np.ndarray:
         if not isinstance(value, list) or len(value) < 2:
-            raise self.src.error(f"expected a list of at least 2 numbers; got {_kind(value)}.",
+            raise self.src.error(f"expected a list of at least 2 numbers; got {shown(value)}.",
                                  keys)
         return np.array([self.number(v, keys, dims) for v in value])
 
@@ -191,14 +191,15 @@ class _Reader:
                 self.numbers(table["y"], (*keys, "y"), dims_y))
 
 
-def _kind(value) -> str:
+def shown(value) -> str:
+    """How a value read from a file is named in an error message ("the number 3", ...)."""
     if isinstance(value, bool):
         return f"a boolean ({str(value).lower()})"
     if isinstance(value, int | float):
         return f"the number {value}"
     if isinstance(value, str):
-        shown = value if len(value) <= 40 else value[:37] + "..."
-        return f"the string {shown!r}"
+        text = value if len(value) <= 40 else value[:37] + "..."
+        return f"the string {text!r}"
     if isinstance(value, list):
         return f"a list of {len(value)} items"
     if isinstance(value, dict):

@@ -9,21 +9,21 @@ import os
 import numpy as np
 
 from ..errors import ModelError
-from ..model import GROUND, Mechanism
+from ..model import GROUND, Mechanism, frame_from_axes
 from ..model.mechanism import BUSHING_AXES
 from .native import (
-    _BUSHING_FIELDS,
-    _LOAD_COMPONENTS,
+    BUSHING_FIELDS,
     FORMAT_VERSION,
+    LOAD_COMPONENTS,
 )
 from .native_values import (
-    _ANG,
-    _FORCE,
-    _LEN,
-    _NONE,
-    _TORQUE,
-    _UNIT_TABLES,
+    ANG,
+    FORCE,
+    LEN,
     LIBRARY_UNITS,
+    NONE,
+    TORQUE,
+    UNIT_TABLES,
 )
 from .tables import Table, split_header
 
@@ -47,16 +47,16 @@ def _write_corners(doc, mech, put, factor):
                 else:
                     it = tomlkit.inline_table()
                     it.add("part", ref[0])
-                    it.add("offset", _floats(ref[1], factor(_LEN)))
+                    it.add("offset", _floats(ref[1], factor(LEN)))
                     refs.append(it)
             t.add("kingpin", refs)
             t["kingpin"].comment("steering axis [upper, lower]: markers or {part, offset = "
                                  "[forward, outboard, up] from the wheel centre}")
         t.add("side", c.side)
         t.add("frame", c.frame)
-        put(t, "loaded_radius", c.loaded_radius, _LEN, vector=False)
+        put(t, "loaded_radius", c.loaded_radius, LEN, vector=False)
         if c.design_load is not None:
-            put(t, "design_load", c.design_load, _FORCE, vector=False)
+            put(t, "design_load", c.design_load, FORCE, vector=False)
         corners.append(t)
     doc.add("corner", corners)
 
@@ -98,9 +98,9 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
 
     units = dict(LIBRARY_UNITS, **(units or {}))
     for key, value in units.items():
-        if key not in _UNIT_TABLES or value not in _UNIT_TABLES[key]:
+        if key not in UNIT_TABLES or value not in UNIT_TABLES[key]:
             raise ValueError(f"units: unknown {key} unit {value!r}.")
-    fac = {k: _UNIT_TABLES[k][v] for k, v in units.items()}
+    fac = {k: UNIT_TABLES[k][v] for k, v in units.items()}
 
     def factor(dims):
         f = 1.0
@@ -112,7 +112,7 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
     def put(table, key, values, dims, *, vector=True, comment=True):
         data = _floats(values, factor(dims))
         table.add(key, data if vector else data[0])
-        if comment and dims != _NONE:
+        if comment and dims != NONE:
             table[key].comment(_unit_text(dims, units))
 
     doc = tomlkit.document()
@@ -138,7 +138,7 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
     for k, name in enumerate(names):
         m = tomlkit.table()
         m.add("part", part_name[k])
-        put(m, "position", pos[k], _LEN)
+        put(m, "position", pos[k], LEN)
         _write_orientation(m, rot[k])
         markers.add(name, m)
     doc.add("markers", markers)
@@ -156,7 +156,7 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
     bu = mech.bushings
 
     def bushing(t, e):
-        for field, dims in _BUSHING_FIELDS.items():
+        for field, dims in BUSHING_FIELDS.items():
             value = np.asarray(getattr(bu, field))[e]
             if field in ("k_trans", "k_rot") or not _is_zero(value):
                 put(t, field, value, dims)
@@ -167,8 +167,8 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
                 if bu.spline_axes[e][a]:
                     rot_axis = axis.startswith("r")
                     st = tomlkit.table()
-                    put(st, "x", sx[a], _ANG if rot_axis else _LEN)
-                    put(st, "y", sy[a], _TORQUE if rot_axis else _FORCE)
+                    put(st, "x", sx[a], ANG if rot_axis else LEN)
+                    put(st, "y", sy[a], TORQUE if rot_axis else FORCE)
                     splines.add(axis, st)
             t.add("splines", splines)
 
@@ -181,11 +181,11 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
         if not sp.tabulated[e] or not _is_zero(k[e]):
             put(t, "k", k[e], (-1, 1, 0), vector=False)
         if not sp.tabulated[e] or not _is_zero(free[e]):
-            put(t, "free_length", free[e], _LEN, vector=False)
+            put(t, "free_length", free[e], LEN, vector=False)
         if sp.tabulated[e]:
             tt = tomlkit.table()
-            put(tt, "x", np.asarray(sp.table_x)[e], _LEN)
-            put(tt, "y", np.asarray(sp.table_y)[e], _FORCE)
+            put(tt, "x", np.asarray(sp.table_x)[e], LEN)
+            put(tt, "y", np.asarray(sp.table_y)[e], FORCE)
             t.add("table", tt)
 
     _add_elements(doc, "springs", sp, names, spring)
@@ -194,7 +194,7 @@ def model_to_toml(mech: Mechanism, *, load_tables: dict | None = None,
 
     def stop(t, e):
         t.add("kind", st.kind[e])
-        put(t, "length", np.asarray(st.length)[e], _LEN, vector=False)
+        put(t, "length", np.asarray(st.length)[e], LEN, vector=False)
         put(t, "k", np.asarray(st.k)[e], (-1, 1, 0), vector=False)
         cubic = np.asarray(st.cubic)[e]
         if not _is_zero(cubic):
@@ -249,8 +249,6 @@ def _add_elements(doc, section: str, elements, names, fill,
 
 
 def _write_orientation(m, rot: np.ndarray):
-    from ..model import frame_from_axes
-
     rot = np.ascontiguousarray(rot, dtype=float)
     if rot.tobytes() == np.eye(3).tobytes():  # bitwise: -0.0 must be written out
         return
@@ -289,7 +287,7 @@ def _write_load_table(table, units: dict[str, str]):
         unit = col_units.get(n)
         if unit is None and n != "case" and units != LIBRARY_UNITS:
             comp = n.rpartition(".")[2]
-            unit = {"f": "N", "m": "N·mm"}.get(comp[:1], "mm") if comp in _LOAD_COMPONENTS \
+            unit = {"f": "N", "m": "N·mm"}.get(comp[:1], "mm") if comp in LOAD_COMPONENTS \
                 else "mm"
         headers.append(f"{n} [{unit}]" if unit else n)
     t = tomlkit.table()
@@ -345,7 +343,7 @@ def _with_units(tables, old_units):
                 continue
             comp = name.rpartition(".")[2]
             unit = (force if comp.startswith("f") else f"{force}·{length}") \
-                if comp in _LOAD_COMPONENTS else length
+                if comp in LOAD_COMPONENTS else length
             columns[c] = f"{name} [{unit}]"
     return tables
 

@@ -41,7 +41,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..errors import ModelFileError
+from ..errors import ModelError, ModelFileError
+from ..model import Loads
+from .files import check_input, current_umask, read_input, write_text_atomic
 
 # --------------------------------------------------------------------------------------- units
 
@@ -203,7 +205,8 @@ def _header(name: str, unit: str | None) -> str:
     return f"{name} [{unit}]" if unit else name
 
 
-def _suffix(path) -> str:
+def table_format(path) -> str:
+    """'csv' or 'parquet', from the suffix of `path`; `ModelFileError` for any other."""
     suffix = os.path.splitext(str(path))[1].lower()
     if suffix in (".csv", ".txt"):
         return "csv"
@@ -225,16 +228,15 @@ def read_table(path) -> Table:
     cannot read: text in a number column, a ragged row, a duplicate or empty column name, an
     unknown unit, a file that is not CSV/Parquet. `FileNotFoundError` if there is no file.
     """
-    from .files import check_input, read_input
-
-    kind = _suffix(path)
+    kind = table_format(path)
     if kind == "csv":
         return _read_csv(read_input(path, "table", "table"), path)
     check_input(path, "table", "table")
     return _read_parquet(path)
 
 
-def _decode(data: bytes, path) -> str:
+def decode_text(data: bytes, path) -> str:
+    """UTF-8 text of a file's bytes (a BOM dropped); `ModelFileError` at the first bad byte."""
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -249,7 +251,7 @@ def csv_cells(data: bytes, path, header_hint: str):
     """The header cells, its line, the rows of cells and their lines of a CSV file's bytes
     (blank rows and rows starting with '#' skipped); `header_hint` says what the header names
     in the error for a file without one."""
-    text = _decode(data, path)
+    text = decode_text(data, path)
     reader = csv.reader(io.StringIO(text, newline=""), strict=True)
     header = None
     rows: list[list[str]] = []
@@ -397,7 +399,7 @@ class TableWriter:
     """
 
     def __init__(self, path, names, units: Mapping | None = None):
-        self.path, self.kind = path, _suffix(path)
+        self.path, self.kind = path, table_format(path)
         self.names = tuple(str(n) for n in names)
         self.units = dict(units or {})
         self.rows = 0
@@ -465,7 +467,7 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     (CSV with every digit needed to read the same float back); `units`: name → unit string (or
     None), written in the CSV header as `name [unit]` and as Parquet field metadata `unit`.
     """
-    kind = _suffix(path)
+    kind = table_format(path)
     units = dict(units or {})
     arrays = {str(k): np.asarray(v, dtype=np.float64) for k, v in columns.items()}
     if any(a.ndim != 1 for a in arrays.values()) or len({a.shape for a in arrays.values()}) > 1:
@@ -473,8 +475,6 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     for name in arrays:
         if _HEADER_RE.match(name) or "\n" in name or "\r" in name:
             raise ValueError(f"write_table: column name {name!r} cannot hold a unit or a newline.")
-    from .files import write_text_atomic
-
     # Through a temporary file renamed at the end: an interrupted or failed write never leaves
     # a table cut after whole rows under the final name (bad_inputs D12).
     if kind == "csv":
@@ -490,8 +490,6 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from .files import _umask
-
     fields = [
         pa.field(n, pa.float64(), metadata={"unit": units[n]} if units.get(n) else None)
         for n in arrays
@@ -503,7 +501,7 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
     os.close(fd)
     try:
         pq.write_table(table, tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # a plain open's permissions, not mkstemp's 0600
+        os.chmod(tmp, 0o666 & ~current_umask())  # a plain open's permissions, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -553,8 +551,6 @@ def loads_from_table(mech, table: Table):
     value (naming its row and line), or a table without rows.
     """
     import jax.numpy as jnp
-
-    from ..model import Loads
 
     path = table.path
     valid = load_columns(mech)
@@ -644,8 +640,6 @@ def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0,
     `diffsusp.statics.spring_states(mech, sol.q)`, required when the model has bushings /
     springs.
     """
-    from ..errors import ModelError
-
     q = np.asarray(sol.q)
     if q.ndim != 2:
         raise ValueError("results_table needs a solution with a leading case axis.")

@@ -1,6 +1,6 @@
 """Tyre property files (`.tir`, MF-Tyre / Adams / Chrono / MFeval format), read and written.
 
-spec: tyre §7 C (MF 5.2 / 6.1 / 6.2 property files); issue 15.
+spec: tyre §7 C (MF 5.2 / 6.1 / 6.2 property files).
 
 A `.tir` file is a list of sections (`[LATERAL_COEFFICIENTS]`), each holding `NAME = value`
 lines; `$` starts a comment (at the start of a line or after a value), `!` a comment line; a few
@@ -27,7 +27,7 @@ import os
 import re
 
 from ..errors import ModelFileError
-from .files import read_input
+from .files import read_input, write_text_atomic
 
 __all__ = ["TirEntry", "TirFile", "read_tir", "write_tir", "tir_from_text"]
 
@@ -259,7 +259,7 @@ def check_values(tir: TirFile) -> None:
     """Every number finite (a value beyond float range, `1e400` or 400 digits, reads as inf),
     `POSITIVE` ones > 0 and `NON_NEGATIVE` ones >= 0; an error naming the key and its line.
 
-    spec: tyre §7 C (the property file's quantities); issue 28 item 11 (bad_inputs D2)."""
+    spec: tyre §7 C (the property file's quantities)."""
     for e in tir.entries.values():
         if not isinstance(e.value, float):
             continue
@@ -338,7 +338,5 @@ def write_tir(tir: TirFile, path: str | os.PathLike, *, header: str | None = Non
     """Write `tir` (SI, as read; changed values with `repr`, so write → read is exact);
     `header` (comment lines starting with `$`, ending with a newline) goes before the first
     line, e.g. to mark a fit that did not converge."""
-    from .files import write_text_atomic
-
     # through a temporary file renamed at the end: an interrupted write leaves no half file
     write_text_atomic(os.fspath(path), to_text(tir) if header is None else header + to_text(tir))

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import tomlkit
 
-from ..io.native import model_to_toml
+from ..io.native_write import model_to_toml
 from . import DOUBLE_WISHBONE_DESIGN_LOAD, TABLE_4_4, TABLE_5_1, ZOO
 
 DATA = os.path.join(os.path.dirname(__file__), "data")

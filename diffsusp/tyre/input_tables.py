@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import ModelFileError, ModelWarning
 from ..io.files import check_input, read_input
-from ..io.tables import Table, _decode, _suffix
+from ..io.tables import Table, decode_text, table_format
 from .fit import COLUMN_ALIASES, read_bench_table, unit_scale
 
 __all__ = ["PLAUSIBLE", "ROUND_TRIP", "read_tyre_table"]
@@ -53,9 +53,9 @@ def read_tyre_table(path, what: str = "tyre input table") -> Table:
     **Raises:** `ModelFileError` (file, line, column) for anything it refuses;
     `FileNotFoundError` when there is no file."""
     path = os.fspath(path)
-    kind = _suffix(path)
+    kind = table_format(path)
     if kind == "csv":
-        _decode(read_input(path, what, "table"), path)
+        decode_text(read_input(path, what, "table"), path)
     else:
         check_input(path, what, "table")
     table = read_bench_table(path)
