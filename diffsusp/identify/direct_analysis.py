@@ -9,6 +9,7 @@ import dataclasses
 
 import numpy as np
 
+from ..lsq import format_combination
 from .report import bar_reason, sigma_pct_at_start, within_bar
 
 __all__: list[str] = []  # used by `identify.direct`
@@ -67,8 +68,6 @@ def analyse(structure: _Structure, fit, negligible, eliminated, max_sigma_pct,
              hold, prior) -> _Analysis:
     """Statistics of the estimate `fit` (weighted or not) on the `structure` of the equations;
     σ % judged at `prior`, the model's values (the linear σ does not depend on θ)."""
-    from ..lsq import format_combination
-
     p = len(fit.names)
     x = np.asarray(fit.x, float)
     cov = np.asarray(fit.covariance, float)

@@ -12,8 +12,9 @@ import numpy as np
 from jaxtyping import Array
 
 from ..errors import InputError
+from ..geometry import gibbs_angular_jacobian, skew
 from ..measure.measurements import Measurements
-from ..model.mechanism import Mechanism
+from ..model.mechanism import JOINT_ROWS, Mechanism
 
 __all__: list[str] = []  # used by `identify.direct`
 
@@ -65,7 +66,6 @@ def _check_every_part_measured(mech: Mechanism, meas: Measurements):
     missing = [p for p in mech.parts if p not in meas.parts]
     if not missing:
         return
-    from ..model.mechanism import JOINT_ROWS
 
     lay = mech.topology
     part_of = [mech.parts[int(k)] if int(k) < len(mech.parts) else "ground"
@@ -101,7 +101,6 @@ def _pose_covariance(mech: Mechanism, meas: Measurements) -> Array:
     σ²·(Σ_a |r_a|²I − r_a r_aᵀ)⁻¹ about the landmark centroid, uncorrelated). For poses given
     without landmarks: unit σ on the reference point (mm) and on ℓ·rotation (mm).
     Only the structure matters: `lsq` estimates the noise level from the residual."""
-    from ..geometry import gibbs_angular_jacobian, skew
     lay = mech.topology
     index = np.asarray([meas.parts.index(p) for p in mech.parts], dtype=int)
     centre = jnp.asarray(lay.centre[:-1])

@@ -16,7 +16,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..lsq import qr_r
 from ..model.mechanism import Mechanism
+from ..statics.kernel import (
+    assemble,
+    bushing_force,
+    bushing_params,
+    constraint_jacobian,
+    line_force,
+    to_internal,
+)
 
 __all__: list[str] = []  # the assembly of `direct`; `direct` and `direct_system` are the API
 
@@ -67,8 +76,6 @@ def _bushing_unit_forces(mech: Mechanism, y):
     N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
     of the solver's own element force function (`statics.kernel.bushing_force`, Adams
     convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
-    from ..statics.kernel import bushing_force
-
     b = mech.bushings
     lay, yfull, offset = _element_geometry(mech, y)
     i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
@@ -96,8 +103,6 @@ def _spring_unit_forces(mech: Mechanism, y):
     """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
     model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
     function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
-    from ..statics.kernel import line_force
-
     s = mech.springs
     lay, yfull, offset = _element_geometry(mech, y)
     i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
@@ -119,8 +124,6 @@ def _spring_unit_forces(mech: Mechanism, y):
 def _constraint_jacobian(mech: Mechanism, loads, y):
     """Φ_q (m, n) of the independent constraint rows at y (solver coordinates), from the
     solver's own constraint rows (Adams definitions, spec stiffness §1.6)."""
-    from ..statics.kernel import constraint_jacobian
-
     return constraint_jacobian(mech, loads, y)
 
 
@@ -144,8 +147,6 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
     onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
     everything else: the loads, the elements and axes not identified, cubic terms."""
-    from ..statics.kernel import assemble, to_internal
-
     lay = eval_mech.topology
     n, m = lay.n, lay.m
     y = to_internal(eval_mech, q)
@@ -164,8 +165,6 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
 
 def _elastic_stiffness(mech: Mechanism, y):
     """Tangent stiffness −∂Q/∂y (n, n) of the bushings and linear springs of `mech` at y."""
-    from ..statics.kernel import bushing_force, bushing_params, line_force
-
     lay, yfull, offset = _element_geometry(mech, y)
     mk = mech.markers
     full = jnp.zeros((yfull.shape[0], yfull.shape[0]), y.dtype)
@@ -201,8 +200,6 @@ def _case_whitener(eval_mech: Mechanism, selection, q, null, x, pose_cov):
     landmark spread) to the bushings' deformations, and the change of L itself multiplies the
     small residual.
     """
-    from ..statics.kernel import to_internal
-
     y = to_internal(eval_mech, q)
     mech_x = _mechanism_at(eval_mech, selection, x)
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
@@ -221,8 +218,6 @@ _QR_CHUNK = 1024
 def r_factor(W, y):
     """R-factor (positive diagonal) of [W, −y], by a tall-skinny QR: chunks of rows reduced
     separately, then their R's (one tall QR is several times slower for 10⁵ rows)."""
-    from ..lsq import qr_r
-
     m = jnp.concatenate([W, -y[:, None]], axis=1)
     n, q = m.shape
     if n > 2 * _QR_CHUNK:

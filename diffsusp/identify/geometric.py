@@ -32,7 +32,7 @@ needed, its axis from the c_max operators:
 
 **σ and observability.** Every solver minimises Σ_c ‖r_c(x)‖² with r_c the equations of
 case c, which depend on that case's registered poses only. The first-order covariance of a
-registered pose under independent landmark noise σ_L is closed-form (`_pose_covariance`), and
+registered pose under independent landmark noise σ_L is closed-form (`pose_covariance`), and
 the implicit-function theorem gives the estimate's influence matrix case by case, so the
 covariance is a sum over cases of small products (`_uncertainty`: no differentiation through
 the solvers or the registration). A joint is reported **observable** when (1) the weakest
@@ -61,6 +61,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
+from ..statics import part_poses
 from .geometric_correct import CorrectionReport, correct_geometry, offset_equivalent
 from .geometric_joints import (
     FREE_AXIS_RATIO,
@@ -78,15 +79,17 @@ from .geometric_joints import (
 )
 from .geometric_locate import (
     START_OFFSETS,
-    _case_residual,
-    _pose_covariance,
-    _skew,
-    _specs,
+    case_residual,
+    joint_specs,
     joint_values,
     locate_joints,
+    pose_covariance,
     registration_check,
     relative_operators,
+    skew,
 )
+from .params import Params
+from .sensitivity import design_experiment
 
 __all__ = [
     "JOINT_KINDS",
@@ -312,8 +315,6 @@ def _design_parameters(mech, joints, table):
     and z axis of the translational/cylindrical joint's marker on S1, one coordinate of each
     left out for the gauge). Returns (Params, per joint (centre marker, line marker or None),
     target names)."""
-    from .params import Params
-
     n_markers = len(mech.markers.names)
     pos_mask = np.zeros((n_markers, 3), bool)
     ori_mask = np.zeros((n_markers, 3, 3), bool)
@@ -370,13 +371,13 @@ def design_geometry_cases(
     (`diffsusp.identify.design_experiment`, criterion "sigma").
 
     The joint localisation is a least-squares problem in the joint centres whose equations
-    r_c (`_case_residual`) hold case by case; so is a stiffness identification in the
+    r_c (`case_residual`) hold case by case; so is a stiffness identification in the
     stiffnesses, and `design_experiment` chooses cases from any per-case measurement model.
     Here the measurement model of a case is the whitened geometric equations of every joint at
     the model's equilibrium, W_c r_c(x) with x the model's joint hardpoints (the parameters),
     the poses held at the equilibrium (its derivative with respect to the hardpoints is not
     the localisation's: the equations use the measured poses) and W_c = (D_c Σ_c D_cᵀ)^(−1/2)
-    from the poses' landmark noise (`_pose_covariance`, D_c = ∂r_c/∂poses), joint by joint
+    from the poses' landmark noise (`pose_covariance`, D_c = ∂r_c/∂poses), joint by joint
     (each solver uses its own equations only): each case adds A_cᵀ (D_c Σ_c D_cᵀ)⁻¹ A_c / σ_L²
     to the information of the centres (the generalised least-squares bound of the estimators'
     covariance, a little below the σ `locate_joints` reports for its ordinary least squares).
@@ -400,12 +401,9 @@ def design_geometry_cases(
     **Raises:** `InputError` for a joint without `elements`, a part without landmarks, or an
     unknown slide whose model has no slide joint on S1.
     """
-    from ..statics import part_poses
-    from .sensitivity import design_experiment
-
     table = element_table(mech)
     parts = tuple(layout.parts)
-    _specs(joints, parts)  # unknown parts, links
+    joint_specs(joints, parts)  # unknown parts, links
     params, markers, targets = _design_parameters(mech, joints, table)
     measured = [mech.part_index(p) for p in parts]
     reference = jnp.asarray(layout.position)
@@ -420,7 +418,7 @@ def design_geometry_cases(
         q = jax.lax.stop_gradient(q)
         rot, trans = part_poses(m, q)
         rot_m, trans_m = rot[jnp.asarray(measured)], trans[jnp.asarray(measured)]
-        pose_cov = _pose_covariance(reference, rot_m[None], present[None])[0]
+        pose_cov = pose_covariance(reference, rot_m[None], present[None])[0]
         eye = jnp.eye(3, dtype=rot.dtype)
         pos, ori = m.markers.position, m.markers.orientation
 
@@ -430,7 +428,7 @@ def design_geometry_cases(
                 if i < 0:
                     return eye, jnp.zeros(3, rot.dtype)
                 k = slot[i]
-                return (eye + _skew(eps[k, :3])) @ rot_m[k], trans_m[k] + eps[k, 3:]
+                return (eye + skew(eps[k, :3])) @ rot_m[k], trans_m[k] + eps[k, 3:]
 
             out = []
             for (kind, (p1, p2), link, slide), (centre, line) in zip(kinds, markers,
@@ -445,7 +443,7 @@ def design_geometry_cases(
                     extra = jnp.asarray(slide, rot.dtype)
                 elif kind == "compliant_bushing":
                     extra = pos[markers[link][0]]
-                out.append(_case_residual(kind, x, r, t, extra))
+                out.append(case_residual(kind, x, r, t, extra))
             return out
 
         eps0 = jnp.zeros((len(measured), 6), rot.dtype)

@@ -12,7 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
+from ..statics import bushing_states, marker_poses, part_poses, solve_statics
 from .geometric_joints import Coordinate, CoordinateRows
+from .geometric_locate import pose_covariance, skew
 from .report import IdentificationReport
 
 TOL_FLOOR = 1e-4
@@ -96,8 +98,6 @@ def _marker_sigma(x_i, part_i, part_j, measured_index, rot_m, trans_m, pose_cov,
     the point of S2 where I must sit; a pose perturbed by (θ, δT) moves it by
     R1ᵀ([g − T1]× θ1 − δT1) + R1ᵀ(−[g − T2]× θ2 + δT2)); None when a part is neither measured
     nor the ground (its pose is the equilibrium's, whose noise is not modelled here)."""
-    from .geometric_locate import _skew
-
     for p in (part_i, part_j):
         if p >= 0 and p not in measured_index:
             return None
@@ -109,11 +109,11 @@ def _marker_sigma(x_i, part_i, part_j, measured_index, rot_m, trans_m, pose_cov,
     g = r1 @ x_i + t1
     cov = np.zeros((3, 3))
     if m1 is not None:
-        g1 = r1.T @ np.hstack([np.asarray(_skew(jnp.asarray(g - t1))), -np.eye(3)])
+        g1 = r1.T @ np.hstack([np.asarray(skew(jnp.asarray(g - t1))), -np.eye(3)])
         cov += g1 @ pose_cov[m1] @ g1.T
     if part_j >= 0:
         m2 = measured_index[part_j]
-        g2 = r1.T @ np.hstack([-np.asarray(_skew(jnp.asarray(g - trans_m[m2]))), np.eye(3)])
+        g2 = r1.T @ np.hstack([-np.asarray(skew(jnp.asarray(g - trans_m[m2]))), np.eye(3)])
         cov += g2 @ pose_cov[m2] @ g2.T
     return sigma * np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
@@ -231,7 +231,6 @@ def correct_geometry(
     """
     import equinox as eqx
 
-    from ..statics import marker_poses, part_poses, solve_statics
 
     n_cases = measurements.n_cases
     if not 0 <= case < n_cases:
@@ -341,8 +340,6 @@ def correct_geometry(
 def _correction_rows(mech, pairs, measurements, measured_index, case, sigma, converged):
     """One (marker, `Coordinate`) per coordinate of every moved marker (its new design
     position and σ, `_marker_sigma`), with its status."""
-    from .geometric_locate import _pose_covariance
-
     part_of = np.asarray(mech.markers.part)
     final = np.asarray(mech.markers.position)
     rot_m = np.asarray(measurements.rotation)[case]
@@ -350,7 +347,7 @@ def _correction_rows(mech, pairs, measurements, measured_index, case, sigma, con
     landmarks = measurements.layout is not None and measurements.weights is not None
     pose_cov = None
     if landmarks:
-        pose_cov = np.asarray(_pose_covariance(
+        pose_cov = np.asarray(pose_covariance(
             jnp.asarray(measurements.layout.position),
             jnp.asarray(measurements.rotation)[case:case + 1],
             jnp.asarray(measurements.weights)[case:case + 1]))[0]
@@ -397,7 +394,6 @@ def offset_equivalent(mech, q, bushings: Sequence[str] | None = None):
     """
     import equinox as eqx
 
-    from ..statics import bushing_states, marker_poses, part_poses
 
     b = mech.bushings
     names = list(b.names) if bushings is None else list(bushings)

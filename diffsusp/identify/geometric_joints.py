@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ModelFileError
 from .report import Consistency, IdentificationReport
 
 JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
@@ -424,8 +424,6 @@ def read_joints(path) -> tuple[GeometricJoint, ...]:
     kind, parts, and optionally slide, prior, prior_coordinate, link_ball, elements; spec
     geometry §4.6). Raises `ModelFileError` naming the file (and the line, or the joint) on an
     unreadable file, non-JSON text or an invalid joint."""
-    from ..errors import ModelFileError
-
     path = Path(path)
     try:
         items = json.loads(path.read_text(encoding="utf-8"))
@@ -441,8 +439,6 @@ def read_joints(path) -> tuple[GeometricJoint, ...]:
 
 
 def _joint_of(item, k: int, path: Path) -> GeometricJoint:
-    from ..errors import ModelFileError
-
     try:
         item = dict(item)
         for key in ("parts", "slide", "prior", "elements"):

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
+from ..statics import Status, part_poses, solve_statics
 from .geometric_joints import (
     GROUND,
     Coordinate,
@@ -25,6 +26,9 @@ from .geometric_joints import (
     model_geometry,
 )
 from .report import CONSISTENCY_ALPHA, Consistency, chi2_quantile
+
+__all__ = ["START_OFFSETS", "joint_values", "locate_joints", "registration_check",
+           "relative_operators"]  # re-exported by `identify.geometric`
 
 START_OFFSETS = 150.0
 """Half-width (mm) of the 3×3×3 grid of starts around the initial estimate of a
@@ -213,14 +217,14 @@ def _locate(specs, rot, trans, mask, index, slides, priors, starts):
     return [out[k] for k in range(len(specs))]
 
 
-def _skew(v):
+def skew(v):
     z = jnp.zeros_like(v[..., 0])
     return jnp.stack([jnp.stack([z, -v[..., 2], v[..., 1]], -1),
                       jnp.stack([v[..., 2], z, -v[..., 0]], -1),
                       jnp.stack([-v[..., 1], v[..., 0], z], -1)], -2)
 
 
-def _pose_covariance(reference, rotation, weights):
+def pose_covariance(reference, rotation, weights):
     """First-order covariance, per unit landmark σ, of every registered pose (cases, parts,
     6, 6), in the perturbation R → (I + [θ]×) R, T → T + δT (θ first).
 
@@ -232,14 +236,14 @@ def _pose_covariance(reference, rotation, weights):
     ref = jnp.where(w[..., None] > 0, reference[None], 0.0)
     a = jnp.einsum("cpij,cpkj->cpki", rotation, ref)
     eye = jnp.broadcast_to(jnp.eye(3, dtype=a.dtype), a.shape + (3,))
-    g = jnp.concatenate([-_skew(a), eye], -1)  # (c, p, k, 3, 6)
+    g = jnp.concatenate([-skew(a), eye], -1)  # (c, p, k, 3, 6)
     info = jnp.einsum("cpk,cpkai,cpkaj->cpij", w, g, g)
     info2 = jnp.einsum("cpk,cpkai,cpkaj->cpij", w**2, g, g)
     inv = jnp.linalg.inv(info)
     return inv @ info2 @ inv
 
 
-def _case_residual(kind, x, r, t, extra):
+def case_residual(kind, x, r, t, extra):
     """The equations of one case for one joint (zero at the joint's true location):
     `'ball'`/`'revolute'`: δ = T + (R − I) C (3.11); `'ball_known_slide'`: δ minus its
     component along the slide (3.19); `'compliant_bushing'`: δ × R u with u from the link's
@@ -290,9 +294,9 @@ def _uncertainty(specs, rot, trans, mask, index, pose_cov, slides, outputs):
     joint's singular values, in closed form (no differentiation through the solvers).
 
     Each solver minimises Σ_c ‖r_c(x)‖² over its unknowns x, with r_c the equations of case c
-    (`_case_residual`), which depend on the noisy poses of that case only. The implicit-function
+    (`case_residual`), which depend on the noisy poses of that case only. The implicit-function
     theorem gives δx = −H⁻¹ Σ_c B_c ε_c with H = Σ_c ∂²(½‖r_c‖²)/∂x², B_c = ∂²(½‖r_c‖²)/∂x∂ε_c
-    and ε_c the pose perturbations of case c, whose covariance is `_pose_covariance`; a compliant
+    and ε_c the pose perturbations of case c, whose covariance is `pose_covariance`; a compliant
     bushing adds the influence of its link's ball centre. So Cov(x) = Σ_c Φ_c Σ_c Φ_cᵀ with
     Φ_c = ∂x/∂ε_c: a sum over cases of small products. A revolute axis (the null vector of
     M = [R^c − I]) moves by δu = −(MᵀM)⁺ Σ_c (R^c − I)ᵀ δR^c u (first-order perturbation of a
@@ -326,7 +330,7 @@ def _uncertainty(specs, rot, trans, mask, index, pose_cov, slides, outputs):
             i = index[p]
             if i < 0:
                 return eye, jnp.zeros(3, rot.dtype)
-            return (eye + _skew(eps[i, :3])) @ rot_c[i], trans_c[i] + eps[i, 3:]
+            return (eye + skew(eps[i, :3])) @ rot_c[i], trans_c[i] + eps[i, 3:]
 
         eps0 = jnp.zeros((n_parts, 6), rot.dtype)
         out = {}
@@ -335,7 +339,7 @@ def _uncertainty(specs, rot, trans, mask, index, pose_cov, slides, outputs):
 
             def residual(x, eps, extra, kind=kind, p1=p1, p2=p2):
                 (r1, t1), (r2, t2) = poses(eps, p1), poses(eps, p2)
-                return _case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extra)
+                return case_residual(kind, x, r1.T @ r2, r1.T @ (t2 - t1), extra)
 
             x, extra = params[k], extras[k]
             n_x, n_e = x.shape[0], 6 * n_parts
@@ -430,7 +434,7 @@ def _run(specs, rot, trans, mask, index, slides, priors, starts, reference, weig
     outputs = _locate(specs, rot, trans, mask, index, slides, priors, starts)
     if not with_sigma:
         return outputs, None, None
-    pose_cov = _pose_covariance(reference, rot, weights)
+    pose_cov = pose_covariance(reference, rot, weights)
     cov, noise = _uncertainty(specs, rot, trans, mask, index, pose_cov, slides,
                               jax.lax.stop_gradient(outputs))
     return outputs, cov, noise
@@ -447,7 +451,7 @@ def _pad(a, n):
     return a if extra == 0 else jnp.concatenate([a, jnp.repeat(a[:1], extra, axis=0)])
 
 
-def _specs(joints: Sequence[GeometricJoint], parts: tuple[str, ...]):
+def joint_specs(joints: Sequence[GeometricJoint], parts: tuple[str, ...]):
     names = [j.name for j in joints]
     if len(set(names)) != len(names):
         raise InputError("joint names must be unique in the joint list.")
@@ -542,7 +546,7 @@ def locate_joints(
     `model` without a measured part.
     """
     parts = tuple(measurements.parts)
-    specs, index = _specs(joints, parts)
+    specs, index = joint_specs(joints, parts)
     slides = tuple(jnp.asarray(j.slide if j.slide is not None else (0.0, 0.0, 0.0), float)
                    for j in joints)
     priors = tuple(jnp.asarray(j.prior if j.prior is not None else (0.0, 0.0, 0.0), float)
@@ -773,8 +777,6 @@ def _model_located(model, measurements, joints, loads, run):
     the measurements are (same compiled program), and the model's hardpoint and axis
     (`model_geometry`); None where the model has no element for it. Returns the
     list and a note (or "")."""
-    from ..statics import Status, part_poses, solve_statics
-
     loads = measurements.loads if loads is None else loads
     missing = [p for p in measurements.parts if p not in model.parts]
     if missing:

@@ -32,8 +32,10 @@ from jaxtyping import Array, Float
 from ..errors import InputError
 from ..measure.data import Deformations, Measurement, as_deformations
 from ..measure.measurements import Measurements
+from ..measure.noise import ARM_SIGMA
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, bushing_states, solve_statics
+from .least_squares import least_squares, whitened_residuals
 from .params import Params, selected_entries
 from .report import (
     AT_START,
@@ -43,6 +45,7 @@ from .report import (
     MeasurementResiduals,
     check_consistency,
     check_data,
+    chi2_quantile,
     sigma_pct_at_start,
 )
 
@@ -117,8 +120,6 @@ class IterativeReport(IdentificationReport):
         consistency verdict says the loop's fixed point does not reproduce the data (spec
         stiffness §2.7: the loop's fixed point need not be the truth). `options` go to
         `least_squares`. **Returns:** `(mech', FitReport)`."""
-        from .least_squares import least_squares
-
         if self._mech is None or self._data is None:
             raise InputError("this report does not carry its model and data; call "
                              "identify.iterative(..., polish=True) instead.")
@@ -472,8 +473,6 @@ def iterative(
     consistency, check_items, sigma_data, gate_pct = None, None, None, None
     if check or polish:
         if isinstance(data, Loads):
-            from ..measure.noise import ARM_SIGMA
-
             s_t, s_r = sigma if sigma is not None else (ARM_SIGMA,
                                                        ARM_SIGMA / mech.length_scale)
             check_items = (Deformations(loads, names, delta, (s_t,) * 3 + (s_r,) * 3),)
@@ -539,8 +538,6 @@ def _start_gate(mech, names, chosen, items, start) -> np.ndarray:
     the measurements' information (whitened Jacobian through the equilibrium) at the start
     model `mech`, the same for every noise draw, as `least_squares` judges. inf where the
     data carry no information, or where the start model has no equilibrium in a case."""
-    from .least_squares import whitened_residuals
-
     params, order = _selected_params(mech, names, chosen)
     try:
         _, jac = whitened_residuals(mech, items, params, params.start)
@@ -562,9 +559,6 @@ def _least_squares_gap(mech, final, names, chosen, items, consistency):
     same data would still lower χ² from here. The loop does not minimise χ², so a value within
     the noise's χ² band can still be far from what the data say; Δχ² above the χ² quantile of
     p dof marks it inconsistent (see `report.Consistency.gap`)."""
-    from .least_squares import whitened_residuals
-    from .report import chi2_quantile
-
     index = np.array([mech.bushings.index(n) for n in names], dtype=int)
     kt = np.zeros((len(mech.bushings.names), 3), bool)
     kr = np.zeros_like(kt)

@@ -62,7 +62,7 @@ from ..errors import InputError
 from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, solve_statics
-from .least_squares_report import FitReport, NullDirection, StepRecord, _report
+from .least_squares_report import FitReport, NullDirection, StepRecord, fit_report
 from .params import Params
 
 __all__ = ["BatchFitReport", "DEFAULT_LOSS_SCALE", "FitReport", "LOSSES", "NullDirection",
@@ -663,8 +663,8 @@ def least_squares(
         problem, None, u0, adaptive=_is_weak(prior, prior_sigma), batched=False,
         max_steps=max_steps, rtol=rtol, atol=atol, ftol=ftol, gtol=gtol, callback=callback)
     # The first evaluation is at the start values: the identifiability gate's information.
-    report = _report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
-                     int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma, jac0[0])
+    report = fit_report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
+                        int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma, jac0[0])
     report = dataclasses.replace(report, max_sigma_pct=float(max_sigma_pct))
     return params.apply(mech, jnp.asarray(returned_values(report))), report
 
@@ -754,8 +754,8 @@ def least_squares_batch(
     for b in range(n_sets):
         one_problem = _with_values(problem, jax.tree.map(lambda a, b=b: a[b], values))
         reports.append(dataclasses.replace(
-            _report(params, one_problem, u[b], [a[b] for a in last], hist[b], bool(conv[b]),
-                    int(steps[b]), int(acc[b]), msg[b], loss, identifiable_sigma, jac0[b]),
+            fit_report(params, one_problem, u[b], [a[b] for a in last], hist[b], bool(conv[b]),
+                       int(steps[b]), int(acc[b]), msg[b], loss, identifiable_sigma, jac0[b]),
             max_sigma_pct=float(max_sigma_pct)))
     return BatchFitReport(
         names=params.names, estimates=np.stack([r.estimate for r in reports]),

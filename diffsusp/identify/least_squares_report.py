@@ -1,7 +1,7 @@
 """The report of `identify.least_squares` (spec guaranteed_least_squares §3.6–3.8, spec
 stiffness §3, §6 item 8): the LM step records, the combinations the data cannot see
 (`NullDirection`), `FitReport` and its assembly from the final whitened Jacobian (σ, σ%, the
-identifiability gate at the start values). `_report` takes the fit's problem (the
+identifiability gate at the start values). `fit_report` takes the fit's problem (the
 `least_squares._Problem`: data, parameters, prior) without importing it.
 """
 
@@ -260,7 +260,7 @@ def _gate_sigma_pct(params: Params, jac0, n_data: int) -> np.ndarray:
     return np.where(params.log_scaled, 100.0 * np.sqrt(var), np.nan)
 
 
-def _report(params: Params, problem, u, last, history, converged, steps,
+def fit_report(params: Params, problem, u, last, history, converged, steps,
             accepted_steps, message, loss_name, identifiable_sigma, jac0=None) -> FitReport:
     names = params.names
     p = len(names)

@@ -44,6 +44,13 @@ from ..errors import ConvergenceError, InputError
 from ..io.files import write_text_atomic
 from ..model.mechanism import Loads, Mechanism
 from .direct import direct, direct_batch
+from .geometric import (
+    displace_joints,
+    joint_values,
+    joints_from_model,
+    locate_joints,
+    model_geometry,
+)
 from .iterative import iterative
 from .least_squares import least_squares, least_squares_batch
 from .report import check_data, rows_csv
@@ -349,8 +356,6 @@ class GeometryScenario:
     method: str = "geometry"
 
     def __post_init__(self):
-        from .geometric import joints_from_model
-
         if not (isinstance(self.noise, int | float) and math.isfinite(self.noise)
                 and self.noise > 0):
             raise InputError(f"the rehearsal's noise must be a positive landmark σ (mm); got "
@@ -394,16 +399,12 @@ class GeometryScenario:
         return tuple(self._names)
 
     def _locate(self, meas):
-        from .geometric import locate_joints
-
         return locate_joints(meas, self.joints, landmark_sigma=float(self.noise),
                              max_sigma=self.max_sigma, min_snr=self.min_snr, model=self.mech)
 
     def truth_values(self, mech) -> np.ndarray:
         """The coordinates (in `names` order) of the joints of model `mech` (NaN where the
         model has no element for a joint)."""
-        from .geometric import joint_values, model_geometry
-
         values = {}
         for j in self.joints:
             geo = model_geometry(mech, j)
@@ -416,16 +417,12 @@ class GeometryScenario:
         return np.array([values.get(n, np.nan) for n in self._names])
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        from .geometric import displace_joints
-
         offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.joints), 3))
         self._drawn = offsets
         return np.stack([self.truth_values(displace_joints(self.mech, self.joints, o))
                          for o in offsets])
 
     def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
-        from .geometric import displace_joints
-
         if self._drawn is None or len(self._drawn) != len(truths):
             raise InputError("GeometryScenario.identify needs the truths of its own draw().")
         noise = measure.GaussianNoise(landmarks=float(self.noise))

@@ -49,6 +49,9 @@ import equinox as eqx
 import numpy as np
 
 from ..io.files import write_text_atomic
+from ..measure.data import as_fit_data, from_measurements
+from ..measure.measurements import Measurements
+from ..statics import Status, solve_statics
 
 CONSISTENCY_ALPHA = 1e-3
 """Significance of the consistency test: a correct model with the stated noise is called
@@ -189,9 +192,6 @@ def check_data(mech, data, sigma_rotation: float | None = None):
     """The measurements a consistency check compares with: `data` as least-squares
     measurements (`measure.data.as_fit_data`), with a pose table without landmarks given a
     rotation σ (`sigma_rotation`, default its translation σ over the model's length scale)."""
-    from ..measure.data import as_fit_data, from_measurements
-    from ..measure.measurements import Measurements
-
     items = (data,) if not isinstance(data, list | tuple) else tuple(data)
     out = []
     for m in items:
@@ -211,7 +211,6 @@ def check_consistency(mech, data, n_parameters: int, *, cases: Sequence[str] | N
     freedom)."""
     import jax.numpy as jnp
 
-    from ..statics import Status, solve_statics
 
     whitened, counts, failed, names = [], [], None, []
     solved = {}

@@ -26,6 +26,8 @@ import jax
 import numpy as np
 
 from ..errors import InputError
+from ..kc.events import evaluate, raw_metrics
+from ..kc.metrics import DERIVATIVE_METRICS, flagged
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, marker_poses, solve_statics
 from .params import Params
@@ -135,8 +137,6 @@ def sensitivity_metrics(event, metrics: Sequence[str] | None = None, *,
 
     **Raises:** `InputError` for a name the event does not have.
     """
-    from ..kc.metrics import DERIVATIVE_METRICS, flagged
-
     def base(k):
         return k.rsplit("/", 1)[-1]
 
@@ -155,8 +155,6 @@ def sensitivity_metrics(event, metrics: Sequence[str] | None = None, *,
 
 @eqx.filter_jit
 def _metric_jacobian(rig, loads, params: Params, theta, derivatives: bool):
-    from ..kc.events import evaluate, raw_metrics
-
     def metrics(th):
         r = eqx.tree_at(lambda r_: r_.mech, rig, params.apply(rig.mech, th))
         if derivatives:

@@ -11,7 +11,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .. import kc
+from ..errors import InputError
+from ..kc.metrics import corner_geometry
 from ..model import Mechanism
+from ..statics import part_poses, solve_statics
 from .iterative import AXES, IterationRecord, IterativeReport
 from .least_squares import FitReport, StepRecord
 from .params import Params
@@ -105,10 +109,6 @@ def case_channels(mech: Mechanism, q):
     (values by channel, [(channel, label)], the wheel's part index or None)."""
     import jax
 
-    from .. import kc
-    from ..errors import InputError
-    from ..kc.metrics import corner_geometry
-    from ..statics import part_poses
 
     try:
         rc = kc.default_corner(mech).resolve(mech)
@@ -132,7 +132,6 @@ def comparison_figure(mech_start: Mechanism, mech_fitted: Mechanism, meas, title
     """Measured vs start vs identified model per load case (`case_channels`; the measured
     series only where the channel's parts are measured). Returns the matplotlib Figure."""
     from .. import plot
-    from ..statics import solve_statics
 
     series = {}
     values, channels, wheel_part = case_channels(mech_fitted, meas.coordinates(
