@@ -3,7 +3,7 @@
 Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", True)`) before use.
 """
 
-from . import geometry, io, lsq, statics, tyre
+from . import fleet, geometry, identify, io, kc, lsq, mdh, measure, model, models, statics, tyre  # noqa: F401  (every stage loaded)
 from .errors import ConvergenceError, InputError, ModelError, ModelFileError, ModelWarning
 from .io import save_model
 from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
