@@ -40,6 +40,8 @@ import os
 import threading
 import time
 
+from ..compilation import set_xla_flags
+from ..errors import InputError
 from .recipes import ItemTimeout
 
 __all__ = ["HARD_GRACE", "LOST_WORKER_TIMEOUT", "DaskEngine", "Engine", "InProcessEngine",
@@ -114,8 +116,6 @@ class DaskEngine(Engine):
         try:
             import distributed
         except ImportError:  # pragma: no cover - the 'fleet' extra
-            from ..errors import InputError
-
             raise InputError("running a fleet on a cluster needs Dask: pip install "
                              "'diffsusp[fleet]' (dask[distributed]).") from None
         self._owned = []
@@ -246,8 +246,6 @@ def engine_for(workers: int | None = None, scheduler: str | None = None, client=
 def worker_environment() -> dict:
     """Variables a local worker process needs before JAX starts: the compiler flags
     (`diffsusp.compilation.XLA_FLAGS`) and float64."""
-    from ..compilation import set_xla_flags
-
     env = {"XLA_FLAGS": os.environ.get("XLA_FLAGS", "")}
     set_xla_flags(env)
     return env

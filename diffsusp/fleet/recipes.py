@@ -30,6 +30,18 @@ import warnings
 
 import numpy as np
 
+from .. import identify, kc, measure, tyre
+from ..errors import InputError
+from ..identify import Params, least_squares_batch
+from ..io.tables import read_table, unit_factor
+from ..io.tir import read_tir
+from ..kc.dispatch import EVENTS, event_json, reference_case, run_event
+from ..measure.data import from_measurements
+from ..model.mechanism import Mechanism
+from ..resolve import load_model_file
+from ..tyre import fit as F
+from ..tyre.input_tables import read_tyre_table
+
 __all__ = ["KC", "Direct", "ItemTimeout", "Iterative", "LeastSquares", "RECIPES", "Recipe",
            "TyreFit", "recipe"]
 
@@ -70,12 +82,8 @@ class Recipe:
 
     def load_model(self, spec):
         """A suspension `Mechanism` from a model file, a built-in name or a `Mechanism`."""
-        from ..model.mechanism import Mechanism
-
         if isinstance(spec, Mechanism):
             return spec
-        from ..resolve import load_model_file
-
         return load_model_file(spec).mechanism
 
     def check(self) -> None:
@@ -85,8 +93,6 @@ class Recipe:
         """Every option a keyword argument of `function` (or one of `own`): an unknown key is
         bad input before any item runs, not ignored nor an error on every item (D18)."""
         import inspect
-
-        from ..errors import InputError
 
         params = inspect.signature(function).parameters
         if any(p.kind is p.VAR_KEYWORD for p in params.values()):
@@ -99,8 +105,6 @@ class Recipe:
                              f"known: {', '.join(known)}.")
 
     def read(self, mech, path):
-        from .. import measure
-
         return measure.read_measurements(path, mech)
 
     def run(self, mechs: list, data: list, deadline: float | None, mesh=None) -> list:
@@ -125,13 +129,9 @@ class Direct(Recipe):
     name = "direct"
 
     def check(self) -> None:
-        from .. import identify
-
         self._check_keywords(identify.direct)
 
     def run_one(self, mech, data):
-        from .. import identify
-
         _, report = identify.direct(mech, data, **self.options)
         return report.to_dict(), _with_statuses(report, dict(zip(
             report.names, map(float, report.values), strict=True)))
@@ -145,13 +145,9 @@ class Iterative(Recipe):
     name = "iterative"
 
     def check(self) -> None:
-        from .. import identify
-
         self._check_keywords(identify.iterative)
 
     def run_one(self, mech, data):
-        from .. import identify
-
         _, report = identify.iterative(mech, data, **self.options)
         d = report.to_dict()
         values = {f"{b}.{a}": float(report.stiffness[i][j])
@@ -209,8 +205,6 @@ class LeastSquares(Recipe):
     _OWN = ("bushings", "axes", "sigma", "sigma_rotation", "pad_to")
 
     def check(self) -> None:
-        from ..identify import least_squares_batch
-
         self._check_keywords(least_squares_batch, self._OWN)
 
     def read(self, mech, path):
@@ -219,16 +213,12 @@ class LeastSquares(Recipe):
     def _measurement(self, m):
         """A `measure.Measurements` (a table read, or an in-memory item) as the fit's
         measurement, with the recipe's σ; a measurement already is one."""
-        from ..measure.data import from_measurements
-
         if hasattr(m, "_values"):
             return m
         return from_measurements(m, self.options.get("sigma", 0.05),
                                  self.options.get("sigma_rotation", 0.01) * _DEG)
 
     def run(self, mechs: list, data: list, deadline: float | None, mesh=None) -> list:
-        from ..identify import Params, least_squares_batch
-
         data = [self._measurement(m) for m in data]
         o = self.options
         bushings = o.get("bushings")
@@ -294,9 +284,6 @@ def _load_table(mech, path):
     """A K&C load table file: columns F_vert, F_lat, F_long (per side, at the contact point:
     vertical up, lateral inboard, longitudinal rearward; N unless the header gives a force
     unit), one load case per row."""
-    from ..errors import InputError
-    from ..io.tables import read_table, unit_factor
-
     table = read_table(path)
     lower = {n.lower(): n for n in table.names}
     columns = []
@@ -316,8 +303,6 @@ def _load_table(mech, path):
 
 def _event_report(ev, model_name: str, caught) -> dict:
     """The JSON of `diffsusp kc MODEL --json` for an event, plus the warnings it raised."""
-    from ..kc.dispatch import event_json
-
     return event_json(ev, model_name) | {"warnings": [str(w.message) for w in caught]}
 
 
@@ -355,9 +340,6 @@ class KC(Recipe):
         return self.event != "table"
 
     def check(self) -> None:
-        from ..errors import InputError
-        from ..kc.dispatch import EVENTS
-
         unknown = sorted(set(self.options) - {"event", *self._RANGES})
         if unknown:
             raise InputError(f"unknown kc option(s) {', '.join(unknown)}; the options are "
@@ -370,10 +352,6 @@ class KC(Recipe):
         return _load_table(mech, path)
 
     def run_one(self, mech, data):
-        from .. import kc
-        from ..errors import InputError
-        from ..kc.dispatch import EVENTS, reference_case, run_event
-
         unknown = sorted(set(self.options) - {"event", *self._RANGES})
         if unknown:
             raise InputError(f"unknown kc option(s) {', '.join(unknown)}; the options are "
@@ -422,9 +400,6 @@ class TyreFit(Recipe):
     def check(self):
         """Unknown option keys, groups or losses are bad input before any item runs
         (bad_inputs D18), not an error on every item."""
-        from ..errors import InputError
-        from ..tyre import fit as F
-
         unknown = [k for k in self.options if k not in self._OPTIONS]
         if unknown:
             raise InputError(f"tyre-fit option(s) {', '.join(map(repr, unknown))} unknown; "
@@ -443,36 +418,25 @@ class TyreFit(Recipe):
             raise InputError(f"tyre-fit option loss {loss!r}: linear, huber or cauchy.")
 
     def load_model(self, spec):
-        from .. import tyre
-
         if isinstance(spec, tyre.MagicFormula6 | tyre.MagicFormula89):
             return spec
-        from ..io.tir import read_tir
-
         return tyre.MagicFormula6.from_tir(read_tir(spec))
 
     def read(self, model, path):
-        from ..tyre import fit as F
-        from ..tyre.input_tables import read_tyre_table
-
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             bench = F.bench_data(read_tyre_table(path, "bench table"))
         return bench, tuple(str(w.message) for w in caught)
 
     def _groups(self, model, channels) -> list[str]:
-        from ..tyre.fit import default_groups
-
         if self.options.get("names"):
             return ["fit"]
         if self.options.get("groups"):
             return list(self.options["groups"])
-        return default_groups(model, channels)
+        return F.default_groups(model, channels)
 
     def run(self, models: list, data: list, deadline: float | None, mesh=None) -> list:
         import jax
-
-        from ..tyre import fit as F
 
         kwargs = {k: v for k, v in self.options.items() if k in self._FIT}
         out: list = [None] * len(data)
@@ -491,8 +455,6 @@ class TyreFit(Recipe):
                     if g == "fit":
                         names = list(self.options["names"])
                     elif g not in F.GROUPS:
-                        from ..errors import InputError
-
                         raise InputError(f"unknown coefficient group {g!r}; one of "
                                          f"{', '.join(F.GROUPS)}.")
                     else:
@@ -524,8 +486,6 @@ RECIPES = {"direct": Direct, "iterative": Iterative, "least_squares": LeastSquar
 def recipe(name_or_recipe, **options) -> Recipe:
     """A recipe from its name (`'direct'`, `'iterative'`, `'least_squares'`, `'kc'`,
     `'tyre_fit'`) and options, or the recipe itself."""
-    from ..errors import InputError
-
     if isinstance(name_or_recipe, Recipe):
         if options:
             raise InputError("give the options to the recipe object, not to recipe().")

@@ -37,7 +37,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..errors import ModelFileError
+from ..compilation import set_xla_flags
+from ..errors import InputError, ModelFileError
 from ..io.files import read_input
 from .engine import DaskEngine, Engine, InProcessEngine, worker_environment
 from .recipes import ItemTimeout, NotConverged, Recipe
@@ -120,8 +121,6 @@ class FleetResult:
 
 
 def _as_items(items, items_are_models: bool = False) -> list[Item]:
-    from ..errors import InputError
-
     if isinstance(items, str | os.PathLike):
         items = [items]
     out: list[Item] = []
@@ -211,8 +210,6 @@ class _Models:
         if spec is None:
             spec = self.default
         if spec is None:
-            from ..errors import InputError
-
             raise InputError("no model: give the fleet a model= or every item its own.")
         key = os.fspath(spec) if isinstance(spec, str | os.PathLike) else id(spec)
         if key not in self._seen:
@@ -343,8 +340,6 @@ def _setup(batch: _Batch, own_process: bool) -> None:
         return
     _WORKER["setup"] = True
     if own_process:
-        from ..compilation import set_xla_flags
-
         set_xla_flags(os.environ)  # before JAX starts its backend (a fresh worker)
         import jax
 
@@ -521,8 +516,6 @@ def run(
     **Returns:** a `FleetResult`.
     """
     import jax
-
-    from ..errors import InputError
 
     rec = make_recipe(recipe, **(options or {}))
     rec.check()

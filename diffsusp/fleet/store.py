@@ -25,7 +25,7 @@ import math
 import os
 import pathlib
 
-from ..errors import ModelFileError
+from ..errors import InputError, ModelFileError
 from ..io.files import read_input, write_text_atomic
 
 __all__ = ["FleetStatus", "Store", "status"]
@@ -198,8 +198,6 @@ class FleetStatus:
 
 def status(out) -> FleetStatus:
     """The state of the fleet in folder `out` (also `diffsusp fleet status OUT`)."""
-    from ..errors import InputError
-
     store = Store(out)
     manifest = store.manifest()
     if not manifest:
