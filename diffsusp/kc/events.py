@@ -34,7 +34,6 @@ from jaxtyping import Array, Float
 from ..compilation import filter_jit
 from ..errors import ConvergenceError, InputError
 from ..model import GROUND, Loads, Mechanism
-from ..models.loadcases import TABLE_4_4, TABLE_5_1
 from ..statics import (
     STATUS_TEXT,
     StaticSolution,
@@ -45,6 +44,7 @@ from ..statics import (
 )
 from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margins, warn_law_validity
 from .corner import Corner, ResolvedCorner, corners_of
+from .loadcases import TABLE_4_4, TABLE_5_1
 from .metrics import DERIVATIVE_METRICS, METRICS, Derivatives, corner_geometry
 from .rig import ROAD_CONTACT, add_driver, add_road_contact, remove_drivers
 
