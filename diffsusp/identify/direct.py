@@ -434,7 +434,7 @@ def direct(
       `iterative` and `least_squares`, `report.sigma_pct_at_start`, `judged_at`) are reported
       as not determined; an unknown whose model value is 0 (an offset) has no relative bar
       (identifiability alone). The reported σ% stays the one at the estimate.
-    - `polish`: errors in variables (issue 12). The rows Lᵀ·D and L are built from the
+    - `polish`: errors in variables. The rows Lᵀ·D and L are built from the
       *measured* poses, so with noisy landmarks the regressors are noisy and the linear
       estimate is biased (A.Krz of the pseudo-McPherson by ≈ 3 of its own σ at 0.05 mm), a bias
       its σ does not show. "auto" (default): when the linear estimate does not reproduce the
@@ -501,7 +501,7 @@ def direct(
                                         max_sigma_pct, held)
     analysis = analyse(structure, fit, negligible, eliminated, max_sigma_pct, hold, raw.prior)
     params = raw.parameters
-    # The one rule of the suspension methods (issue 27): σ % at the model's values.
+    # The one rule of the suspension methods: σ % at the model's values.
     identified = analysis.identifiable & within_bar(analysis.gate_pct, max_sigma_pct)
     values = np.asarray(fit.x, float)
     # A negative stiffness is not a result, however small its σ: typically the forces of

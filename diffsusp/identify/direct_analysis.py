@@ -2,7 +2,7 @@
 the identifiability of each unknown from the unweighted equations (no effect, independent, or
 only in an identifiable combination such as `bushing_1.Krx + bushing_2.Krx`), and the verdict
 per unknown from its σ% at the model's values (the start: `report.sigma_pct_at_start`, the one
-rule of the suspension methods, issue 27).
+rule of the suspension methods).
 """
 
 import dataclasses

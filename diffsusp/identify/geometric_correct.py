@@ -42,7 +42,7 @@ class CorrectionReport(CoordinateRows, IdentificationReport):
     case); `notes`; `coordinates`: one `Coordinate` per moved marker coordinate (its new design
     position, mm, and its σ from the landmark noise of the reference case's measured poses).
 
-    On the report base (issue 27): one row per moved marker coordinate (`'<marker>.x'`…) with
+    On the report base: one row per moved marker coordinate (`'<marker>.x'`…) with
     value, σ and one status: *identified* when the correction converged and σ is known (the
     marker's parts measured with landmarks, or the ground), *not determined* otherwise (with
     the reason). The correction reproduces one case by construction, so its consistency with

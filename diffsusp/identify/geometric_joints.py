@@ -84,7 +84,7 @@ class GeometricJoint:
 
 @dataclasses.dataclass(frozen=True)
 class Coordinate:
-    """One located coordinate of a joint: a row of the report (issue 27: one verdict).
+    """One located coordinate of a joint: a row of the report (one verdict).
 
     **Fields:** `name` ('x', 'y', 'z' of the centre; 'axis_y'… a component of a revolute's or
     slide's unit axis, the largest component left out: the norm fixes it); `value`; `sigma`
@@ -222,7 +222,7 @@ class GeometricReport(CoordinateRows, IdentificationReport):
     """Result of `locate_joints`: one `JointEstimate` per joint of the list, in order, the
     landmark noise σ_L used for the σ (mm), and the number of cases.
 
-    On the report base of every identification (`identify.report`, issue 27): one parameter
+    On the report base of every identification (`identify.report`): one parameter
     per located coordinate (`'<joint>.x'`, `'<joint>.axis_y'`…, see `Coordinate`) with its
     value, σ and one status — *identified* (determined and the data consistent), *not
     determined* with the reason (a revolute's position along its axis; not observable; a

@@ -531,7 +531,7 @@ def locate_joints(
     The number of cases is padded up to a multiple of `CASE_BUCKET` with masked cases, so that
     tables of similar size share one compiled program.
 
-    **Report (issue 27):** one row per located coordinate (`Coordinate`: the centre's x, y, z;
+    **Report:** one row per located coordinate (`Coordinate`: the centre's x, y, z;
     a revolute's two coordinates across its axis where the line crosses the plane of the
     prior's coordinate along it, that coordinate itself "not determined: position along the
     axis not observable", and its axis' two smaller components; an unknown slide's axis

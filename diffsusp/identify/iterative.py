@@ -372,7 +372,7 @@ def iterative(
       (spec §2.8, §2.10: "bushings whose deformation is below the measurement capability cannot
       be identified"). Default: no such gate (exact synthetic data correlate at any amplitude).
     - `max_iterations`: bound on the loop; `callback(i, record)` is called after each pass.
-    - `check` (issue 12): re-solve the identified model at the measured cases and compare with
+    - `check`: re-solve the identified model at the measured cases and compare with
       the measurements in units of their noise (`report.consistency`: landmarks or poses when
       given them, else the deformations). The loop's fixed point matches the deformations only
       up to the offsets E0 and need not be the truth (spec stiffness §2.7): when the model does

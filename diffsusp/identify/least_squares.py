@@ -29,7 +29,7 @@ model about the trial point (its value and Jacobian there are all a Gauss–Newt
 the function). Losses, priors and data values are runtime arrays: they never recompile.
 `least_squares_batch` vmaps the same four calls over many data sets.
 
-Stopping (issue 12): at an accepted point, when a full Gauss–Newton step would lower χ² (prior
+Stopping: at an accepted point, when a full Gauss–Newton step would lower χ² (prior
 rows included) by less than `gtol` + `ftol`·χ² — a test on what the data can still give, not on
 the size of the step, which stays large along directions the data barely see. A weak default
 prior on log stiffness keeps those directions where they started (see `least_squares`). The
@@ -233,7 +233,7 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
     accepted = new_state.num_accepted_steps > state.num_accepted_steps
     # The stop does not look at the step in u (optimistix's Cauchy test): along a direction
     # the data barely see, steps stay large long after the fit has settled, and a parameter
-    # there may wander (issue 12). It asks what the data can still give: at an accepted point,
+    # there may wander. It asks what the data can still give: at an accepted point,
     # the decrease of Σr² a full Gauss–Newton step would bring, ‖Qᵀr‖² (QR of the Jacobian,
     # prior rows included), below gtol + ftol·Σr² (in χ² units: far below a change anyone
     # could see in the data).
@@ -620,7 +620,7 @@ def least_squares(
     - `prior`, `prior_sigma`: Tikhonov prior θ_prior (a Mechanism, a `(p,)` array or a mapping
       name → value; missing names: the start) with σ in physical units (scalar, `(p,)`, or a
       mapping; inf = none). For a log-scaled parameter it acts on log θ with relative σ/θ_prior.
-      Default `"weak"` (issue 12: a parameter the data cannot see must not wander by orders of
+      Default `"weak"` (a parameter the data cannot see must not wander by orders of
       magnitude): every log-scaled parameter (stiffness) gets a prior at its start value with
       σ = `DEFAULT_LOG_PRIOR_SIGMA` = 3 on log θ (a factor e³ ≈ 20); positions get none. Chosen
       over steps restricted to the identifiable subspace because it is one objective (the LM's

@@ -112,7 +112,7 @@ class FitReport(IdentificationReport):
         the suspension methods (`report.sigma_pct_at_start`, `IdentificationReport.within_bar`;
         `direct` and `iterative` apply it too).
 
-        Why not the σ% at the estimate (issue 12): the σ of log θ depends on θ (a stiff
+        Why not the σ% at the estimate: the σ of log θ depends on θ (a stiff
         bushing's effect on the poses goes as 1/K, so its relative σ grows with K), so a bar
         on the σ% at the estimate admits the draws whose noise happened to move the estimate
         where the data see it better — a selection on the estimate's own noise. Over 100 noise

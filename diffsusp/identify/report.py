@@ -17,7 +17,7 @@ Each report keeps its own fields (e.g. `DirectReport.values` in the thesis's tab
   verdict);
 
 and, from those, `is_identified` (a parameter is *identified* only when the data determine it
-AND the identified model reproduces the data: issue 12), `verdicts`, `rows()`, `to_frame()`,
+AND the identified model reproduces the data), `verdicts`, `rows()`, `to_frame()`,
 `to_json()` and `plot()`.
 
 **Why a consistency verdict.** A determined parameter (small σ, full rank) of a model that does
@@ -265,7 +265,7 @@ AT_START = "the start values"
 
 
 def sigma_pct_at_start(sigma, start) -> np.ndarray:
-    """The one rule for "determined" of `direct`, `iterative` and `least_squares` (issue 27):
+    """The one rule for "determined" of `direct`, `iterative` and `least_squares`:
     σ % judged at the start values, 100·σ/|start|, where σ is what the experiment gives at the
     start values (the method's σ where it does not depend on θ, as the direct method's linear
     σ; the Fisher information of the data Jacobian at the start where it does, as for least
