@@ -6,27 +6,44 @@ global figure list; in a notebook it displays as the cell's value) and accepts `
 existing axes. Values are shown in display units (deg, deg/m, deg/kN, N/mm; see
 `diffsusp.kc.METRICS`); events hold internal units. `save(fig, stem)` writes PNG and SVG.
 
-Without a display (no `DISPLAY`, no `MPLBACKEND`, not in a notebook kernel), the Agg backend is
-selected on import.
+matplotlib is imported when the first figure is made, not with this module (the identification
+reports import it; a report that is only printed never loads matplotlib). Without a display (no
+`DISPLAY`, no `MPLBACKEND`, not in a notebook kernel), the Agg backend is selected then.
 """
+
+from __future__ import annotations
 
 import os
 import pathlib
 import sys
 import textwrap
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-if (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
-        and not os.environ.get("WAYLAND_DISPLAY") and not os.environ.get("MPLBACKEND")
-        and "ipykernel" not in sys.modules):
-    matplotlib.use("Agg")
+from .kc.metrics import METRICS, display
 
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
-from .kc.metrics import METRICS, display  # noqa: E402
+
+_BACKEND_CHOSEN = []
+
+
+def _figure(**kwargs) -> Figure:
+    """A new `matplotlib.figure.Figure` (no pyplot); the backend is chosen once, at the first."""
+    import matplotlib
+
+    if not _BACKEND_CHOSEN:
+        _BACKEND_CHOSEN.append(True)
+        if (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
+                and not os.environ.get("WAYLAND_DISPLAY") and not os.environ.get("MPLBACKEND")
+                and "ipykernel" not in sys.modules):
+            matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    return Figure(**kwargs)
 
 _X_LABELS = {
     "wheel_travel": "wheel travel",
@@ -69,7 +86,7 @@ def _series(ev, metric):
 
 def _new_axes(n: int, ax, width=6.4, height=2.6):
     if ax is None:
-        fig = Figure(figsize=(width, height * n + 0.6), layout="constrained")
+        fig = _figure(figsize=(width, height * n + 0.6), layout="constrained")
         axes = fig.subplots(n, 1, squeeze=False)[:, 0]
         return fig, list(axes)
     axes = list(ax) if isinstance(ax, Sequence | np.ndarray) else [ax]
@@ -157,7 +174,7 @@ def sensitivity_bars(values, names, *, ax=None, title: str | None = None,
         order = order[:top]
     values, names = values[order], [names[i] for i in order]
     if ax is None:
-        fig = Figure(figsize=(6.4, 0.6 + 0.32 * max(len(names), 1)), layout="constrained")
+        fig = _figure(figsize=(6.4, 0.6 + 0.32 * max(len(names), 1)), layout="constrained")
         ax = fig.subplots()
     else:
         fig = ax.figure
@@ -181,7 +198,7 @@ def convergence(histories: dict, *, ylabel: str, log: bool = True, xlabel: str =
     **Returns:** the Figure.
     """
     if ax is None:
-        fig = Figure(figsize=(6.4, 3.6), layout="constrained")
+        fig = _figure(figsize=(6.4, 3.6), layout="constrained")
         ax = fig.subplots()
     else:
         fig = ax.figure

@@ -25,6 +25,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .. import plot
 from ..errors import InputError
 from ..kc.events import evaluate, raw_metrics
 from ..kc.metrics import DERIVATIVE_METRICS, flagged
@@ -110,8 +111,6 @@ class SensitivityReport:
 
     def plot(self, metric: str, *, case: int | None = None, top: int = 12, ax=None):
         """Bar chart of the `top` elasticities of `metric` (`diffsusp.plot.sensitivity_bars`)."""
-        from .. import plot
-
         ranks = self.ranked(metric, case)[:top]
         return plot.sensitivity_bars([v for _, v in ranks], [p for p, _ in ranks],
                                      title=f"elasticity of {metric}", ax=ax)

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .. import kc
+from .. import kc, plot
 from ..errors import InputError
 from ..kc.metrics import corner_geometry
 from ..model import Mechanism
@@ -131,8 +131,6 @@ def case_channels(mech: Mechanism, q):
 def comparison_figure(mech_start: Mechanism, mech_fitted: Mechanism, meas, title: str):
     """Measured vs start vs identified model per load case (`case_channels`; the measured
     series only where the channel's parts are measured). Returns the matplotlib Figure."""
-    from .. import plot
-
     series = {}
     values, channels, wheel_part = case_channels(mech_fitted, meas.coordinates(
         mech_fitted, unmeasured="design"))
@@ -151,8 +149,6 @@ def iterative_figures(report: IterativeReport, mech0: Mechanism, fitted: Mechani
                       meas) -> dict:
     """{'iterative_convergence': |K/K_final − 1| per identified direction and iteration,
     'iterative_cases': `comparison_figure`} (matplotlib Figures)."""
-    from .. import plot
-
     k = np.stack([r.stiffness for r in report.history])  # (iterations, n, 6)
     ok = np.asarray(report.identified, dtype=bool)
     histories = {f"{name}.{axis}": np.abs(k[:, b, a] / report.stiffness[b, a] - 1.0) + 1e-16
@@ -168,8 +164,6 @@ def iterative_figures(report: IterativeReport, mech0: Mechanism, fitted: Mechani
 def fit_figures(report: FitReport, mech0: Mechanism, fitted: Mechanism, meas) -> dict:
     """{'fit_convergence': the loss ½Σr² at each accepted LM step, 'fit_cases':
     `comparison_figure`} (matplotlib Figures)."""
-    from .. import plot
-
     loss = np.array([r.trial_loss for r in report.history], dtype=float)
     accepted = np.array([r.accepted for r in report.history], dtype=bool)
     losses = {"loss ½Σr² at the estimate": np.where(accepted, np.maximum(loss, 1e-300),
