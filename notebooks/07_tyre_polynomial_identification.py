@@ -145,7 +145,7 @@ print({k: round(float(start[k]), 4) for k in ("a1", "a2", "a3", "a4", "c1", "c2"
                                                "c12", "c13")})
 d = np.linspace(-4, 4, 81)
 fig, ax = plt.subplots(figsize=(6, 3.5))
-u = {"fz": np.full_like(d, 4.5), "delta": convert._deg_to_dp(d, 0.33)}
+u = {"fz": np.full_like(d, 4.5), "delta": convert.deg_to_dp(d, 0.33)}
 ax.plot(d, fy(u) - fy({"fz": np.array([4.5])})[0], "k-", label="polynomial (offset removed)")
 ax.plot(d, mf89.fy0(start, d, 4.5), "b--", label="MF step 1")
 ax.set(xlabel="δ [deg]", ylabel="F_y [N]")

@@ -488,15 +488,15 @@ def test_camber_powers_on_steady_and_varied_camber():
     names = poly.regressor_model("Fy", {"gamma": 5, "one": 1}).names
     steady = np.radians(np.repeat([-1.5, 0.0, 1.5], 50))
     np.testing.assert_array_equal(bench.camber_levels(steady), [-1.5, 0.0, 1.5])
-    why = bench._camber_powers(names, steady)
+    why = bench.camber_powers(names, steady)
     assert set(why) == {f"b_Fy_gamma_{i}_{j}" for i in (3, 4, 5) for j in range(4)}
     assert "gamma^4 is a combination of gamma^1..gamma^2" in why["b_Fy_gamma_4_1"]
     # the Vandermonde claim itself: γ³ on these levels is a combination of γ and γ²
     G = np.stack([steady**i for i in (1, 2, 3)], axis=1)
     assert np.linalg.matrix_rank(G) == 2
     ramp = np.radians(np.linspace(-3.0, 3.0, 400))
-    assert bench.camber_levels(ramp) is None and bench._camber_powers(names, ramp) == {}
-    zero = bench._camber_powers(names, np.zeros(10))
+    assert bench.camber_levels(ramp) is None and bench.camber_powers(names, ramp) == {}
+    zero = bench.camber_powers(names, np.zeros(10))
     assert set(zero) == {n for n in names if "_gamma_" in n}
 
 

@@ -181,7 +181,7 @@ def round_trip():
     dd = np.linspace(-4.0, 4.0, 25)
     FZ, DD = np.meshgrid(loads, dd, indexing="ij")
     fy = np.asarray(mf89.fy0(m, DD, FZ))
-    dp = convert._deg_to_dp(DD.ravel(), R)
+    dp = convert.deg_to_dp(DD.ravel(), R)
     pfy = convert.fit_slip_polynomial("Fy", FZ.ravel(), dp, fy.ravel())  # degree 5, j = 1..3
     start, notes = convert.step1(pfy, loads=loads, radius=R)
     fitted, report = convert.refine(start, convert.slip_data(FZ, DD, fy))
@@ -225,7 +225,7 @@ def test_step1_on_annex_g_polynomials():
     # at δ′ > 0 and minimum at δ′ < 0 (12.19 and −14.38 mm at 4.5 kN); at 6 kN the minimum
     # leaves the domain, so the affine S_h(F_z) goes through the two loads that have both
     assert "extrema found at 2 loads" in notes["Mz"]
-    sh = -(convert._dp_to_deg(0.0121895, 0.33) + convert._dp_to_deg(-0.0143840, 0.33)) / 2
+    sh = -(convert.dp_to_deg(0.0121895, 0.33) + convert.dp_to_deg(-0.0143840, 0.33)) / 2
     assert float(mf89.macro(start, 4.5)["Shz"]) == pytest.approx(sh, abs=0.002)
     # D from the extrema of M_z: the mean of |M_z| at the two extrema (3-107)
     ex = {e[2]: e for e in mz.extrema(4.5, lo=-0.03, hi=0.03) if abs(e[0]) < 0.016}

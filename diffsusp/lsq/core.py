@@ -183,7 +183,7 @@ def _back(QR, top, bottom):
     return jax.scipy.linalg.solve_triangular(Rr, Q.T @ rhs, lower=False)
 
 
-def _masked_solve(A, b, mask, x_fixed):
+def masked_solve(A, b, mask, x_fixed):
     """argmin ‖A x − b‖ over x[mask], x[~mask] = x_fixed; and the unit-variance covariance
     (R′ᵀR′)⁻¹ of x[mask] (zero elsewhere) (spec §3.7 (1-32), §3.8 (1-37))."""
     p = A.shape[1]
@@ -325,7 +325,10 @@ def solve_r(
     return _finish_jit(base, step, identifiable, fixed)
 
 
-def _scaled(R, n, threshold):
+def scaled_problem(R, n, threshold):
+    """The (p, p) block of the QR factor `R` with its columns scaled to unit norm (a zero column
+    left as is), the scales and the rank threshold (`threshold`, or `default_threshold(n, p)`
+    when not positive)."""
     p = R.shape[0] - 1
     Rw = R[:p, :p]
     norms = jnp.linalg.norm(Rw, axis=0)
@@ -335,7 +338,7 @@ def _scaled(R, n, threshold):
 
 
 def _identifiability(R, n, threshold, pivot):
-    A, _, tol = _scaled(R, n, threshold)
+    A, _, tol = scaled_problem(R, n, threshold)
     p = A.shape[1]
     kept = select(A, jnp.ones(p, bool), tol, pivot)
     gamma = _regrouping(A, _factor(A, kept))
@@ -391,12 +394,12 @@ def _sigma2(base, x_s):
 
 def _base(R, n, prior, fixed, threshold, pivot, dof) -> _Base:
     p = R.shape[0] - 1
-    A, d, tol = _scaled(R, n, threshold)
+    A, d, tol = scaled_problem(R, n, threshold)
     B = -R[:p, p]
     prior_s = prior / d
     # Fixed (eliminated) parameters are not candidates; they stay at their prior.
     kept = select(A, ~fixed, tol, pivot)
-    x_basic, cov_basic, QR = _masked_solve(A, B, kept, prior_s)
+    x_basic, cov_basic, QR = masked_solve(A, B, kept, prior_s)
     gamma = _regrouping(A, QR)
     rank = jnp.sum(kept)
     dof_value = (n - rank if dof == "n-rank" else n - p).astype(R.dtype)
@@ -449,7 +452,7 @@ def _method(base, prior, prior_sigma, lower, upper, fixed, method) -> _Step:
         hi = jnp.where(fixed, prior_s, upper / d)
         x_s, free, iterations, converged = bvls(A, B, lo, hi, base.x_basic, max_iter=4 * p + 20)
         estimated = free & base.kept
-        _, cov_unit, _ = _masked_solve(A, B, estimated, x_s)
+        _, cov_unit, _ = masked_solve(A, B, estimated, x_s)
         return _Step(x_s, cov_unit, nan, estimated, ~free & ~fixed, iterations, converged)
     raise ValueError(f"unknown method {method!r}")  # pragma: no cover - the caller validates
 

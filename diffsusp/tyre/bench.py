@@ -148,7 +148,7 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
     significance tests): while a kept coefficient still fails IC ≥ `ic_threshold` or
     σ % ≤ `sigma_pct_threshold`, the rule returns None and lets the elimination remove it.
     """
-    violation = _behaviour(output, fz_range, rolling_radius=rolling_radius, loads=loads,
+    violation = behaviour_rules(output, fz_range, rolling_radius=rolling_radius, loads=loads,
                            well_excited_load=well_excited_load)
 
     def rule(fit: lsq.Fit) -> str | None:
@@ -167,7 +167,7 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
     return rule
 
 
-def _behaviour(output, fz_range, *, rolling_radius=0.294, loads=None, well_excited_load=True):
+def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_excited_load=True):
     """The behaviour rules of `structure_rules` as a function of the active coefficients
     (name → value): returns None, or (the coefficient the rule drops, the coefficients that
     can fix the same fault (its load polynomial c_{F,X,i} for rule 1, the cornering stiffness's
@@ -909,16 +909,16 @@ def _whiten(xp, e, sources):
     return xp.linalg.solve(chol, e[..., None])[..., 0]
 
 
-def _masks(names):
+def block_masks(names):
     blocks = [parse_name(n)[1] for n in names]
     return (np.array([b == "Ly" for b in blocks], bool),
             np.array([b not in ("Ly", "P2") for b in blocks], bool),
             np.array([b == "P2" for b in blocks], bool))
 
 
-def _parts_fn(model):
+def parts_fn(model):
     """samples → (X, L, Dp) of `two_step` for a LIP model with relaxation columns."""
-    is_ly, is_pneu, _ = _masks(model.names)
+    is_ly, is_pneu, _ = block_masks(model.names)
     dmodel = model.derivative("delta")
 
     def run(samples):
@@ -936,7 +936,7 @@ _PARTS_PROGRAMS: dict = {}
 def _parts_program(model):
     key = ("parts", model.names, model.inputs)
     if key not in _PARTS_PROGRAMS:
-        _PARTS_PROGRAMS[key] = quick_jit(_parts_fn(model))
+        _PARTS_PROGRAMS[key] = quick_jit(parts_fn(model))
     return _PARTS_PROGRAMS[key]
 
 
@@ -951,7 +951,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77);
     every structure estimated by `two_step` (instrumental variables, noise-model σ).
 
-    **The structure search** (spec §3.3, §3.4, §7 items 18–19; `_structure_search`) removes
+    **The structure search** (spec §3.3, §3.4, §7 items 18–19; `structure_search`) removes
     one coefficient at a time, refitting each time:
 
     1. the coefficient with the largest σ % above `sigma_pct_threshold` (default 10 %: the
@@ -989,9 +989,9 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
 
     A removal that leaves the number of estimable coefficients unchanged (a column that was a
     combination of the removed one and the kept ones takes its place: γ³ for γ on constant
-    camber levels) removes that column with it (`_aliases`). Camber powers that the data's
+    camber levels) removes that column with it (`aliased_columns`). Camber powers that the data's
     steady camber levels cannot determine are reported in `not_identifiable` with the reason
-    (`_camber_powers`).
+    (`camber_powers`).
 
     `extra` (a `lsq.algebra.LinearModel`, optional): more F_pneu columns to search with the
     others, named b_<F>_<block>_<i>_<j> (e.g. the camber/slip coupling γ²·δ′·F_z^j of the
@@ -1000,7 +1000,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     polynomial of `degrees`).
 
     **The coupling term of M_z** (b_Mz_P2_0_0 = K_y⁻¹ of (3-69), the column −F_y·F̂x_pneu):
-    judged before the search against every candidate column (`_structure_search(separable=)`)
+    judged before the search against every candidate column (`structure_search(separable=)`)
     at its physical size K_y⁻¹ (`p2_size`, default the compliance of `fy_report`, else
     1e−5 m/N: K_y = 100 kN/m, the soft end of spec §8.2), and held at 0, reported in
     `not_identifiable` with the reason, when the data cannot tell it from 0. On steering-feel
@@ -1044,7 +1044,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     profile, profile_fy = prof.get(channel), (None if output == "Fy" else prof.get("FY"))
 
     def estimate(active, **kw):
-        is_ly, is_pneu, is_p2 = _masks([names[i] for i in active])
+        is_ly, is_pneu, is_p2 = block_masks([names[i] for i in active])
         return two_step(np, X[..., active], L[..., active], Dp[..., active], fydot,
                         y.reshape(s, -1), H, cond.difference, omega, cond.dt, is_ly=is_ly,
                         is_pneu=is_pneu, is_p2=is_p2, instrument=instrument,
@@ -1053,7 +1053,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     removed, not_ident, excused = {}, {}, []
     if search:
         fz = cond.inputs["fz"]
-        behaviour = _behaviour(output, (float(fz.min()), float(fz.max())),
+        behaviour = behaviour_rules(output, (float(fz.min()), float(fz.max())),
                                rolling_radius=rolling_radius) if rules else None
         # The search judges the least squares with their noise-model σ at the noise level of
         # the data (above the cut-off: independent of the structure): the instrumental-
@@ -1061,7 +1061,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
         # the collinear columns of the full model the predicted Ḟ_y is meaningless and the
         # residual is overfitted).
         var = cond.noise["FY" if output == "Fy" else "MZ"] ** 2
-        gram = _NoiseGram(W, L, _masks(names)[0], H, cond.difference, omega, var,
+        gram = NoiseGram(W, L, block_masks(names)[0], H, cond.difference, omega, var,
                           None if output == "Fy" else cond.noise["FY"] ** 2, profile,
                           profile_fy)
         def final(active):  # the final estimator's (x, σ) at the data's noise level
@@ -1076,7 +1076,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                 size = (abs(fy_report.compliance) if fy_report is not None
                         and np.isfinite(fy_report.compliance) else 1e-5)
             separable = {p2: float(size)}
-        fit, active, removed, excused, full = _structure_search(
+        fit, active, removed, excused, full = structure_search(
             W, y, names, gram, behaviour=behaviour, fixed=fixed,
             sigma_pct_threshold=sigma_pct_threshold, ic_threshold=ic_threshold,
             significance=significance, final=final if final_pass else None,
@@ -1092,7 +1092,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                 removed.pop(n)
                 not_ident[n] = _coupling_reason(cond, why)
         act_names = {names[i] for i in active}
-        for n, why in _camber_powers(names, cond.inputs["gamma"]).items():
+        for n, why in camber_powers(names, cond.inputs["gamma"]).items():
             if n not in act_names:
                 removed.pop(n, None)
                 not_ident[n] = why
@@ -1116,7 +1116,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
         fit = None
         res = estimate(active, check_var=cond.noise[channel] ** 2)
     act = [names[i] for i in active]
-    is_pneu = _masks(act)[1]
+    is_pneu = block_masks(act)[1]
     reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
     model = PolynomialModel.create(output, degrees, values={
         n: x for n, x, k in zip(act, reduced.x, is_pneu, strict=True) if k and n in own})
@@ -1124,7 +1124,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     residual = np.asarray(res["residual"]).reshape(s, -1)
     white = np.asarray(res["whitened"])
     consistency = bench_consistency(
-        white, int(np.sum(_masks(act)[1])) + 1, cond, channel, output)
+        white, int(np.sum(block_masks(act)[1])) + 1, cond, channel, output)
     return OutputReport(output, fit, reduced, model, float(res["compliance"]),
                         float(res["compliance_sigma"]), float(res["sigma_step2"]),
                         float(res["noise_sigma"]), removed, not_ident,
@@ -1214,7 +1214,7 @@ def camber_levels(gamma) -> np.ndarray | None:
     return levels if len(levels) <= 12 else None
 
 
-def _camber_powers(names, gamma) -> dict:
+def camber_powers(names, gamma) -> dict:
     """name → why, for the camber terms b_{F,γ,i,j} that constant camber levels cannot
     determine (spec §4.3 A, seed 001 §3.2.3.1: every steering-feel sequence holds the camber
     at −1.5°, 0° or +1.5°; the camber steps and camber-with-slip laws of the active-safety
@@ -1239,7 +1239,7 @@ def _camber_powers(names, gamma) -> dict:
     return out
 
 
-def _behaviour_removal(behaviour, values, f_of, crit, excused):
+def behaviour_removal(behaviour, values, f_of, crit, excused):
     """The behaviour rules' step of the structure search, on a state where no coefficient
     fails the statistical test: the first fault a rule finds (not in `excused`) names its
     preferred removal and the other monomials that mend it; the least significant of them
@@ -1259,7 +1259,7 @@ def _behaviour_removal(behaviour, values, f_of, crit, excused):
         excused.add(key)
 
 
-def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_threshold,
+def structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_threshold,
                       ic_threshold, significance, final=None, separable=None):
     """The structure search of `identify_output`. The guaranteed least squares (`lsq`, one
     R-factor of [W, −y]) decide what the data can determine (identifiability, base-parameter
@@ -1375,7 +1375,7 @@ def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_th
         elif behaviour is not None:
             values = {names[i]: v for i, v in zip(active, x, strict=True)}
             f_of = {names[i]: stat[k] for k, i in enumerate(active)}
-            found = _behaviour_removal(behaviour, values, f_of, crit, excused)
+            found = behaviour_removal(behaviour, values, f_of, crit, excused)
             if found is not None:
                 candidate, key = found
                 reason = (f"behaviour: {key[0]} rule, F {f_of[candidate]:.3g} < "
@@ -1391,7 +1391,7 @@ def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_th
         fixed_m = fixed_m.copy()
         fixed_m[i] = True
         new = prob.fit(fixed=fixed_m)
-        aliases = _aliases(prob, fit, new, fixed_m, len(active))
+        aliases = aliased_columns(prob, fit, new, fixed_m, len(active))
         if aliases:
             fixed_m[aliases] = True
             new = prob.fit(fixed=fixed_m)
@@ -1410,7 +1410,7 @@ def _structure_search(W, y, names, noise_gram, *, behaviour, fixed, sigma_pct_th
     return fit, active, removed, sorted(excused), full
 
 
-def _aliases(prob, before, after, fixed, n_active):
+def aliased_columns(prob, before, after, fixed, n_active):
     """The columns a removal brought back (kept after, dropped for rank before): when holding
     one coefficient at 0 leaves the number of estimable ones unchanged, a column that was a
     combination of it and the kept ones takes its place and carries the direction just judged
@@ -1431,7 +1431,7 @@ def _aliases(prob, before, after, fixed, n_active):
     return found if np.sum(active(after)) == n_active - 1 else []
 
 
-class _NoiseGram:
+class NoiseGram:
     """S = Wᵀ·Σ·W (all columns) of the filtered noise model of `two_step` for coefficients b:
     ε = H·(I − diag(g/ω)·D)·e_F (F_y), or H·e_M − H·diag(g/ω)·D·e_Fy (M_z), g the relaxation
     gain Σ_k L_k·b_k, e white of the variances `var` (output) and `var_fy`."""
@@ -1597,7 +1597,7 @@ def monte_carlo(table: Mapping, output: str, degrees, keep, *, noise: Mapping[st
             raise InputError(f"keep: {unknown} are not coefficients of the {out} model")
         # Only the kept columns are built (the others are held at 0).
         lip = full.select([n for n in full.names if n in names_kept])
-        return lip, _masks(lip.names), _parts_fn(lip)
+        return lip, block_masks(lip.names), parts_fn(lip)
 
     fy_struct = structure("Fy", fy_degrees or degrees, keep if output == "Fy" else fy_keep)
     mz_struct = structure("Mz", degrees, keep) if output == "Mz" else None

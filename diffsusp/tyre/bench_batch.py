@@ -16,15 +16,15 @@ become selects that evaluate both branches for every set at every step (the run 
 finished: 5.9 s of CPU for 2 sets with its compile, `lax.map` 2.1 s). `lax.map` runs one
 set at a time inside the program: one set's memory, real branches, unbatched LAPACK.
 
-**The structure search** is the library's (`bench._structure_search`), step by step: the
+**The structure search** is the library's (`bench.structure_search`), step by step: the
 guaranteed least squares decide what the data determine (the kept columns by the pivoted
 selection of `lsq` on the R-factor of [W, −y], refitted after every removal); a coefficient is
 removed when its σ % > `sigma_pct_threshold` **and** the F-test says its removal does not raise
 the residual beyond the noise: (x_i/σ_i)² < χ²₁ quantile of `significance`, σ the sandwich of
-the least squares under the filtered noise model (`bench._NoiseGram`, S = Wᵀ·Σ·W recomputed when
+the least squares under the filtered noise model (`bench.NoiseGram`, S = Wᵀ·Σ·W recomputed when
 the relaxation gain moves by > 5 %, the noise level of the data from above the cut-off); the
 largest σ % first. Each refit is the masked QR of the scaled R-factor (the removed columns
-pinned by identity rows, `lsq.core._masked_solve`): fixed shapes, no host round trip. With the
+pinned by identity rows, `lsq.core.masked_solve`): fixed shapes, no host round trip. With the
 library's final pass under the instrumental-variable estimator
 (`identify_output(final_pass=True)`, the default), the traced search runs it too (its σ from
 `bench.two_step`, step 1 at the data's noise level).
@@ -112,13 +112,13 @@ class CampaignResult:
 
 def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, crit, threshold,
             var, final_pass, profile=None):
-    """The structure search of `bench._structure_search` without the behaviour rules, traced
+    """The structure search of `bench.structure_search` without the behaviour rules, traced
     (one data set; fixed shapes). Returns a dict of arrays (see `search_program`)."""
     n, p = W.shape
-    masks = bench._masks(names)
+    masks = bench.block_masks(names)
     dtype = W.dtype
     R = core.qr_r(core.augmented(W, y))
-    A_sel, _, tol = core._scaled(R, jnp.asarray(n, dtype), jnp.asarray(0.0, dtype))
+    A_sel, _, tol = core.scaled_problem(R, jnp.asarray(n, dtype), jnp.asarray(0.0, dtype))
     sc = jnp.linalg.norm(W, axis=0)
     sc = jnp.where(sc > 0, sc, 1.0)
     Rw, z = R[:p, :p] / sc, -R[:p, p]
@@ -133,7 +133,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
                               profile=profile, **kw)
 
     def least_squares(active, S, g_ref, have_S):
-        xs, cov_unit, _ = core._masked_solve(Rw, z, active, zeros)  # cov_unit: G_A⁻¹
+        xs, cov_unit, _ = core.masked_solve(Rw, z, active, zeros)  # cov_unit: G_A⁻¹
         b = jnp.where(active, xs / sc, 0.0)
         g = gram.gain(b)
         moved = jnp.linalg.norm(g - g_ref) > 0.05 * jnp.linalg.norm(g_ref)
@@ -166,7 +166,7 @@ def _search(W, y, gram, H, X, L, Dp, fydot, omega, Dm, dt, *, names, fixed0, cri
         return core.select(A_sel, ~fixed, tol, True)
 
     def aliases(fixed, before):
-        """`bench._aliases`: the columns a removal brought back (kept after, dropped for rank
+        """`bench.aliased_columns`: the columns a removal brought back (kept after, dropped for rank
         before), held at 0 with it when that drops the number of estimable ones by one."""
         n_active = jnp.sum(before)
 
@@ -313,7 +313,7 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
     `noise_sigma`, `fydot_hat`); with the noise levels (FY, MZ) and the F_z range."""
     lip = regressor_model("Fy", degrees, ly=True)
     names = lip.names
-    parts = bench._parts_fn(lip)
+    parts = bench.parts_fn(lip)
     fixed0 = np.zeros(len(names), bool)
     for nm in fixed:
         if nm not in names:
@@ -326,7 +326,7 @@ def search_program(degrees, *, rolling_radius=0.294, rows, dt, final_pass=None, 
         W = jnp.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
         var = noise[0] ** 2
         profile = samples.get("noise_w_fy")
-        gram = bench._NoiseGram(W, L, bench._masks(names)[0], H, Dm, samples["omega"], var,
+        gram = bench.NoiseGram(W, L, bench.block_masks(names)[0], H, Dm, samples["omega"], var,
                                 profile=profile)
         return _search(W, y, gram, H, X, L, Dp, fydot, samples["omega"], Dm, dt, names=names,
                        fixed0=fixed0, crit=params[1], threshold=params[0], var=var,
@@ -378,12 +378,12 @@ def _compiled(key, make, optimize):
 
 def _behaviour_removal(behaviour, names, active, x, stat, crit):
     """What the library's search does with the behaviour rules on a state where no
-    coefficient fails the statistical test (`bench._structure_search`): returns (the
+    coefficient fails the statistical test (`bench.structure_search`): returns (the
     coefficient a rule removes and the rule's key, or None; the faults excused)."""
     values = {names[i]: float(x[i]) for i in np.flatnonzero(active)}
     f_of = {names[i]: float(stat[i]) for i in np.flatnonzero(active)}
     excused: set = set()
-    found = bench._behaviour_removal(behaviour, values, f_of, crit, excused)
+    found = bench.behaviour_removal(behaviour, values, f_of, crit, excused)
     return found, sorted(excused)
 
 
@@ -524,7 +524,7 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         if ic_threshold > 0:
             why = f"ic_threshold {ic_threshold:g} (the IC rule is not traced)"
         elif rules:
-            behaviour = bench._behaviour("Fy", (float(fz_range[i][0]), float(fz_range[i][1])),
+            behaviour = bench.behaviour_rules("Fy", (float(fz_range[i][0]), float(fz_range[i][1])),
                                          rolling_radius=r_m)
             phases = [("x", "stat", "active")]
             # the rules at the end of each phase, as the library; with σ % ≤ 100/√crit
@@ -567,7 +567,7 @@ def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_do
     (`bench.bench_consistency`)."""
     active = np.flatnonzero(r["active"])
     act = [names[i] for i in active]
-    is_pneu = bench._masks(act)[1]
+    is_pneu = bench.block_masks(act)[1]
     reduced = bench.Coefficients(tuple(act), np.asarray(r["final_x"])[active],
                                  np.asarray(r["final_sigma"])[active])
     model = PolynomialModel.create(output, degrees, values={
@@ -585,13 +585,13 @@ def _report(output, degrees, names, r, excused, threshold, crit, gamma, noise_do
     not_ident = {n: ("not identifiable: no effect on the data" if r["diag"][i] == 0
                      else "not identifiable")
                  for i, n in enumerate(names) if not r["kept"][i] and not r["fixed"][i]}
-    if hasattr(bench, "_camber_powers"):  # as `identify_output`: powers of held camber levels
-        for n, why in bench._camber_powers(names, gamma).items():
+    if hasattr(bench, "camber_powers"):  # as `identify_output`: powers of held camber levels
+        for n, why in bench.camber_powers(names, gamma).items():
             if n not in act:
                 removed.pop(n, None)
                 not_ident[n] = why
     white = np.asarray(r["whitened"])
-    n_par = int(np.sum(bench._masks(act)[1])) + 1
+    n_par = int(np.sum(bench.block_masks(act)[1])) + 1
     consistency = bench.bench_consistency(white, n_par, None, "FY", output,
                                           noise_dof=noise_dof)
     held = tuple(n for n in fixed if n not in removed and n not in not_ident)

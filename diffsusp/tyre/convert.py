@@ -42,11 +42,11 @@ from .poly import PolynomialModel, parse_name, table6_domains
 __all__ = ["step1", "refine", "to_magic_formula", "fit_slip_polynomial", "slip_data"]
 
 
-def _deg_to_dp(delta_deg, radius):
+def deg_to_dp(delta_deg, radius):
     return -radius * np.tan(np.radians(delta_deg))
 
 
-def _dp_to_deg(dp, radius):
+def dp_to_deg(dp, radius):
     return -np.degrees(np.arctan(np.asarray(dp) / radius))
 
 
@@ -69,7 +69,7 @@ def _shift_and_peak(model, loads, radius, output):
     if len(feats) < 2:
         return None
     f = np.array([f for f, _ in feats])
-    shift = np.array([-(_dp_to_deg(a[0], radius) + _dp_to_deg(b[0], radius)) / 2
+    shift = np.array([-(dp_to_deg(a[0], radius) + dp_to_deg(b[0], radius)) / 2
                       for _, (a, b) in feats])
     peak = np.array([(abs(a[1]) + abs(b[1])) / 2 for _, (a, b) in feats])
     return f, shift, peak
@@ -104,7 +104,7 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
         d = []
         for f, k in zip(loads, k_fy, strict=True):
             c = fy.input_polynomial(float(f), "delta")
-            vals = [abs(float(algebra.poly_eval(c, _deg_to_dp(s * x_e, radius))))
+            vals = [abs(float(algebra.poly_eval(c, deg_to_dp(s * x_e, radius))))
                     for s in (-1, 1)]
             ratio = abs(k) * x_e / np.mean(vals)
             d.append(abs(k) * x_e / math.sqrt(ratio**2 - 1.0) if ratio > 1 else np.mean(vals))
@@ -179,7 +179,7 @@ def to_magic_formula(fy: PolynomialModel, mz: PolynomialModel | None = None, *,
     if data is None:
         fz = np.repeat(np.asarray(loads, float), 41)
         dd = np.tile(np.linspace(-slip_range, slip_range, 41), len(loads))
-        dp = _deg_to_dp(dd, radius)
+        dp = deg_to_dp(dd, radius)
         u = {"fz": jnp.asarray(fz), "delta": jnp.asarray(dp)}
         yfy = np.asarray(_slip_only(fy)(u))
         ymz = None if mz is None else np.asarray(_slip_only(mz)(u))

@@ -438,7 +438,7 @@ def _open_ranges(model):
     if not isinstance(model, mf6.MagicFormula6):
         return model
     return mf6.MagicFormula6(dict(model.coefficients), model.version,
-                             tuple(sorted(mf6._LIMITS.items())), model.friction_ellipse)
+                             tuple(sorted(mf6.LIMITS.items())), model.friction_ellipse)
 
 
 LOSSES = ("linear", "huber", "cauchy")
@@ -1083,7 +1083,7 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
                 continue
             v = np.asarray(data.valid)[k]
             if v.sum() >= 12:
-                refit[c] = fit_start._scale_model(res[k][v], np.abs(pred[k][v]))
+                refit[c] = fit_start.scale_model(res[k][v], np.abs(pred[k][v]))
         sig = fit_start.noise_sigma(refit, data)
         p2 = eqx.tree_at(lambda q: (q.x0, q.sigma), problem, (x, jnp.asarray(sig)))
         x, s2, ok = _solve(p2, jnp.zeros(len(names)), max_steps, rtol, atol)
@@ -1193,7 +1193,7 @@ def _reject_outliers(problem, x, data, noise, max_steps, rtol, atol):
         refit = {}
         for k, c in enumerate(data.channels):
             if c not in (noise or {}) and keep[k].sum() >= 12:
-                refit[c] = fit_start._scale_model(res[k][keep[k]], np.abs(pred[k][keep[k]]))
+                refit[c] = fit_start.scale_model(res[k][keep[k]], np.abs(pred[k][keep[k]]))
         if refit:
             sigma = np.where(np.isin(np.arange(len(data.channels)),
                                      [data.channels.index(c) for c in refit])[:, None],

@@ -117,11 +117,11 @@ def estimate_noise(data) -> dict[str, tuple[float, float, int]]:
             if s3 > COARSE_RATIO * s5:
                 order = 5
         d, lev = per_order[order]
-        out[ch] = (*_scale_model(d, lev), int(round(d.size * DOF_FACTOR[order])))
+        out[ch] = (*scale_model(d, lev), int(round(d.size * DOF_FACTOR[order])))
     return out
 
 
-def _scale_model(d, lev):
+def scale_model(d, lev):
     """a, b of σ = a + b·level from robust group scales (medians), b ≥ 0, a > 0."""
     n_groups = int(min(6, max(1, d.size // 30)))
     order = np.argsort(lev)

@@ -156,7 +156,7 @@ REQUIRED = tuple(
 """Coefficients every MF file must give (a missing one is an error naming its section); any
 other missing coefficient takes its neutral value (λ = 1, p_Ky4 = 2, others 0)."""
 
-_LIMITS = {"FZMIN": 0.0, "FZMAX": math.inf, "KPUMIN": -math.inf, "KPUMAX": math.inf,
+LIMITS = {"FZMIN": 0.0, "FZMAX": math.inf, "KPUMIN": -math.inf, "KPUMAX": math.inf,
            "ALPMIN": -math.inf, "ALPMAX": math.inf, "CAMMIN": -math.inf, "CAMMAX": math.inf,
            "PRESMIN": -math.inf, "PRESMAX": math.inf}
 _LIMIT_SECTION = {"FZMIN": "VERTICAL_FORCE_RANGE", "FZMAX": "VERTICAL_FORCE_RANGE",
@@ -229,7 +229,7 @@ class MagicFormula6(eqx.Module):
         check_x64()
         c = {n: jnp.asarray(float(values.get(n, _default(n, values))), dtype=float)
              for n in COEFFICIENTS}
-        lim = dict(_LIMITS)
+        lim = dict(LIMITS)
         lim.update(limits or {})
         return cls(c, version, tuple(sorted(lim.items())), bool(friction_ellipse))
 
@@ -261,7 +261,7 @@ class MagicFormula6(eqx.Module):
         for n, f in _TO_LIBRARY.items():
             if n in values:
                 values[n] = values[n] * f
-        limits = {n: tir.number(n) for n in _LIMITS if n in tir}
+        limits = {n: tir.number(n) for n in LIMITS if n in tir}
         for n in ("PRESMIN", "PRESMAX"):
             if limits.get(n) == 0.0:  # some exporters write 0 for "no range"
                 limits.pop(n)
