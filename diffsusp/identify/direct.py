@@ -94,6 +94,7 @@ from .direct_report import DirectReport
 from .direct_unknowns import (
     STIFFNESS_NAMES,
     Parameter,
+    bushing_arrays,
     default_where,
     derived,
     free_axes,
@@ -314,13 +315,8 @@ def _prior_sigma(prior: np.ndarray, params, prior_sigma) -> np.ndarray:
 
 def _apply(mech: Mechanism, params, values, write) -> Mechanism:
     """The mechanism with the written unknowns replaced (table units → model units)."""
-    b, s = mech.bushings, mech.springs
-    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    off = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)], axis=1) \
-        if b.names else np.zeros((0, 6))
+    s = mech.springs
+    k, off, pre = bushing_arrays(mech)
     spring_k = np.asarray(s.k).copy()
     free_length = np.asarray(s.free_length).copy()
     for i, p in enumerate(params):

@@ -169,14 +169,20 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
     return tuple(params)
 
 
+def bushing_arrays(mech: Mechanism) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bushings' stiffnesses, offsets and preloads as (bushings, 6) arrays, translations
+    then rotations (model units)."""
+    b = mech.bushings
+    if not b.names:
+        return np.zeros((0, 6)), np.zeros((0, 6)), np.zeros((0, 6))
+    return tuple(np.concatenate([np.asarray(t), np.asarray(r)], axis=1) for t, r in (
+        (b.k_trans, b.k_rot), (b.offset_trans, b.offset_rot),
+        (b.preload_force, b.preload_torque)))
+
+
 def prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
-    b, s = mech.bushings, mech.springs
-    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    off = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    pre = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)], axis=1) \
-        if b.names else np.zeros((0, 6))
+    s = mech.springs
+    k, off, pre = bushing_arrays(mech)
     out = []
     for p in params:
         if p.kind == "stiffness":
