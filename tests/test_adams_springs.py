@@ -21,6 +21,23 @@ from diffsusp.io.chrono import read_chrono
 HMMWV = Path(__file__).parent / "data" / "chrono" / "HMMWV_DoubleWishboneRear.json"
 
 
+def _assert_same_equilibria(mech, back):
+    """`back` (read back from a written file) has `mech`'s equilibria under the same loads:
+    bump to 30 kN and a combined lateral case, at the contact patch (that the stops carry load
+    there: tests/test_chrono_fidelity.py, the same loads)."""
+    force = np.zeros((8, 3))
+    force[:7, 2] = np.linspace(0.0, 30000.0, 7)
+    force[7] = (0.0, 4000.0, 15000.0)
+    sols = [diffsusp.solve_statics(m, m.loads(forces={"contact_patch": force}))
+            for m in (mech, back)]
+    for s in sols:
+        assert np.all(np.asarray(s.status) == 0)
+    qa, qb = (np.asarray(s.q).reshape(8, -1, 6) for s in sols)
+    assert np.abs(qa[..., :3]).max() > 10.0                     # the wheel did move
+    np.testing.assert_allclose(qb[..., :3], qa[..., :3], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(qb[..., 3:], qa[..., 3:], rtol=0, atol=1e-12)
+
+
 def test_spring_curve_and_stops_round_trip_through_adm(tmp_path):
     """The 30 stops come back with the same kind, length, rate (to the bit: repr-exact numbers),
     on the same markers; the spring and all else as before; the equilibria under a 0–30 kN
@@ -45,18 +62,7 @@ def test_spring_curve_and_stops_round_trip_through_adm(tmp_path):
     np.testing.assert_allclose(np.asarray(back.springs.free_length),
                                np.asarray(mech.springs.free_length), rtol=1e-15)
 
-    force = np.zeros((8, 3))
-    force[:7, 2] = np.linspace(0.0, 30000.0, 7)
-    force[7] = (0.0, 4000.0, 15000.0)
-    sols = [diffsusp.solve_statics(m, m.loads(forces={"contact_patch": force}))
-            for m in (mech, back)]
-    for s in sols:
-        assert np.all(np.asarray(s.status) == 0)
-    qa, qb = (np.asarray(s.q).reshape(8, -1, 6) for s in sols)
-    assert np.abs(qa[..., :3]).max() > 10.0                     # the wheel did move
-    # (that the stops carry load here: tests/test_chrono_fidelity.py, the same loads)
-    np.testing.assert_allclose(qb[..., :3], qa[..., :3], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(qb[..., 3:], qa[..., 3:], rtol=0, atol=1e-12)
+    _assert_same_equilibria(mech, back)
 
 
 def test_stop_function_grammar(tmp_path):
@@ -114,14 +120,4 @@ def test_cli_write_model_adm_of_a_chrono_corner(tmp_path):
     np.testing.assert_array_equal(np.asarray(back.stops.k), np.asarray(mech.stops.k))
     np.testing.assert_allclose(np.asarray(back.springs.k), np.asarray(mech.springs.k),
                                rtol=1e-15)
-    force = np.zeros((8, 3))
-    force[:7, 2] = np.linspace(0.0, 30000.0, 7)
-    force[7] = (0.0, 4000.0, 15000.0)
-    sols = [diffsusp.solve_statics(m, m.loads(forces={"contact_patch": force}))
-            for m in (mech, back)]
-    for s in sols:
-        assert np.all(np.asarray(s.status) == 0)
-    qa, qb = (np.asarray(s.q).reshape(8, -1, 6) for s in sols)
-    assert np.abs(qa[..., :3]).max() > 10.0
-    np.testing.assert_allclose(qb[..., :3], qa[..., :3], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(qb[..., 3:], qa[..., 3:], rtol=0, atol=1e-12)
+    _assert_same_equilibria(mech, back)

@@ -479,8 +479,8 @@ def iterative(
         else:
             check_items = check_data(mech, data)
         consistency = check_consistency(final, check_items, int(np.sum(ever & chosen)))
-        sigma_data, consistency = _least_squares_gap(mech, final, names, chosen, check_items,
-                                                     consistency)
+        sigma_data, consistency = _least_squares_gap(final, names, chosen, check_items,
+                                                      consistency)
         gate_pct = _start_gate(mech, names, chosen, check_items, start)
     report = IterativeReport(
         bushings=names, stiffness=k, start=start, identified=ever, equalised=equalised,
@@ -500,8 +500,8 @@ def iterative(
         final = _with_stiffness(mech, index, written)
         if check_items is not None:
             consistency = check_consistency(final, check_items, int(np.sum(kept)))
-            _, consistency = _least_squares_gap(mech, final, names, chosen, check_items,
-                                                consistency)
+            _, consistency = _least_squares_gap(final, names, chosen, check_items,
+                                                 consistency)
         report = dataclasses.replace(report, _mech=final, consistency=consistency)
     if polish:
         polished_mech, fit = report.polish()
@@ -552,21 +552,14 @@ def _start_gate(mech, names, chosen, items, start) -> np.ndarray:
     return sigma_pct_at_start(sigma, np.asarray(start)[chosen])
 
 
-def _least_squares_gap(mech, final, names, chosen, items, consistency):
+def _least_squares_gap(final, names, chosen, items, consistency):
     """σ of the selected stiffnesses from the measurements (whitened Jacobian through the
     equilibrium at the loop's values, widened by the loop's distance from the least-squares
     estimate) and Δχ² = ‖QᵀR‖²: how much a least-squares fit of the
     same data would still lower χ² from here. The loop does not minimise χ², so a value within
     the noise's χ² band can still be far from what the data say; Δχ² above the χ² quantile of
     p dof marks it inconsistent (see `report.Consistency.gap`)."""
-    index = np.array([mech.bushings.index(n) for n in names], dtype=int)
-    kt = np.zeros((len(mech.bushings.names), 3), bool)
-    kr = np.zeros_like(kt)
-    kt[index], kr[index] = chosen[:, :3], chosen[:, 3:]
-    params = Params.leaves(final, lambda m: (m.bushings.k_trans, m.bushings.k_rot), (kt, kr))
-    # Order as the report names them: bushing by bushing, axis by axis.
-    order = [params.names.index(f"{n}.{a}") for i, n in enumerate(names)
-             for j, a in enumerate(AXES) if chosen[i, j]]
+    params, order = _selected_params(final, names, chosen)
     if consistency.failed_cases:
         return np.full(len(order), np.inf), consistency
     z, jac = (np.asarray(a, float) for a in whitened_residuals(final, items, params,
