@@ -56,7 +56,7 @@ class _App(typer.Typer):
 
 
 app = _App(add_completion=False, no_args_is_help=True,
-                  help="Differentiable K&C suspension solver (units: mm, N, deg at the edge).")
+           help="Differentiable K&C suspension solver (units: mm, N, deg at the edge).")
 
 
 @app.callback()
