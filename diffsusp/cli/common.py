@@ -300,32 +300,15 @@ def side_value(side) -> str | None:
     return None if side is None else Side(side).value
 
 
-MODEL_SUFFIXES = (".toml", ".adm", ".json")
-"""The model file formats every verb that takes a MODEL reads (`diffsusp.io.read_model_file`)."""
-
-
 def load_model_file(model, *, check: bool = True, side=None):
     """The one model loader of the verbs that take a MODEL: a built-in name (`diffsusp.models.
-    ZOO` or `STOP_VARIANTS`) or a model file (.toml, .adm, .json), through the library's one
-    resolver (`diffsusp.resolve.load_model_file`), on `side` (a `SideOption` value). A name that
-    is neither a built-in model nor an existing path is bad input (`InputError`, exit 2) that
-    lists the built-in models."""
-    import os
-
-    from ..errors import InputError
-    from ..resolve import builtin_models
+    ZOO` or `STOP_VARIANTS`) or a model file (`diffsusp.io.MODEL_SUFFIXES`), through the
+    library's one resolver (`diffsusp.resolve.load_model_file`), on `side` (a `SideOption`
+    value). A name that is neither is bad input (`ModelFileError`, exit 2) that lists the
+    built-in models."""
     from ..resolve import load_model_file as load
 
-    text = os.fspath(model)
-    builtin = builtin_models()
-    if text not in builtin and not os.path.exists(text):
-        why = ("no such file" if os.path.splitext(text)[1].lower() in MODEL_SUFFIXES else
-               "not a model file or a built-in model")
-        raise InputError(
-            f"model '{text}' is neither a built-in model ({', '.join(builtin)}) nor an existing "
-            f"file ({why}). Give a built-in name or the path of a model file "
-            f"({', '.join(MODEL_SUFFIXES)}).")
-    return load(text, check=check, side=side_value(side))
+    return load(model, check=check, side=side_value(side))
 
 
 def check_identify_outputs(out, write_model, figures=None):

@@ -31,12 +31,16 @@ from .tir import TirFile, read_tir, tir_from_text, write_tir
 
 __all__ = [
     "IgesFile", "TirFile", "read_iges", "read_tir", "tir_from_text", "write_tir",
-    "SIDES", "ModelFile", "NamedModels", "Table", "library_model_file", "load_columns",
+    "MODEL_SUFFIXES", "SIDES", "ModelFile", "NamedModels", "Table", "library_model_file",
+    "load_columns",
     "loads_from_table", "model_from_toml", "model_to_toml", "parse_unit", "read_model_toml",
     "read_model_file", "read_table", "results_table", "save_model", "write_model_toml",
     "write_table",
 ]
 
+
+MODEL_SUFFIXES = (".toml", ".adm", ".json")
+"""The model file formats `read_model_file` reads (and every verb that takes a MODEL)."""
 
 SIDES = ("left", "right")
 """The sides `read_model_file(side=...)` gives a half axle."""
@@ -89,27 +93,30 @@ def _read_model_file(source, *, check: bool, named: NamedModels) -> ModelFile:
     text = os.fspath(source)
     if text in named and not os.path.exists(text):
         return named[text]()
-    hint = f" or a built-in model name ({', '.join(named)})" if named else ""
     suffix = os.path.splitext(text)[1].lower()
-    if suffix in (".toml", ".adm", ".json"):
-        if not os.path.exists(text):
-            raise ModelFileError(
-                f"no such file; give the path of a model file (.toml, .adm, .json){hint}.",
-                path=text)
-        if os.path.isdir(text):
-            raise ModelFileError("is a directory, not a model file.", path=text)
+    if suffix not in MODEL_SUFFIXES or not os.path.exists(text):
+        raise ModelFileError(_not_a_model(text, named), path=text)
+    if os.path.isdir(text):
+        raise ModelFileError("is a directory, not a model file.", path=text)
     if suffix == ".toml":
         return read_model_toml(text, check=check)
     if suffix == ".adm":
         return ModelFile(mechanism=read_adm(text, check=check), load_tables={},
                          units=dict(_LIBRARY), path=text)
-    if suffix == ".json":
-        return ModelFile(mechanism=read_chrono(text), load_tables={}, units=dict(_LIBRARY),
-                         path=text)
-    models = f", or one of {', '.join(named)}" if named else ""
-    raise ModelFileError(
-        f"not a model file or a built-in model: expected a .toml, .adm or .json path{models}.",
-        path=text)
+    return ModelFile(mechanism=read_chrono(text), load_tables={}, units=dict(_LIBRARY),
+                     path=text)
+
+
+def _not_a_model(text: str, named: NamedModels) -> str:
+    """The one message for a source that is neither a model file nor a name of `named`."""
+    expected = "expected a .toml, .adm or .json path."
+    missing = os.path.splitext(text)[1].lower() in MODEL_SUFFIXES
+    if not named:
+        return f"model '{text}' is not a model file: {'no such file.' if missing else expected}"
+    why = "no such file." if missing else f"not a model file or a built-in model; {expected}"
+    return (f"model '{text}' is neither a built-in model ({', '.join(named)}) nor a model file: "
+            f"{why} Give a built-in model name or the path of a model file "
+            f"({', '.join(MODEL_SUFFIXES)}).")
 
 
 def library_model_file(mech) -> ModelFile:
