@@ -13,6 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 import diffsusp.cli.model as cli_model  # registers `info` and `simulate`
+from diffsusp import simulation
 from diffsusp.cli import app
 from diffsusp.io import read_table, write_table
 from diffsusp.model.mechanism import PARAMETER_UNITS
@@ -128,7 +129,7 @@ def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_pat
     order = [0, 1, 2, 1, 0]
     five = tmp_path / "five.csv"
     write_table(five, {n: loads[n][order] for n in loads.names})
-    monkeypatch.setattr(cli_model, "_CHUNK", 3)
+    monkeypatch.setattr(simulation, "CHUNK", 3)
     out = tmp_path / "chunked.csv"
     result = invoke("simulate", "isolated_bushing", "--loads", five, "--out", out)
     assert result.exit_code == 3

@@ -270,6 +270,7 @@ def test_kc_output_carries_the_flags():
     import types
 
     from diffsusp.cli import kc as cli_kc
+    from diffsusp.kc.dispatch import event_json
 
     solution = types.SimpleNamespace(status=np.array([0, 0, 3]), iterations=np.array([4, 5, 50]),
                                      stable=np.array([True, False, False]),
@@ -277,8 +278,8 @@ def test_kc_output_carries_the_flags():
     ev = types.SimpleNamespace(name="lateral_force", x=np.array([-1.0, 0.0, 1.0]),
                                x_name="lateral_force", x_unit="N", held="", metrics={},
                                compliance={}, solution=solution)
-    out = cli_kc._json(ev, "axle")
+    out = event_json(ev, "axle")
     assert out["stable"] == [True, False, False] and out["law_valid"] == [True, True, False]
-    notes = cli_kc._flag_notes(ev)
+    notes = cli_kc.flag_notes(ev)
     assert len(notes) == 1 and notes[0].startswith("1 converged case of the event with an "
                                                    "unstable equilibrium") and ": 1 (" in notes[0]

@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import diffsusp.cli.model as cli_model
+from diffsusp import simulation
 from diffsusp.cli import app
 from diffsusp.errors import ModelFileError
 from diffsusp.io import read_table, write_table
@@ -343,7 +344,7 @@ def loads5(tmp_path_factory):
 def test_output_paths_are_checked_before_the_work(tmp_path, loads5, no_solve, monkeypatch):
     import diffsusp.cli.kc as cli_kc
 
-    monkeypatch.setattr(cli_kc, "_run_event", lambda *a, **k: pytest.fail("event ran"))
+    monkeypatch.setattr(cli_kc, "run_event", lambda *a, **k: pytest.fail("event ran"))
     a_file = tmp_path / "file.txt"
     a_file.write_text("x")
     for args, message in (
@@ -408,7 +409,7 @@ def test_an_interrupted_simulate_leaves_the_finished_cases_on_disk(
         tmp_path, loads5, monkeypatch, interrupt, word, suffix):
     import diffsusp.statics.solve
 
-    monkeypatch.setattr(cli_model, "_CHUNK", 2)
+    monkeypatch.setattr(simulation, "CHUNK", 2)
     monkeypatch.setattr(diffsusp.statics.solve, "solve_statics", _fake_solutions(1, interrupt))
     out = tmp_path / f"r{suffix}"
     result = invoke("simulate", "isolated_bushing", "-l", loads5, "-o", out)
@@ -440,7 +441,7 @@ def test_simulate_writes_chunk_by_chunk(tmp_path, loads5, monkeypatch):
             look()
         return solve(mech, loads, **kwargs)
 
-    monkeypatch.setattr(cli_model, "_CHUNK", 2)
+    monkeypatch.setattr(simulation, "CHUNK", 2)
     monkeypatch.setattr(diffsusp.statics.solve, "solve_statics", solve_and_look)
     result = invoke("simulate", "isolated_bushing", "-l", loads5, "-o", out)
     assert result.exit_code == 0, result.output
@@ -556,7 +557,7 @@ def test_an_interrupted_kc_run_exits_130_without_a_traceback(monkeypatch):
     def terminate(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGTERM)
 
-    monkeypatch.setattr(cli_kc, "_run_event", terminate)
+    monkeypatch.setattr(cli_kc, "run_event", terminate)
     before = signal.getsignal(signal.SIGTERM)
     result = invoke("kc", "isolated_bushing")
     assert result.exit_code == 130, result.output

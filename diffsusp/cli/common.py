@@ -338,6 +338,21 @@ def write_model_file(mech, path, model_file) -> None:
     write_adm(mech, path, template=template)
 
 
+def listed(items, most: int = 10) -> str:
+    """The first `most` items, comma-separated, then 'and N more' (the cases a message names)."""
+    items = [str(i) for i in items]
+    more = f" and {len(items) - most} more" if len(items) > most else ""
+    return ", ".join(items[:most]) + more
+
+
+def flagged_note(cases, subject: str, what: str, tail: str = ".") -> str:
+    """'3 converged load cases with ...: 1, 4, 9.': the converged cases that a check
+    (`diffsusp.statics.flagged_cases`) flags, for a warning; `subject` is singular ('load
+    case'), `what` says what the check found."""
+    n = len(cases)
+    return f"{n} converged {subject}{'s' * (n != 1)} {what}: {listed(cases)}{tail}"
+
+
 def nan_to_none(obj):
     """`obj` (nested dicts and lists) with every non-finite float replaced by None: valid JSON
     (`--json` output of the K&C verbs)."""

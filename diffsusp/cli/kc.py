@@ -30,16 +30,19 @@ from ..kc.dispatch import (
     EVENTS,
     corner_with,
     default_load,
+    event_json,
     loaded_radius_origin,
     reference_case,
     run_event,
 )
+from ..statics import flagged_cases
 from .common import (
     SideOption,
     check_output,
     cli_errors,
     console,
     enable_x64,
+    flagged_note,
     load_model_file,
     print_json,
     show_warnings,
@@ -67,45 +70,17 @@ def register(app: typer.Typer) -> None:
     app.command("kc")(kc_command)
 
 
-def _corner(mech, frame, loaded_radius, kingpin, tyre=None):
-    if tyre is not None:
-        from diffsusp.io.tir import read_tir
-        from diffsusp.tyre import MagicFormula6
-
-        tyre = MagicFormula6.from_tir(read_tir(tyre))
-    return corner_with(mech, frame=None if frame is None else Frame(frame).value,
-                       loaded_radius=loaded_radius, kingpin=kingpin, tyre=tyre)
-
-
-def _run_event(mech, event, corner, travel, fz, force, torque, rack):
-    return run_event(mech, Event(event).value, corner, travel=travel, fz=fz, force=force,
-                     torque=torque, rack=rack)
-
-
-def _json(ev, mech_name: str) -> dict:
-    from diffsusp.kc.dispatch import event_json
-
-    return event_json(ev, mech_name)
-
-
-def _flag_notes(ev) -> list[str]:
-    """One warning per flag that some converged case fails (stable, law_valid)."""
-    from diffsusp.statics import flagged_cases
-
+def flag_notes(ev) -> list[str]:
+    """One warning per flag that some converged case of the event fails (stable, law_valid)."""
     flags = flagged_cases(ev.solution)
-    notes = []
-    for key, flag, what in (
-            ("unstable", "stable", "an unstable equilibrium (the reduced tangent stiffness is "
-             "not positive definite)"),
-            ("law_invalid", "law_valid", "a bushing beyond its law's validity (|AX|, |AY| < "
-             "15°, |AZ| < 90°)")):
-        cases = flags[key]
-        if cases.size:
-            shown = ", ".join(map(str, cases[:10])) + (
-                f" and {cases.size - 10} more" if cases.size > 10 else "")
-            notes.append(f"{cases.size} converged case{'s' * (cases.size != 1)} of the event "
-                         f"with {what}: {shown} ('{flag}' is false in --json).")
-    return notes
+    return [flagged_note(flags[key], "case", f"of the event with {what}",
+                         f" ('{flag}' is false in --json).")
+            for key, flag, what in (
+                ("unstable", "stable", "an unstable equilibrium (the reduced tangent stiffness "
+                 "is not positive definite)"),
+                ("law_invalid", "law_valid", "a bushing beyond its law's validity (|AX|, |AY| "
+                 "< 15°, |AZ| < 90°)"))
+            if flags[key].size]
 
 
 def _table(ev, mech_name: str) -> Table:
@@ -165,12 +140,21 @@ def kc_command(
     with cli_errors(), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mech = load_model_file(model, side=side).mechanism
-        corner = _corner(mech, frame, loaded_radius, kingpin, tyre)
+        tyre_model = None
+        if tyre is not None:
+            from ..io.tir import read_tir
+            from ..tyre import MagicFormula6
+
+            tyre_model = MagicFormula6.from_tir(read_tir(tyre))
+        corner = corner_with(mech, frame=None if frame is None else Frame(frame).value,
+                             loaded_radius=loaded_radius, kingpin=kingpin,
+                             tyre=tyre_model)
         radius = loaded_radius_origin(mech, corner, given=loaded_radius, tyre_file=tyre)
         t0 = time.perf_counter()
         with err.status(f"running {event.value} on {mech.name} (the first run compiles, "
                         "~30 s)..."):
-            ev = _run_event(mech, event, corner, travel, fz, force, torque, rack)
+            ev = run_event(mech, Event(event).value, corner, travel=travel, fz=fz, force=force,
+                           torque=torque, rack=rack)
         elapsed = time.perf_counter() - t0
         if out is not None:
             from diffsusp import kc, plot
@@ -181,11 +165,11 @@ def kc_command(
             fig = plot.kc_curves(ev, derivatives, title=f"{mech.name}: derivatives")
             paths += plot.save(fig, out / f"kc_{ev.name}_derivatives")
     show_warnings(caught)
-    for note in _flag_notes(ev):
+    for note in flag_notes(ev):
         warn(note)
     load = default_load(mech, Event(event).value, corner, fz)
     if as_json:
-        data = _json(ev, mech.name)
+        data = event_json(ev, mech.name)
         if load is not None:
             data["design_load"] = load
         data["loaded_radius"] = radius
