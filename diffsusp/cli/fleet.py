@@ -15,6 +15,7 @@ Without `--workers` or `--scheduler` the fleet runs in this process. Exit codes:
 ok, 3 some items failed (listed, and in the summary), 2 bad input.
 """
 
+import inspect
 import json
 import pathlib
 from typing import Annotated
@@ -70,26 +71,8 @@ RetryOpt = Annotated[bool, typer.Option(help="Also re-run the items that failed 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable result.")]
 
 
-def _items(values: list[str]) -> list[str]:
-    out = []
-    for v in values:
-        if v.lower().endswith(".txt") and pathlib.Path(v).is_file():
-            from ..io.files import read_input
-
-            try:
-                text = read_input(v, "item list").decode("utf-8")
-            except UnicodeDecodeError:
-                raise fail(f"{v}: the item list is not UTF-8 text.", EXIT_BAD_INPUT) from None
-            except ValueError as e:   # ModelFileError: too large, not a regular file
-                raise fail(str(e), EXIT_BAD_INPUT) from None
-            out += [line.strip() for line in text.splitlines()
-                    if line.strip() and not line.lstrip().startswith("#")]
-        else:
-            out.append(v)
-    return out
-
-
 def _options(values: list[str] | None) -> dict:
+    """`--option KEY=VALUE` (VALUE as JSON, else text) → the recipe's keyword arguments."""
     options = {}
     for v in values or ():
         key, sep, text = v.partition("=")
@@ -102,97 +85,67 @@ def _options(values: list[str] | None) -> dict:
     return options
 
 
-def _run(recipe, items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output, devices=None):
-    if workers is not None and scheduler is not None:
-        raise fail("give --workers or --scheduler, not both.", EXIT_BAD_INPUT)
-    if workers is not None and workers < 1:
-        raise fail("--workers must be at least 1.", EXIT_BAD_INPUT)
-    check_output(out, what="fleet folder", directory=True)
-    options = _options(option)
-    if devices is not None and devices != "all":
-        if not devices.isdigit() or int(devices) < 1:
-            raise fail(f"--devices must be a count or 'all'; got '{devices}'.", EXIT_BAD_INPUT)
-        devices = int(devices)
-    enable_x64()
-    from .. import fleet
+def _recipe_command(recipe: str, doc: str, *, model_required: bool = True):
+    """The verb `diffsusp fleet <recipe>`: `diffsusp.fleet.run` on the items, then its result
+    and the failures (`diffsusp.fleet.status`); exit 3 when some item failed. `--model` is
+    required unless the recipe's items can carry their own model."""
 
-    with cli_errors():
-        result = fleet.run(recipe, _items(items), out, model=model, options=options,
-                           workers=workers, scheduler=scheduler, batch_size=batch_size,
-                           time_limit=time_limit, retry_failed=retry_failed,
-                           devices=devices, progress=not json_output)
-        state = fleet.status(out)
-    if json_output:
-        print_json({"ok": result.ok, "failed": result.failed, "skipped": result.skipped,
-                    "total": result.total, "seconds": result.seconds,
-                    "items_per_s": result.items_per_s, "compiled": result.compiled,
-                    "cache_hits": result.cache_hits, "summary": str(result.summary),
-                    "failures": [list(f) for f in state.failures]})
-    else:
-        con = console(markup=False)
-        con.print(result.text(), highlight=False)
-        for item, st, msg in state.failures:
-            con.print(f"  {item}: {st}: {msg}", highlight=False)
-    if state.failed:
-        raise typer.Exit(code=EXIT_NOT_CONVERGED)
+    def command(
+        items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
+        scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
+        option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+        devices: DevicesOpt = None,
+    ):
+        check_output(out, what="fleet folder", directory=True)
+        options = _options(option)
+        enable_x64()
+        from .. import fleet
 
+        with cli_errors():
+            result = fleet.run(recipe, items, out, model=model, options=options,
+                               workers=workers, scheduler=scheduler, batch_size=batch_size,
+                               time_limit=time_limit, retry_failed=retry_failed,
+                               devices=devices, progress=not json_output)
+            state = fleet.status(out)
+        if json_output:
+            print_json({"ok": result.ok, "failed": result.failed, "skipped": result.skipped,
+                        "total": result.total, "seconds": result.seconds,
+                        "items_per_s": result.items_per_s, "compiled": result.compiled,
+                        "cache_hits": result.cache_hits, "summary": str(result.summary),
+                        "failures": [list(f) for f in state.failures]})
+        else:
+            con = console(markup=False)
+            con.print(result.text(), highlight=False)
+            for item, st, msg in state.failures:
+                con.print(f"  {item}: {st}: {msg}", highlight=False)
+        if state.failed:
+            raise typer.Exit(code=EXIT_NOT_CONVERGED)
 
-def direct_command(
-    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-    devices: DevicesOpt = None,
-):
-    """The direct (linear) stiffness identification on every data set."""
-    _run("direct", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output, devices)
-
-
-def iterative_command(
-    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-    devices: DevicesOpt = None,
-):
-    """The iterative (correlation loop) identification on every data set."""
-    _run("iterative", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output, devices)
+    if model_required:
+        signature = inspect.signature(command)
+        command.__signature__ = signature.replace(parameters=[
+            p.replace(default=inspect.Parameter.empty) if p.name == "model" else p
+            for p in signature.parameters.values()])
+    command.__name__ = command.__qualname__ = f"{recipe}_command"
+    command.__doc__ = doc
+    return command
 
 
-def least_squares_command(
-    items: ItemsOpt, out: OutOpt, model: ModelOpt, workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-    devices: DevicesOpt = None,
-):
-    """Least squares through the equilibrium on every data set, a batch at a time (vmapped)."""
-    _run("least_squares", items, out, model, workers, scheduler, batch_size, time_limit,
-         option, retry_failed, json_output, devices)
-
-
-def kc_command(
-    items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-    devices: DevicesOpt = None,
-):
-    """A K&C event on every item: load tables (F_vert, F_lat, F_long, N) on --model, or with
-    --option event=NAME (and its ranges, e.g. travel=-80:80:161) every item a model file."""
-    _run("kc", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output, devices)
-
-
-def tyre_fit_command(
-    items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-    option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
-    devices: DevicesOpt = None,
-):
-    """A Magic Formula fit of every bench table from the start tyre --model START.tir
-    (options: groups, names, loss, noise, ...; a batch is one vmapped fit)."""
-    _run("tyre_fit", items, out, model, workers, scheduler, batch_size, time_limit, option,
-         retry_failed, json_output, devices)
+direct_command = _recipe_command(
+    "direct", "The direct (linear) stiffness identification on every data set.")
+iterative_command = _recipe_command(
+    "iterative", "The iterative (correlation loop) identification on every data set.")
+least_squares_command = _recipe_command(
+    "least_squares", "Least squares through the equilibrium on every data set, a batch at a "
+    "time (vmapped).")
+kc_command = _recipe_command(
+    "kc", """A K&C event on every item: load tables (F_vert, F_lat, F_long, N) on --model, or
+    with --option event=NAME (and its ranges, e.g. travel=-80:80:161) every item a model
+    file.""", model_required=False)
+tyre_fit_command = _recipe_command(
+    "tyre_fit", """A Magic Formula fit of every bench table from the start tyre --model
+    START.tir (options: groups, names, loss, noise, ...; a batch is one vmapped fit).""",
+    model_required=False)
 
 
 def status_command(

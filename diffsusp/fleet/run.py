@@ -129,6 +129,9 @@ def _as_items(items, items_are_models: bool = False) -> list[Item]:
             out.append(it)
             continue
         text = os.fspath(it)
+        if text.lower().endswith(".txt") and os.path.isfile(text):
+            out += _as_items(_listed_paths(text), items_are_models)
+            continue
         paths = sorted(glob.glob(text)) if glob.has_magic(text) else [text]
         if not paths:
             raise InputError(f"--items {text!r} matches no file.")
@@ -149,6 +152,17 @@ def _as_items(items, items_are_models: bool = False) -> list[Item]:
     if not out:
         raise InputError("the fleet has no items.")
     return out
+
+
+def _listed_paths(path: str) -> list[str]:
+    """The paths (or globs) a `.txt` item list names, one a line (blank lines and `#` comments
+    skipped)."""
+    try:
+        text = read_input(path, "item list").decode("utf-8")
+    except UnicodeDecodeError:
+        raise ModelFileError("the item list is not UTF-8 text.", path=path) from None
+    return [line.strip() for line in text.splitlines()
+            if line.strip() and not line.lstrip().startswith("#")]
 
 
 def _numpy_tree(tree):
@@ -485,8 +499,9 @@ def run(
     **Arguments:**
     - `recipe`: `'direct'`, `'iterative'`, `'least_squares'`, `'kc'`, `'tyre_fit'` (with
       `options`: see each recipe in `diffsusp.fleet.recipes`), or a `Recipe` object.
-    - `items`: a glob (`'data/*.csv'`), a path, or a list of paths and `Item`s (in-memory data,
-      a model of its own). An item's name is its file stem; its report is
+    - `items`: a glob (`'data/*.csv'`), a path, a `.txt` file listing one path or glob per line
+      (`#` comments), or a list of those and `Item`s (in-memory data, a model of its own).
+      An item's name is its file stem; its report is
       `out/reports/NAME.json`. For `kc` with a named event the paths are model files (one
       design variant per item).
     - `out`: the output folder (made if needed): see `diffsusp.fleet.store`.
@@ -504,9 +519,10 @@ def run(
       `timeout` (`diffsusp.fleet.engine.DaskEngine`). In-process, a call that hangs inside XLA
       is not interrupted.
     - `devices`: local devices of a worker that a batch is split over (`jax.sharding`): a
-      count or "all" (in a worker process started for the fleet, on the CPU, that many CPU
-      devices are made); None: `$DIFFSUSP_DEVICES`, else 1. Batched `least_squares` places the
-      batch axis on them; `kc` splits each event's cases (`solve_statics(devices=...)`).
+      count (an int or its text) or "all" (in a worker process started for the fleet, on the
+      CPU, that many CPU devices are made); None: `$DIFFSUSP_DEVICES`, else 1. Batched
+      `least_squares` places the batch axis on them; `kc` splits each event's cases
+      (`solve_statics(devices=...)`).
     - `cache_dir`: the persistent compilation cache the workers share (default: this
       process's, else `$DIFFSUSP_CACHE` or `~/.cache/diffsusp/jax` as the CLI).
     - `retry_failed`: also re-run the items that failed before.
@@ -525,9 +541,15 @@ def run(
         raise InputError(f"time_limit must be positive (seconds per item); got {time_limit}.")
     if rec.batched and rec.options.get("pad_to") is None:
         rec = dataclasses.replace(rec, options={**rec.options, "pad_to": batch_size})
+    if isinstance(devices, str) and devices.isdigit():
+        devices = int(devices)
     if devices is not None and devices != "all" and not (isinstance(devices, int)
                                                          and devices >= 1):
         raise InputError(f"devices must be a count (at least 1) or 'all'; got {devices!r}.")
+    if workers is not None and scheduler is not None:
+        raise InputError("give workers or a scheduler, not both.")
+    if workers is not None and workers < 1:
+        raise InputError(f"workers must be at least 1; got {workers}.")
     item_list = _as_items(items, rec.items_are_models)
     if model is None and any(it.model is None for it in item_list):
         raise InputError("no model: give the fleet a model= (or every item its own).")
