@@ -18,6 +18,7 @@ import os
 import signal
 import sys
 import warnings
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -293,6 +294,24 @@ SideOption = Annotated[Side | None, typer.Option(
     help="the vehicle side to load the model on: a Chrono file is read on that side, any other "
     "half axle whose corner is on the other side is mirrored (default: as the model is)")]
 """The one `--side` option of every verb that loads a model."""
+
+
+ModelArgument = Annotated[str, typer.Argument(
+    help="Model file (.toml, .adm, .json) or built-in name.")]
+"""The MODEL argument of every verb that loads a model (`load_model_file`)."""
+
+JsonOption = Annotated[bool, typer.Option(
+    "--json", help="Machine-readable output on stdout (JSON).")]
+"""The one `--json` flag of the verbs."""
+
+MeasurementsOption = Annotated[Path, typer.Option(
+    "--measurements", "-m",
+    help="Landmark or pose table with the loads of each case (.csv or .parquet).")]
+"""The measurement table of the identification verbs (`diffsusp.measure.read_measurements`)."""
+
+ReorderOption = Annotated[bool, typer.Option(
+    help="Match landmarks probed in any order by their distance tables.")]
+"""`--reorder` of the verbs that read measurements."""
 
 
 def side_value(side) -> str | None:

@@ -25,6 +25,7 @@ import typer
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_NOT_CONVERGED,
+    JsonOption,
     check_output,
     cli_errors,
     console,
@@ -68,7 +69,6 @@ OptionOpt = Annotated[list[str] | None, typer.Option(
     "--option", help="Recipe option KEY=VALUE (VALUE as JSON, else text), e.g. hold=model, "
     "eliminate=true (repeatable): the identification function's keyword arguments.")]
 RetryOpt = Annotated[bool, typer.Option(help="Also re-run the items that failed before.")]
-JsonOpt = Annotated[bool, typer.Option("--json", help="Machine-readable result.")]
 
 
 def _options(values: list[str] | None) -> dict:
@@ -93,7 +93,7 @@ def _recipe_command(recipe: str, doc: str, *, model_required: bool = True):
     def command(
         items: ItemsOpt, out: OutOpt, model: ModelOpt = None, workers: WorkersOpt = None,
         scheduler: SchedulerOpt = None, batch_size: BatchOpt = 16, time_limit: TimeOpt = None,
-        option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOpt = False,
+        option: OptionOpt = None, retry_failed: RetryOpt = False, json_output: JsonOption = False,
         devices: DevicesOpt = None,
     ):
         check_output(out, what="fleet folder", directory=True)
@@ -150,7 +150,7 @@ tyre_fit_command = _recipe_command(
 
 def status_command(
     out: Annotated[pathlib.Path, typer.Argument(help="The fleet's output folder.")],
-    json_output: JsonOpt = False,
+    json_output: JsonOption = False,
 ):
     """Items done, failed (with their messages) and still to do in a fleet's folder."""
     from .. import fleet

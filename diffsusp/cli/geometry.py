@@ -28,6 +28,10 @@ import typer
 
 from .common import (
     EXIT_BAD_INPUT,
+    JsonOption,
+    MeasurementsOption,
+    ModelArgument,
+    ReorderOption,
     check_identify_outputs,
     check_number,
     check_output,
@@ -39,7 +43,6 @@ from .common import (
     print_json,
     write_model_file,
 )
-from .identify import JsonOpt, MeasurementsOpt, ModelArg, ReorderOpt
 
 
 def register(identify_app: typer.Typer) -> None:
@@ -48,18 +51,9 @@ def register(identify_app: typer.Typer) -> None:
     identify_app.command("correct")(correct_command)
 
 
-def _load(model, measurements, reorder):
-    from .. import measure
-
-    model_file = load_model_file(model)
-    mech = model_file.mechanism
-    meas = measure.read_measurements(measurements, mech, reorder=reorder)
-    return model_file, mech, meas
-
-
 def geometry_command(
-    model: ModelArg,
-    measurements: MeasurementsOpt,
+    model: ModelArgument,
+    measurements: MeasurementsOption,
     joints: Annotated[Path | None, typer.Option(
         help="Joint list (.json); default: derived from the model.")] = None,
     compliant: Annotated[list[str] | None, typer.Option(
@@ -85,8 +79,8 @@ def geometry_command(
         help="Write the model with the identified joints (.toml or .adm).")] = None,
     figures: Annotated[Path | None, typer.Option(
         help="Write the located joints against the model (PNG) in this directory.")] = None,
-    reorder: ReorderOpt = False,
-    json_output: JsonOpt = False,
+    reorder: ReorderOption = False,
+    json_output: JsonOption = False,
 ):
     """Locate the joints from the relative motion of the measured parts (mm)."""
     check_output(out, suffixes=(".csv", ".json", ".html", ".txt"), what="report")
@@ -99,9 +93,12 @@ def geometry_command(
     enable_x64()
     from ..identify import geometric
     from ..identify.report import format_table, write_report
+    from ..measure import read_measurements
 
     with cli_errors():
-        model_file, mech, meas = _load(model, measurements, reorder)
+        model_file = load_model_file(model)
+        mech = model_file.mechanism
+        meas = read_measurements(measurements, mech, reorder=reorder)
         notes = ()
         if joints is not None:
             joint_list = geometric.read_joints(joints)
@@ -143,8 +140,8 @@ def geometry_command(
 
 
 def correct_command(
-    model: ModelArg,
-    measurements: MeasurementsOpt,
+    model: ModelArgument,
+    measurements: MeasurementsOption,
     case: Annotated[str, typer.Option(
         help="The measured case to reproduce (its label in the table).")],
     element: Annotated[list[str] | None, typer.Option(
@@ -158,8 +155,8 @@ def correct_command(
     out: Annotated[Path | None, typer.Option(
         help="Write the report: .csv, .json, .html or .txt (one row per moved marker "
              "coordinate, with its status).")] = None,
-    reorder: ReorderOpt = False,
-    json_output: JsonOpt = False,
+    reorder: ReorderOption = False,
+    json_output: JsonOption = False,
 ):
     """Move the bolted-side joint frames so that the model's equilibrium reproduces the
     measured poses of one case (spec geometry §3.8)."""
@@ -171,9 +168,12 @@ def correct_command(
     enable_x64()
     from ..identify import geometric
     from ..identify.report import format_table, write_report
+    from ..measure import read_measurements
 
     with cli_errors():
-        model_file, mech, meas = _load(model, measurements, reorder)
+        model_file = load_model_file(model)
+        mech = model_file.mechanism
+        meas = read_measurements(measurements, mech, reorder=reorder)
         if case not in meas.cases:
             raise fail(f"--case '{case}' is not a case of {measurements.name} (cases: "
                        f"{', '.join(meas.cases)}).", EXIT_BAD_INPUT)

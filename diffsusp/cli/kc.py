@@ -37,6 +37,8 @@ from ..kc.dispatch import (
 )
 from ..statics import flagged_cases
 from .common import (
+    JsonOption,
+    ModelArgument,
     SideOption,
     check_output,
     cli_errors,
@@ -107,7 +109,7 @@ def _table(ev, mech_name: str) -> Table:
 
 
 def kc_command(
-    model: Annotated[str, typer.Argument(help="built-in model name or model file path")],
+    model: ModelArgument,
     event: EventOption = Event.parallel_travel,
     travel: Annotated[str, typer.Option(help="wheel travel range (mm) start:stop:count")]
     = "-80:80:161",
@@ -130,8 +132,7 @@ def kc_command(
         help="steering axis markers 'upper,lower'")] = None,
     out: Annotated[pathlib.Path | None, typer.Option(
         help="write figures (PNG and SVG) to this folder")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output on stdout")]
-    = False,
+    as_json: JsonOption = False,
 ):
     """Run a K&C event on MODEL and print its metrics (Adams/Car conventions, per side)."""
     enable_x64()

@@ -21,6 +21,8 @@ from .common import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
     EXIT_NOT_CONVERGED,
+    JsonOption,
+    ModelArgument,
     SideOption,
     Terminated,
     check_output,
@@ -35,10 +37,6 @@ from .common import (
     warn,
 )
 
-ModelArgument = Annotated[str, typer.Argument(
-    help="Model file (.toml, .adm, .json) or built-in name.")]
-"""MODEL of `info` and `simulate`."""
-
 
 def register(app: typer.Typer) -> None:
     """Add `info` and `simulate` to `app`."""
@@ -49,8 +47,7 @@ def register(app: typer.Typer) -> None:
 def info_command(
     model: ModelArgument,
     side: SideOption = None,
-    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable output.")]
-    = False,
+    json_output: JsonOption = False,
 ):
     """Describe a model: parts, markers, joints, elements, DOF, rank, redundant rows, free modes
     and its parameters (float leaves) with their shapes and units."""
@@ -143,7 +140,7 @@ def simulate_command(
     side: SideOption = None,
     max_steps: Annotated[int, typer.Option(
         "--max-steps", help="Newton iterations per case.")] = 50,
-    json_output: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+    json_output: JsonOption = False,
 ):
     """Solve the static equilibrium of MODEL under every row of a load table and write one row
     of results per case (status, stable and law_valid flags, poses, bushing deformations and
