@@ -282,7 +282,9 @@ class AdmModel:
     `force_to_n` (conversion factors); `statements` (the active ones, in file order); `names`
     ((keyword, id) → adams_view_name); `splines` (id → `AdmSpline`); `skipped` (statements
     outside the subset, each with line and reason); `ignored` (statements without static
-    effect); `inactive` ((line, text) of commented-out statements); `path`.
+    effect); `inactive` ((line, text) of commented-out statements); `path`; `plan` (the
+    statements interpreted as builder calls and load definitions, `adams_plan.AdmPlan`: set by
+    `adams_plan.parse_adm`, None until then).
     """
 
     title: str
@@ -296,14 +298,14 @@ class AdmModel:
     ignored: list[SkippedStatement]
     inactive: list[tuple[int, str]]
     path: Path | None = None
-    _plan: object = dataclasses.field(default=None, repr=False)
+    plan: object = dataclasses.field(default=None, repr=False)
 
     # -- public API -----------------------------------------------------------------------
 
     def build(self, time: float = 0.0, *, check: bool = True) -> Mechanism:
         """The `Mechanism` (mm, N, N·mm, rad; the file's global frame; design position = the
         file's positions). Two-body SFORCE functions are evaluated at `time` (s)."""
-        return self._plan.build(time, check)
+        return self.plan.build(time, check)
 
     def loads(self, mech: Mechanism, times: float | Float[ArrayLike, " t"] = 0.0) -> Loads:
         """Loads of the file's external forces and motions at `times` (s).
@@ -313,7 +315,7 @@ class AdmModel:
         measured from the design position). A scalar `times` gives one case; an array a leading
         case axis.
         """
-        return self._plan.loads(mech, times)
+        return self.plan.loads(mech, times)
 
     def spline_bushings(self) -> dict[str, dict[str, AdmSpline]]:
         """A/Car bushing splines grouped by bushing: name stem → {axis: spline}, for splines

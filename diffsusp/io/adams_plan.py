@@ -115,7 +115,7 @@ def _check_magnitude(values, path, line, what, limit=1e15):
                     "its units.", path, line, what)
 
 
-class _Plan:
+class AdmPlan:
     """The statements interpreted as builder calls and load definitions (no JAX here)."""
 
     def __init__(self, model: AdmModel):
@@ -764,7 +764,7 @@ def parse_adm(source) -> AdmModel:
     """
     model = parse_statements(source)
     path = model.path
-    model._plan = _Plan(model)
+    model.plan = AdmPlan(model)
     if model.skipped:
         warnings.warn(
             f"{path or '<input>'}: skipped {len(model.skipped)} statement(s) outside the "

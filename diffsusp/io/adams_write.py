@@ -198,7 +198,7 @@ def _write_with_template(mech: Mechanism, template) -> str:
     lines = text.splitlines()
     edits: list[tuple[int, int, int, str]] = []
     lf, ff = model.length_to_mm, model.force_to_n
-    plan = model._plan
+    plan = model.plan
     names = {s.line: n for s, _, (n, *_), _ in plan.calls}
 
     def replace(s, key, values):
