@@ -186,9 +186,9 @@ def test_batch_split_over_two_devices(tmp_path):
                     batch_size=4, devices=2)
     assert one.ok == two.ok == 3
     data = [from_measurements(it.data, 0.05, 0.01 * np.pi / 180) for it in items]
-    stacked = eqx.tree_at(lambda x: tuple(getattr(x, f) for f in x._values), data[0],
+    stacked = eqx.tree_at(lambda x: tuple(getattr(x, f) for f in x.value_fields), data[0],
                           tuple(jnp.stack([getattr(d, f) for d in [*data, data[-1]]])
-                                for f in data[0]._values))
+                                for f in data[0].value_fields))
     ref = least_squares_batch(mech, stacked, Params.bushing_stiffness(
         mech, None, ["Ktx", "Kty", "Ktz"]), max_steps=15)
     for k, it in enumerate(items):

@@ -213,7 +213,7 @@ class LeastSquares(Recipe):
     def _measurement(self, m):
         """A `measure.Measurements` (a table read, or an in-memory item) as the fit's
         measurement, with the recipe's σ; a measurement already is one."""
-        if hasattr(m, "_values"):
+        if hasattr(m, "value_fields"):
             return m
         return from_measurements(m, self.options.get("sigma", 0.05),
                                  self.options.get("sigma_rotation", 0.01) * _DEG)
@@ -252,7 +252,7 @@ def _layout_key(m) -> bytes:
     """Everything of a measurement but its measured values: items with equal keys batch."""
     import jax
 
-    fields = [f.name for f in dataclasses.fields(m) if f.name not in m._values]
+    fields = [f.name for f in dataclasses.fields(m) if f.name not in m.value_fields]
     leaves = jax.tree.leaves([getattr(m, f) for f in fields])
     return repr((type(m).__name__, [np.asarray(x).tobytes() for x in leaves])).encode()
 
@@ -272,9 +272,9 @@ def _stack(items, mesh=None):
     import jax.numpy as jnp
 
     first = items[0]
-    return eqx.tree_at(lambda x: tuple(getattr(x, f) for f in x._values), first,
+    return eqx.tree_at(lambda x: tuple(getattr(x, f) for f in x.value_fields), first,
                        tuple(_shard(jnp.stack([getattr(m, f) for m in items]), mesh)
-                             for f in first._values))
+                             for f in first.value_fields))
 
 
 # ----------------------------------------------------------------------------- K&C events

@@ -192,7 +192,7 @@ def as_batch(data, n: int, items=None):
     `n` times, or the measured values of `items` (lists of measurements like `data`)."""
     out = []
     for k, m in enumerate(data):
-        fields = m._values
+        fields = m.value_fields
         if items is None:
             values = tuple(jnp.broadcast_to(getattr(m, f), (n, *getattr(m, f).shape))
                            for f in fields)

@@ -288,11 +288,11 @@ def _bookkeep(params, accepted, trial_u, u, new, last, q, status, q0):
 
 
 def _values_of(data: Sequence[Measurement]):
-    return tuple(tuple(getattr(m, f) for f in m._values) for m in data)
+    return tuple(tuple(getattr(m, f) for f in m.value_fields) for m in data)
 
 
 def _with_values(problem: _Problem, values) -> _Problem:
-    data = tuple(eqx.tree_at(lambda m: tuple(getattr(m, f) for f in m._values), m, v)
+    data = tuple(eqx.tree_at(lambda m: tuple(getattr(m, f) for f in m.value_fields), m, v)
                  for m, v in zip(problem.data, values, strict=True))
     return dataclasses.replace(problem, data=data)
 

@@ -320,7 +320,7 @@ class SuspensionScenario:
 
 def _stack(items: Sequence):
     """One measurement with a leading data-set axis from one-set measurements alike."""
-    fields = items[0]._values
+    fields = items[0].value_fields
     return eqx.tree_at(lambda m: tuple(getattr(m, f) for f in fields), items[0],
                        tuple(jnp.stack([getattr(it, f) for it in items]) for f in fields))
 

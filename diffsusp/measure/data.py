@@ -96,9 +96,10 @@ def _check_loads(loads: Loads, what: str) -> int:
 class Measurement(eqx.Module):
     """Base of the measurement types: `loads`, `weight` (mask/σ, the shape of one data set's
     measured values) and `name`; `residual(mech, q)` gives model − measured (physical units)
-    at the equilibria q `(cases, n)` of `loads`."""
+    at the equilibria q `(cases, n)` of `loads`. `value_fields` names the fields that hold the
+    measured values (those a batch of data sets stacks on a leading axis)."""
 
-    _values: ClassVar[tuple[str, ...]] = ("measured",)
+    value_fields: ClassVar[tuple[str, ...]] = ("measured",)
 
     def predict(self, mech: Mechanism, q):
         """The model's values of this measurement at the equilibria q `(cases, n)`."""
@@ -126,18 +127,18 @@ class Measurement(eqx.Module):
 
     def residual(self, mech: Mechanism, q) -> Array:
         """Model − measured (physical units), the shape of `weight`."""
-        return self.predict(mech, q) - getattr(self, self._values[0])
+        return self.predict(mech, q) - getattr(self, self.value_fields[0])
 
     @property
     def n_sets(self) -> int | None:
         """Number of data sets (leading axis of the measured values), None for one."""
-        first = getattr(self, self._values[-1])
+        first = getattr(self, self.value_fields[-1])
         return first.shape[0] if first.ndim > self.weight.ndim else None
 
     def select(self, k: int) -> "Measurement":
         """The `k`-th data set of a batched measurement."""
-        return eqx.tree_at(lambda m: tuple(getattr(m, f) for f in self._values), self,
-                           tuple(getattr(self, f)[k] for f in self._values))
+        return eqx.tree_at(lambda m: tuple(getattr(m, f) for f in self.value_fields), self,
+                           tuple(getattr(self, f)[k] for f in self.value_fields))
 
 
 class Landmarks(Measurement):
@@ -211,7 +212,7 @@ class Poses(Measurement):
     small-angle vector of R_model R_measᵀ), whitened by `sigma_translation`, `sigma_rotation`.
     """
 
-    _values: ClassVar[tuple[str, ...]] = ("rotation", "translation")
+    value_fields: ClassVar[tuple[str, ...]] = ("rotation", "translation")
 
     loads: Loads
     rotation: Float[Array, "*sets cases p 3 3"]
@@ -432,7 +433,7 @@ def data_axes(data: Sequence[Measurement]):
     """`in_axes` for vmapping over data sets: 0 on the measured values, None elsewhere."""
     batched = set()
     for m in data:
-        for f in m._values:
+        for f in m.value_fields:
             batched.add(id(getattr(m, f)))
     return jax.tree.map(lambda x: 0 if id(x) in batched else None, tuple(data))
 
