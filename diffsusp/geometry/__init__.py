@@ -29,6 +29,7 @@ from .poses import (
     transform_points,
 )
 from .rotations import (
+    DEG,
     GIBBS_SINGULARITY_TOL,
     PROJECTED_ANGLE_LIMITS,
     REULER_GIMBAL_LOCK_TOL,
@@ -51,6 +52,7 @@ from .rotations import (
 )
 
 __all__ = [
+    "DEG",
     "BushingFrame",
     "LineFit",
     "PlaneFit",

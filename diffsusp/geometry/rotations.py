@@ -22,6 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
+    "DEG",
     "NEG_LEVI_CIVITA",
     "matrix_to_quaternion",
     "skew",
@@ -45,6 +46,10 @@ __all__ = [
     "PROJECTED_ANGLE_LIMITS",
 ]
 
+DEG = math.pi / 180.0
+"""One degree in radians, the library's one angle conversion: degrees × DEG = radians,
+radians / DEG = degrees (display units are degrees, internal units radians)."""
+
 # `matrix_to_gibbs` refuses rotations with 1 + tr R below this (4·cos²(θ/2)), i.e. angles within
 # about 1e-6 rad (5.7e-5°) of 180°, where |b| = tan(θ/2) exceeds ~2e6.
 GIBBS_SINGULARITY_TOL = 1e-12
@@ -52,9 +57,9 @@ GIBBS_SINGULARITY_TOL = 1e-12
 REULER_GIMBAL_LOCK_TOL = 1e-12
 # Validity limits of the projected angles (AX, AY, AZ) as a bushing deformation measure, in rad
 # (spec stiffness §0, geometry §2.6: |AX|, |AY| < 15°, |AZ| < 90°).
-PROJECTED_ANGLE_LIMITS = (math.radians(15.0), math.radians(15.0), math.radians(90.0))
+PROJECTED_ANGLE_LIMITS = (15.0 * DEG, 15.0 * DEG, 90.0 * DEG)
 
-_GIBBS_LIMIT_DEG = 180.0 - 2.0 * math.sqrt(GIBBS_SINGULARITY_TOL / 4.0) * 180.0 / math.pi
+_GIBBS_LIMIT_DEG = 180.0 - 2.0 * math.sqrt(GIBBS_SINGULARITY_TOL / 4.0) / DEG
 _GIBBS_SINGULAR_MESSAGE = (
     f"matrix_to_gibbs: rotation of more than {_GIBBS_LIMIT_DEG:.5f}° is too close to 180°, "
     "where Gibbs vectors are singular (|b| = tan(θ/2) -> inf); use rotation vectors "

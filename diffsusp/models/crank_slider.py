@@ -3,6 +3,7 @@
 
 import math
 
+from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 
 CRANK_LENGTH = 100.0
@@ -49,7 +50,7 @@ def crank_slider(k_trans: float = 10000.0, k_rot_deg: float = 10000.0) -> Mechan
 
     **Returns:** the `Mechanism`.
     """
-    angle = math.radians(CRANK_ANGLE_DEG)
+    angle = CRANK_ANGLE_DEG * DEG
     pin = (CRANK_LENGTH * math.cos(angle), CRANK_LENGTH * math.sin(angle), 0.0)
     slider_x = pin[0] + math.sqrt(ROD_LENGTH**2 - pin[1] ** 2)
     slider = (slider_x, 0.0, 0.0)
@@ -64,6 +65,6 @@ def crank_slider(k_trans: float = 10000.0, k_rot_deg: float = 10000.0) -> Mechan
     b.joint("slide", "translational", parts=("slider", "ground"), at=slider,
             z=(1.0, 0.0, 0.0), x=(0.0, 1.0, 0.0))
     b.bushing("slider_bushing", parts=("ground", "slider"), at=slider,
-              k_trans=k_trans, k_rot=k_rot_deg * 180.0 / math.pi)
+              k_trans=k_trans, k_rot=k_rot_deg / DEG)
     b.load_point("crank_pin", part="crank", at=pin)
     return b.build()

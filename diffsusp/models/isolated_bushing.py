@@ -1,7 +1,7 @@
 """The isolated bushing of the thesis's Adams example (spec stiffness §1.12a, §4.1, §7 R1)."""
 
-import math
 
+from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 
 ISOLATED_BUSHING_REULER_DEG = (28.18678543, 33.2259422, 350.8538915)
@@ -53,7 +53,7 @@ def isolated_bushing(k_trans: float = 100.0, k_rot_deg: float = 10000.0) -> Mech
         at=(0.0, 0.0, 0.0),
         reuler_deg=ISOLATED_BUSHING_REULER_DEG,
         k_trans=k_trans,
-        k_rot=k_rot_deg * 180.0 / math.pi,
+        k_rot=k_rot_deg / DEG,
     )
     b.load_point("tip", part="arm", at=(-300.0, 0.0, 0.0))
     b.load_point("centre", part="arm", at=(0.0, 0.0, 0.0))

@@ -1,8 +1,8 @@
 """The thesis's pseudo-McPherson test half axle (spec stiffness §0, §2.7; geometry §2.2, §2.5,
 §3.10)."""
 
-import math
 
+from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 from ..model.corner import Corner, common_perpendicular_midpoint, design_offset
 
@@ -66,9 +66,6 @@ above 225 mm, i.e. 95.0 mm of strut extension from design (about −100 mm of wh
 near 2 050 N of vertical load), force 100·p + 2.0·p³ N (3 kN at 10 mm, 18 kN at 20 mm), stiffer
 than the bump stop like the hydraulic/elastomer rebound stop inside a damper (Adams/Car `.reb`).
 Chosen: the thesis tabulates no stop."""
-
-NMM_PER_DEG_TO_RAD = 180.0 / math.pi
-"""N·mm/deg → N·mm/rad (the thesis states rotational rates per degree)."""
 
 
 def virtual_lower_pivot() -> tuple[float, float, float]:
@@ -252,7 +249,7 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
     ):
         k_trans, k_rot_deg = BUSHING_STIFFNESS[name]
         b.bushing(name, parts=parts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
-                  k_rot=tuple(k * NMM_PER_DEG_TO_RAD for k in k_rot_deg))
+                  k_rot=tuple(k / DEG for k in k_rot_deg))
 
     if tie_rod_part:
         b.part("tie_rod")

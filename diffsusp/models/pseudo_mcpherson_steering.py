@@ -3,13 +3,13 @@
 
 import numpy as np
 
+from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 from .pseudo_mcpherson import (
     BUSHING_STIFFNESS,
     JOINT_POSITIONS,
     JOINT_REULER_DEG,
     LOADED_RADIUS,
-    NMM_PER_DEG_TO_RAD,
     SPRING_FREE_LENGTH,
     SPRING_RATE,
     corner,
@@ -119,7 +119,7 @@ def pseudo_mcpherson_steering(*, strut: bool = True, rack: bool = True,
     for bname, bparts, joint in bushings:
         k_trans, k_rot_deg = BUSHING_STIFFNESS[bname]
         b.bushing(bname, parts=bparts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
-                  k_rot=tuple(k * NMM_PER_DEG_TO_RAD for k in k_rot_deg))
+                  k_rot=tuple(k / DEG for k in k_rot_deg))
 
     axis = np.subtract(p["L6"], p["L3"])
     z_rod, z_rack = _cross_axes(axis / np.linalg.norm(axis))

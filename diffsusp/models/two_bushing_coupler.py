@@ -1,7 +1,7 @@
 """Two links on bushings joined by a coupler (spec stiffness §1.12c, §7 R3)."""
 
-import math
 
+from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 
 LINK_LENGTH = 450.0
@@ -39,7 +39,7 @@ def two_bushing_coupler(k_trans: float = 10000.0, k_rot_deg: float = 10000.0) ->
 
     **Returns:** the `Mechanism`.
     """
-    k_rot = k_rot_deg * 180.0 / math.pi
+    k_rot = k_rot_deg / DEG
     z_axis = (0.0, 0.0, 1.0)
     b = MechanismBuilder("two-bushing coupler")
     for part in ("link_1", "link_2", "coupler"):
