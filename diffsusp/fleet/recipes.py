@@ -23,7 +23,6 @@ model structure and data shape (no retrace when only values change).
 """
 
 import dataclasses
-import math
 import time
 import typing
 import warnings
@@ -32,6 +31,7 @@ import numpy as np
 
 from .. import identify, kc, measure, tyre
 from ..errors import InputError
+from ..geometry import DEG
 from ..identify import Params, least_squares_batch
 from ..io.tables import read_table, unit_factor
 from ..io.tir import read_tir
@@ -44,8 +44,6 @@ from ..tyre.input_tables import read_tyre_table
 
 __all__ = ["KC", "Direct", "ItemTimeout", "Iterative", "LeastSquares", "RECIPES", "Recipe",
            "TyreFit", "recipe"]
-
-_DEG = math.pi / 180.0
 
 
 class ItemTimeout(Exception):
@@ -216,7 +214,7 @@ class LeastSquares(Recipe):
         if hasattr(m, "value_fields"):
             return m
         return from_measurements(m, self.options.get("sigma", 0.05),
-                                 self.options.get("sigma_rotation", 0.01) * _DEG)
+                                 self.options.get("sigma_rotation", 0.01) * DEG)
 
     def run(self, mechs: list, data: list, deadline: float | None, mesh=None) -> list:
         data = [self._measurement(m) for m in data]

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
+from ..geometry import DEG
 from .adams_common import FORCE_TO_N, LENGTH_TO_MM, error, fmt, read_source
 
 # ----------------------------------------------------------------------------- TeimOrbit files
@@ -253,7 +254,7 @@ def write_lcf(table: LoadCaseTable, path) -> str:
 
 _BUS_SECTIONS = {"tx": "TX_FORCE", "ty": "TY_FORCE", "tz": "TZ_FORCE", "rx": "RX_TORQUE",
                  "ry": "RY_TORQUE", "rz": "RZ_TORQUE"}
-_ANGLE_TO_RAD = {"DEG": math.pi / 180, "DEGREE": math.pi / 180, "DEGREES": math.pi / 180,
+_ANGLE_TO_RAD = {"DEG": DEG, "DEGREE": DEG, "DEGREES": DEG,
                  "RAD": 1.0, "RADIAN": 1.0, "RADIANS": 1.0}
 
 

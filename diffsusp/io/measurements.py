@@ -43,6 +43,7 @@ import os
 import numpy as np
 
 from ..errors import ModelFileError
+from ..geometry import DEG
 from ..model.mechanism import Loads, Mechanism
 from .files import check_input, read_input
 from .tables import Table, csv_cells, loads_from_table, split_header, unit_factor
@@ -114,7 +115,7 @@ class MeasurementRows:
         """The factor of column `name` to library units (an angle without a unit: degrees)."""
         unit = self.units.get(name)
         if dimension == "angle" and unit is None:
-            return math.pi / 180.0  # degrees, as in Adams result files
+            return DEG  # degrees, as in Adams result files
         try:
             return unit_factor(unit, dimension)
         except ValueError as e:

@@ -9,6 +9,7 @@ import re
 import numpy as np
 
 from ..errors import ModelFileError
+from ..geometry import DEG
 
 MAX_MAGNITUDE = 1e15
 """Largest magnitude of any number in a model file, in mm, N and rad (beyond it a value is a
@@ -16,7 +17,7 @@ typo or a unit mistake, and products in the checks would overflow)."""
 
 LENGTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 FORCE_UNITS = {"N": 1.0, "daN": 10.0, "kN": 1000.0, "lbf": 4.4482216152605}
-ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+ANGLE_UNITS = {"rad": 1.0, "deg": DEG}
 UNIT_TABLES = {"length": LENGTH_UNITS, "force": FORCE_UNITS, "angle": ANGLE_UNITS}
 LIBRARY_UNITS = {"length": "mm", "force": "N", "angle": "rad"}
 

@@ -42,6 +42,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..errors import ModelError, ModelFileError
+from ..geometry import DEG
 from ..model import Loads
 from .files import check_input, current_umask, read_input, write_text_atomic
 
@@ -53,7 +54,7 @@ _BASE_UNITS = {
     "in": (_L, 25.4), "ft": (_L, 304.8),
     "N": (_F, 1.0), "daN": (_F, 10.0), "kN": (_F, 1000.0), "MN": (_F, 1.0e6),
     "lbf": (_F, 4.4482216152605),
-    "rad": (_A, 1.0), "deg": (_A, math.pi / 180.0), "°": (_A, math.pi / 180.0),
+    "rad": (_A, 1.0), "deg": (_A, DEG), "°": (_A, DEG),
 }
 """Base units: (exponents of length, force, angle), factor to the library's mm, N, rad."""
 
