@@ -145,10 +145,16 @@ class LineFit(NamedTuple):
     sigma: Float[Array, ""]
 
 
-def _line(points):
+def _centroid_axis(points, k: int):
+    """(centroid, unit principal direction k of the centred points): k = 0 the direction of
+    most spread (a line), k = 2 of least spread (a plane's normal)."""
     mean = jnp.mean(points, axis=0)
     _, _, vt = jnp.linalg.svd(points - mean, full_matrices=False)
-    return jnp.concatenate([mean, _sign_fixed(vt[0])])
+    return jnp.concatenate([mean, _sign_fixed(vt[k])])
+
+
+_line = functools.partial(_centroid_axis, k=0)
+_plane = functools.partial(_centroid_axis, k=2)
 
 
 def fit_line(points: Float[ArrayLike, "n 3"], sigma: float | None = None) -> LineFit:
@@ -187,12 +193,6 @@ class PlaneFit(NamedTuple):
     covariance: Float[Array, "6 6"]
     rms: Float[Array, ""]
     sigma: Float[Array, ""]
-
-
-def _plane(points):
-    mean = jnp.mean(points, axis=0)
-    _, _, vt = jnp.linalg.svd(points - mean, full_matrices=False)
-    return jnp.concatenate([mean, _sign_fixed(vt[2])])
 
 
 def fit_plane(points: Float[ArrayLike, "n 3"], sigma: float | None = None) -> PlaneFit:
