@@ -116,19 +116,19 @@ class _Parser:
         if self.depth > MAX_DEPTH:
             raise ExpressionError(f"expression nested deeper than {MAX_DEPTH} levels", pos)
 
-    def expression(self) -> Node:
-        node = self.term()
-        while self.peek()[0] == "op" and self.peek()[1] in "+-":
+    def binary(self, ops: str, operand) -> Node:
+        """Left-associative `operand (op operand)*` with `op` one of `ops`."""
+        node = operand()
+        while self.peek()[0] == "op" and self.peek()[1] in ops:
             op = self.take()[1]
-            node = Node("binary", op, (node, self.term()))
+            node = Node("binary", op, (node, operand()))
         return node
 
+    def expression(self) -> Node:
+        return self.binary("+-", self.term)
+
     def term(self) -> Node:
-        node = self.unary()
-        while self.peek()[0] == "op" and self.peek()[1] in "*/":
-            op = self.take()[1]
-            node = Node("binary", op, (node, self.unary()))
-        return node
+        return self.binary("*/", self.unary)
 
     def unary(self) -> Node:
         tok = self.peek()

@@ -44,6 +44,15 @@ def _pins(a, b):
     return _unit(np.cross(e, z1)), z1, e
 
 
+def _universal(b: MechanismBuilder, name: str, parts, at, toward) -> None:
+    """A universal joint `name` at `at` between `parts` (the link's, then the other), its pins
+    (`_pins`) set by the link from `at` to `toward`: markers `name.i`, `name.j`."""
+    z_link, z_other, e = _pins(at, toward)
+    b.marker(f"{name}.i", parts[0], at, z=z_link, x=e)
+    b.marker(f"{name}.j", parts[1], at, z=z_other, x=e)
+    b.joint(name, "universal", f"{name}.i", f"{name}.j")
+
+
 def front_axle_table_3_3() -> Mechanism:
     """The left front pseudo-McPherson axle of the thesis's full-vehicle test (Table 3.3), with
     ideal joints only: a kinematic model (no bushing, spring or stiffness).
@@ -89,20 +98,14 @@ def front_axle_table_3_3() -> Mechanism:
     b.joint("strut_top", "spherical", parts=("strut", "ground"), at=c["strut_top"])
     b.joint("tie_rod_outer", "spherical", parts=("tie_rod", "hub_carrier"),
             at=c["tie_rod_outer"])
-    z_rod, z_rack, e = _pins(c["tie_rod_inner"], c["tie_rod_outer"])
-    b.marker("tie_rod_inner.i", "tie_rod", c["tie_rod_inner"], z=z_rod, x=e)
-    b.marker("tie_rod_inner.j", "rack", c["tie_rod_inner"], z=z_rack, x=e)
-    b.joint("tie_rod_inner", "universal", "tie_rod_inner.i", "tie_rod_inner.j")
+    _universal(b, "tie_rod_inner", ("tie_rod", "rack"), c["tie_rod_inner"], c["tie_rod_outer"])
     b.joint("rack_slide", "translational", parts=("rack", "ground"), at=c["tie_rod_inner"],
             z=ax["rack_slide"], x=(1.0, 0.0, 0.0))
     b.joint("bar_pivot", "revolute", parts=("bar", "ground"), at=c["bar_pivot"],
             z=_unit(ax["bar_pivot"]))
     b.joint("drop_link_hub", "spherical", parts=("drop_link", "hub_carrier"),
             at=c["drop_link_hub"])
-    z_link, z_bar, e = _pins(c["drop_link_bar"], c["drop_link_hub"])
-    b.marker("drop_link_bar.i", "drop_link", c["drop_link_bar"], z=z_link, x=e)
-    b.marker("drop_link_bar.j", "bar", c["drop_link_bar"], z=z_bar, x=e)
-    b.joint("drop_link_bar", "universal", "drop_link_bar.i", "drop_link_bar.j")
+    _universal(b, "drop_link_bar", ("drop_link", "bar"), c["drop_link_bar"], c["drop_link_hub"])
     b.marker("wheel_centre", "hub_carrier", WHEEL_CENTRE, z=(0.0, -1.0, 0.0))
     b.marker("rack_end", "rack", c["tie_rod_inner"])
     b.driver("rack_travel", marker="rack_end", direction=(0.0, 1.0, 0.0))

@@ -218,6 +218,42 @@ def pseudo_mcpherson(wheel_travel: bool = False, *,
     return _builder(wheel_travel, spring_free_length, stops=stops).build()
 
 
+BUSHING_JOINTS = {"bushing_B": (("ground", "front_arm"), "L1"),
+                  "bushing_A": (("ground", "rear_arm"), "L2"),
+                  "bushing_F": (("strut", "ground"), "L4")}
+"""Each bushing's (I part, J part) and the hardpoint it sits at (Tables 2.1, 2.2)."""
+
+
+def add_arm_markers(b: MechanismBuilder) -> None:
+    """The lower arms' hardpoint markers (L1, L8 on the front arm; L2, L7 on the rear arm)."""
+    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    b.marker("L1_front_arm_bushing", "front_arm", p["L1"], reuler_deg=e["L1"])
+    b.marker("L8_front_arm_ball", "front_arm", p["L8"])
+    b.marker("L2_rear_arm_bushing", "rear_arm", p["L2"], reuler_deg=e["L2"])
+    b.marker("L7_rear_arm_ball", "rear_arm", p["L7"])
+
+
+def add_hub_markers(b: MechanismBuilder) -> None:
+    """The hub carrier's hardpoint markers (L5, L6, L7, L8) and the wheel centre (L9)."""
+    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    b.marker("L5_strut_base", "hub_carrier", p["L5"], reuler_deg=e["L5"])
+    b.marker("L6_tie_rod_outer", "hub_carrier", p["L6"])
+    b.marker("L7_hub_rear_ball", "hub_carrier", p["L7"])
+    b.marker("L8_hub_front_ball", "hub_carrier", p["L8"])
+    b.marker("wheel_centre", "hub_carrier", p["L9"], reuler_deg=e["L9"])
+
+
+def add_bushings(b: MechanismBuilder, names) -> None:
+    """The named bushings at their hardpoints (`BUSHING_JOINTS`) with the Table 2.1 nominal
+    stiffnesses (`BUSHING_STIFFNESS`, the rotational rates converted to N·mm/rad)."""
+    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    for name in names:
+        parts, joint = BUSHING_JOINTS[name]
+        k_trans, k_rot_deg = BUSHING_STIFFNESS[name]
+        b.bushing(name, parts=parts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
+                  k_rot=tuple(k / DEG for k in k_rot_deg))
+
+
 def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: bool = False,
              strut_joint: str = "translational", stops: bool = False) -> MechanismBuilder:
     """The builder of `pseudo_mcpherson`. `tie_rod_part=True` models the tie rod as a part
@@ -230,26 +266,11 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
         b.part(part)
 
     # Readable hardpoint markers (measurement landmarks, K&C outputs).
-    b.marker("L1_front_arm_bushing", "front_arm", p["L1"], reuler_deg=e["L1"])
-    b.marker("L8_front_arm_ball", "front_arm", p["L8"])
-    b.marker("L2_rear_arm_bushing", "rear_arm", p["L2"], reuler_deg=e["L2"])
-    b.marker("L7_rear_arm_ball", "rear_arm", p["L7"])
+    add_arm_markers(b)
     b.marker("L4_strut_top", "strut", p["L4"], reuler_deg=e["L4"])
     b.marker("L3_tie_rod_inner", "ground", p["L3"])
-    b.marker("L5_strut_base", "hub_carrier", p["L5"], reuler_deg=e["L5"])
-    b.marker("L6_tie_rod_outer", "hub_carrier", p["L6"])
-    b.marker("L7_hub_rear_ball", "hub_carrier", p["L7"])
-    b.marker("L8_hub_front_ball", "hub_carrier", p["L8"])
-    b.marker("wheel_centre", "hub_carrier", p["L9"], reuler_deg=e["L9"])
-
-    for name, parts, joint in (
-        ("bushing_B", ("ground", "front_arm"), "L1"),
-        ("bushing_A", ("ground", "rear_arm"), "L2"),
-        ("bushing_F", ("strut", "ground"), "L4"),
-    ):
-        k_trans, k_rot_deg = BUSHING_STIFFNESS[name]
-        b.bushing(name, parts=parts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
-                  k_rot=tuple(k / DEG for k in k_rot_deg))
+    add_hub_markers(b)
+    add_bushings(b, ("bushing_B", "bushing_A", "bushing_F"))
 
     if tie_rod_part:
         b.part("tie_rod")

@@ -3,15 +3,16 @@
 
 import numpy as np
 
-from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 from .pseudo_mcpherson import (
-    BUSHING_STIFFNESS,
     JOINT_POSITIONS,
     JOINT_REULER_DEG,
     LOADED_RADIUS,
     SPRING_FREE_LENGTH,
     SPRING_RATE,
+    add_arm_markers,
+    add_bushings,
+    add_hub_markers,
     corner,
 )
 
@@ -97,29 +98,14 @@ def pseudo_mcpherson_steering(*, strut: bool = True, rack: bool = True,
         b.part(part)
     inner_side = "rack" if rack else "ground"
 
-    b.marker("L1_front_arm_bushing", "front_arm", p["L1"], reuler_deg=e["L1"])
-    b.marker("L8_front_arm_ball", "front_arm", p["L8"])
-    b.marker("L2_rear_arm_bushing", "rear_arm", p["L2"], reuler_deg=e["L2"])
-    b.marker("L7_rear_arm_ball", "rear_arm", p["L7"])
+    add_arm_markers(b)
     b.marker("L3_tie_rod_inner", "tie_rod", p["L3"])
     b.marker("L6_tie_rod_outer_rod", "tie_rod", p["L6"])
     b.marker("L3_rack", inner_side, p["L3"])
     if strut:
         b.marker("L4_strut_top", "strut", p["L4"], reuler_deg=e["L4"])
-    b.marker("L5_strut_base", "hub_carrier", p["L5"], reuler_deg=e["L5"])
-    b.marker("L6_tie_rod_outer", "hub_carrier", p["L6"])
-    b.marker("L7_hub_rear_ball", "hub_carrier", p["L7"])
-    b.marker("L8_hub_front_ball", "hub_carrier", p["L8"])
-    b.marker("wheel_centre", "hub_carrier", p["L9"], reuler_deg=e["L9"])
-
-    bushings = [("bushing_B", ("ground", "front_arm"), "L1"),
-                ("bushing_A", ("ground", "rear_arm"), "L2")]
-    if strut:
-        bushings.append(("bushing_F", ("strut", "ground"), "L4"))
-    for bname, bparts, joint in bushings:
-        k_trans, k_rot_deg = BUSHING_STIFFNESS[bname]
-        b.bushing(bname, parts=bparts, at=p[joint], reuler_deg=e[joint], k_trans=k_trans,
-                  k_rot=tuple(k / DEG for k in k_rot_deg))
+    add_hub_markers(b)
+    add_bushings(b, ("bushing_B", "bushing_A") + (("bushing_F",) if strut else ()))
 
     axis = np.subtract(p["L6"], p["L3"])
     z_rod, z_rack = _cross_axes(axis / np.linalg.norm(axis))
