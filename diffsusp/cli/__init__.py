@@ -2,8 +2,11 @@
 
 One module per verb or group of verbs, each with a `register(app)` that adds its verbs (named
 `<verb>_command`) to the app or group it is given; they are all called below, in the order the
-help lists them (commands, then groups). Shared pieces (the app, exit codes, the one model
-loader `load_model_file`, output checks) are in `cli.common`.
+help lists them (commands, then groups). A verb parses its arguments, makes one library call
+and formats the result. Shared pieces (the app, exit codes, the one model loader
+`load_model_file`, the argument and option types every verb uses — `ModelArgument`,
+`SideOption`, `JsonOption`, `MeasurementsOption`, `ReorderOption` — output checks, the wording
+of flagged cases) are in `cli.common`.
 Exit codes (`diffsusp.cli.common`): 0 success, 2 bad input (paths, files, tables, arguments),
 3 a load case did not converge, 4 a model that cannot be solved as given.
 """
