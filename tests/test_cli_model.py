@@ -7,6 +7,7 @@ three load cases, so the solver compiles once for the module.
 
 import json
 import pathlib
+import warnings
 
 import numpy as np
 import pytest
@@ -139,6 +140,53 @@ def test_progress_over_chunks_gives_the_same_results(csv_run, loads_csv, tmp_pat
     for name in reference.names:
         if name != "case":
             np.testing.assert_array_equal(got[name], reference[name][order])
+
+
+def test_simulate_table_is_the_library_call_behind_simulate(csv_run, loads_csv, tmp_path,
+                                                            monkeypatch):
+    """`diffsusp.simulation` without the command: a load table named by a model file or a
+    path (`load_cases`), solved and written chunk by chunk (`simulate_table`: the rows the CLI
+    writes); an interruption after the first chunk leaves the rest written with status -1 and
+    is returned, not raised."""
+    from diffsusp.errors import InputError, ModelFileError
+    from diffsusp.resolve import load_model_file
+
+    mf = load_model_file("isolated_bushing")
+    table = simulation.load_cases(mf, str(loads_csv))
+    with pytest.raises(ModelFileError, match="not a load table of the model"):
+        simulation.load_cases(mf, str(tmp_path / "nope.csv"))
+    empty = tmp_path / "empty.csv"
+    empty.write_text("centre.fx [N]\n")
+    with pytest.raises(InputError, match="has no rows"):
+        simulation.load_cases(mf, str(empty))
+    out = tmp_path / "lib.csv"
+    done = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run = simulation.simulate_table(mf.mechanism, table, out, progress=done.append)
+    assert any("projected angles' validity" in str(w.message) for w in caught)
+    assert done == [3] and run.interrupted is None and run.done == 3
+    summary = run.summary()
+    assert (summary["cases"], summary["converged"], summary["not_solved"]) == (3, 2, 0)
+    assert [f["case"] for f in summary["failed"]] == [2]
+    _, cli_out = csv_run
+    reference, got = read_table(cli_out), read_table(out)
+    for name in reference.names:
+        np.testing.assert_array_equal(got[name], reference[name])
+
+    def stop(n):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(simulation, "CHUNK", 3)  # one chunk: the same compiled shape
+    five = tmp_path / "five.csv"
+    write_table(five, {n: table[n][[0, 1, 2, 1, 0]] for n in table.names})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # case 2's, as above
+        run = simulation.simulate_table(mf.mechanism, read_table(five), out, progress=stop)
+    assert isinstance(run.interrupted, KeyboardInterrupt) and run.done == 3
+    got = read_table(out)
+    np.testing.assert_array_equal(got["status"], [0, 0, 3, -1, -1])
+    assert run.summary()["not_solved"] == 2 and run.summary()["interrupted"]
 
 
 def test_flagged_cases_lists_failures_and_converged_cases_with_a_false_flag():
