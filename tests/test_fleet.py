@@ -225,6 +225,15 @@ def test_bad_input(items, mech, tmp_path):
     with pytest.raises(InputError, match="two items are named 'draw001'"):
         fleet.run("direct", [items / "draw001.csv", tmp_path / "draw001.csv"], tmp_path,
                   model=mech)
+    with pytest.raises(InputError, match="not both"):
+        fleet.run("direct", str(items / "*.csv"), tmp_path, model=mech, workers=2,
+                  scheduler="tcp://localhost:8786")
+    with pytest.raises(InputError, match="devices must be a count"):
+        fleet.run("direct", str(items / "*.csv"), tmp_path, model=mech, devices="two")
+    listing = tmp_path / "items.txt"  # a .txt list: one path or glob a line, # comments
+    listing.write_text(f"# the draws\n{items / 'draw001.csv'}\n\n{tmp_path / 'draw001.csv'}\n")
+    with pytest.raises(InputError, match="two items are named 'draw001'"):
+        fleet.run("direct", listing, tmp_path, model=mech)
 
 
 class _Hang(fleet.Recipe):
