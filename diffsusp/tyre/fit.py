@@ -71,7 +71,8 @@ __all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "defaul
            "default_hold", "read_bench", "read_bench_table", "input_columns", "simulate",
            "bench_programme", "with_ranges", "fit", "fit_many", "FitRehearsal", "GROUPS",
            "POSITIVE", "SIGNED_LOG", "CAMBER", "MAX_SIGMA_PCT", "CHANNELS", "COLUMN_ALIASES",
-           "check_constraints", "plot_fit"]
+           "check_constraints", "plot_fit", "fit_groups", "group_params", "check_varies",
+           "MF1989_START"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
 """Measured channels: forces [N], moments [N·mm] (library units)."""
@@ -1320,6 +1321,54 @@ def default_groups(model, channels) -> list[str]:
     fleet's tyre fits): `mf1989_lateral` for a 1989 tyre (`MagicFormula89`), otherwise
     pure_lateral, pure_longitudinal and pure_aligning as the bench data's `channels` allow."""
     return model.default_groups(channels)
+
+
+MF1989_START = {"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0, "a4": 8.0, "a7": 0.3,
+                "c0": 2.4, "c1": 4.0, "c3": -1.0, "c4": -10.0, "c9": 0.5}
+"""The start of a 1989-set fit without a start file (`diffsusp tyre fit --model mf1989`): a
+passenger-car tyre's order of magnitude, thesis units (the other coefficients 0, λ's 1)."""
+
+
+def group_params(model, groups) -> list[str]:
+    """The coefficients of the `GROUPS` named in `groups` that `model` has, in order, once
+    each."""
+    return list(dict.fromkeys(n for g in groups for n in GROUPS[g] if n in model.coefficients))
+
+
+def check_varies(data: BenchData, n_free: int, where: str = "") -> None:
+    """Bench data with fewer distinct input points (FZ, SL, SA, IA, VX, P over the rows kept)
+    than `n_free` free coefficients cannot determine them: an `InputError` (prefixed by
+    `where`, e.g. the file) before anything is compiled (10⁶ rows of one repeated point would
+    run for minutes)."""
+    keep = np.asarray(data.valid).any(axis=0)
+    pts = np.stack([np.asarray(v)[keep] for v in (data.fz, data.kappa, data.alpha,
+                                                  data.gamma, data.vx, data.pressure)], 1)
+    distinct = np.unique(np.nan_to_num(pts, nan=-1.0), axis=0).shape[0]
+    if distinct < max(n_free, 2):
+        raise InputError(f"{where}the data hold {distinct} distinct input point(s) (FZ, SL, "
+                         f"SA, IA, VX, P) in {int(keep.sum())} rows, fewer than the {n_free} "
+                         "coefficients to fit; a fit needs sweeps of slip and load")
+
+
+def fit_groups(model, data: BenchData, groups=None, *, free=(), tir=None, where: str = "",
+               **options):
+    """Fit the coefficient groups `groups` (keys of `GROUPS`; default `default_groups`)
+    together, as `diffsusp tyre fit --mode` does: the groups' coefficients the model has
+    (`group_params`), those the start file does not use held (`default_hold` with `tir`, the
+    start's property file) unless named in `free`, the data checked to vary enough for them
+    (`check_varies`, its message prefixed by `where`); `options` go to `fit`. Returns (the
+    groups, the fitted model, the `TyreFitReport`)."""
+    groups = list(groups or default_groups(model, data.channels))
+    names = group_params(model, groups)
+    free = tuple(free)
+    bad = [n for n in free if n not in names]
+    if bad:
+        raise InputError(f"free {', '.join(bad)}: not among the fitted coefficients of "
+                         f"{', '.join(groups)}")
+    hold = default_hold(model, names, tir)
+    check_varies(data, len([n for n in names if n not in hold or n in free]), where)
+    fitted, report = fit(model, data, names, hold=hold, free=free, tir=tir, **options)
+    return groups, fitted, report
 
 
 def fit_many(models, datas, params, *, noise: dict | None = None, loss: str = "huber",

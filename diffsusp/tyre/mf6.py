@@ -331,10 +331,12 @@ class MagicFormula6(AbstractTyre):
                 limits.pop(n)
         return cls.from_values(values, version, limits, _fe_method(tir))
 
-    def to_tir(self, template: TirFile) -> TirFile:
+    def to_tir(self, template: TirFile, *, ranges: bool = False) -> TirFile:
         """A copy of `template` with this model's coefficients written in (library → SI). Only
         coefficients that differ from the template or that it lacks are written; FE_METHOD is
-        written where `friction_ellipse` differs from the template's."""
+        written where `friction_ellipse` differs from the template's. `ranges=True` also
+        writes the model's finite validity ranges of load, slip and camber into their sections
+        (a fitted model: the data's ranges, `diffsusp.tyre.fit.with_ranges`)."""
         tir = template.copy()
         if self.friction_ellipse != _fe_method(template):
             tir.set("FE_METHOD", "YES" if self.friction_ellipse else "NO", section="MODEL")
@@ -345,6 +347,10 @@ class MagicFormula6(AbstractTyre):
                     tir.set(n, v)
             elif v != _default(n, {}):
                 tir.set(n, v, section=SECTION_OF[n])
+        if ranges:
+            for n, v in self.limit.items():
+                if math.isfinite(v) and n in _LIMIT_SECTION and not n.startswith("PRES"):
+                    tir.set(n, float(v), section=_LIMIT_SECTION[n])
         return tir
 
 
