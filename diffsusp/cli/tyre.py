@@ -244,15 +244,16 @@ def spec_command(
         return
     # one row per quantity, one column per load: as narrow as the number of loads, whatever
     # the quantities (eleven columns would not fit a terminal)
-    show = [("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
+    show = [("cornering_stiffness", "C_alpha [N/deg]", math.radians(1.0)),
             ("pneumatic_trail", "trail [mm]", 1), ("slip_stiffness", "C_kappa [N/-]", 1),
-            ("camber_stiffness", "C_gamma [N/deg]", math.pi / 180),
-            ("fy_peak", "FY peak [N]", 1), ("alpha_at_fy_peak", "  at alpha [deg]", 180 / math.pi),
+            ("camber_stiffness", "C_gamma [N/deg]", math.radians(1.0)),
+            ("fy_peak", "FY peak [N]", 1),
+            ("alpha_at_fy_peak", "  at alpha [deg]", math.degrees(1.0)),
             ("mu_y", "mu_y [-]", 1),
             ("fx_peak", "FX peak, braking [N]", 1), ("kappa_at_fx_peak", "  at kappa [-]", 1),
             ("mu_x", "mu_x [-]", 1),
             ("mz_peak", "MZ peak [N·m]", 1e-3), ("alpha_at_mz_peak", "  at alpha [deg]",
-                                                180 / math.pi),
+                                                math.degrees(1.0)),
             ("fy_at_zero", "FY(0) [N]", 1), ("mz_at_zero", "MZ(0) [N·m]", 1e-3)]
     t = RichTable(box=box.SIMPLE)
     t.add_column("FZ [N]", no_wrap=True)

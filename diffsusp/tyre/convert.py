@@ -92,7 +92,7 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
     spec = {"a0": a0, "c0": c0, "a7": a7, "c9": c9, "a4": a4}
     if fy is None:
         raise InputError("step1 needs at least the F_y polynomial")
-    k_fy = -radius * math.pi / 180.0 * fy.cornering_stiffness(loads)
+    k_fy = -math.radians(radius) * fy.cornering_stiffness(loads)
     sp = _shift_and_peak(fy, loads, radius, "Fy")
     if sp is not None:
         notes["Fy"] = (f"extrema found at {len(sp[0])} loads: S_h and D from the extrema "
@@ -118,7 +118,7 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
     if fy_shift is not None:
         spec["fy_shift"] = np.polyval(np.polyfit(fy_loads, fy_shift, 1), loads)
     if mz is not None:
-        k_mz = -radius * math.pi / 180.0 * mz.cornering_stiffness(loads)
+        k_mz = -math.radians(radius) * mz.cornering_stiffness(loads)
         spec["aligning_stiffness"] = k_mz
         sp = _shift_and_peak(mz, loads, radius, "Mz")
         if sp is not None:
