@@ -427,16 +427,10 @@ def fit_command(
 
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
-            table = read_tyre_table(data, "bench table")
-            present = [ch for ch in F.CHANNELS
-                       if any(F.COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
-            outputs = m0.channels
-            left = [ch for ch in present if ch not in outputs]
-            if left and len(left) < len(present):   # fit what the model has
+            bench, left = F.model_bench_data(m0, read_tyre_table(data, "bench table"))
+            if left:   # fit what the model has
                 warn(f"{data}: {', '.join(left)} not fitted: {model} has no such output "
-                     f"(fitting {', '.join(ch for ch in present if ch in outputs)})")
-            bench = F.bench_data(table, channels=[ch for ch in present if ch in outputs]
-                                 if left and len(left) < len(present) else None)
+                     f"(fitting {', '.join(bench.channels)})")
         for w in rec:
             warn(w.message)
         unknown = [ch for ch in noise_ab if ch not in bench.channels]

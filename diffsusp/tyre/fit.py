@@ -71,8 +71,8 @@ __all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "defaul
            "default_hold", "read_bench", "read_bench_table", "input_columns", "simulate",
            "bench_programme", "with_ranges", "fit", "fit_many", "FitRehearsal", "GROUPS",
            "POSITIVE", "SIGNED_LOG", "CAMBER", "MAX_SIGMA_PCT", "CHANNELS", "COLUMN_ALIASES",
-           "check_constraints", "plot_fit", "fit_groups", "group_params", "check_varies",
-           "MF1989_START"]
+           "check_constraints", "plot_fit", "fit_groups", "model_bench_data", "group_params",
+           "check_varies", "MF1989_START"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
 """Measured channels: forces [N], moments [N·mm] (library units)."""
@@ -275,6 +275,19 @@ def read_bench_table(path):
         raise ModelFileError("duplicate column names", path=path, line=header[0])
     return Table({n: arr[:, k] for k, n in enumerate(names)}, dict(header[1]), path,
                  tuple(rows), header[0])
+
+
+def model_bench_data(model, table) -> tuple[BenchData, list[str]]:
+    """Bench data of `table` (`bench_data`) for what `model` evaluates: the measured channels
+    the model has no output for (`AbstractTyre.channels`: MX, MY for the 1989 set) are left
+    out and returned, as long as another channel remains (else every channel is kept, and
+    the fit names the missing output). Returns (the data, the channels left out)."""
+    present = [ch for ch in CHANNELS
+               if any(COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
+    left = [ch for ch in present if ch not in model.channels]
+    if left and len(left) < len(present):
+        return bench_data(table, channels=[ch for ch in present if ch in model.channels]), left
+    return bench_data(table), []
 
 
 def read_bench(path, *, channels=None, mapping: dict | None = None,
