@@ -636,20 +636,9 @@ class BenchReport(IdentificationReport):
 
 
 def statuses(rep) -> tuple[str, ...]:
-    """Per parameter one of "identified", "not determined", "held", "not seen" — the shared
-    report's `statuses` where the base provides it, else by its definitions: held at its start
-    value; not seen (σ inf: the data carry no information on it); identified (determined and
-    the fit consistent, `is_identified`); else not determined."""
-    if hasattr(rep, "statuses"):
-        return tuple(rep.statuses)
-    ident = np.asarray(rep.is_identified, bool)
-    held = np.asarray(getattr(rep, "held", np.zeros(len(rep.names), bool)), bool)
-    sig = np.asarray(rep.sigmas, float)
-    out = []
-    for i in range(len(rep.names)):
-        out.append("held" if held[i] else "identified" if ident[i] else
-                   "not seen" if np.isinf(sig[i]) else "not determined")
-    return tuple(out)
+    """Per parameter one of "identified", "not determined", "held", "not seen": the report's
+    `IdentificationReport.statuses` (one rule for every identification report)."""
+    return tuple(rep.statuses)
 
 
 def report_rows(rep, label: str | None = None) -> list[dict]:
