@@ -156,15 +156,17 @@ def slip_data(fz_kn, delta_deg, fy=None, mz=None) -> mf_fit.BenchData:
 
 
 def refine(start: mf89.MagicFormula89, data: mf_fit.BenchData, *,
-           fy_names=("a1", "a2", "a3", "a4", "a7", "a9", "a10"),
-           mz_names=("c1", "c2", "c3", "c4", "c9", "c12", "c13"), noise=None):
+           fy_params=("a1", "a2", "a3", "a4", "a7", "a9", "a10"),
+           mz_params=("c1", "c2", "c3", "c4", "c9", "c12", "c13"), noise=None):
     """Step 2 (3-95): Levenberg–Marquardt on the slip coefficients with C fixed, through
-    `diffsusp.tyre.fit.fit` (pure slip, linear loss). Returns (model, report)."""
+    `diffsusp.tyre.fit.fit` (pure slip, linear loss): `fy_params`, `mz_params` the F_y and M_z
+    coefficients fitted (names), each where the data measure its channel. Returns (model,
+    report)."""
     names = []
     if "FY" in data.channels:
-        names += list(fy_names)
+        names += list(fy_params)
     if "MZ" in data.channels:
-        names += list(mz_names)
+        names += list(mz_params)
     return mf_fit.fit(start, data, names, noise=noise, loss="linear", combined=False,
                       max_steps=400)
 
