@@ -617,13 +617,13 @@ def _statuses_of_table(text, names):
 def test_report_table_csv_and_json_agree_on_every_status(conditioned, tmp_path):
     """The bench report (`OutputReport`, an `IdentificationReport`) rendered three ways from
     the one object — the printed table (`bench.format_report`), CSV and JSON (the CLI's
-    `write_reports`) — gives each parameter the same status, and every status occurs:
-    identified, not determined (removed by the F-test, with the reason), held (fixed by the
-    user), not seen (κ′ is not excited: free rolling); the consistency verdict is printed."""
+    writer, `bench.write_reports`) — gives each parameter the same status, and every status
+    occurs: identified, not determined (removed by the F-test, with the reason), held (fixed by
+    the user), not seen (κ′ is not excited: free rolling); the consistency verdict is printed."""
     import csv
     import json
 
-    from diffsusp.cli.tyre_identify import write_reports
+    from diffsusp.tyre.bench import write_reports
 
     rep = bench.identify_output(conditioned, "Fy", DEGREES, fixed=["b_Fy_one_1_0"])
     table = bench.format_report(rep)

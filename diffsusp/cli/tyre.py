@@ -244,15 +244,16 @@ def spec_command(
         return
     # one row per quantity, one column per load: as narrow as the number of loads, whatever
     # the quantities (eleven columns would not fit a terminal)
-    show = [("cornering_stiffness", "C_alpha [N/deg]", math.pi / 180),
+    show = [("cornering_stiffness", "C_alpha [N/deg]", math.radians(1.0)),
             ("pneumatic_trail", "trail [mm]", 1), ("slip_stiffness", "C_kappa [N/-]", 1),
-            ("camber_stiffness", "C_gamma [N/deg]", math.pi / 180),
-            ("fy_peak", "FY peak [N]", 1), ("alpha_at_fy_peak", "  at alpha [deg]", 180 / math.pi),
+            ("camber_stiffness", "C_gamma [N/deg]", math.radians(1.0)),
+            ("fy_peak", "FY peak [N]", 1),
+            ("alpha_at_fy_peak", "  at alpha [deg]", math.degrees(1.0)),
             ("mu_y", "mu_y [-]", 1),
             ("fx_peak", "FX peak, braking [N]", 1), ("kappa_at_fx_peak", "  at kappa [-]", 1),
             ("mu_x", "mu_x [-]", 1),
             ("mz_peak", "MZ peak [N·m]", 1e-3), ("alpha_at_mz_peak", "  at alpha [deg]",
-                                                180 / math.pi),
+                                                math.degrees(1.0)),
             ("fy_at_zero", "FY(0) [N]", 1), ("mz_at_zero", "MZ(0) [N·m]", 1e-3)]
     t = RichTable(box=box.SIMPLE)
     t.add_column("FZ [N]", no_wrap=True)
@@ -312,10 +313,9 @@ def rig_command(
         rig = tyre_rig.tyre_rig(mech, tyre, longitudinal_at=longitudinal_at)
         sol = tyre_rig.solve(rig, jnp.asarray(alpha), fz=fz, slip_ratio=slip_ratio,
                              camber_offset=math.radians(camber_offset))
-        deg = 180.0 / math.pi
-        res = {"SA_CMD": alpha * deg, "SA": np.asarray(sol.slip_angle) * deg,
-               "IA": np.asarray(sol.inclination) * deg, "TOE": np.asarray(sol.toe) * deg,
-               "CAMBER": np.asarray(sol.camber) * deg,
+        res = {"SA_CMD": np.degrees(alpha), "SA": np.degrees(np.asarray(sol.slip_angle)),
+               "IA": np.degrees(np.asarray(sol.inclination)),
+               "TOE": np.degrees(np.asarray(sol.toe)), "CAMBER": np.degrees(np.asarray(sol.camber)),
                "FZ": np.full(alpha.size, float(rig.corner.design_load if fz is None else fz)),
                "FX": np.asarray(sol.forces.fx), "FY": np.asarray(sol.forces.fy),
                "MX": np.asarray(sol.forces.mx) / 1000.0,
@@ -422,44 +422,27 @@ def fit_command(
                            f"{tir.fittyp}); use --model mf{m0.version.replace('.', '')}",
                            EXIT_BAD_INPUT)
         if model == "mf1989":
-            m0 = MagicFormula89.from_values({"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0,
-                                             "a4": 8.0, "a7": 0.3, "c0": 2.4, "c1": 4.0,
-                                             "c3": -1.0, "c4": -10.0, "c9": 0.5})
-            tir = None
+            m0, tir = MagicFormula89.from_values(F.MF1989_START), None
         from diffsusp.tyre.input_tables import read_tyre_table
 
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
-            table = read_tyre_table(data, "bench table")
-            present = [ch for ch in F.CHANNELS
-                       if any(F.COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
-            outputs = MODEL_OUTPUTS[model]
-            left = [ch for ch in present if ch not in outputs]
-            if left and len(left) < len(present):   # fit what the model has
+            bench, left = F.model_bench_data(m0, read_tyre_table(data, "bench table"))
+            if left:   # fit what the model has
                 warn(f"{data}: {', '.join(left)} not fitted: {model} has no such output "
-                     f"(fitting {', '.join(ch for ch in present if ch in outputs)})")
-            bench = F.bench_data(table, channels=[ch for ch in present if ch in outputs]
-                                 if left and len(left) < len(present) else None)
+                     f"(fitting {', '.join(bench.channels)})")
         for w in rec:
             warn(w.message)
         unknown = [ch for ch in noise_ab if ch not in bench.channels]
         if unknown:
             raise fail(f"--noise for {', '.join(unknown)}: not a channel of the data "
                        f"({', '.join(bench.channels)})", EXIT_BAD_INPUT)
-        groups = mode or F.default_groups(m0, bench.channels)
-        names = list(dict.fromkeys(n for g in groups for n in F.GROUPS[g]
-                                   if n in m0.coefficients))
-        bad = [n for n in free or () if n not in names]
-        if bad:
-            raise fail(f"--free {', '.join(bad)}: not among the fitted coefficients of "
-                       f"{', '.join(groups)}", EXIT_BAD_INPUT)
-        hold = F.default_hold(m0, names, tir)
-        _check_varies(data, bench, len([n for n in names if n not in hold or n in (free or ())]))
-        c.print(f"fitting {', '.join(groups)} ({len(names)} coefficients, {bench.n} points, "
-                f"{strategy}) ...")
-        fitted, rep = F.fit(m0, bench, names, loss=loss, noise=noise_ab or None,
-                            hold=hold, free=tuple(free or ()),
-                            tir=tir, strategy=strategy, max_steps=max_steps)
+        c.print(f"fitting {', '.join(mode or m0.default_groups(bench.channels))} "
+                f"({bench.n} points, {strategy}) ...")
+        groups, fitted, rep = F.fit_groups(m0, bench, mode, free=free or (), tir=tir,
+                                           where=f"{data}: ", loss=loss,
+                                           noise=noise_ab or None, strategy=strategy,
+                                           max_steps=max_steps)
         c.print(rep.table(), highlight=False)
         converged = bool(rep.converged)
         if not converged:   # never a success, the model only on request
@@ -470,12 +453,8 @@ def fit_command(
                     + (" (--keep-unconverged writes it, marked)" if out is not None else "")))
         if out is not None and tir is not None and (converged or keep_unconverged):
             from diffsusp.io.tir import write_tir
-            from diffsusp.tyre import mf6
 
-            written = fitted.to_tir(tir)
-            for n, v in fitted.limit.items():   # the validity ranges: the data's
-                if math.isfinite(v) and n in mf6._LIMIT_SECTION and not n.startswith("PRES"):
-                    written.set(n, float(v), section=mf6._LIMIT_SECTION[n])
+            written = fitted.to_tir(tir, ranges=True)   # the validity ranges: the data's
             write_tir(written, out, header=None if converged else
                       f"$ NOT CONVERGED: diffsusp tyre fit stopped after {rep.steps} steps "
                       "without converging; these coefficients are not a fit\n")
@@ -492,24 +471,3 @@ def fit_command(
             c.print(f"figures written to {figures}")
         if not converged or (rep.consistency is not None and not rep.consistency.consistent):
             raise typer.Exit(3)
-
-
-MODEL_OUTPUTS = {"mf61": ("FX", "FY", "MX", "MY", "MZ"), "mf62": ("FX", "FY", "MX", "MY", "MZ"),
-                 "mf52": ("FX", "FY", "MX", "MY", "MZ"), "mf1989": ("FX", "FY", "MZ")}
-"""The channels each `--model` evaluates (`tyre.fit._predict`)."""
-
-
-def _check_varies(data, bench, n_free: int) -> None:
-    """Bench data with fewer distinct input points (FZ, SL, SA, IA, VX, P over the rows
-    kept) than free coefficients cannot determine them: an error before anything is compiled
-    (10⁶ rows of one repeated point would run for minutes)."""
-    from diffsusp.errors import InputError
-
-    keep = np.asarray(bench.valid).any(axis=0)
-    pts = np.stack([np.asarray(v)[keep] for v in (bench.fz, bench.kappa, bench.alpha,
-                                                  bench.gamma, bench.vx, bench.pressure)], 1)
-    distinct = np.unique(np.nan_to_num(pts, nan=-1.0), axis=0).shape[0]
-    if distinct < max(n_free, 2):
-        raise InputError(f"{data}: the data hold {distinct} distinct input point(s) (FZ, SL, "
-                         f"SA, IA, VX, P) in {int(keep.sum())} rows, fewer than the {n_free} "
-                         "coefficients to fit; a fit needs sweeps of slip and load")

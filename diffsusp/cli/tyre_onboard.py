@@ -15,7 +15,6 @@ than the record).
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from .common import (
@@ -29,72 +28,6 @@ from .common import (
     plain,
     print_json,
 )
-
-
-def _load(path: Path) -> dict:
-    """The arrays of a .npz record: a regular file within the table size limit (a FIFO or a
-    device is refused before it is opened), an archive (a renamed .npy is not)."""
-    from diffsusp.io.files import check_input
-
-    if path.suffix != ".npz":
-        raise fail(f"{path}: the on-board record must be a .npz archive of arrays (channels "
-                   "as diffsusp.tyre.onboard.CHANNELS).", EXIT_BAD_INPUT)
-    try:
-        check_input(path, "on-board record", "table")
-    except FileNotFoundError as exc:
-        raise fail(f"{path}: cannot read the record: {exc.strerror}.", EXIT_BAD_INPUT) from None
-    except ValueError as exc:   # ModelFileError: names the file already
-        raise fail(str(exc), EXIT_BAD_INPUT) from None
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:
-        raise fail(f"{path}: cannot read the archive ({exc}).", EXIT_BAD_INPUT) from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise fail(f"{path}: a single array (a .npy file renamed .npz?), not an archive of "
-                   "channels; save the record with numpy.savez.", EXIT_BAD_INPUT)
-    try:
-        with z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise fail(f"{path}: cannot read the archive ({exc}).", EXIT_BAD_INPUT) from None
-
-
-def _check_record(path: Path, record: dict, window_time: float) -> None:
-    """The checks the pipeline's own (`onboard.check`) do not make, with the file and the
-    channel named: numeric channels; a 1-D time of at least two samples,
-    finite and increasing, in seconds (a step of 0.5 s or more, e.g. milliseconds or whole
-    seconds, leaves the window `--window-time` fewer than three samples); a wheel spin that is
-    never zero (the slip divides by it)."""
-    def bad(channel, why):
-        return fail(f"{path}: {channel}: {why}", EXIT_BAD_INPUT)
-
-    for k, v in record.items():
-        if v.dtype.kind not in "biuf":
-            raise bad(k, f"holds {v.dtype} values, not numbers")
-    if "time" in record:
-        t = np.asarray(record["time"], float)
-        if t.ndim != 1 or t.size < 2:
-            raise bad("time", f"has shape {t.shape}; expected a 1-D array of samples [s]")
-        if not np.isfinite(t).all():
-            i = int(np.flatnonzero(~np.isfinite(t))[0])
-            raise bad("time", f"is not finite at sample {i} ({t[i]})")
-        dt = np.diff(t)
-        if not (dt > 0).all():
-            i = int(np.flatnonzero(dt <= 0)[0])
-            raise bad("time", f"does not increase at sample {i + 1} ({t[i + 1]:g} after "
-                      f"{t[i]:g}); a constant or reversed time is not a record")
-        step = float(np.median(dt))
-        if window_time / step < 2.0:
-            raise bad("time", f"a sampling step of {step:g} s leaves the {window_time:g} s "
-                      "window fewer than 3 samples: time in milliseconds or whole seconds? "
-                      "Give time in seconds (or a longer --window-time)")
-    if "spin" in record:
-        spin = np.asarray(record["spin"], float)
-        if spin.size and (spin == 0).any():
-            i = int(np.flatnonzero((spin == 0).reshape(spin.shape[0], -1).any(axis=1))[0]) \
-                if spin.ndim >= 1 else 0
-            raise bad("spin", f"is 0 at sample {i}: the wheels must roll (the slip divides by "
-                      "the spin)")
 
 
 def register(tyre_app: typer.Typer) -> None:
@@ -122,6 +55,7 @@ def onboard_command(
 ):
     """Identify the reduced lateral tyre model (4-16…4-18) from on-board measurements."""
     from diffsusp.tyre import onboard
+    from diffsusp.tyre.input_tables import read_onboard_record
 
     check_output(figures, what="figures folder", directory=True)
     check_output(report, suffixes=(".json", ".csv"), what="report")
@@ -132,16 +66,13 @@ def onboard_command(
         raise fail(f"--grouping '{grouping}' names no grouping; give all, front or rear "
                    "(comma separated).", EXIT_BAD_INPUT)
     with cli_errors():
-        record = _load(data)
-        _check_record(data, record, window_time)
+        record = read_onboard_record(data, window_time)
         enable_x64()
         out = onboard.identify(record, groupings=groups, camber=(True, False),
                                delay=delay, estimate_delay=estimate_delay,
                                options=onboard.Options(window=window,
                                                        window_time=window_time))
-    from diffsusp.tyre.bench import format_report, report_rows
-
-    from .tyre_identify import write_reports
+    from diffsusp.tyre.bench import format_report, report_rows, write_reports
 
     labels = [f"{r.grouping}{'' if r.camber else ', gamma = 0'}" for r in out["reports"]]
     if figures is not None:

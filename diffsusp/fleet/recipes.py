@@ -416,7 +416,7 @@ class TyreFit(Recipe):
             raise InputError(f"tyre-fit option loss {loss!r}: linear, huber or cauchy.")
 
     def load_model(self, spec):
-        if isinstance(spec, tyre.MagicFormula6 | tyre.MagicFormula89):
+        if isinstance(spec, tyre.AbstractTyre):
             return spec
         return tyre.MagicFormula6.from_tir(read_tir(spec))
 

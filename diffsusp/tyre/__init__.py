@@ -1,5 +1,6 @@
 """Tyre force models (spec: tyre_contact_model §2, §7 C).
 
+- `base`: `AbstractTyre`, what every tyre model answers (`forces`, …): the fits call it;
 - `mf89`: the thesis's Bakker–Pacejka 1989/1991 Magic Formula (Annex B) and its twelve
   identified sets (`thesis_sets`, Tables 14–29), in the thesis's units (kN, degrees);
 - `mf6`: MF 5.2 / 6.1 / 6.2 steady state from `.tir` files (`diffsusp.io.tir`), library units;
@@ -24,11 +25,12 @@ tyre.mf89.fy0(m89, 2.0, 4.5)                                # N at 2°, 4.5 kN
 """
 
 from . import contact, examples, fit, mf6, mf89, rig, spec, thesis_sets, vertical  # noqa: F401
+from .base import AbstractTyre
 from .examples import example_path
 from .mf6 import COEFFICIENTS, FITTYP_VERSION, MagicFormula6, TyreForces, check_limits, evaluate
 from .mf89 import MagicFormula89
 from .spec import specification
 
-__all__ = ["COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89", "TyreForces",
-           "check_limits", "evaluate", "example_path", "examples", "fit", "mf6", "mf89", "rig",
-           "spec", "specification", "thesis_sets", "vertical"]
+__all__ = ["AbstractTyre", "COEFFICIENTS", "FITTYP_VERSION", "MagicFormula6", "MagicFormula89",
+           "TyreForces", "check_limits", "evaluate", "example_path", "examples", "fit", "mf6",
+           "mf89", "rig", "spec", "specification", "thesis_sets", "vertical"]

@@ -61,7 +61,9 @@ together with the thesis's chapter 3.
 """
 
 import dataclasses
-from collections.abc import Mapping
+import json
+import pathlib
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -75,7 +77,10 @@ from ..identify.report import (
     IdentificationReport,
     MeasurementResiduals,
     consistency_from_residuals,
+    rows_csv,
+    write_report,
 )
+from ..io.files import write_text_atomic
 from . import relaxation
 from .bench_condition import (  # noqa: F401  (re-exported)
     MAX_SEGMENT,
@@ -122,6 +127,7 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
            "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT",
            "stability", "camber_levels", "report_rows", "format_report", "statuses",
+           "ReportSet", "write_reports",
            "coefficient_unit", "bench_consistency", "noise_model", "noise_band", "noise_dof"]
 
 
@@ -630,20 +636,9 @@ class BenchReport(IdentificationReport):
 
 
 def statuses(rep) -> tuple[str, ...]:
-    """Per parameter one of "identified", "not determined", "held", "not seen" — the shared
-    report's `statuses` where the base provides it, else by its definitions: held at its start
-    value; not seen (σ inf: the data carry no information on it); identified (determined and
-    the fit consistent, `is_identified`); else not determined."""
-    if hasattr(rep, "statuses"):
-        return tuple(rep.statuses)
-    ident = np.asarray(rep.is_identified, bool)
-    held = np.asarray(getattr(rep, "held", np.zeros(len(rep.names), bool)), bool)
-    sig = np.asarray(rep.sigmas, float)
-    out = []
-    for i in range(len(rep.names)):
-        out.append("held" if held[i] else "identified" if ident[i] else
-                   "not seen" if np.isinf(sig[i]) else "not determined")
-    return tuple(out)
+    """Per parameter one of "identified", "not determined", "held", "not seen": the report's
+    `IdentificationReport.statuses` (one rule for every identification report)."""
+    return tuple(rep.statuses)
 
 
 def report_rows(rep, label: str | None = None) -> list[dict]:
@@ -661,6 +656,78 @@ def report_rows(rep, label: str | None = None) -> list[dict]:
             row = {"report": label, **row}
         rows.append(row)
     return rows
+
+
+@dataclasses.dataclass(frozen=True)
+class ReportSet:
+    """Several identification reports written as one document (`diffsusp tyre identify` and
+    `tyre onboard --report`, `bench_batch.CampaignResult`): `reports` (each an
+    `IdentificationReport`), `labels` (one per report: the `report` column and key; None: no
+    label), `extra` (fields merged at the top of the JSON document).
+
+    `rows()`: every report's `report_rows` one after the other (with the `report` label when
+    there are several); `summary()`: each report's own `summary()` with those rows as its
+    `parameters` (a single unlabelled report: its summary itself, else `{"reports": [...]}`),
+    `extra` merged; `to_json()`; `write(path)` by suffix: .csv (`rows()`, the base's
+    `rows_csv`), .json (`summary()`), .html (the base's `write_report`, one report)."""
+
+    reports: Sequence
+    labels: Sequence[str] | None = None
+    extra: Mapping = dataclasses.field(default_factory=dict)
+
+    def _labels(self) -> list:
+        return list(self.labels) if self.labels is not None else [None] * len(self.reports)
+
+    def rows(self) -> list[dict]:
+        several = len(self.reports) > 1
+        return [r for rep, lab in zip(self.reports, self._labels(), strict=True)
+                for r in report_rows(rep, lab if several else None)]
+
+    def summary(self) -> dict:
+        out = []
+        labels = self._labels()
+        for rep, lab in zip(self.reports, labels, strict=True):
+            summ = rep.summary()
+            summ["parameters"] = report_rows(rep)
+            if lab is not None:
+                summ["report"] = lab
+            out.append(summ)
+        doc = out[0] if len(out) == 1 and labels[0] is None else {"reports": out}
+        doc.update(self.extra)
+        return doc
+
+    def to_json(self, **kwargs) -> str:
+        """`summary()` as JSON (NumPy values as numbers, NaN and inf as null)."""
+        return json.dumps(self.summary(), default=_json_default, **kwargs)
+
+    def write(self, path) -> None:
+        """Write the set by the suffix of `path` (.csv, .json, .html: see the class);
+        atomically."""
+        path = pathlib.Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".csv":
+            write_text_atomic(path, rows_csv(self.rows()))
+        elif suffix == ".json":
+            write_text_atomic(path, self.to_json(indent=2) + "\n")
+        elif suffix in (".html", ".htm") and len(self.reports) == 1:
+            write_report(self.reports[0], path)
+        else:
+            raise InputError(f"{path}: the report is written as .csv, .json or .html (HTML: "
+                             "one report)")
+
+
+def write_reports(path, reports, labels=None, extra: Mapping | None = None) -> None:
+    """Write one or more reports by the suffix of `path` (`ReportSet.write`)."""
+    ReportSet(tuple(reports), labels, dict(extra or {})).write(path)
+
+
+def _json_default(v):
+    if isinstance(v, np.generic):
+        v = v.item()
+        return v if not isinstance(v, float) or np.isfinite(v) else None
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    raise TypeError(f"{type(v).__name__} is not JSON serialisable")
 
 
 def _cell(v, fmt):

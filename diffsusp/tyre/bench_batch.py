@@ -105,6 +105,35 @@ class CampaignResult:
     def compliance_sigma(self) -> np.ndarray:
         return np.array([r.compliance_sigma for r in self.reports])
 
+    def report_set(self) -> bench.ReportSet:
+        """The F_y reports (then M_z's, when identified) as one `bench.ReportSet`, labelled
+        "Fy set i" / "Mz set i", with the campaign's own fields (the structure over `names`,
+        search steps, program times) at the top of its JSON."""
+        reports = list(self.reports) + list(self.mz_reports or ())
+        labels = [f"Fy set {i}" for i in range(len(self.reports))] + [
+            f"Mz set {i}" for i in range(len(self.mz_reports or ()))]
+        extra = {"names": list(self.names), "kept": np.asarray(self.kept).tolist(),
+                 "exact": {str(k): v for k, v in self.exact.items()},
+                 "search_steps": np.asarray(self.search_steps).tolist(),
+                 "gram_updates": np.asarray(self.gram_updates).tolist(),
+                 "program_seconds": self.program_seconds,
+                 "program_cpu_seconds": self.program_cpu_seconds}
+        return bench.ReportSet(tuple(reports), labels, extra)
+
+    def rows(self) -> list[dict]:
+        """One row per data set and parameter (`report_set().rows()`)."""
+        return self.report_set().rows()
+
+    def summary(self) -> dict:
+        return self.report_set().summary()
+
+    def to_json(self, **kwargs) -> str:
+        return self.report_set().to_json(**kwargs)
+
+    def write(self, path) -> None:
+        """.csv or .json by suffix (`bench.ReportSet.write`)."""
+        self.report_set().write(path)
+
 
 # --------------------------------------------------------------------------------------------
 # The traced search (one data set)

@@ -154,22 +154,22 @@ def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
     `speed` [m/s], `omega` [rad/s] (ω = V·cos δ/(R_r + κ′): free rolling, κ′ = 0, unless
     `kappa_amp`), `delta` δ′ [m],
     `phi` φ′ = δ̇/ω [rad], `kappa` [m]."""
-    deg = math.pi / 180.0
     w = 2.0 * math.pi
 
     def slip(s):
         tri = jnp.arcsin(0.98 * jnp.sin(w * s / seg.ramp_period)) / math.asin(0.98)
-        return deg * (seg.slip0 + seg.sine_amp * jnp.sin(w * seg.sine_freq * s)
-                      + seg.step_amp * jnp.tanh(3.0 * jnp.sin(w * s / seg.step_period))
-                      / math.tanh(3.0) + seg.ramp_amp * tri)
+        return jnp.deg2rad(seg.slip0 + seg.sine_amp * jnp.sin(w * seg.sine_freq * s)
+                           + seg.step_amp * jnp.tanh(3.0 * jnp.sin(w * s / seg.step_period))
+                           / math.tanh(3.0) + seg.ramp_amp * tri)
 
     d, ddot = jax.jvp(slip, (jnp.asarray(t, dtype=float),), (jnp.ones_like(t, dtype=float),))
     v = seg.speed / 3.6
     kap = (1e-3 * seg.kappa_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.kappa_period))
            / math.tanh(3.0))
     omega = v * jnp.cos(d) / (rolling_radius + kap)
-    gamma = (deg * (seg.camber + seg.camber_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.camber_period))
-                    / math.tanh(3.0)) + seg.camber_slip * d)
+    gamma = (jnp.deg2rad(seg.camber + seg.camber_amp
+                         * jnp.tanh(3.0 * jnp.sin(w * t / seg.camber_period)) / math.tanh(3.0))
+             + seg.camber_slip * d)
     return {"slip": d, "fz": seg.fz0 + seg.fz_amp * jnp.sin(w * seg.fz_freq * t),
             "gamma": gamma, "speed": v, "omega": omega,
             "delta": -v * jnp.sin(d) / omega, "phi": ddot / omega,

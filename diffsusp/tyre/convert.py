@@ -92,7 +92,7 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
     spec = {"a0": a0, "c0": c0, "a7": a7, "c9": c9, "a4": a4}
     if fy is None:
         raise InputError("step1 needs at least the F_y polynomial")
-    k_fy = -radius * math.pi / 180.0 * fy.cornering_stiffness(loads)
+    k_fy = -math.radians(radius) * fy.cornering_stiffness(loads)
     sp = _shift_and_peak(fy, loads, radius, "Fy")
     if sp is not None:
         notes["Fy"] = (f"extrema found at {len(sp[0])} loads: S_h and D from the extrema "
@@ -118,7 +118,7 @@ def step1(fy: PolynomialModel | None = None, mz: PolynomialModel | None = None, 
     if fy_shift is not None:
         spec["fy_shift"] = np.polyval(np.polyfit(fy_loads, fy_shift, 1), loads)
     if mz is not None:
-        k_mz = -radius * math.pi / 180.0 * mz.cornering_stiffness(loads)
+        k_mz = -math.radians(radius) * mz.cornering_stiffness(loads)
         spec["aligning_stiffness"] = k_mz
         sp = _shift_and_peak(mz, loads, radius, "Mz")
         if sp is not None:
@@ -156,15 +156,17 @@ def slip_data(fz_kn, delta_deg, fy=None, mz=None) -> mf_fit.BenchData:
 
 
 def refine(start: mf89.MagicFormula89, data: mf_fit.BenchData, *,
-           fy_names=("a1", "a2", "a3", "a4", "a7", "a9", "a10"),
-           mz_names=("c1", "c2", "c3", "c4", "c9", "c12", "c13"), noise=None):
+           fy_params=("a1", "a2", "a3", "a4", "a7", "a9", "a10"),
+           mz_params=("c1", "c2", "c3", "c4", "c9", "c12", "c13"), noise=None):
     """Step 2 (3-95): Levenberg–Marquardt on the slip coefficients with C fixed, through
-    `diffsusp.tyre.fit.fit` (pure slip, linear loss). Returns (model, report)."""
+    `diffsusp.tyre.fit.fit` (pure slip, linear loss): `fy_params`, `mz_params` the F_y and M_z
+    coefficients fitted (names), each where the data measure its channel. Returns (model,
+    report)."""
     names = []
     if "FY" in data.channels:
-        names += list(fy_names)
+        names += list(fy_params)
     if "MZ" in data.channels:
-        names += list(mz_names)
+        names += list(mz_params)
     return mf_fit.fit(start, data, names, noise=noise, loss="linear", combined=False,
                       max_steps=400)
 

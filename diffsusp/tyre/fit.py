@@ -64,14 +64,15 @@ from ..identify.report import (
     chi2_quantile,
 )
 from ..io.tables import Table, read_table, split_header, unit_factor
-from . import fit_start, mf6, mf89
+from . import fit_start, mf6
 from .fit_start import noise_sigma
 
 __all__ = ["BenchData", "TyreFitReport", "bench_data", "default_groups", "default_names",
            "default_hold", "read_bench", "read_bench_table", "input_columns", "simulate",
            "bench_programme", "with_ranges", "fit", "fit_many", "FitRehearsal", "GROUPS",
            "POSITIVE", "SIGNED_LOG", "CAMBER", "MAX_SIGMA_PCT", "CHANNELS", "COLUMN_ALIASES",
-           "check_constraints", "plot_fit"]
+           "check_constraints", "plot_fit", "fit_groups", "model_bench_data", "group_params",
+           "check_varies", "MF1989_START"]
 
 CHANNELS = ("FX", "FY", "MX", "MY", "MZ")
 """Measured channels: forces [N], moments [N·mm] (library units)."""
@@ -276,6 +277,19 @@ def read_bench_table(path):
                  tuple(rows), header[0])
 
 
+def model_bench_data(model, table) -> tuple[BenchData, list[str]]:
+    """Bench data of `table` (`bench_data`) for what `model` evaluates: the measured channels
+    the model has no output for (`AbstractTyre.channels`: MX, MY for the 1989 set) are left
+    out and returned, as long as another channel remains (else every channel is kept, and
+    the fit names the missing output). Returns (the data, the channels left out)."""
+    present = [ch for ch in CHANNELS
+               if any(COLUMN_ALIASES.get(n.upper()) == ch for n in table.names)]
+    left = [ch for ch in present if ch not in model.channels]
+    if left and len(left) < len(present):
+        return bench_data(table, channels=[ch for ch in present if ch in model.channels]), left
+    return bench_data(table), []
+
+
 def read_bench(path, *, channels=None, mapping: dict | None = None,
                defaults: dict | None = None) -> BenchData:
     """Bench data from a CSV or Parquet file (`read_bench_table`, then `bench_data`)."""
@@ -314,24 +328,8 @@ def input_columns(table) -> dict[str, np.ndarray]:
 
 def _predict(model, data: BenchData, combined: bool) -> jax.Array:
     """(c, n) model outputs for the data's channels, library units."""
-    if isinstance(model, mf6.MagicFormula6):
-        vx = jnp.where(jnp.isnan(data.vx), model["LONGVL"], data.vx)
-        p = jnp.where(jnp.isnan(data.pressure), model["INFLPRES"], data.pressure)
-        out = mf6.evaluate(model, data.fz, data.kappa, data.alpha, data.gamma, vx, p,
-                           combined=combined, outputs=tuple(c.lower() for c in data.channels))
-        d = {"FX": out.fx, "FY": out.fy, "MX": out.mx, "MY": out.my, "MZ": out.mz}
-    elif isinstance(model, mf89.MagicFormula89):
-        if combined:
-            fx, fy, mz = mf89.evaluate(model, data.fz, data.kappa, data.alpha, data.gamma)
-        else:
-            deg = 180.0 / math.pi
-            fz = data.fz / 1000.0
-            fx = mf89.fx0(model, data.kappa, fz)
-            fy = mf89.fy0(model, data.alpha * deg, fz, data.gamma * deg)
-            mz = 1000.0 * mf89.mz0(model, data.alpha * deg, fz, data.gamma * deg)
-        d = {"FX": fx, "FY": fy, "MZ": mz}
-    else:
-        raise TypeError(f"a MagicFormula6 or MagicFormula89, got {type(model).__name__}")
+    d = model.forces(data.fz, data.kappa, data.alpha, data.gamma, data.vx, data.pressure,
+                     combined=combined, channels=data.channels)
     try:
         return jnp.stack([jnp.broadcast_to(d[c], data.fz.shape) for c in data.channels])
     except KeyError as e:
@@ -379,8 +377,8 @@ def bench_programme(model, *, loads=None, cambers=None, n_slip: int = 31,
     `n_slip` points each; every channel measured on every row. Defaults: four loads over
     [FZMIN, FZMAX] (FNOMIN/2 … 1.5·FNOMIN when the file has no range), cambers 0, ±CAMMAX/2,
     ±CAMMAX (±0.1 rad without a range). The files' ranges are those their fitters measured."""
-    lim = model.limit if isinstance(model, mf6.MagicFormula6) else {}
-    fnom = float(model["FNOMIN"]) if isinstance(model, mf6.MagicFormula6) else 4000.0
+    lim = model.limit
+    fnom = model.nominal_load
 
     def rng(lo, hi, dlo, dhi):
         lo = lim.get(lo, -math.inf)
@@ -416,9 +414,8 @@ def bench_programme(model, *, loads=None, cambers=None, n_slip: int = 31,
 def with_ranges(model, data: BenchData):
     """`model` with its validity ranges (FZMIN … CAMMAX) set to the data's (a fitted file is
     valid where it was measured, and the fit must not saturate a measured input: MF-Tyre
-    raises F_z to FZMIN in M_z, clips slips at their ranges). A 1989 model is returned as is."""
-    if not isinstance(model, mf6.MagicFormula6):
-        return model
+    raises F_z to FZMIN in M_z, clips slips at their ranges). A model without ranges (the 1989
+    set) is returned as is (`AbstractTyre.with_limits`)."""
     lim = dict(model.limit)
 
     def span(v):
@@ -429,16 +426,12 @@ def with_ranges(model, data: BenchData):
         span(data.fz), span(data.kappa), span(data.alpha), span(data.gamma))
     lim.update(FZMIN=fmin, FZMAX=fmax, KPUMIN=kmin, KPUMAX=kmax, ALPMIN=amin, ALPMAX=amax,
                CAMMIN=gmin, CAMMAX=gmax)
-    return mf6.MagicFormula6(dict(model.coefficients), model.version, tuple(sorted(lim.items())),
-                             model.friction_ellipse)
+    return model.with_limits(lim)
 
 
 def _open_ranges(model):
     """The model with no validity ranges (the fit's compiled program is shared by files)."""
-    if not isinstance(model, mf6.MagicFormula6):
-        return model
-    return mf6.MagicFormula6(dict(model.coefficients), model.version,
-                             tuple(sorted(mf6.LIMITS.items())), model.friction_ellipse)
+    return model.with_limits(mf6.LIMITS)
 
 
 LOSSES = ("linear", "huber", "cauchy")
@@ -481,7 +474,7 @@ class _Problem(eqx.Module):
         c = dict(self.model.coefficients)
         for i, n in enumerate(self.names):
             c[n] = x[i]
-        return type(self.model)(c, *_static(self.model))
+        return self.model.with_coefficients(c)
 
     def whitened(self, x):
         pred = _predict(self.with_x(x), self.data, self.combined)
@@ -493,12 +486,6 @@ class _Problem(eqx.Module):
 
     def residual_u(self, u, _args=None):
         return self.residual_x(self.x_of(u))
-
-
-def _static(model):
-    if isinstance(model, mf6.MagicFormula6):
-        return (model.version, model.limits, model.friction_ellipse)
-    return ()
 
 
 def _solve_impl(problem: _Problem, u0, max_steps: int, rtol: float, atol: float):
@@ -717,36 +704,10 @@ def _num(v):
 
 
 def check_constraints(model, data: BenchData) -> list[str]:
-    """The usual physical constraints over the data's range of load (and camber): C_x, C_y,
-    C_t > 0; |μ_x|, |μ_y| > 0 without a change of sign (the sign of D is the file's convention:
-    PAC2002 files write PDY1 < 0); E_x, E_y ≤ 1 (MF 6.x names; spec: tyre §7 C)."""
-    if not isinstance(model, mf6.MagicFormula6):
-        return []
-    c = {k: float(v) for k, v in model.coefficients.items()}
-    fz = np.linspace(float(jnp.min(data.fz)), float(jnp.max(data.fz)), 21)
-    g = np.linspace(float(jnp.min(data.gamma)), float(jnp.max(data.gamma)), 7)[:, None]
-    dfz = (fz - c["LFZO"] * c["FNOMIN"]) / (c["LFZO"] * c["FNOMIN"])
-    out = []
-    for name, v in (("C_x = PCX1·LCX", c["PCX1"] * c["LCX"]), ("C_y = PCY1·LCY",
-                                                              c["PCY1"] * c["LCY"]),
-                    ("C_t = QCZ1", c["QCZ1"])):
-        if v <= 0:
-            out.append(f"{name} = {v:.4g} is not > 0")
-    mux = (c["PDX1"] + c["PDX2"] * dfz) * (1 - c["PDX3"] * g**2)
-    muy = (c["PDY1"] + c["PDY2"] * dfz) * (1 - c["PDY3"] * g**2)
-    for name, v, s in (("mu_x (D_x/F_z)", mux, c["PDX1"]), ("mu_y (D_y/F_z)", muy, c["PDY1"])):
-        sgn = 1.0 if s >= 0 else -1.0
-        if np.min(sgn * v) <= 0:
-            out.append(f"|{name}| reaches 0 (sign change) in the data's range: "
-                       f"{np.min(sgn * v) * sgn:.4g}")
-    ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2)[None, :] * (
-        1 - c["PEX4"] * np.array([[-1.0], [1.0]]))
-    ey = (c["PEY1"] + c["PEY2"] * dfz) * (1 + c["PEY5"] * g**2 - (c["PEY3"] + c["PEY4"] * g))
-    ey2 = (c["PEY1"] + c["PEY2"] * dfz) * (1 + c["PEY5"] * g**2 + (c["PEY3"] + c["PEY4"] * g))
-    for name, v in (("E_x", ex), ("E_y", np.concatenate([ey, ey2]))):
-        if np.max(v) > 1:
-            out.append(f"{name} reaches {np.max(v):.4g} > 1 in the data's range (clipped at 1)")
-    return out
+    """The physical constraints `model` breaks over the data's range of load and camber
+    (`AbstractTyre.constraint_violations`; MF 6.x: C > 0, |μ| > 0 without a change of sign,
+    E ≤ 1, spec: tyre §7 C)."""
+    return model.constraint_violations(data.fz, data.gamma)
 
 
 SIGNED_LOG = frozenset(POSITIVE | {"PKY1", "PKX1", "QDZ1"})
@@ -1001,19 +962,21 @@ def default_names(model, channels) -> list[str]:
             if n in model.coefficients]
 
 
-def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
+def fit(model, data: BenchData, params=None, *, noise: dict | None = None,
         loss: str = "huber", loss_scale: float = 1.345, combined: bool = True,
         max_steps: int = 200, rtol: float = 1e-10, atol: float = 1e-10,
         threshold: float = 1e-8, strategy: str = "staged", start_from_data: bool = True,
         hold=None, free=(), tir=None, second_start: bool = True):
-    """Fit the coefficients `names` of `model` (a `MagicFormula6` or `MagicFormula89`) to `data`.
+    """Fit the coefficients `params` of `model` (an `AbstractTyre`: `MagicFormula6`,
+    `MagicFormula89`) to `data`.
 
     spec: tyre §7 E item 22, §7 D item 18; the start and noise: `diffsusp.tyre.fit_start`.
 
-    **Arguments:** `names` (default `default_names`: the `default_groups` the data's channels
+    **Arguments:** `params` the coefficients fitted, a sequence of names (the selector every
+    identification takes; default `default_names`: the `default_groups` the data's channels
     allow; the others stay at the model's values); `hold` the names kept at the start value
-    (default: with `names` not given, `default_hold` — those the start file does not use, 0 or
-    absent from `tir`; with `names` given, none) less `free`; `noise` per channel σ or (a, b)
+    (default: with `params` not given, `default_hold` — those the start file does not use, 0 or
+    absent from `tir`; with `params` given, none) less `free`; `noise` per channel σ or (a, b)
     for σ = a + b·|F| [N or N·mm] (default: estimated from the sweeps,
     `fit_start.estimate_noise`); `loss` "huber", "cauchy" or "linear",
     `loss_scale` k in units of σ; `combined=False` fits the pure-slip functions;
@@ -1051,10 +1014,8 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     """
     if strategy not in ("staged", "joint"):
         raise InputError(f"strategy {strategy!r}: 'staged' or 'joint'")
-    named = names is not None
-    if names is None:
-        names = default_names(model, data.channels)
-    names = tuple(names)
+    named = params is not None
+    names = tuple(default_names(model, data.channels) if params is None else params)
     unknown = [n for n in (*names, *free, *(hold or ())) if n not in model.coefficients]
     if unknown:
         raise InputError(f"unknown coefficient(s) {', '.join(unknown)} for "
@@ -1065,10 +1026,9 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
     file_start = np.array([float(model.coefficients[n]) for n in names])
     noise_ab, noise_src, counts = _noise_models(data, noise)
     start = model
-    if start_from_data and isinstance(model, mf6.MagicFormula6):
-        open_model = _open_ranges(model)
-        new = fit_start.data_start(open_model, data, [n for n in names if n not in hold],
-                                   lambda m: _predict_jit(m, data, combined))
+    if start_from_data:
+        new = _open_ranges(model).data_start(data, [n for n in names if n not in hold],
+                                             lambda m: _predict_jit(m, data, combined))
         if new:
             start = model.replace(**new)
     problem = _prepare(start, data, names, noise_ab, loss, loss_scale, combined, hold)
@@ -1128,8 +1088,8 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
         others = [(xo, abs(float(_objective(problem_cov, jnp.asarray(xo))) - s_main))
                   for xo in others]
     for attempt in range(2):
-        fitted, report = _report(problem_cov, x, steps, ok, threshold, file_start, noise_ab,
-                                 noise_src, counts, labels)
+        _, report = _report(problem_cov, x, steps, ok, threshold, file_start, noise_ab,
+                            noise_src, counts, labels)
         for xo, gap in others:
             _second_opinion(report, xo, gap)
         if not second_start:
@@ -1165,8 +1125,8 @@ def fit(model, data: BenchData, names=None, *, noise: dict | None = None,
         report.consistency = cons
         report.whitened_residuals = {c: z[k] for k, c in enumerate(data.channels)}
     report.start = np.asarray(problem.x0)
-    return with_ranges(model.replace(**{n: float(v) for n, v in zip(names, x, strict=True)})
-                       if isinstance(model, mf6.MagicFormula6) else fitted, data), report
+    return with_ranges(model.replace(**{n: float(v) for n, v in zip(names, x, strict=True)}),
+                       data), report
 
 
 def _reject_outliers(problem, x, data, noise, max_steps, rtol, atol):
@@ -1373,20 +1333,66 @@ def default_groups(model, channels) -> list[str]:
     """The coefficient groups fitted, in order, when none are named (`diffsusp tyre fit`, the
     fleet's tyre fits): `mf1989_lateral` for a 1989 tyre (`MagicFormula89`), otherwise
     pure_lateral, pure_longitudinal and pure_aligning as the bench data's `channels` allow."""
-    if isinstance(model, mf89.MagicFormula89):
-        return ["mf1989_lateral"]
-    return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
-                            ("pure_aligning", "MZ")) if ch in channels]
+    return model.default_groups(channels)
 
 
-def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "huber",
+MF1989_START = {"a0": 1.3, "a1": -20.0, "a2": 1300.0, "a3": 2000.0, "a4": 8.0, "a7": 0.3,
+                "c0": 2.4, "c1": 4.0, "c3": -1.0, "c4": -10.0, "c9": 0.5}
+"""The start of a 1989-set fit without a start file (`diffsusp tyre fit --model mf1989`): a
+passenger-car tyre's order of magnitude, thesis units (the other coefficients 0, λ's 1)."""
+
+
+def group_params(model, groups) -> list[str]:
+    """The coefficients of the `GROUPS` named in `groups` that `model` has, in order, once
+    each."""
+    return list(dict.fromkeys(n for g in groups for n in GROUPS[g] if n in model.coefficients))
+
+
+def check_varies(data: BenchData, n_free: int, where: str = "") -> None:
+    """Bench data with fewer distinct input points (FZ, SL, SA, IA, VX, P over the rows kept)
+    than `n_free` free coefficients cannot determine them: an `InputError` (prefixed by
+    `where`, e.g. the file) before anything is compiled (10⁶ rows of one repeated point would
+    run for minutes)."""
+    keep = np.asarray(data.valid).any(axis=0)
+    pts = np.stack([np.asarray(v)[keep] for v in (data.fz, data.kappa, data.alpha,
+                                                  data.gamma, data.vx, data.pressure)], 1)
+    distinct = np.unique(np.nan_to_num(pts, nan=-1.0), axis=0).shape[0]
+    if distinct < max(n_free, 2):
+        raise InputError(f"{where}the data hold {distinct} distinct input point(s) (FZ, SL, "
+                         f"SA, IA, VX, P) in {int(keep.sum())} rows, fewer than the {n_free} "
+                         "coefficients to fit; a fit needs sweeps of slip and load")
+
+
+def fit_groups(model, data: BenchData, groups=None, *, free=(), tir=None, where: str = "",
+               **options):
+    """Fit the coefficient groups `groups` (keys of `GROUPS`; default `default_groups`)
+    together, as `diffsusp tyre fit --mode` does: the groups' coefficients the model has
+    (`group_params`), those the start file does not use held (`default_hold` with `tir`, the
+    start's property file) unless named in `free`, the data checked to vary enough for them
+    (`check_varies`, its message prefixed by `where`); `options` go to `fit`. Returns (the
+    groups, the fitted model, the `TyreFitReport`)."""
+    groups = list(groups or default_groups(model, data.channels))
+    names = group_params(model, groups)
+    free = tuple(free)
+    bad = [n for n in free if n not in names]
+    if bad:
+        raise InputError(f"free {', '.join(bad)}: not among the fitted coefficients of "
+                         f"{', '.join(groups)}")
+    hold = default_hold(model, names, tir)
+    check_varies(data, len([n for n in names if n not in hold or n in free]), where)
+    fitted, report = fit(model, data, names, hold=hold, free=free, tir=tir, **options)
+    return groups, fitted, report
+
+
+def fit_many(models, datas, params, *, noise: dict | None = None, loss: str = "huber",
              loss_scale: float = 1.345, combined: bool = True, max_steps: int = 200,
              rtol: float = 1e-10, atol: float = 1e-10, threshold: float = 1e-8, hold=()):
     """Many tyres in one batched (vmapped) call of the joint strategy: `models` and `datas`
     are sequences of equal length whose data have equal shapes (pad with `valid=False` rows
-    otherwise); `noise` given (σ or (a, b) per channel; default: estimated per data set).
-    Returns lists of fitted models and reports."""
-    names = tuple(names)
+    otherwise); `params` the coefficients fitted (a sequence of names, as `fit`); `noise` given
+    (σ or (a, b) per channel; default: estimated per data set). Returns lists of fitted models
+    and reports."""
+    names = tuple(params)
     preps = []
     for m, d in zip(models, datas, strict=True):
         ab, src, counts = _noise_models(d, noise)
@@ -1398,12 +1404,10 @@ def fit_many(models, datas, names, *, noise: dict | None = None, loss: str = "hu
     X, S, OK = _solve_many(stacked, u0, max_steps, rtol, atol)
     out = []
     for i, (p, ab, src, counts) in enumerate(preps):
-        fitted, rep = _report(p, X[i], S[i], OK[i], threshold, np.asarray(p.x0), ab, src,
-                              counts, ["joint (batched)"])
-        if isinstance(models[i], mf6.MagicFormula6):
-            fitted = with_ranges(models[i].replace(**{n: float(v) for n, v in
-                                                      zip(names, X[i], strict=True)}),
-                                 datas[i])
+        _, rep = _report(p, X[i], S[i], OK[i], threshold, np.asarray(p.x0), ab, src,
+                         counts, ["joint (batched)"])
+        fitted = with_ranges(models[i].replace(**{n: float(v) for n, v in
+                                                  zip(names, X[i], strict=True)}), datas[i])
         out.append((fitted, rep))
     return [o[0] for o in out], [o[1] for o in out]
 
@@ -1414,7 +1418,7 @@ class FitRehearsal:
     noise, fitted with the user's options from the start file.
 
     **Arguments:** `start_model` (the start file's model), `programme` (a `BenchData` whose
-    inputs and channels are the planned bench programme, e.g. `bench_programme`), `names` (the
+    inputs and channels are the planned bench programme, e.g. `bench_programme`), `params` (the
     coefficients whose truths are drawn; default the ones `fit` estimates: `default_names` less
     `default_hold`), `spread` (relative: truths x₀·(1 + spread·U(−1, 1)), default ±20 %),
     `noise` per channel σ or (a, b) for σ = a + b·|F| (default 20 N + 1 % |F| on forces, 20 N·m
@@ -1432,7 +1436,7 @@ class FitRehearsal:
 
     method = "mf-fit"
 
-    def __init__(self, start_model, programme: BenchData, names=None, *, spread: float = 0.2,
+    def __init__(self, start_model, programme: BenchData, params=None, *, spread: float = 0.2,
                  noise: dict | None = None, outliers: float = 0.0, fit_noise=None,
                  loss: str = "huber", strategy: str = "staged", tir=None, centre=None):
         if not (spread > 0 and math.isfinite(spread)):
@@ -1441,8 +1445,8 @@ class FitRehearsal:
             raise InputError(f"outliers {outliers!r}: a fraction in [0, 0.5)")
         fitted_names = default_names(start_model, programme.channels)
         self.hold = default_hold(start_model, fitted_names, tir)
-        if names is None:
-            names = [n for n in fitted_names if n not in self.hold]
+        names = ([n for n in fitted_names if n not in self.hold] if params is None
+                 else list(params))
         unknown = [n for n in names if n not in start_model.coefficients]
         if unknown:
             raise InputError(f"unknown coefficient(s) {', '.join(unknown)}")
@@ -1457,10 +1461,9 @@ class FitRehearsal:
         self.outliers, self.fit_noise, self.loss, self.strategy = (outliers, fit_noise, loss,
                                                                    strategy)
         self.centre = start_model if centre is None else centre
-        if isinstance(start_model, mf6.MagicFormula6) and float(
-                self.centre["FNOMIN"]) != float(start_model["FNOMIN"]):
-            raise InputError(f"centre FNOMIN {float(self.centre['FNOMIN']):g} N, the start's "
-                             f"{float(start_model['FNOMIN']):g} N: the fit holds FNOMIN, so "
+        if self.centre.nominal_load != start_model.nominal_load:
+            raise InputError(f"centre FNOMIN {self.centre.nominal_load:g} N, the start's "
+                             f"{start_model.nominal_load:g} N: the fit holds FNOMIN, so "
                              "write the centre for the start's (fit_start.renormalise)")
         self.x0 = np.array([float(self.centre[n]) for n in self.names])
 

@@ -99,7 +99,7 @@ PAC2002 files, e.g. Chrono's) is evaluated with these MF 5.2 equations; the λ_�
 
 import math
 import warnings
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -108,7 +108,8 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..errors import ModelFileError, ModelWarning
 from ..io.tir import TirFile
-from . import fast_math
+from . import fast_math, fit_start
+from .base import AbstractTyre
 from .vertical import spin
 
 __all__ = ["MagicFormula6", "TyreForces", "evaluate", "check_limits", "COEFFICIENTS",
@@ -180,8 +181,9 @@ class TyreForces(NamedTuple):
     mz: Array
 
 
-class MagicFormula6(eqx.Module):
-    """A Magic Formula 5.2 / 6.1 / 6.2 tyre (spec: tyre §7 C; module docstring for equations).
+class MagicFormula6(AbstractTyre):
+    """A Magic Formula 5.2 / 6.1 / 6.2 tyre (spec: tyre §7 C; module docstring for equations),
+    an `AbstractTyre`.
 
     **Fields:** `coefficients` (name → float64 scalar array, library units: UNLOADED_RADIUS mm,
     LONGVL mm/s, pressures Pa; differentiable, vmappable), `version` ("5.2", "6.1" or "6.2",
@@ -204,12 +206,74 @@ class MagicFormula6(eqx.Module):
             raise ValueError(f"coefficients missing: {', '.join(missing[:8])}; build the model "
                              "with MagicFormula6.from_tir or from_values")
 
+    channels: ClassVar[tuple[str, ...]] = ("FX", "FY", "MX", "MY", "MZ")
+
     @property
     def limit(self) -> dict[str, float]:
         return dict(self.limits)
 
-    def __getitem__(self, name: str) -> Array:
-        return self.coefficients[name]
+    def with_limits(self, limits: dict[str, float]) -> "MagicFormula6":
+        """A copy whose validity ranges are `limits` (name → value; every other range open)."""
+        return MagicFormula6(dict(self.coefficients), self.version,
+                             tuple(sorted(limits.items())), self.friction_ellipse)
+
+    @property
+    def nominal_load(self) -> float:
+        """FNOMIN [N]."""
+        return float(self["FNOMIN"])
+
+    def forces(self, fz, kappa, alpha, gamma=0.0, vx=None, pressure=None, *, combined=True,
+               channels=None) -> dict[str, Array]:
+        """`evaluate` as a dict channel → array (`AbstractTyre.forces`): NaN entries of `vx`
+        and `pressure` are LONGVL and INFLPRES; only `channels` are computed (the others NaN)."""
+        if vx is not None:
+            vx = jnp.where(jnp.isnan(vx), self["LONGVL"], vx)
+        if pressure is not None:
+            pressure = jnp.where(jnp.isnan(pressure), self["INFLPRES"], pressure)
+        out = evaluate(self, fz, kappa, alpha, gamma, vx, pressure, combined=combined,
+                       outputs=tuple(c.lower() for c in (channels or self.channels)))
+        return {"FX": out.fx, "FY": out.fy, "MX": out.mx, "MY": out.my, "MZ": out.mz}
+
+    def default_groups(self, channels) -> list[str]:
+        """pure_lateral, pure_longitudinal and pure_aligning as `channels` allow."""
+        return [g for g, ch in (("pure_lateral", "FY"), ("pure_longitudinal", "FX"),
+                                ("pure_aligning", "MZ")) if ch in channels]
+
+    def data_start(self, data, names, predict) -> dict[str, float]:
+        """The scale coefficients' starting values from the data (`fit_start.data_start`)."""
+        return fit_start.data_start(self, data, names, predict)
+
+    def constraint_violations(self, fz, gamma) -> list[str]:
+        """The usual physical constraints over the range of load `fz` (and camber `gamma`):
+        C_x, C_y, C_t > 0; |μ_x|, |μ_y| > 0 without a change of sign (the sign of D is the
+        file's convention: PAC2002 files write PDY1 < 0); E_x, E_y ≤ 1 (spec: tyre §7 C)."""
+        c = {k: float(v) for k, v in self.coefficients.items()}
+        fz = np.linspace(float(jnp.min(fz)), float(jnp.max(fz)), 21)
+        g = np.linspace(float(jnp.min(gamma)), float(jnp.max(gamma)), 7)[:, None]
+        dfz = (fz - c["LFZO"] * c["FNOMIN"]) / (c["LFZO"] * c["FNOMIN"])
+        out = []
+        for name, v in (("C_x = PCX1·LCX", c["PCX1"] * c["LCX"]),
+                        ("C_y = PCY1·LCY", c["PCY1"] * c["LCY"]), ("C_t = QCZ1", c["QCZ1"])):
+            if v <= 0:
+                out.append(f"{name} = {v:.4g} is not > 0")
+        mux = (c["PDX1"] + c["PDX2"] * dfz) * (1 - c["PDX3"] * g**2)
+        muy = (c["PDY1"] + c["PDY2"] * dfz) * (1 - c["PDY3"] * g**2)
+        for name, v, s in (("mu_x (D_x/F_z)", mux, c["PDX1"]),
+                           ("mu_y (D_y/F_z)", muy, c["PDY1"])):
+            sgn = 1.0 if s >= 0 else -1.0
+            if np.min(sgn * v) <= 0:
+                out.append(f"|{name}| reaches 0 (sign change) in the data's range: "
+                           f"{np.min(sgn * v) * sgn:.4g}")
+        ex = (c["PEX1"] + c["PEX2"] * dfz + c["PEX3"] * dfz**2)[None, :] * (
+            1 - c["PEX4"] * np.array([[-1.0], [1.0]]))
+        ey = (c["PEY1"] + c["PEY2"] * dfz) * (1 + c["PEY5"] * g**2 - (c["PEY3"] + c["PEY4"] * g))
+        ey2 = (c["PEY1"] + c["PEY2"] * dfz) * (1 + c["PEY5"] * g**2
+                                               + (c["PEY3"] + c["PEY4"] * g))
+        for name, v in (("E_x", ex), ("E_y", np.concatenate([ey, ey2]))):
+            if np.max(v) > 1:
+                out.append(f"{name} reaches {np.max(v):.4g} > 1 in the data's range (clipped "
+                           "at 1)")
+        return out
 
     def replace(self, *, friction_ellipse: bool | None = None, **values) -> "MagicFormula6":
         """A copy with some coefficients changed (library units); `friction_ellipse`: switch the
@@ -267,10 +331,12 @@ class MagicFormula6(eqx.Module):
                 limits.pop(n)
         return cls.from_values(values, version, limits, _fe_method(tir))
 
-    def to_tir(self, template: TirFile) -> TirFile:
+    def to_tir(self, template: TirFile, *, ranges: bool = False) -> TirFile:
         """A copy of `template` with this model's coefficients written in (library → SI). Only
         coefficients that differ from the template or that it lacks are written; FE_METHOD is
-        written where `friction_ellipse` differs from the template's."""
+        written where `friction_ellipse` differs from the template's. `ranges=True` also
+        writes the model's finite validity ranges of load, slip and camber into their sections
+        (a fitted model: the data's ranges, `diffsusp.tyre.fit.with_ranges`)."""
         tir = template.copy()
         if self.friction_ellipse != _fe_method(template):
             tir.set("FE_METHOD", "YES" if self.friction_ellipse else "NO", section="MODEL")
@@ -281,6 +347,10 @@ class MagicFormula6(eqx.Module):
                     tir.set(n, v)
             elif v != _default(n, {}):
                 tir.set(n, v, section=SECTION_OF[n])
+        if ranges:
+            for n, v in self.limit.items():
+                if math.isfinite(v) and n in _LIMIT_SECTION and not n.startswith("PRES"):
+                    tir.set(n, float(v), section=_LIMIT_SECTION[n])
         return tir
 
 

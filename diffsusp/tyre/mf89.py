@@ -22,13 +22,14 @@ Choices where the annex is silent or garbled, each documented where applied:
 """
 
 import math
+from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import lsq
 from . import thesis_sets
+from .base import AbstractTyre
 from .mf6 import check_x64
 
 __all__ = ["MagicFormula89", "NAMES", "fx0", "fy0", "mz0", "combined", "evaluate", "macro",
@@ -44,14 +45,16 @@ NAMES = tuple([f"b{i}" for i in range(13)]
 relaxation lengths sigma_x, sigma_y [m])."""
 
 
-class MagicFormula89(eqx.Module):
-    """A Bakker–Pacejka 1989/1991 Magic Formula tyre (spec: tyre §2.4), thesis units.
+class MagicFormula89(AbstractTyre):
+    """A Bakker–Pacejka 1989/1991 Magic Formula tyre (spec: tyre §2.4), thesis units, an
+    `AbstractTyre` (its `forces` in library units).
 
     **Fields:** `coefficients` (name → float64 scalar array; see `NAMES`). Missing ones are 0
     except the λ's (1) when built with `from_values`.
     """
 
     coefficients: dict[str, Float[Array, ""]]
+    channels: ClassVar[tuple[str, ...]] = ("FX", "FY", "MZ")
 
     def __check_init__(self):
         missing = [n for n in NAMES if n not in self.coefficients]
@@ -59,8 +62,30 @@ class MagicFormula89(eqx.Module):
             raise ValueError(f"coefficients missing: {', '.join(missing[:8])}; build with "
                              "MagicFormula89.from_values or from_thesis")
 
-    def __getitem__(self, name):
-        return self.coefficients[name]
+    @property
+    def nominal_load(self) -> float:
+        """4000 N: the set has no nominal load (its loads are in kN); a bench programme
+        without ranges is centred there."""
+        return 4000.0
+
+    def forces(self, fz, kappa, alpha, gamma=0.0, vx=None, pressure=None, *, combined=True,
+               channels=None) -> dict[str, Array]:
+        """F_x, F_y [N] and M_z [N·mm] in library units (`AbstractTyre.forces`): combined
+        slip by `evaluate`, pure slip by `fx0`, `fy0`, `mz0` (κ in the b-set's unit as given);
+        the set has no speed or pressure terms (`vx`, `pressure` unused)."""
+        del vx, pressure, channels
+        if combined:
+            fx, fy, mz = evaluate(self, fz, kappa, alpha, gamma)
+            return {"FX": fx, "FY": fy, "MZ": mz}
+        fz = jnp.asarray(fz) / 1000.0
+        alpha, gamma = jnp.rad2deg(alpha), jnp.rad2deg(gamma)
+        return {"FX": fx0(self, kappa, fz), "FY": fy0(self, alpha, fz, gamma),
+                "MZ": 1000.0 * mz0(self, alpha, fz, gamma)}
+
+    def default_groups(self, channels) -> list[str]:
+        """mf1989_lateral, whatever the channels."""
+        del channels
+        return ["mf1989_lateral"]
 
     @classmethod
     def from_values(cls, values: dict) -> "MagicFormula89":
@@ -235,9 +260,8 @@ def evaluate(m: MagicFormula89, fz: ArrayLike, kappa: ArrayLike, alpha: ArrayLik
     """F_x, F_y [N] and M_z [N·mm] in library units: `fz` [N], `kappa` [-] (multiplied by
     `kappa_scale` into the b-set's unit, e.g. 100 for percent), `alpha`, `gamma` [rad] (PSA
     signs; converted to the thesis's kN and degrees here)."""
-    deg = 180.0 / math.pi
-    fx, fy, mz = combined(m, jnp.asarray(kappa) * kappa_scale, jnp.asarray(alpha) * deg,
-                          jnp.asarray(fz) / 1000.0, jnp.asarray(gamma) * deg)
+    fx, fy, mz = combined(m, jnp.asarray(kappa) * kappa_scale, jnp.rad2deg(alpha),
+                          jnp.asarray(fz) / 1000.0, jnp.rad2deg(gamma))
     return fx, fy, mz * 1000.0
 
 

@@ -12,8 +12,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from . import mf6, mf89
-
 __all__ = ["magic_formula", "macro_to_bcde", "bcde_to_macro", "similarity",
            "similarity_primitive", "specification", "SPEC_UNITS"]
 
@@ -101,23 +99,20 @@ SPEC_UNITS = {
 
 
 def _curves(model, pressure):
-    """(fx(κ, fz), fy(α, γ, fz), mz(α, γ, fz)) in library units, pure slip."""
-    if isinstance(model, mf6.MagicFormula6):
-        def fx(k, fz):
-            return mf6.evaluate(model, fz, k, 0.0, 0.0, pressure=pressure, combined=False).fx
+    """(fx(κ, fz), fy(α, γ, fz), mz(α, γ, fz)) in library units, pure slip
+    (`AbstractTyre.forces`)."""
+    def fx(k, fz):
+        return model.forces(fz, k, 0.0, 0.0, pressure=pressure, combined=False,
+                            channels=("FX",))["FX"]
 
-        def fy(a, g, fz):
-            return mf6.evaluate(model, fz, 0.0, a, g, pressure=pressure, combined=False).fy
+    def fy(a, g, fz):
+        return model.forces(fz, 0.0, a, g, pressure=pressure, combined=False,
+                            channels=("FY",))["FY"]
 
-        def mz(a, g, fz):
-            return mf6.evaluate(model, fz, 0.0, a, g, pressure=pressure, combined=False).mz
-        return fx, fy, mz
-    if isinstance(model, mf89.MagicFormula89):
-        deg = 180.0 / math.pi
-        return ((lambda k, fz: mf89.fx0(model, k, fz / 1000.0)),
-                (lambda a, g, fz: mf89.fy0(model, a * deg, fz / 1000.0, g * deg)),
-                (lambda a, g, fz: 1000.0 * mf89.mz0(model, a * deg, fz / 1000.0, g * deg)))
-    raise TypeError(f"specification: a MagicFormula6 or MagicFormula89, got {type(model)}")
+    def mz(a, g, fz):
+        return model.forces(fz, 0.0, a, g, pressure=pressure, combined=False,
+                            channels=("MZ",))["MZ"]
+    return fx, fy, mz
 
 
 def _extremum(f, alpha_max, n_grid, newton_steps):
