@@ -59,7 +59,7 @@ def info_command(
     and its parameters (float leaves) with their shapes and units."""
     enable_x64()
     with cli_errors():
-        from ..model import validate
+        from ..statics import validate
 
         mf = load_model_file(model, check=False, side=side)
         mech = mf.mechanism
@@ -122,12 +122,14 @@ def info_command(
 
 def _design_load(mech, corner) -> float | None:
     """The corner's design load (N, vertical up at its contact point): the stated one, or the
-    load that holds the design position (`kc.corner.equilibrium_load`, what `Corner.resolve`
-    computes when the model states none); None when the corner cannot be resolved."""
+    load that holds the design position (`kc.design_load` when the model states none); None
+    when the corner cannot be resolved."""
+    from ..kc.corner import design_load
+
     if corner.design_load is not None:
         return float(corner.design_load)
     try:
-        return float(corner.resolve(mech).design_load)
+        return design_load(mech, corner)
     except Exception:  # noqa: BLE001 - `info` describes broken models too; validate says why
         return None
 
