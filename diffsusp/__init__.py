@@ -6,11 +6,12 @@ Units: mm, N, N·mm, rad. Enable float64 (`jax.config.update("jax_enable_x64", T
 from . import fleet, geometry, identify, io, kc, lsq, mdh, measure, model, models, statics, tyre  # noqa: F401  (every stage loaded)
 from .errors import ConvergenceError, InputError, ModelError, ModelFileError, ModelWarning
 from .io import save_model
-from .model import Loads, Mechanism, MechanismBuilder, ValidationReport, validate
+from .model import Loads, Mechanism, MechanismBuilder
 from .resolve import load_model
 from .statics import (
     Linearization,
     StaticSolution,
+    ValidationReport,
     bushing_states,
     joint_reactions,
     linearize,
@@ -19,6 +20,7 @@ from .statics import (
     solve_statics,
     solve_sweep,
     spring_states,
+    validate,
 )
 
 __all__ = [

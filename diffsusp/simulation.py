@@ -21,7 +21,7 @@ from .io import ModelFile, loads_from_table, read_table, results_table
 from .io.tables import RESULT_STATUS, Table, TableWriter
 from .statics import bushing_states, flagged_cases, solve_statics_chunks, spring_states
 
-__all__ = ["CHUNK", "TableRun", "design_load", "load_cases", "simulate_table"]
+__all__ = ["CHUNK", "TableRun", "load_cases", "simulate_table"]
 
 CHUNK = 256
 """Cases per solve (the last chunk is padded so that every chunk reuses one compiled shape)."""
@@ -162,16 +162,3 @@ def _unsolved(mech, n: int):
         q=np.full((n, 6 * len(mech.parts)), np.nan), status=np.full(n, -1),
         iterations=np.zeros(n), residual=nan, constraint_error=nan, stable=np.zeros(n, bool),
         law_valid=np.zeros(n, bool))
-
-
-def design_load(mech, corner) -> float | None:
-    """A corner's design load (N, vertical up at its contact point): the one it states, or the
-    load that holds the design position (`Corner.resolve`, `diffsusp.kc.corner.
-    equilibrium_load`); None when the corner cannot be resolved (a broken model is described
-    too: `diffsusp.model.validate` says why)."""
-    if corner.design_load is not None:
-        return float(corner.design_load)
-    try:
-        return float(corner.resolve(mech).design_load)
-    except Exception:  # noqa: BLE001 - the model may not solve; None says so
-        return None

@@ -38,7 +38,7 @@ def bushings():
 def _virtual_work(mech, point="contact_patch"):
     """The old estimate: least-squares (F, λ) of Q0 + F·Q1 + Φ_qᵀλ = 0 at the design position."""
     from diffsusp.kc.rig import remove_drivers
-    from diffsusp.model.validate import design_terms
+    from diffsusp.statics.validation import design_terms
 
     base = remove_drivers(mech, mech.drivers.names)
     n, n_l = base.n_coordinates, len(base.load_points.names)

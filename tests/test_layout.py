@@ -2,14 +2,12 @@
 
 - no `_private` name is imported from another module (a name a sibling needs is not private);
 - internal imports inside functions only under `diffsusp/cli/` (lazy start-up of the command),
-  except the edges listed in `LAZY` below, each with its reason;
+  except the edges listed in `LAZY` below (none today), each with its reason;
 - no module-level `__getattr__` (no compatibility shims);
 - no import circle (strongly connected modules, in-function imports counted) other than those
-  in `CIRCLES`.
+  in `CIRCLES` (none today).
 
-ARCHITECTURE.md describes the layers; the two exceptions are the corner's equilibrium load,
-which `model.corner` still asks of `kc.corner` (a model's corner with no stated design load
-runs an equilibrium, `Corner.resolve`). A new exception fails here until it is listed with its
+ARCHITECTURE.md describes the layers. A new exception fails here until it is listed with its
 reason, and a listed one that disappears fails too, so that the lists only shrink.
 """
 
@@ -18,9 +16,8 @@ import pathlib
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent / "diffsusp"
 
-LAZY = {("diffsusp.model.corner", "diffsusp.kc.corner")}
-CIRCLES = {frozenset({"diffsusp.kc.corner", "diffsusp.kc.rig", "diffsusp.model",
-                      "diffsusp.model.builder", "diffsusp.model.corner"})}
+LAZY = set()
+CIRCLES = set()
 
 
 def _modules():

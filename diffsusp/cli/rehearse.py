@@ -49,10 +49,10 @@ def corner_cases(mech):
     """The default load table of a suspension rehearsal: at the corner's contact point, the
     design load × 0.7, 1, 1.3, each with lateral −2, 0, +2 kN and longitudinal ±1.5 kN (18
     cases: a K&C rig's combined-load grid)."""
-    from ..kc.corner import corners_of
+    from ..kc.corner import corners_of, design_load
 
     corner = corners_of(mech)[""].resolve(mech)
-    f0 = corner.design_load
+    f0 = design_load(mech, corners_of(mech)[""])
     force = [[x, y, z] for z in (0.7 * f0, f0, 1.3 * f0) for y in (-2000.0, 0.0, 2000.0)
              for x in (-1500.0, 1500.0)]
     name = mech.load_points.names[corner.contact_point]

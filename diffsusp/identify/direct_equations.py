@@ -2,11 +2,11 @@
 measured case the rows Lᵀ D k = −Lᵀ (Q_ext + Q_known) in the solver's coordinates, and the
 whitening of each case by the pose noise (generalised least squares, errors in variables).
 
-D = ∂Q_int/∂k is `jax.jacfwd` of the solver's own element force functions, element by element
-(bushings: the generalised force of a unit −δ per axis; springs: K·ℓ − K·L0, linear in the
-unknowns (K, K·L0)); L an orthonormal basis of the null space of Φ_q; rotational coordinates
-scaled by the model's length scale so that every row is in N (spec §1.10). The selection of the
-unknowns and the analysis of the stacked system are in `identify.direct`.
+D = ∂Q_int/∂k is `jax.jacfwd` of the solver's generalised forces (`statics.generalised_forces`)
+in the stiffnesses (bushings: the generalised force of a unit −δ per axis; springs: K·ℓ − K·L0,
+linear in the unknowns (K, K·L0)); L an orthonormal basis of the null space of Φ_q; rotational
+coordinates scaled by the model's length scale so that every row is in N (spec §1.10). The
+selection of the unknowns and the analysis of the stacked system are in `identify.direct`.
 """
 
 import functools
@@ -18,6 +18,7 @@ import numpy as np
 
 from ..lsq import qr_r
 from ..model.mechanism import Mechanism
+from ..statics import generalised_forces
 from ..statics.kernel import (
     assemble,
     bushing_force,
@@ -71,54 +72,28 @@ def _scatter_vectors(n_full, idx, values):
     return out.at[np.asarray(idx)].add(values)
 
 
-def _bushing_unit_forces(mech: Mechanism, y):
-    """D of the bushings: ∂Q/∂θ (n, nb, 12) for θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and
-    N·mm/rad, then the six constant forces on I (preload, or K·δ0 of an offset), by `jax.jacfwd`
-    of the solver's own element force function (`statics.kernel.bushing_force`, Adams
-    convention, spec stiffness §1.8), one bushing at a time. Exact: the force is linear in θ."""
-    b = mech.bushings
-    lay, yfull, offset = _element_geometry(mech, y)
-    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
-    idx = lay.coords(i, j)
-    mk = mech.markers
-    zero3 = jnp.zeros(3, y.dtype)
+def _unit_forces(mech: Mechanism, loads, y):
+    """D = ∂Q/∂θ (n, 12·nb + 2·ns), `jax.jacfwd` of `statics.generalised_forces` with respect
+    to, per bushing, θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and N·mm/rad, then the six
+    constant forces on I (preload, or K·δ0 of an offset) (Adams convention, spec stiffness
+    §1.8), and per spring (K, K·L0): the stiffness at the model's free length L0 (0 where K·L0
+    is an unknown) and the free length at unit stiffness, a tension −1 (spec §1.7,
+    4.37–4.38). Exact: the forces are linear in θ."""
+    b, s = mech.bushings, mech.springs
+    n_b, n_s = len(b.names), len(s.names)
 
-    def one(z, x0i, r0i, x0j, r0j, off_t, off_r):
-        def force(theta):
-            params = dict(k_trans=theta[:3], k_rot=theta[3:6], cubic_trans=zero3,
-                          cubic_rot=zero3, offset_trans=off_t, offset_rot=off_r,
-                          preload_force=theta[6:9], preload_torque=theta[9:])
-            return bushing_force(z, x0i, r0i, x0j, r0j, params, None)
+    def forces(theta):
+        tb = theta[: 12 * n_b].reshape(n_b, 12)
+        ts = theta[12 * n_b :].reshape(n_s, 2)
+        at = eqx.tree_at(
+            lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
+                        mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
+            mech, (tb[:, :3], tb[:, 3:6], tb[:, 6:9], tb[:, 9:], ts[:, 0], ts[:, 1]))
+        return generalised_forces(at, loads, y)
 
-        return jax.jacfwd(force)(jnp.zeros(12, y.dtype))  # (12 coordinates, 12 unknowns)
-
-    gen = jax.vmap(one)(yfull[idx], offset[i], mk.orientation[i], offset[j], mk.orientation[j],
-                        b.offset_trans, b.offset_rot)  # (nb, 12, 12)
-    full = jnp.zeros((yfull.shape[0], len(b.names), 12), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(b.names))[:, None], :].add(gen)
-    return full[: y.shape[0]]
-
-
-def _spring_unit_forces(mech: Mechanism, y):
-    """D of the springs: ∂Q/∂(K, K·L0) (n, ns, 2) of tension K·(ℓ − L0) − K·L0 with L0 the
-    model's free length (0 where K·L0 is an unknown), by `jax.jacfwd` of the solver's line-force
-    function (spec stiffness §1.7, 4.37–4.38). Exact: linear."""
-    s = mech.springs
-    lay, yfull, offset = _element_geometry(mech, y)
-    i, j = np.asarray(s.i_marker, dtype=int), np.asarray(s.j_marker, dtype=int)
-    idx = lay.coords(i, j)
-
-    def one(z, x0i, x0j, free_length):
-        def force(kc):
-            return line_force(z, x0i, x0j,
-                               lambda length: kc[0] * (length - free_length) - kc[1])
-
-        return jax.jacfwd(force)(jnp.zeros(2, y.dtype))  # (12, 2)
-
-    gen = jax.vmap(one)(yfull[idx], offset[i], offset[j], s.free_length)  # (ns, 12, 2)
-    full = jnp.zeros((yfull.shape[0], len(s.names), 2), y.dtype)
-    full = full.at[np.asarray(idx), np.arange(len(s.names))[:, None], :].add(gen)
-    return full[: y.shape[0]]
+    theta = jnp.concatenate([jnp.zeros(12 * n_b, y.dtype),
+                             jnp.stack([jnp.ones(n_s, y.dtype), s.free_length], 1).ravel()])
+    return jax.jacfwd(forces)(theta)
 
 
 def _constraint_jacobian(mech: Mechanism, loads, y):
@@ -144,7 +119,7 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     """Rows Lᵀ·D (r, p) and right-hand side −Lᵀ·(Q_ext + Q_known) (r,) of one case (N), and
     the null-space basis L (n, r).
 
-    D = ∂Q_int/∂k element by element (`jax.jacfwd` of the element force functions), gathered
+    D = ∂Q_int/∂k (`jax.jacfwd` of `statics.generalised_forces` in the stiffnesses), gathered
     onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
     everything else: the loads, the elements and axes not identified, cubic terms."""
     lay = eval_mech.topology
@@ -152,12 +127,7 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
     y = to_internal(eval_mech, q)
     known, _ = assemble(eval_mech, loads, y, jnp.zeros(m, y.dtype), with_jacobian=False)
     known = known[:n]
-    parts = []
-    if eval_mech.bushings.names:
-        parts.append(_bushing_unit_forces(eval_mech, y).reshape(n, -1))
-    if eval_mech.springs.names:
-        parts.append(_spring_unit_forces(eval_mech, y).reshape(n, -1))
-    columns = jnp.concatenate(parts, axis=1) @ selection
+    columns = _unit_forces(eval_mech, loads, y) @ selection
     scale = jnp.asarray(_scaling(eval_mech), y.dtype)
     null, _ = _null_basis(eval_mech, loads, y, scale)
     return null.T @ (columns * scale[:, None]), -null.T @ (known * scale), null

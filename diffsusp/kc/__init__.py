@@ -14,7 +14,7 @@ Definitions and signs (Adams/Car, per side): `diffsusp.kc.metrics`. Which marker
 `Corner` (stored with the model: `Mechanism.corners`). Events: `diffsusp.kc.events`.
 """
 
-from .corner import Corner, ResolvedCorner, corners_of, default_corner
+from .corner import Corner, ResolvedCorner, corners_of, default_corner, design_load
 from .events import (
     TABLES,
     KCEvent,
@@ -53,7 +53,8 @@ __all__ = [
     "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric", "ResolvedCorner",
     "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking", "compliance_matrix",
     "corner_geometry", "corner_loads", "corners_of", "default_corner", "default_plots",
-    "derivative_metrics", "display", "display_unit", "evaluate", "flagged", "force_rig",
-    "lateral_force", "load_table", "longitudinal_force", "opposite_travel", "parallel_travel",
-    "remove_drivers", "steering", "traction", "travel_rig", "vertical_force", "with_rack",
+    "derivative_metrics", "design_load", "display", "display_unit", "evaluate", "flagged",
+    "force_rig", "lateral_force", "load_table", "longitudinal_force", "opposite_travel",
+    "parallel_travel", "remove_drivers", "steering", "traction", "travel_rig", "vertical_force",
+    "with_rack",
 ]

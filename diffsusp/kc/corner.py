@@ -20,8 +20,8 @@ from ..model.corner import (  # noqa: F401  (re-exported: diffsusp.kc.Corner)
     PointRef,
     ResolvedCorner,
 )
-from ..model.validate import design_terms
 from ..statics import Status, marker_poses, solve_statics
+from ..statics.validation import design_terms
 from .rig import add_road_contact, remove_drivers
 
 
@@ -49,6 +49,19 @@ def corners_of(mech: Mechanism) -> dict[str, Corner]:
     if not mech.corners:
         return {"": default_corner(mech)}
     return {c.prefix: c for c in mech.corners}
+
+
+def design_load(mech: Mechanism, corner: Corner | None = None) -> float:
+    """The vertical wheel load at design (N) of `corner` (default: the model's, see
+    `default_corner`): the one it states (`Corner.design_load`), else the load at the ground
+    contact point of a wheel of its loaded radius that holds the wheel centre at its design
+    height (`equilibrium_load`). The force events' default; pass it to `Corner.resolve`."""
+    c = corner or default_corner(mech)
+    if c.design_load is not None:
+        return float(c.design_load)
+    wc = mech.markers.index(c.prefix + c.wheel_centre)
+    return equilibrium_load(mech, c.prefix + c.contact_point, (0.0, 0.0, 1.0), wc,
+                            loaded_radius=float(c.loaded_radius))
 
 
 _LOADS = {}  # id(mechanism) → (mechanism, contact point, up, load): a computed design load
@@ -186,4 +199,4 @@ def _secant(height, f0: float, *, tol: float = 1e-9, limit: float = 1e6, steps: 
 
 
 __all__ = ["FRAMES", "Corner", "PointRef", "ResolvedCorner", "corners_of", "default_corner",
-           "equilibrium_load"]
+           "design_load", "equilibrium_load"]

@@ -17,7 +17,7 @@ from ..errors import InputError
 from ..model.combine import combine, component_names
 from ..model.mirror import mirror
 from ..tyre.vertical import loaded_radius as vertical_radius
-from .corner import Corner, corners_of, default_corner, equilibrium_load
+from .corner import Corner, corners_of, default_corner, design_load, equilibrium_load
 from .events import (
     TABLES,
     aligning_torque,
@@ -173,8 +173,8 @@ def mirrored_corner(corner: Corner) -> Corner:
 
 def default_fz_range(mech, corner=None) -> str:
     """0.5–1.5× the corner's design load, 21 cases (N): the load it states, else the one that
-    holds the wheel centre at its design height (`Corner.resolve`)."""
-    fz0 = (corner or corners_of(mech)[""]).resolve(mech).design_load
+    holds the wheel centre at its design height (`design_load`)."""
+    fz0 = design_load(mech, corner or corners_of(mech)[""])
     return f"{0.5 * fz0}:{1.5 * fz0}:21"
 
 
@@ -190,7 +190,7 @@ def default_load(mech, event: str, corner=None, fz=None) -> dict | None:
     if fz is not None or event not in LOADED_EVENTS:
         return None
     c = corner or corners_of(mech)[""]
-    value = float(c.resolve(mech).design_load)
+    value = design_load(mech, c)
     origin = ("stated by the model's corner" if c.design_load is not None else
               "computed: the vertical load that holds the wheel centre at its design height")
     return {"value": value, "origin": origin}

@@ -43,7 +43,7 @@ from ..statics import (
     to_public,
 )
 from ..statics.checks import STABILITY_TOLERANCE, law_validity, stability_margins, warn_law_validity
-from .corner import Corner, ResolvedCorner, corners_of
+from .corner import Corner, ResolvedCorner, corners_of, design_load
 from .loadcases import TABLE_4_4, TABLE_5_1
 from .metrics import DERIVATIVE_METRICS, METRICS, Derivatives, corner_geometry
 from .rig import ROAD_CONTACT, add_driver, add_road_contact, remove_drivers
@@ -144,7 +144,7 @@ def _resolve(mech: Mechanism, corner) -> tuple[ResolvedCorner, ...]:
         raise InputError(f"corner must be a Corner, a dict of them, or None; got {type(corner)}.")
     out = []
     for c in corners.values():
-        rc = c.resolve(mech)
+        rc = c.resolve(mech, design_load(mech, c))
         for lp in (rc.contact_point, rc.wheel_centre_load):
             if lp >= 0 and mech.load_points.frame[lp] != GROUND:
                 raise InputError(

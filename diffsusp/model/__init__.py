@@ -1,4 +1,4 @@
-"""Mechanism pytree, builder and validation."""
+"""Mechanism pytree, builder, corners and the build-time checks."""
 
 from .builder import MechanismBuilder, frame_from_axes
 from .kinds import GROUND, JOINT_ROWS
@@ -15,10 +15,9 @@ from .mechanism import (
     describe,
     parameter_leaves,
 )
-from .validate import ValidationReport, validate
 
 __all__ = [
     "GROUND", "JOINT_ROWS", "Bushings", "Drivers", "Joints", "LoadPoints", "Loads", "Markers",
-    "Mechanism", "MechanismBuilder", "Springs", "Stops", "ValidationReport", "describe",
-    "frame_from_axes", "parameter_leaves", "validate",
+    "Mechanism", "MechanismBuilder", "Springs", "Stops", "describe", "frame_from_axes",
+    "parameter_leaves",
 ]

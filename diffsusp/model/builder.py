@@ -16,11 +16,10 @@ angles in degrees (`reuler_deg`).
 import math
 from collections.abc import Sequence
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 
 from ..errors import ModelError
-from ..geometry import reuler_deg_to_matrix
 from .corner import Corner
 from .mechanism import (
     BUSHING_AXES,
@@ -35,7 +34,7 @@ from .mechanism import (
     Springs,
     Stops,
 )
-from .validate import finalize
+from .structure import finalize
 
 
 def frame_from_axes(z=None, x=None) -> np.ndarray:
@@ -105,7 +104,7 @@ class MechanismBuilder:
             if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-9) or np.linalg.det(rot) < 0:
                 raise ModelError(f"orientation of marker '{name}' is not a rotation matrix.")
         elif reuler_deg is not None:
-            rot = np.asarray(reuler_deg_to_matrix(jnp.asarray(reuler_deg, dtype=float)))
+            rot = _reuler_deg(reuler_deg)
         else:
             rot = frame_from_axes(z, x)
         self._markers[name] = (part, _vec3(position, f"position of marker '{name}'"), rot)
@@ -286,8 +285,8 @@ class MechanismBuilder:
         index = {n: k for k, n in enumerate(names)}
         part_index = {p: k for k, p in enumerate(self._parts)} | {"ground": GROUND}
         markers = Markers(
-            position=jnp.asarray(np.array([self._markers[n][1] for n in names]).reshape(-1, 3)),
-            orientation=jnp.asarray(
+            position=_array(np.array([self._markers[n][1] for n in names]).reshape(-1, 3)),
+            orientation=_array(
                 np.array([self._markers[n][2] for n in names]).reshape(-1, 3, 3)
             ),
             part=tuple(part_index[self._markers[n][0]] for n in names),
@@ -303,16 +302,16 @@ class MechanismBuilder:
         springs = self._stack_springs(index)
         st = self._stops
         stops = Stops(
-            length=jnp.asarray([s["length"] for s in st], dtype=float),
-            k=jnp.asarray([s["k"] for s in st], dtype=float),
-            cubic=jnp.asarray([s["cubic"] for s in st], dtype=float),
+            length=_array([s["length"] for s in st]),
+            k=_array([s["k"] for s in st]),
+            cubic=_array([s["cubic"] for s in st]),
             i_marker=tuple(index[s["i"]] for s in st),
             j_marker=tuple(index[s["j"]] for s in st),
             kind=tuple(s["kind"] for s in st),
             names=tuple(s["name"] for s in st),
         )
         drivers = Drivers(
-            direction=jnp.asarray(np.array([d[2] for d in self._drivers]).reshape(-1, 3)),
+            direction=_array(np.array([d[2] for d in self._drivers]).reshape(-1, 3)),
             marker=tuple(index[d[1]] for d in self._drivers),
             names=tuple(d[0] for d in self._drivers),
         )
@@ -370,13 +369,13 @@ class MechanismBuilder:
             mask.append(tuple(row))
 
         def stack(key):
-            return jnp.asarray(np.array([b[key] for b in bs]).reshape(n, 3))
+            return _array(np.array([b[key] for b in bs]).reshape(n, 3))
 
         return Bushings(
             **{key: stack(key) for key in ("k_trans", "k_rot", "cubic_trans", "cubic_rot",
                                            "offset_trans", "offset_rot", "preload_force",
                                            "preload_torque")},
-            spline_x=jnp.asarray(sx), spline_y=jnp.asarray(sy),
+            spline_x=_array(sx), spline_y=_array(sy),
             i_marker=tuple(index[b["i"]] for b in bs),
             j_marker=tuple(index[b["j"]] for b in bs),
             spline_axes=tuple(mask),
@@ -398,14 +397,33 @@ class MechanismBuilder:
             if s["table"] is not None:
                 tx[e], ty[e] = s["table"]
         return Springs(
-            k=jnp.asarray([s["k"] for s in sp], dtype=float),
-            free_length=jnp.asarray([s["free_length"] for s in sp], dtype=float),
-            table_x=jnp.asarray(tx), table_y=jnp.asarray(ty),
+            k=_array([s["k"] for s in sp]),
+            free_length=_array([s["free_length"] for s in sp]),
+            table_x=_array(tx), table_y=_array(ty),
             i_marker=tuple(index[s["i"]] for s in sp),
             j_marker=tuple(index[s["j"]] for s in sp),
             tabulated=tuple(s["table"] is not None for s in sp),
             names=tuple(s["name"] for s in sp),
         )
+
+
+def _array(values) -> jax.Array:
+    """A float array leaf, put on the device without a compiled conversion (building compiles
+    nothing)."""
+    return jax.device_put(np.asarray(values, dtype=float))
+
+
+def _reuler_deg(angles_deg) -> np.ndarray:
+    """`geometry.reuler_deg_to_matrix` in NumPy: Rz(ψ)·Rx(θ)·Rz(φ) of body-3-1-3 Euler angles
+    in degrees (spec geometry §2.2 eq. 2.7)."""
+    psi, theta, phi = np.deg2rad(np.asarray(angles_deg, dtype=float).reshape(3))
+
+    def rz(a):
+        return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0],
+                         [0.0, 0.0, 1.0]])
+
+    c, s = np.cos(theta), np.sin(theta)
+    return rz(psi) @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]) @ rz(phi)
 
 
 def _table(table, what: str) -> tuple[np.ndarray, np.ndarray]:

@@ -60,8 +60,8 @@ class Corner:
       then says which radius it uses.
     - `design_load`: vertical wheel load at design (N), the default of force events; None:
       the vertical contact-patch load that holds the wheel centre at its design height,
-      computed by `resolve` through the statics (`diffsusp.kc.corner.equilibrium_load`, any
-      number of degrees of freedom) — what an imported model that states no wheel load uses.
+      computed through the statics by `diffsusp.kc.design_load` (any number of degrees of
+      freedom) — what an imported model that states no wheel load uses.
     - `prefix`: name prefix of this corner in a combined axle (e.g. 'left/'); see `with_prefix`.
     """
 
@@ -132,9 +132,11 @@ class Corner:
                     f"{', '.join(known) or 'none'})."
                 )
 
-    def resolve(self, mech) -> "ResolvedCorner":
+    def resolve(self, mech, design_load: float | None = None) -> "ResolvedCorner":
         """Indices and axes of this corner in `mech` (raises `InputError` on unknown names).
 
+        The resolved `design_load` is the one the corner states, else `design_load` (N; the
+        equilibrium load of `diffsusp.kc.design_load`, which the K&C events pass), else None.
         With `side='auto'` the wheel centre's design position must be concrete (not traced).
         """
         p = self.prefix
@@ -201,10 +203,8 @@ class Corner:
             up=tuple(up.tolist()),
             toe_out=tuple(toe_out.tolist()),
             loaded_radius=float(self.loaded_radius),
-            design_load=float(self.design_load)
-            if self.design_load is not None
-            else _equilibrium_load(mech, self.prefix + self.contact_point, tuple(up.tolist()),
-                                   wc, float(self.loaded_radius)),
+            design_load=float(self.design_load) if self.design_load is not None
+            else None if design_load is None else float(design_load),
         )
 
 
@@ -224,7 +224,7 @@ class ResolvedCorner(NamedTuple):
     up: tuple[float, float, float]
     toe_out: tuple[float, float, float]
     loaded_radius: float
-    design_load: float
+    design_load: float | None  # N; None: not stated and not computed
 
     def load_vectors(self, vertical, lateral, longitudinal, aligning):
         """Per-side components → global force (N) and moment (N·mm) at the contact point.
@@ -240,15 +240,6 @@ class ResolvedCorner(NamedTuple):
         )
         force = vertical * up - lateral * o + longitudinal * r
         return force, aligning * a
-
-
-def _equilibrium_load(mech, contact_point: str, up, wheel_centre: int,
-                      loaded_radius: float) -> float:
-    """The vertical load (N) at the ground contact point of a wheel of `loaded_radius` that
-    holds the wheel centre at its design height (see `Corner.design_load`)."""
-    from ..kc.corner import equilibrium_load
-
-    return equilibrium_load(mech, contact_point, up, wheel_centre, loaded_radius=loaded_radius)
 
 
 def design_offset(point, wheel_centre, frame: str, side: str) -> tuple[float, float, float]:

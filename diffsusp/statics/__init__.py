@@ -1,6 +1,6 @@
 """Static equilibrium (KKT Newton), sweeps and derived outputs."""
 
-from .kernel import to_internal, to_public
+from .kernel import generalised_forces, to_internal, to_public
 from .linearize import Linearization, linearize, linearize_internal, residual, scaled_solve
 from .outputs import (
     bushing_states,
@@ -18,10 +18,12 @@ from .solve import (
     solve_statics_chunks,
     solve_sweep,
 )
+from .validation import ValidationReport, validate
 
 __all__ = [
-    "STATUS_TEXT", "Linearization", "StaticSolution", "Status", "bushing_states", "flagged_cases",
-    "joint_reactions", "linearize", "linearize_internal", "marker_poses", "part_poses",
-    "residual", "scaled_solve", "solve_statics", "solve_statics_chunks", "solve_sweep",
-    "spring_states", "to_internal", "to_public",
+    "STATUS_TEXT", "Linearization", "StaticSolution", "Status", "ValidationReport",
+    "bushing_states", "flagged_cases", "generalised_forces", "joint_reactions", "linearize",
+    "linearize_internal", "marker_poses", "part_poses", "residual", "scaled_solve",
+    "solve_statics", "solve_statics_chunks", "solve_sweep", "spring_states", "to_internal",
+    "to_public", "validate",
 ]

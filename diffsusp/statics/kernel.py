@@ -518,6 +518,18 @@ def assemble(mech: Mechanism, loads: Loads, q, lam, with_jacobian: bool = True):
     return r, jac.at[rows, cols].add(dg)
 
 
+def generalised_forces(mech: Mechanism, loads: Loads, y):
+    """Generalised forces Q = Q_ext + Q_int (n,) of the loads and the force elements (bushings,
+    springs, stops) at solver coordinates y (one load case; no joint reactions): per part the
+    force F (N) and G(b)ᵀM (N·mm) of the moments about its reference point (spec stiffness
+    §1.4–1.5). Differentiable in every leaf of `mech`: its `jax.jacfwd` in the stiffnesses is
+    the direct method's regressor (spec §1.9)."""
+    n = mech.topology.n
+    w, _ = assemble_twist(mech, loads, y, jnp.zeros(mech.topology.m, y.dtype),
+                          with_jacobian=False)
+    return generalised_residual(y, w)[:n]
+
+
 def constraint_values(mech: Mechanism, loads: Loads, q):
     """All constraint rows (joints then drivers, redundant ones included) at solver coordinates
     q, without touching the force elements."""
