@@ -28,8 +28,8 @@ WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.]*")
 COMMENT = "$!"
 """Characters that start a comment line, or a comment after a value."""
 
-_SECTION = re.compile(r"\[([^\[\]]*)\]")
-_SUBSECTION = re.compile(r"\(([^()]*)\)")
+_BLOCKS = (("section", re.compile(r"\[([^\[\]]*)\]")),
+           ("subsection", re.compile(r"\(([^()]*)\)")))
 _BLOCK_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_ ]*")
 _HEADER = re.compile(r"\{(.*)\}")
 _ASSIGN = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*)")
@@ -67,7 +67,7 @@ def _cells(text: str) -> tuple[str, ...] | None:
 
 def classify(text: str, line: int = 0) -> TeimLine:
     """The `TeimLine` of one stripped, non-comment line."""
-    for kind, pattern in (("section", _SECTION), ("subsection", _SUBSECTION)):
+    for kind, pattern in _BLOCKS:
         m = pattern.fullmatch(text)
         if m and _BLOCK_NAME.fullmatch(m.group(1).strip()):
             return TeimLine(kind, line, text, m.group(1).strip().upper())
