@@ -15,7 +15,7 @@ from jaxtyping import ArrayLike, Float
 
 from ..geometry import DEG
 from .adams_common import FORCE_TO_N, LENGTH_TO_MM, error, fmt, read_source
-from .teimorbit import WORD, scalar, split_value, tokenise
+from .teimorbit import NUMBER, WORD, scalar, split_value, tokenise
 
 # ----------------------------------------------------------------------------- TeimOrbit files
 
@@ -59,7 +59,8 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
     Lines (the grammar of `io.teimorbit`, shared with .tir files): ``$`` or ``!`` comments,
     ``[SECTION]``, ``(SUBSECTION)``, ``key = value`` (quoted string, number or word; an optional
     ``$`` comment after it), ``{col1 col2 ...}`` table headers followed by rows of numbers or
-    quoted strings. Raises `ModelFileError` with the line of anything else.
+    quoted strings (rows of numbers without a header make a table with no column names, as in
+    a .tir [SHAPE]). Raises `ModelFileError` with the line of anything else.
     """
     text, path = read_source(source, what)
     sections: dict[str, TeimBlock] = {}
@@ -95,9 +96,13 @@ def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
                 raise error(f"{exc}.", path, number, t.name) from None
             block.values[t.name.upper()] = _teim_value(text_value, path, number)
             table = None
-        elif table is not None and t.kind == "row":
+        elif t.kind == "row" and (table is not None or (
+                block is not None and all(NUMBER.fullmatch(c) for c in t.cells))):
+            if table is None:  # numbers without a {header} (a .tir [SHAPE]): no column names
+                table = TeimTable((), [], number)
+                block.tables.append(table)
             cells = [_teim_value(c, path, number) for c in t.cells]
-            if len(cells) != len(table.columns):
+            if table.columns and len(cells) != len(table.columns):
                 raise error(f"row has {len(cells)} value(s) but the table header at line "
                             f"{table.line} names {len(table.columns)} column(s).", path, number)
             table.rows.append(cells)
@@ -185,6 +190,8 @@ def read_lcf(path) -> LoadCaseTable:
     if len(data.tables) > 1:
         raise error("[DATA] has more than one table.", file, data.tables[1].line, "DATA")
     table = data.tables[0]
+    if not table.columns:
+        raise error("the [DATA] rows have no {column header}.", file, table.line, "DATA")
     for row_index, row in enumerate(table.rows):
         if any(isinstance(c, str) for c in row):
             raise error(f"load case {row_index + 1} has a non-numeric value.", file,
