@@ -29,6 +29,7 @@ from diffsusp.io.adams import (
     AdmModel,
     LoadCaseTable,
     parse_adm,
+    parse_teimorbit,
     read_adm,
     read_bushing_property,
     read_lcf,
@@ -533,6 +534,23 @@ def test_bushing_property_round_trip(tmp_path):
     prop = read_bushing_property(path)
     np.testing.assert_allclose(prop.k_trans, k_trans, rtol=1e-14)
     np.testing.assert_allclose(prop.k_rot, k_rot, rtol=1e-14)
+
+
+def test_property_files_share_the_tir_line_grammar():
+    """One TeimOrbit grammar for property and .tir files: ``!`` comment lines, a comment after a
+    value, Fortran D exponents, rows of numbers without a {header}; a shipped .tir file reads."""
+    sections = parse_teimorbit("! written by hand\n[UNITS]\n LENGTH = 'mm' $ millimetre\n"
+                               " SCALE = 1.5D3 ! per mille\n[SHAPE]\n 1.0 0.0\n 1.0d0 0.4\n"
+                               "[DATA]\n{a b}\n 2.5D-1 'x'\n")
+    assert sections["UNITS"].values == {"LENGTH": "mm", "SCALE": 1500.0}
+    assert sections["SHAPE"].tables[0].columns == ()
+    assert sections["SHAPE"].tables[0].rows == [[1.0, 0.0], [1.0, 0.4]]
+    assert sections["DATA"].tables[0].rows == [[0.25, "x"]]
+    tir = DATA.parent.parent / "diffsusp" / "tyre" / "data" / "MagicFormula61_Paramerters.tir"
+    assert parse_teimorbit(tir)["MODEL"].values["FITTYP"] == 61.0
+    with pytest.raises(ModelFileError, match="no {column header}") as info:
+        read_lcf("[DATA]\n 1.0 2.0\n")
+    assert info.value.line == 2
 
 
 # ----------------------------------------------------------------------------- fuzzing

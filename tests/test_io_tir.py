@@ -47,6 +47,17 @@ def test_sections_comments_and_added_entries():
         tir_from_text("[MODEL]\nTYRESIDE = 'LEFT\n")
 
 
+def test_property_file_lines_are_read():
+    """The line grammar shared with the Adams property files: a (SUBSECTION) line groups lines of
+    its section, a section name may hold blanks, table rows take Fortran D exponents."""
+    tir = tir_from_text("[MODEL]\n(VERSION)\nFITTYP = 61 ! MF 6.1\n[SHAPE]\n{radial width}\n"
+                        " 1.0D0 0.0\n 1.0 4.0d-1\n[TYRE DATA]\nX = 'it's'\n")
+    assert tir.section_of("FITTYP") == "MODEL" and tir.entry("FITTYP").comment == "MF 6.1"
+    assert tir.tables["SHAPE"] == [(1.0, 0.0), (1.0, 0.4)]
+    assert tir["X"] == "it's" and tir.section_of("X") == "TYRE DATA"
+    assert to_text(tir).splitlines() == tir.lines  # written back as read
+
+
 _FUZZ = settings(max_examples=120, deadline=None,
                  suppress_health_check=[HealthCheck.too_slow])
 

@@ -8,7 +8,6 @@ never executes anything from a file. Units are converted to mm, N, N·mm, rad.
 
 import dataclasses
 import math
-import re
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ from jaxtyping import ArrayLike, Float
 
 from ..geometry import DEG
 from .adams_common import FORCE_TO_N, LENGTH_TO_MM, error, fmt, read_source
+from .teimorbit import NUMBER, WORD, scalar, split_value, tokenise
 
 # ----------------------------------------------------------------------------- TeimOrbit files
 
@@ -41,84 +41,73 @@ class TeimBlock:
     blocks: dict = dataclasses.field(default_factory=dict)
 
 
-_TEIM_SECTION = re.compile(r"\[([^\[\]]*)\]\s*$")
-_TEIM_SUBSECTION = re.compile(r"\(([^()]*)\)\s*$")
-_TEIM_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_ ]*")
-_TEIM_HEADER = re.compile(r"\{([^{}]*)\}\s*$")
-_TEIM_PAIR = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*?)\s*$")
-_TEIM_CELL = re.compile(r"\s*('[^']*'|\"[^\"]*\"|[^\s'\"]+)")
-_TEIM_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-
-
 def _teim_value(text: str, path, line):
-    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
-        return text[1:-1]
-    if _TEIM_NUMBER.fullmatch(text):
-        value = float(text)
+    """A value or a table cell: a quoted string, a finite number or a word."""
+    value = scalar(text)
+    if isinstance(value, float):
         if not math.isfinite(value):
             raise error(f"{text} is not a finite number.", path, line)
-        return value
-    if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.]*", text):
-        return text
-    raise error(f"value {text[:40]!r} is not a number, a quoted string or a word.", path, line)
+    elif text[:1] not in ("'", '"') and not WORD.fullmatch(text):
+        raise error(f"value {text[:40]!r} is not a number, a quoted string or a word.", path,
+                    line)
+    return value
 
 
 def parse_teimorbit(source, what: str = "property") -> dict[str, TeimBlock]:
     """Parse a TeimOrbit file (the format of A/Car .lcf and property files) into its sections.
 
-    Lines: ``$`` comments, ``[SECTION]``, ``(SUBSECTION)``, ``key = value`` (quoted string,
-    number or word), ``{col1 col2 ...}`` table headers followed by rows of numbers or quoted
-    strings. Raises `ModelFileError` with the line of anything else.
+    Lines (the grammar of `io.teimorbit`, shared with .tir files): ``$`` or ``!`` comments,
+    ``[SECTION]``, ``(SUBSECTION)``, ``key = value`` (quoted string, number or word; an optional
+    ``$`` comment after it), ``{col1 col2 ...}`` table headers followed by rows of numbers or
+    quoted strings (rows of numbers without a header make a table with no column names, as in
+    a .tir [SHAPE]). Raises `ModelFileError` with the line of anything else.
     """
     text, path = read_source(source, what)
     sections: dict[str, TeimBlock] = {}
     section = block = None
     table = None
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("$"):
-            continue
-        if (m := _TEIM_SECTION.match(stripped)) and _TEIM_NAME.fullmatch(m.group(1).strip()):
-            name = m.group(1).strip().upper()
-            if name in sections:
-                raise error(f"section [{name}] is given twice (first at line "
-                            f"{sections[name].line}).", path, number)
-            section = block = sections[name] = TeimBlock(name, number)
+    for t in tokenise(text):
+        number = t.line
+        if t.kind == "section":
+            if t.name in sections:
+                raise error(f"section [{t.name}] is given twice (first at line "
+                            f"{sections[t.name].line}).", path, number)
+            section = block = sections[t.name] = TeimBlock(t.name, number)
             table = None
-        elif (m := _TEIM_SUBSECTION.match(stripped)) and _TEIM_NAME.fullmatch(
-                m.group(1).strip()):
+        elif t.kind == "subsection":
             if section is None:
-                raise error(f"({m.group(1).strip()}) is outside any [SECTION].", path, number)
-            name = m.group(1).strip().upper()
-            block = section.blocks[name] = TeimBlock(name, number)
+                raise error(f"({t.text[1:-1].strip()}) is outside any [SECTION].", path,
+                            number)
+            block = section.blocks[t.name] = TeimBlock(t.name, number)
             table = None
-        elif m := _TEIM_HEADER.match(stripped):
+        elif t.kind == "header":
             if block is None:
                 raise error("a {table header} is outside any [SECTION].", path, number)
-            columns = tuple(m.group(1).split())
-            if not columns:
+            if not t.cells:
                 raise error("the table header {} names no column.", path, number)
-            table = TeimTable(columns, [], number)
+            table = TeimTable(t.cells, [], number)
             block.tables.append(table)
-        elif (m := _TEIM_PAIR.match(stripped)) and not _TEIM_NUMBER.match(stripped):
+        elif t.kind == "assign":
             if block is None:
-                raise error(f"'{m.group(1)}' is outside any [SECTION].", path, number)
-            block.values[m.group(1).upper()] = _teim_value(m.group(2), path, number)
+                raise error(f"'{t.name}' is outside any [SECTION].", path, number)
+            try:
+                text_value = split_value(t.raw, t.name)[1]
+            except ValueError as exc:
+                raise error(f"{exc}.", path, number, t.name) from None
+            block.values[t.name.upper()] = _teim_value(text_value, path, number)
             table = None
-        elif table is not None:
-            cells, pos = [], 0
-            while pos < len(stripped):
-                c = _TEIM_CELL.match(stripped, pos)
-                if c is None:
-                    break
-                cells.append(_teim_value(c.group(1), path, number))
-                pos = c.end()
-            if len(cells) != len(table.columns):
+        elif t.kind == "row" and (table is not None or (
+                block is not None and all(NUMBER.fullmatch(c) for c in t.cells))):
+            if table is None:  # numbers without a {header} (a .tir [SHAPE]): no column names
+                table = TeimTable((), [], number)
+                block.tables.append(table)
+            cells = [_teim_value(c, path, number) for c in t.cells]
+            if table.columns and len(cells) != len(table.columns):
                 raise error(f"row has {len(cells)} value(s) but the table header at line "
                             f"{table.line} names {len(table.columns)} column(s).", path, number)
             table.rows.append(cells)
         else:
-            raise error(f"unexpected line {stripped[:40]!r}: expected [SECTION], (SUBSECTION), "
+            raise error(f"unexpected line {t.text[:40]!r}: expected [SECTION], (SUBSECTION), "
                         "key = value, {table header} or a table row.", path, number)
     return sections
 
@@ -201,6 +190,8 @@ def read_lcf(path) -> LoadCaseTable:
     if len(data.tables) > 1:
         raise error("[DATA] has more than one table.", file, data.tables[1].line, "DATA")
     table = data.tables[0]
+    if not table.columns:
+        raise error("the [DATA] rows have no {column header}.", file, table.line, "DATA")
     for row_index, row in enumerate(table.rows):
         if any(isinstance(c, str) for c in row):
             raise error(f"load case {row_index + 1} has a non-numeric value.", file,

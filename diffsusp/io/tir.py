@@ -5,7 +5,8 @@ spec: tyre §7 C (MF 5.2 / 6.1 / 6.2 property files).
 A `.tir` file is a list of sections (`[LATERAL_COEFFICIENTS]`), each holding `NAME = value`
 lines; `$` starts a comment (at the start of a line or after a value), `!` a comment line; a few
 sections hold tables (`[SHAPE]`: a `{radial width}` header and rows of numbers). Values are
-numbers or quoted strings.
+numbers or quoted strings. The line grammar is `io.teimorbit`'s, shared with the Adams property
+files (a `(SUBSECTION)` line is read as part of its section).
 
 The file's own units are kept: a `TirFile` is **SI as written** (m, N, rad, Pa, m/s; the
 `[UNITS]` section must say so), so writing it back reproduces every value exactly (numbers are
@@ -24,16 +25,13 @@ Errors (`ModelFileError`, an `InputError`) name the file, the line and the field
 
 import dataclasses
 import os
-import re
 
 from ..errors import ModelFileError
 from .files import read_input, write_text_atomic
+from .teimorbit import NUMBER, classify, scalar, split_value, tokenise
 
 __all__ = ["TirEntry", "TirFile", "read_tir", "write_tir", "tir_from_text"]
 
-_SECTION = re.compile(r"^\s*\[\s*([A-Za-z0-9_]+)\s*\]\s*$")
-_ASSIGN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*)$")
-_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eEdD][+-]?\d+)?$")
 SI_UNITS = {"LENGTH": ("meter", "metre", "m"), "FORCE": ("newton", "n"),
             "ANGLE": ("radians", "radian", "rad"), "MASS": ("kg", "kilogram"),
             "TIME": ("second", "s", "sec")}
@@ -154,36 +152,6 @@ class TirFile:
                        self.path, {k: list(v) for k, v in self.tables.items()})
 
 
-def _parse_value(raw: str, path, lineno: int, name: str) -> tuple[float | str, str, str]:
-    """(value, text, comment) of the right-hand side of an assignment."""
-    raw = raw.strip()
-    comment = ""
-    if raw.startswith("'") or raw.startswith('"'):
-        q = raw[0]
-        end = raw.find(q, 1)
-        if end < 0:
-            raise ModelFileError(f"unterminated string for {name}", path=path, line=lineno,
-                                 field=name)
-        text, rest = raw[:end + 1], raw[end + 1:].strip()
-        if rest.startswith("$") or rest.startswith("!"):
-            comment = rest[1:].strip()
-        elif rest:
-            raise ModelFileError(f"unexpected text {rest!r} after the value of {name}",
-                                 path=path, line=lineno, field=name)
-        return text[1:-1], text, comment
-    for mark in ("$", "!"):
-        pos = raw.find(mark)
-        if pos >= 0:
-            raw, comment = raw[:pos].strip(), raw[pos + 1:].strip()
-            break
-    text = raw
-    if not text:
-        raise ModelFileError(f"no value for {name}", path=path, line=lineno, field=name)
-    if _NUMBER.match(text):
-        return float(text.replace("d", "e").replace("D", "e")), text, comment
-    return text, text, comment  # unquoted word: kept as a string (numeric use is checked)
-
-
 def tir_from_text(text: str, path: str | None = None) -> TirFile:
     """Parse the text of a `.tir` file (see the module docstring)."""
     if not isinstance(text, str):
@@ -193,24 +161,25 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
     sections: dict[str, list[str]] = {}
     tables: dict[str, list[tuple[float, ...]]] = {}
     section = None
-    for i, line in enumerate(lines, start=1):
-        s = line.strip()
-        if not s or s[0] in "$!":
-            continue
-        m = _SECTION.match(s)
-        if m:
-            section = m.group(1).upper()
+    for t in tokenise(text):
+        i = t.line
+        if t.kind == "section":
+            section = t.name
             sections.setdefault(section, [])
             continue
-        if s.startswith("["):
-            raise ModelFileError(f"malformed section header {s!r}", path=path, line=i)
-        m = _ASSIGN.match(s)
-        if m:
+        if t.kind == "subsection" and section is not None:
+            continue  # a (SUBSECTION) groups lines of its [SECTION]; entries stay in it
+        if t.text.startswith("["):
+            raise ModelFileError(f"malformed section header {t.text!r}", path=path, line=i)
+        if t.kind == "assign":
             if section is None:
-                raise ModelFileError(f"{m.group(1)} is outside any [SECTION]", path=path,
-                                     line=i, field=m.group(1))
-            name = m.group(1).upper()
-            value, vtext, comment = _parse_value(m.group(2), path, i, name)
+                raise ModelFileError(f"{t.name} is outside any [SECTION]", path=path,
+                                     line=i, field=t.name)
+            name = t.name.upper()
+            try:
+                value, vtext, comment = split_value(t.raw, name)
+            except ValueError as exc:
+                raise ModelFileError(str(exc), path=path, line=i, field=name) from None
             key = name
             if name in entries:
                 # the same name in [UNITS] and another section (MASS in [UNITS] and [INERTIA])
@@ -230,15 +199,16 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
             entries[key] = TirEntry(name, value, vtext, comment, section, i)
             sections[section].append(key)
             continue
-        if section is not None and s.startswith("{") and s.endswith("}"):
+        if section is not None and t.kind == "header":
             tables.setdefault(section, [])
             continue
-        parts = s.split()
-        if section is not None and parts and all(_NUMBER.match(p) for p in parts):
-            tables.setdefault(section, []).append(tuple(float(p) for p in parts))
+        if (section is not None and t.kind == "row"
+                and all(NUMBER.fullmatch(c) for c in t.cells)):
+            tables.setdefault(section, []).append(tuple(scalar(c) for c in t.cells))
             continue
-        raise ModelFileError(f"cannot read {s[:60]!r}: expected '[SECTION]', 'NAME = value', "
-                             "a comment ($ or !) or a table row", path=path, line=i)
+        raise ModelFileError(f"cannot read {t.text[:60]!r}: expected '[SECTION]', "
+                             "'NAME = value', a comment ($ or !) or a table row", path=path,
+                             line=i)
     if not entries:
         raise ModelFileError("no 'NAME = value' line: not a .tir file", path=path)
     tir = TirFile(entries, sections, lines, path, tables)
@@ -307,8 +277,8 @@ def to_text(tir: TirFile) -> str:
     out = list(tir.lines)
     for e in tir.entries.values():
         if e.line is not None:
-            m = _ASSIGN.match(out[e.line - 1].strip())
-            old = _parse_value(m.group(2), tir.path, e.line, e.name)[1] if m else None
+            old = classify(out[e.line - 1].strip())
+            old = split_value(old.raw, e.name)[1] if old.kind == "assign" else None
             if old != e.text:
                 out[e.line - 1] = _format_line(e)
     added: dict[str, list[str]] = {}
@@ -320,9 +290,9 @@ def to_text(tir: TirFile) -> str:
         section_end: dict[str, int] = {}
         current = None
         for i, line in enumerate(out):
-            m = _SECTION.match(line.strip())
-            if m:
-                current = m.group(1).upper()
+            head = classify(line.strip())
+            if head.kind == "section":
+                current = head.name
             if current is not None and line.strip() and not line.strip().startswith("$"):
                 section_end[current] = i
         for sec in sorted((s for s in added if s in section_end),
