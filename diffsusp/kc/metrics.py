@@ -77,17 +77,15 @@ moment (N·mm) at the wheel-centre load point, global components, rows and colum
 """
 
 import dataclasses
-import math
 from collections.abc import Callable
 from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 
+from ..geometry import DEG
 from ..statics import marker_poses, part_poses
 from .corner import ResolvedCorner
-
-_DEG = 180.0 / math.pi
 
 EVENTS = ("parallel_travel", "opposite_travel", "vertical_force", "lateral_force",
           "longitudinal_force", "aligning_torque", "steering", "load_table")
@@ -163,14 +161,14 @@ def _gain(key):
 
 
 METRICS: dict[str, Metric] = {
-    "toe": Metric("rad", "deg", _DEG, "toe angle (toe-in +)",
+    "toe": Metric("rad", "deg", 1 / DEG, "toe angle (toe-in +)",
                   plots=(*_TRAVEL, "vertical_force"), sensitivity=True, summary=True),
-    "steer": Metric("rad", "deg", _DEG, "steer angle (left turn +)",
+    "steer": Metric("rad", "deg", 1 / DEG, "steer angle (left turn +)",
                     plots=(*_FORCES, "steering")),
-    "camber": Metric("rad", "deg", _DEG, "camber angle (top outboard +)", plots=EVENTS,
+    "camber": Metric("rad", "deg", 1 / DEG, "camber angle (top outboard +)", plots=EVENTS,
                      sensitivity=True, summary=True),
-    "caster": Metric("rad", "deg", _DEG, "caster angle (top rearward +)"),
-    "kingpin_inclination": Metric("rad", "deg", _DEG, "kingpin inclination (top inboard +)"),
+    "caster": Metric("rad", "deg", 1 / DEG, "caster angle (top rearward +)"),
+    "kingpin_inclination": Metric("rad", "deg", 1 / DEG, "kingpin inclination (top inboard +)"),
     "scrub_radius": Metric("mm", "mm", 1.0, "scrub radius (axis meets ground inboard +)"),
     "mechanical_trail": Metric("mm", "mm", 1.0, "mechanical trail (axis meets ground ahead +)",
                                plots=("steering",)),
@@ -192,10 +190,10 @@ METRICS: dict[str, Metric] = {
     "lateral_force": Metric("N", "N", 1.0, "lateral force (inboard +)"),
     "longitudinal_force": Metric("N", "N", 1.0, "longitudinal force (rearward/braking +)"),
     "aligning_torque": Metric("N·mm", "N·m", 1e-3, "aligning torque (toe-out +)"),
-    "bump_steer": Metric("rad/mm", "deg/m", _DEG * 1e3, "bump steer (toe per travel)",
+    "bump_steer": Metric("rad/mm", "deg/m", 1 / DEG * 1e3, "bump steer (toe per travel)",
                          derive=lambda at: at.per_travel("toe"), plots=EVENTS,
                          sensitivity=True, summary=True),
-    "bump_camber": Metric("rad/mm", "deg/m", _DEG * 1e3, "bump camber (camber per travel)",
+    "bump_camber": Metric("rad/mm", "deg/m", 1 / DEG * 1e3, "bump camber (camber per travel)",
                           derive=lambda at: at.per_travel("camber"), plots=EVENTS,
                           sensitivity=True, summary=True),
     "wheel_rate": Metric("N/mm", "N/mm", 1.0, "wheel rate",
@@ -219,16 +217,16 @@ METRICS: dict[str, Metric] = {
         derive=lambda at, u=u, key=("toe" if angle == "steer" else "camber"): at.d(key, u),
         sensitivity=(what, angle) == ("lateral", "steer"))
        for u, what, unit, shown, scale, text in (
-           (1, "lateral", "rad/N", "deg/kN", _DEG * 1e3, "lateral force"),
-           (2, "longitudinal", "rad/N", "deg/kN", _DEG * 1e3, "longitudinal (braking) force"),
-           (3, "aligning_torque", "rad/(N·mm)", "deg/(kN·m)", _DEG * 1e6, "aligning torque"))
+           (1, "lateral", "rad/N", "deg/kN", 1 / DEG * 1e3, "lateral force"),
+           (2, "longitudinal", "rad/N", "deg/kN", 1 / DEG * 1e3, "longitudinal (braking) force"),
+           (3, "aligning_torque", "rad/(N·mm)", "deg/(kN·m)", 1 / DEG * 1e6, "aligning torque"))
        for angle in ("steer", "camber")},
-    "steer_gain": Metric("rad/mm", "deg/mm", _DEG, "steer per rack travel",
+    "steer_gain": Metric("rad/mm", "deg/mm", 1 / DEG, "steer per rack travel",
                          derive=_gain("steer"), sensitivity=True),
-    "camber_steer_gain": Metric("rad/mm", "deg/mm", _DEG, "camber per rack travel",
+    "camber_steer_gain": Metric("rad/mm", "deg/mm", 1 / DEG, "camber per rack travel",
                                 derive=_gain("camber")),
-    "roll_angle": Metric("rad", "deg", _DEG, "body roll angle (right side down +)"),
-    "roll_stiffness": Metric("N·mm/rad", "N·m/deg", 1e-3 / _DEG, "roll stiffness",
+    "roll_angle": Metric("rad", "deg", 1 / DEG, "body roll angle (right side down +)"),
+    "roll_stiffness": Metric("N·mm/rad", "N·m/deg", 1e-3 * DEG, "roll stiffness",
                              derivative=True, per_roll=True),
     "roll_steer": Metric(
         "rad/rad", "deg/deg", 1.0, "roll steer (steer per body roll, left turn +)",
