@@ -151,12 +151,10 @@ def write_reports(path: Path, reports, labels=None, extra: dict | None = None) -
         doc.update(extra or {})
         path.write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
     elif path.suffix == ".html":
-        from diffsusp.identify import report as base
-
-        if not hasattr(base, "write_report") or len(reports) != 1:
+        if len(reports) != 1:
             raise fail(f"{path}: HTML needs the shared report writer (one report); write "
                        ".csv or .json", EXIT_BAD_INPUT)
-        base.write_report(reports[0], path)
+        reports[0].write(path)
     else:
         raise fail(f"{path}: the report is written as .csv, .json or .html", EXIT_BAD_INPUT)
 

@@ -10,8 +10,8 @@ import numpy as np
 
 from ..errors import InputError, ModelError
 from ..model.mechanism import Mechanism
-from .direct_report import DEG
 from .params import selected_entries
+from .selection import DEG
 
 __all__ = ["Parameter"]  # re-exported by `identify.direct`; the rest serves direct, direct_polish
 

@@ -231,7 +231,7 @@ class GeometricReport(CoordinateRows, IdentificationReport):
     against σ_L (χ² with 3n − 6 dof per part and case); `warnings`: the parts and cases whose
     own registration residual is beyond noise (swapped or moved landmarks), which make the
     verdict inconsistent. Each joint's own lack of fit is judged joint by joint (σ inflated, or
-    the joint flagged). Every writer (`format_table`, `csv_text`, `html_text`, `write_report`)
+    the joint flagged). Every writer (`format_table`, `csv_text`, `html_text`, `write`)
     renders these rows; `joint_rows()` keeps the former one row per joint.
     """
 

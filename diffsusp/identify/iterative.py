@@ -19,7 +19,6 @@ offsets E0 (eq. 5.17); the stiffnesses themselves need not be unique (§2.7).
 """
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import ClassVar
 
@@ -48,11 +47,10 @@ from .report import (
     chi2_quantile,
     sigma_pct_at_start,
 )
+from .selection import DEG
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
-
-_DEG = math.pi / 180.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -226,7 +224,7 @@ class IterativeReport(IdentificationReport):
         (start value kept), `=` = equalised by axisymmetry."""
         head = f"{'bushing':<14}" + "".join(f"{a:>12}" for a in AXES)
         lines = [head, "-" * len(head)]
-        scale = np.array([1, 1, 1, _DEG, _DEG, _DEG])
+        scale = np.array([1, 1, 1, DEG, DEG, DEG])
         for b, name in enumerate(self.bushings):
             cells = []
             for a in range(6):
@@ -247,6 +245,33 @@ class IterativeReport(IdentificationReport):
                              "(report.polish(), iterative(..., polish=True), or "
                              "`diffsusp identify iterative --polish`).")
         return "\n".join(lines)
+
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`), one per identified direction (`names`): parameter, value,
+        unit, start (the thesis's units: rotational per degree), status and reason (the
+        report's one verdict: `statuses`), identified (status is 'identified'), gate_passed
+        (the correlation gate passed at least once), equalised, r."""
+        rows = []
+        sel = self._selected
+        statuses, reasons, ident = self.statuses, self.status_reasons, self.is_identified
+        k = 0
+        for b, name in enumerate(self.bushings):
+            for a, axis in enumerate(AXES):
+                if not sel[b, a]:
+                    continue
+                scale, unit = (DEG, "N*mm/deg") if a >= 3 else (1.0, "N/mm")
+                rows.append(dict(
+                    parameter=f"{name}.{axis}", value=float(self.stiffness[b, a] * scale),
+                    unit=unit, start=float(self.start[b, a] * scale), status=statuses[k],
+                    reason=reasons[k], identified=bool(ident[k]),
+                    gate_passed=bool(self.identified[b, a]),
+                    equalised=bool(self.equalised[b, a]), r=float(self.r[b, a])))
+                k += 1
+        return rows
+
+    def json_data(self) -> dict:
+        """The .json content (`write`): `to_dict()`."""
+        return self.to_dict()
 
     def to_dict(self) -> dict:
         return {

@@ -21,6 +21,7 @@ from .report import (
     MeasurementResiduals,
     consistency_from_residuals,
 )
+from .selection import display_value
 
 __all__ = ["FitReport", "NullDirection", "StepRecord"]
 
@@ -222,6 +223,29 @@ class FitReport(IdentificationReport):
             lines.append("not seen by the data (σ of the combination):")
             lines += [f"  {d.text}  (σ {d.sigma:.3g})" for d in self.null_space]
         return "\n".join(lines)
+
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`), one per parameter: parameter, value, sigma, sigma_pct,
+        unit, start, identifiable (the data see it), identified (`is_identified`: determined
+        and the model consistent), status and reason (the report's one verdict, `statuses`);
+        values and σ in the thesis's units, `selection.display_value`."""
+        rows = []
+        identified, statuses, reasons = self.is_identified, self.statuses, self.status_reasons
+        for k, name in enumerate(self.names):
+            value, unit = display_value(name, self.estimate[k])
+            scale = value / self.estimate[k] if self.estimate[k] else 1.0
+            rows.append(dict(parameter=name, value=float(value),
+                             sigma=float(self.sigma[k] * scale),
+                             sigma_pct=float(self.sigma_percent[k]), unit=unit,
+                             start=float(display_value(name, self.start[k])[0]),
+                             identifiable=bool(self.identifiable[k]),
+                             identified=bool(identified[k]), status=statuses[k],
+                             reason=reasons[k]))
+        return rows
+
+    def json_data(self) -> dict:
+        """The .json content (`write`): `to_dict()`."""
+        return self.to_dict()
 
     def to_dict(self) -> dict:
         return {

@@ -29,9 +29,7 @@ geometric location (joint hardpoints displaced, landmarks measured); the tyre be
 """
 
 import dataclasses
-import json
 import math
-import pathlib
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -41,7 +39,6 @@ import numpy as np
 
 from .. import measure
 from ..errors import ConvergenceError, InputError
-from ..io.files import write_text_atomic
 from ..model.mechanism import Loads, Mechanism
 from .direct import direct, direct_batch
 from .geometric import (
@@ -53,7 +50,7 @@ from .geometric import (
 )
 from .iterative import iterative
 from .least_squares import least_squares, least_squares_batch
-from .report import check_data, rows_csv
+from .report import Report, check_data
 from .selection import fit_selection
 
 __all__ = ["GeometryScenario", "ParameterRehearsal", "RehearsalReport", "SuspensionScenario",
@@ -87,10 +84,13 @@ class ParameterRehearsal:
 
 
 @dataclasses.dataclass(frozen=True)
-class RehearsalReport:
+class RehearsalReport(Report):
     """What a rehearsal found: `method`, `n` truths, `parameters` (one `ParameterRehearsal`
     each), `consistent_rate` (fits whose consistency verdict is "consistent", of those that
-    ran), `failed` (runs without a report), `seed`."""
+    ran), `failed` (runs without a report), `seed`. On the report base (`Report`): `rows()`,
+    `summary()`, `to_json()`, `write(path)` (.csv, .json)."""
+
+    kind = "rehearsal"
 
     method: str
     n: int
@@ -113,8 +113,9 @@ class RehearsalReport:
                 "false_identified_rate": self.false_identified_rate,
                 "parameters": self.rows(), "bottom_line": self.bottom_line()}
 
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(self.summary(), **kwargs)
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`): `rows()` with the method on each."""
+        return [{"method": self.method, **r} for r in self.rows()]
 
     def bottom_line(self) -> list[str]:
         """One sentence per parameter a user acts on."""
@@ -155,18 +156,6 @@ class RehearsalReport:
                      "68.3 / 95.4 / 99.7)")
         lines += self.bottom_line()
         return "\n".join(lines)
-
-    def write(self, path) -> None:
-        """.json (`summary()`) or .csv (`rows()`), by suffix; written atomically."""
-        path = pathlib.Path(path)
-        if path.suffix.lower() == ".json":
-            text = json.dumps(self.summary(), indent=2) + "\n"
-        elif path.suffix.lower() == ".csv":
-            text = rows_csv([{"method": self.method, **r} for r in self.rows()])
-        else:
-            raise InputError(f"{path}: unknown format '{path.suffix}' for a rehearsal; use "
-                             ".csv or .json.")
-        write_text_atomic(path, text)
 
 
 def _number(v):
