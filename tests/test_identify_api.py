@@ -115,8 +115,6 @@ def test_the_measurement_conversions_name_what_is_missing(case):
         identify.direct(ref, defo)
     with pytest.raises(InputError, match="the iterative method identifies bushing stiffnesses"):
         identify.iterative(ref, data, lambda m: m.springs.k)
-    with pytest.raises(InputError, match="params= or where=, not both"):
-        identify.direct(ref, data, params, where=lambda m: m.bushings.k_trans)
     # A Params entry the direct method cannot identify is named as such.
     with pytest.raises(InputError, match="where= selected something"):
         identify.direct(ref, data, Params.bushing_centres(ref, ["bushing_A"]))

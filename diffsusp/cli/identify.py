@@ -60,7 +60,7 @@ Method = enum.StrEnum("Method", {v: v for v in ("basic", "min_norm", "tsvd", "ti
 Hold = enum.StrEnum("Hold", {v: v for v in ("zero", "model")})
 Weighting = enum.StrEnum("Weighting", {v: v for v in ("noise", "none")})
 Polish = enum.StrEnum("Polish", {v: v for v in ("auto", "on", "off")})
-Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # identify.LOSSES
+Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # lsq.LOSSES
 
 
 # Options shared by the identify verbs.
@@ -123,15 +123,10 @@ def direct_command(
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        where = None
-        if offsets:
-            def where(m):
-                return (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
-                        m.bushings.offset_rot, m.springs.k, m.springs.free_length)
+        selection = identify.direct_selection(mech, element, offsets=offsets)
         fitted, report = identify.direct(
-            mech, meas, where=where, elements=element or None,
-            axisymmetric=tuple(axisymmetric or ()), method=method, hold=hold,
-            eliminate=eliminate, weighting=weighting, threshold=threshold,
+            mech, meas, selection, axisymmetric=tuple(axisymmetric or ()), method=method,
+            hold=hold, eliminate=eliminate, weighting=weighting, threshold=threshold,
             max_sigma_pct=max_sigma_pct, polish={"on": True, "off": False}.get(polish, "auto"))
         if out is not None:
             report.write(out)
@@ -307,7 +302,7 @@ def iterative_command(
                                 f"{100 * record.max_change:.3g}%")
 
             fitted, report = iterative(
-                mech0, meas.loads, measured, bushings=names,
+                mech0, meas.loads, names, measured=measured,
                 axisymmetric=tuple(axisymmetric or ()), r_min=r_min, resolution=res, eps=eps,
                 max_iterations=max_iterations, callback=step, polish=polish)
         if out is not None:
