@@ -186,7 +186,7 @@ class Fit:
         for i, name in enumerate(self.names):
             lines.append(f"{name:<{width}}  {self.x[i]:>13.6g}  {_num(self.sigma[i], '.3g'):>10}"
                          f"  {_pct(self.sigma_pct[i]):>8}  {_num(self.confidence[i], '.3f'):>6}"
-                         f"  {self._status(i)}")
+                         f"  {self.status(i)}")
         if self.relations:
             lines.append("identifiable combinations:")
             for text, v, s in zip(self.relations, self.relation_values, self.relation_sigma,
@@ -205,7 +205,9 @@ class Fit:
     def __str__(self) -> str:
         return self.table()
 
-    def _status(self, i: int) -> str:
+    def status(self, i: int) -> str:
+        """The status of parameter `i` in words ("" when identified): fixed at its prior, at a
+        bound, not identifiable (with the combination it is in), not essential."""
         name_rel = None
         for text, j in zip(self.relations, np.nonzero(self._nontrivial())[0], strict=True):
             if self.regrouping[j, i] != 0:

@@ -1086,7 +1086,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             # dropped for rank (neither kept nor removed by the search): no effect, or a
             # combination of others
             if not fit.kept[i] and not fit.fixed[i]:
-                not_ident[n] = fit._status(i) or "not identifiable"
+                not_ident[n] = fit.status(i) or "not identifiable"
         for n, why in list(removed.items()):
             if why.startswith("not separable"):
                 removed.pop(n)
