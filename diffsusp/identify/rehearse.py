@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import measure
 from ..errors import ConvergenceError, InputError
+from ..kc.corner import corners_of
 from ..model.mechanism import Loads, Mechanism
 from .direct import direct, direct_batch
 from .geometric import (
@@ -51,13 +52,25 @@ from .geometric import (
 from .iterative import iterative
 from .least_squares import least_squares, least_squares_batch
 from .report import Report, check_data
-from .selection import fit_selection
+from .selection import named_stiffnesses
 
 __all__ = ["GeometryScenario", "ParameterRehearsal", "RehearsalReport", "SuspensionScenario",
-           "rehearse"]
+           "corner_cases", "rehearse"]
 
 METHODS = ("direct", "iterative", "least_squares")
 """The suspension methods `SuspensionScenario` runs."""
+
+
+def corner_cases(mech: Mechanism) -> Loads:
+    """The default load table of a suspension rehearsal: at the corner's contact point, the
+    design load × 0.7, 1, 1.3, each with lateral −2, 0, +2 kN and longitudinal ±1.5 kN (18
+    cases: a K&C rig's combined-load grid)."""
+    corner = corners_of(mech)[""].resolve(mech)
+    f0 = corner.design_load
+    force = [[x, y, z] for z in (0.7 * f0, f0, 1.3 * f0) for y in (-2000.0, 0.0, 2000.0)
+             for x in (-1500.0, 1500.0)]
+    name = mech.load_points.names[corner.contact_point]
+    return mech.loads(forces={name: force})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,10 +234,11 @@ class SuspensionScenario:
     stiffness §1.12, §2.8), identified from the start model.
 
     **Fields:** `method`; `mech` the user's start model; `loads` the load table (leading case
-    axis); `params` the `Params` whose truths are drawn and identified (default: every bushing
-    stiffness that is not 0 in the model, `selection.fit_selection`); `noise` the landmark σ
-    (mm, > 0); `spread` (low, high): each truth is the start × a log-uniform factor in it
-    (default 0.5–2); `per_part` landmarks per part; `layout_seed`."""
+    axis); `params` the `Params` whose truths are drawn and identified, or the names of
+    stiffnesses among the default ('bushing_A.Ktx', `selection.named_stiffnesses`); default:
+    every bushing stiffness that is not 0 in the model (`selection.fit_selection`); `noise`
+    the landmark σ (mm, > 0); `spread` (low, high): each truth is the start × a log-uniform
+    factor in it (default 0.5–2); `per_part` landmarks per part; `layout_seed`."""
 
     method: str
     mech: Mechanism
@@ -248,8 +262,8 @@ class SuspensionScenario:
         if not (0 < lo <= hi and math.isfinite(hi)) or lo == hi:
             raise InputError(f"the spread must be (low, high) factors with 0 < low < high; "
                              f"got {self.spread!r}: a spread of 0 draws the start every time.")
-        if self.params is None:
-            self.params = fit_selection(self.mech)[0]
+        if self.params is None or isinstance(self.params, list | tuple):
+            self.params = named_stiffnesses(self.mech, self.params)
         if self.loads.n_cases is None:
             raise InputError("the rehearsal needs a table of load cases (leading case axis).")
 
