@@ -178,7 +178,7 @@ def correct_command(
             raise fail(f"--case '{case}' is not a case of {measurements.name} (cases: "
                        f"{', '.join(meas.cases)}).", EXIT_BAD_INPUT)
         corrected, report = geometric.correct_geometry(
-            mech, meas, case=meas.cases.index(case), elements=element or None, tol=tol,
+            mech, meas, element or None, case=meas.cases.index(case), tol=tol,
             max_iterations=max_iterations)
         if write_model is not None:
             write_model_file(corrected, write_model, model_file)

@@ -18,7 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import InputError, ModelFileError
-from .report import Consistency, IdentificationReport
+from .report import Consistency, IdentificationReport, sigma_pct
 
 JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
                "compliant_bushing")
@@ -193,8 +193,7 @@ class CoordinateRows:
 
     @property
     def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
+        return sigma_pct(self.sigmas, self.estimates)
 
     @property
     def estimate_units(self) -> tuple[str, ...]:

@@ -45,6 +45,7 @@ from .report import (
     check_consistency,
     check_data,
     chi2_quantile,
+    sigma_pct,
     sigma_pct_at_start,
 )
 from .selection import DEG
@@ -175,8 +176,7 @@ class IterativeReport(IdentificationReport):
 
     @property
     def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
+        return sigma_pct(self.sigmas, self.estimates)
 
     @property
     def reasons(self) -> tuple[str, ...]:

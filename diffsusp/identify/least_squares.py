@@ -168,9 +168,11 @@ def _quiet(**kwargs):
 
 
 class _Damping(eqx.Module):
-    """The state of `_TrustRegion`: the step size 1/λ of the damped Newton descent."""
+    """The state of `_TrustRegion`: the step size 1/λ of the damped Newton descent, and
+    whether its last step accepted the point evaluated."""
 
     step_size: Array
+    accepted: Array
 
 
 class _TrustRegion(optx.ClassicalTrustRegion):
@@ -185,16 +187,16 @@ class _TrustRegion(optx.ClassicalTrustRegion):
 
     def init(self, y, f_info_struct) -> _Damping:
         del y, f_info_struct
-        return _Damping(step_size=jnp.array(1.0))
+        return _Damping(step_size=jnp.array(1.0), accepted=jnp.array(False))
 
     def step(self, first_step, y, y_eval, f_info, f_eval_info, state: _Damping):
         jacobian = f_eval_info.jac.as_matrix()
         lam0 = INITIAL_DAMPING * jnp.max(jnp.sum(jacobian ** 2, axis=0))
         start = _Damping(step_size=jnp.where(first_step, 1.0 / jnp.maximum(lam0, 1e-300),
-                                             state.step_size))
+                                             state.step_size), accepted=state.accepted)
         step_size, accept, result, _ = super().step(first_step, y, y_eval, f_info,
                                                     f_eval_info, start)
-        return step_size, accept, result, _Damping(step_size=step_size)
+        return step_size, accept, result, _Damping(step_size=step_size, accepted=accept)
 
 
 class _LevenbergMarquardt(optx.AbstractGaussNewton):
@@ -235,7 +237,8 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
     args = (residual, jacobian, state.y_eval)
     new_u, new_state, _ = solver.step(_model, u, args, {}, state, _TAGS)
     _, result = solver.terminate(_model, new_u, args, {}, new_state, _TAGS)
-    accepted = new_state.num_accepted_steps > state.num_accepted_steps
+    damping = new_state.search_state  # `_TrustRegion`'s own state
+    accepted = damping.accepted
     # The stop does not look at the step in u (optimistix's Cauchy test): along a direction
     # the data barely see, steps stay large long after the fit has settled, and a parameter
     # there may wander. It asks what the data can still give: at an accepted point,
@@ -254,7 +257,7 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
     new_u, new_dyn = jax.tree.map(lambda n, o: jnp.where(active, n, o), (new_u, new_dyn),
                                   (u, dyn_state))
     record = dict(accepted=active & accepted,
-                  step_size=new_state.search_state.step_size, terminate=terminate,
+                  step_size=damping.step_size, terminate=terminate,
                   failed=result != optx.RESULTS.successful, reason=reason,
                   predicted=predicted)
     return new_u, new_dyn, record

@@ -265,6 +265,13 @@ AT_START = "the start values"
 """Where the suspension identifications judge σ % (`judged_at`): see `sigma_pct_at_start`."""
 
 
+def sigma_pct(sigma, estimate) -> np.ndarray:
+    """σ % at the estimate: 100·σ/|estimate| (inf where the estimate is 0, NaN where both
+    are)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return 100.0 * np.asarray(sigma, dtype=float) / np.abs(np.asarray(estimate, dtype=float))
+
+
 def sigma_pct_at_start(sigma, start) -> np.ndarray:
     """The one rule for "determined" of `direct`, `iterative` and `least_squares`:
     σ % judged at the start values, 100·σ/|start|, where σ is what the experiment gives at the
@@ -733,4 +740,4 @@ def html_text(report: IdentificationReport, figures: bool = True) -> str:
 __all__ = ["CONSISTENCY_ALPHA", "STATUSES", "Consistency", "IdentificationReport",
            "MeasurementResiduals", "Report", "RowsReport", "check_consistency", "check_data",
            "chi2_quantile", "consistency_from_residuals", "csv_text", "format_table",
-           "html_text", "plain", "rows_csv"]
+           "html_text", "plain", "rows_csv", "sigma_pct"]
