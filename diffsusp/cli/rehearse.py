@@ -147,7 +147,6 @@ def _mf_scenario(path: str, noise, spread, params):
 
 
 def _geometry_scenario(model: str, noise, spread, params, cases):
-    from ..identify.geometric import joints_from_model
     from ..identify.rehearse import GeometryScenario
     from .common import load_model_file
 
@@ -160,17 +159,8 @@ def _geometry_scenario(model: str, noise, spread, params, cases):
     if len(mm) != 1 or not mm[0] > 0:
         raise fail(f"--spread must be one displacement > 0 (mm) of the joint hardpoints; got "
                    f"{spread!r}.", EXIT_BAD_INPUT)
-    joints = joints_from_model(mech, mech.parts)[0]
-    if params:
-        wanted = [n.strip() for n in params.split(",") if n.strip()]
-        known = [j.name for j in joints]
-        unknown = [n for n in wanted if n not in known]
-        if unknown or not wanted:
-            raise fail(f"unknown parameter(s) {', '.join(unknown) or repr(params)}: --params "
-                       f"names the joints to locate; the model's: {', '.join(known)}.",
-                       EXIT_BAD_INPUT)
-        joints = tuple(j for j in joints if j.name in wanted)
-    return GeometryScenario(mech, _loads(mech, cases), joints, noise=sigma[0], spread=mm[0])
+    names = [n.strip() for n in params.split(",")] if params else None
+    return GeometryScenario(mech, _loads(mech, cases), names, noise=sigma[0], spread=mm[0])
 
 
 def _loads(mech, cases):

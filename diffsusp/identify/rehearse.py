@@ -328,6 +328,21 @@ def _stack(items: Sequence):
                        tuple(jnp.stack([getattr(it, f) for it in items]) for f in fields))
 
 
+def _joints_named(mech: Mechanism, names: Sequence[str] | None) -> tuple:
+    """The joints `joints_from_model` finds in `mech` (every part), those named in `names` if
+    given. Raises `InputError` for a name that is not one of them."""
+    joints = joints_from_model(mech, mech.parts)[0]
+    if names is None:
+        return joints
+    wanted = [n.strip() for n in names if n.strip()]
+    known = [j.name for j in joints]
+    unknown = [n for n in wanted if n not in known]
+    if unknown or not wanted:
+        raise InputError(f"unknown parameter(s) {', '.join(unknown) or repr(names)}: params "
+                         f"names the joints to locate; the model's: {', '.join(known)}.")
+    return tuple(j for j in joints if j.name in wanted)
+
+
 @dataclasses.dataclass
 class GeometryScenario:
     """The rehearsal of the geometric location (`identify.geometric.locate_joints`, spec
@@ -340,8 +355,9 @@ class GeometryScenario:
     `'<joint>.axis_y'`…); a truth's value of each is the truth model's own (its hardpoint; a
     revolute's line cut at the prior's plane and its axis).
 
-    **Fields:** `mech` the user's model; `loads` the load table; `joints` the joint list
-    (default `joints_from_model` over every part); `noise` landmark σ (mm, > 0); `spread`
+    **Fields:** `mech` the user's model; `loads` the load table; `params` the joints to
+    locate, `GeometricJoint`s or their names among those `joints_from_model` finds over every
+    part (default: all of them); `noise` landmark σ (mm, > 0); `spread`
     (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as `locate_joints`.
 
     `draw` keeps the hardpoint displacements it drew for the next `identify` (the truths it
@@ -349,7 +365,7 @@ class GeometryScenario:
 
     mech: Mechanism
     loads: Loads
-    joints: tuple = None
+    params: tuple = None
     noise: float = 0.05
     spread: float = 5.0
     per_part: int = 4
@@ -371,21 +387,21 @@ class GeometryScenario:
                              "every time.")
         if self.loads.n_cases is None:
             raise InputError("the rehearsal needs a table of load cases (leading case axis).")
-        if self.joints is None:
-            self.joints = joints_from_model(self.mech, self.mech.parts)[0]
-        self.joints = tuple(self.joints)
-        if not self.joints:
+        if self.params is None or (self.params and all(isinstance(j, str) for j in self.params)):
+            self.params = _joints_named(self.mech, self.params)
+        self.params = tuple(self.params)
+        if not self.params:
             raise InputError(f"model '{self.mech.name}' has no joint the geometric location "
                              "can locate.")
         parts = tuple(p for p in self.mech.parts
-                      if any(p in j.parts for j in self.joints))
+                      if any(p in j.parts for j in self.params))
         self.layout = measure.place_landmarks(self.mech, self.per_part, parts=parts,
                                               seed=self.layout_seed)
         nominal = self._locate(measure.synthesize(self.mech, self.loads, layout=self.layout))
         self._names = nominal.names
         # the cut coordinate / left-out axis component of each joint, as the nominal reports
         self._rows = {j.name: self._row_map(j, est) for j, est in
-                      zip(self.joints, nominal.joints, strict=True)}
+                      zip(self.params, nominal.joints, strict=True)}
         self._drawn = None
 
     @staticmethod
@@ -402,14 +418,14 @@ class GeometryScenario:
         return tuple(self._names)
 
     def _locate(self, meas):
-        return locate_joints(meas, self.joints, landmark_sigma=float(self.noise),
+        return locate_joints(meas, self.params, landmark_sigma=float(self.noise),
                              max_sigma=self.max_sigma, min_snr=self.min_snr, model=self.mech)
 
     def truth_values(self, mech) -> np.ndarray:
         """The coordinates (in `names` order) of the joints of model `mech` (NaN where the
         model has no element for a joint)."""
         values = {}
-        for j in self.joints:
+        for j in self.params:
             geo = model_geometry(mech, j)
             if geo is None:
                 continue
@@ -420,9 +436,9 @@ class GeometryScenario:
         return np.array([values.get(n, np.nan) for n in self._names])
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.joints), 3))
+        offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.params), 3))
         self._drawn = offsets
-        return np.stack([self.truth_values(displace_joints(self.mech, self.joints, o))
+        return np.stack([self.truth_values(displace_joints(self.mech, self.params, o))
                          for o in offsets])
 
     def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
@@ -431,7 +447,7 @@ class GeometryScenario:
         noise = measure.GaussianNoise(landmarks=float(self.noise))
         reports = []
         for offsets in self._drawn:
-            truth = displace_joints(self.mech, self.joints, offsets)
+            truth = displace_joints(self.mech, self.params, offsets)
             key = jax.random.PRNGKey(int(rng.integers(2**31)))
             try:
                 meas = measure.synthesize(truth, self.loads, layout=self.layout, noise=noise,
