@@ -164,11 +164,11 @@ def _geometry_scenario(model: str, noise, spread, params, cases):
 
 
 def _loads(mech, cases):
-    """The load table `--cases` names: the corner's combined-load grid or the thesis's."""
-    from ..identify.rehearse import corner_cases
+    """The load table `--cases` names: the thesis's, or None: the scenario's default (the
+    corner's combined-load grid, `identify.rehearse.corner_cases`)."""
     from ..kc.loadcases import thesis_load_cases
 
-    return thesis_load_cases(mech) if cases == Cases.thesis else corner_cases(mech)
+    return thesis_load_cases(mech) if cases == Cases.thesis else None
 
 
 def _onboard_scenario(model: str, noise, spread, params, delay, duration, n):

@@ -234,15 +234,16 @@ class SuspensionScenario:
     stiffness §1.12, §2.8), identified from the start model.
 
     **Fields:** `method`; `mech` the user's start model; `loads` the load table (leading case
-    axis); `params` the `Params` whose truths are drawn and identified, or the names of
-    stiffnesses among the default ('bushing_A.Ktx', `selection.named_stiffnesses`); default:
-    every bushing stiffness that is not 0 in the model (`selection.fit_selection`); `noise`
-    the landmark σ (mm, > 0); `spread` (low, high): each truth is the start × a log-uniform
-    factor in it (default 0.5–2); `per_part` landmarks per part; `layout_seed`."""
+    axis; default `corner_cases`); `params` the `Params` whose truths are drawn and
+    identified, or the names of stiffnesses among the default ('bushing_A.Ktx',
+    `selection.named_stiffnesses`); default: every bushing stiffness that is not 0 in the
+    model (`selection.fit_selection`); `noise` the landmark σ (mm, > 0); `spread` (low,
+    high): each truth is the start × a log-uniform factor in it (default 0.5–2); `per_part`
+    landmarks per part; `layout_seed`."""
 
     method: str
     mech: Mechanism
-    loads: Loads
+    loads: Loads | None = None
     params: object = None
     noise: float = 0.05
     spread: tuple[float, float] = (0.5, 2.0)
@@ -264,6 +265,8 @@ class SuspensionScenario:
                              f"got {self.spread!r}: a spread of 0 draws the start every time.")
         if self.params is None or isinstance(self.params, list | tuple):
             self.params = named_stiffnesses(self.mech, self.params)
+        if self.loads is None:
+            self.loads = corner_cases(self.mech)
         if self.loads.n_cases is None:
             raise InputError("the rehearsal needs a table of load cases (leading case axis).")
 
@@ -355,16 +358,17 @@ class GeometryScenario:
     `'<joint>.axis_y'`…); a truth's value of each is the truth model's own (its hardpoint; a
     revolute's line cut at the prior's plane and its axis).
 
-    **Fields:** `mech` the user's model; `loads` the load table; `params` the joints to
-    locate, `GeometricJoint`s or their names among those `joints_from_model` finds over every
-    part (default: all of them); `noise` landmark σ (mm, > 0); `spread`
-    (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as `locate_joints`.
+    **Fields:** `mech` the user's model; `loads` the load table (default `corner_cases`);
+    `params` the joints to locate, `GeometricJoint`s or their names among those
+    `joints_from_model` finds over every part (default: all of them); `noise` landmark σ (mm,
+    > 0); `spread` (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as
+    `locate_joints`.
 
     `draw` keeps the hardpoint displacements it drew for the next `identify` (the truths it
     returns are the coordinates, not the displacements)."""
 
     mech: Mechanism
-    loads: Loads
+    loads: Loads | None = None
     params: tuple = None
     noise: float = 0.05
     spread: float = 5.0
@@ -385,10 +389,12 @@ class GeometryScenario:
             raise InputError(f"the spread must be a positive displacement (mm) of the "
                              f"hardpoints; got {self.spread!r}: a spread of 0 draws the start "
                              "every time.")
-        if self.loads.n_cases is None:
-            raise InputError("the rehearsal needs a table of load cases (leading case axis).")
         if self.params is None or (self.params and all(isinstance(j, str) for j in self.params)):
             self.params = _joints_named(self.mech, self.params)
+        if self.loads is None:
+            self.loads = corner_cases(self.mech)
+        if self.loads.n_cases is None:
+            raise InputError("the rehearsal needs a table of load cases (leading case axis).")
         self.params = tuple(self.params)
         if not self.params:
             raise InputError(f"model '{self.mech.name}' has no joint the geometric location "
