@@ -86,12 +86,12 @@ def main():
     args = parser.parse_args()
     start, loads, measured, idx = problem()
     t0 = time.perf_counter()
-    _, report = iterative(start, loads, measured, bushings=NAMES, resolution=RESOLUTION)
+    _, report = iterative(start, loads, NAMES, measured=measured, resolution=RESOLUTION)
     first = time.perf_counter() - t0
     repeats = 5
     t0 = time.perf_counter()
     for _ in range(repeats):
-        _, report = iterative(start, loads, measured, bushings=NAMES, resolution=RESOLUTION)
+        _, report = iterative(start, loads, NAMES, measured=measured, resolution=RESOLUTION)
     run = (time.perf_counter() - t0) / repeats
     row = dict(problem="R5 pseudo_mcpherson, 13 cases, A and B", iterations=report.iterations,
                first_call_s=first, run_s=run, per_iteration_ms=1e3 * run / report.iterations)

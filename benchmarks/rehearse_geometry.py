@@ -2,7 +2,7 @@
 
 `diffsusp.identify.rehearse` with `GeometryScenario`: N random truths (default 200), the model's
 located joint hardpoints (both markers of each element) displaced by a uniform ±5 mm per
-coordinate, the corner's combined-load grid (`diffsusp.cli.rehearse.corner_cases`: design load
+coordinate, the corner's combined-load grid (`diffsusp.identify.rehearse.corner_cases`: design load
 × 0.7/1/1.3, lateral −2/0/+2 kN, longitudinal ±1.5 kN, 18 cases) solved on each truth, four
 landmarks per part with σ = 0.05 mm, the joints located with the nominal model as the start
 (revolute priors, compliance bias). Two scenarios:
@@ -33,8 +33,7 @@ from _common import RESULTS
 jax.config.update("jax_enable_x64", True)
 
 from diffsusp import load_model  # noqa: E402
-from diffsusp.cli.rehearse import corner_cases  # noqa: E402
-from diffsusp.identify.rehearse import GeometryScenario, rehearse  # noqa: E402
+from diffsusp.identify.rehearse import GeometryScenario, corner_cases, rehearse  # noqa: E402
 from diffsusp.models import double_wishbone, pseudo_mcpherson  # noqa: E402
 
 CHRONO = pathlib.Path(__file__).parents[1] / "tests" / "data" / "DoubleWishbone_bushings.json"

@@ -109,7 +109,7 @@ for b, name in enumerate(A_B):
                                    (*spread[b, :3], *np.degrees(spread[b, 3:]))))
 
 # %%
-iter_mech, iter_report = iterative(start, loads, measured_deformations, bushings=A_B,
+iter_mech, iter_report = iterative(start, loads, A_B, measured=measured_deformations,
                                    resolution=(1e-3, 0.01 * DEG))
 print(f"{'iter':>4} {'max rel. change':>16} {'failed cases':>13} {'accepted':>9} "
       f"{'A.Ktx':>10} {'B.Ktx':>10}")
@@ -183,7 +183,7 @@ print("σ % of the identifiable ones:",
 
 # %%
 try:
-    identify.direct(start, measured3, elements=A_B)
+    identify.direct(start, measured3, A_B)
 except diffsusp.InputError as err:
     print("InputError:", err)
 
@@ -198,7 +198,7 @@ except diffsusp.InputError as err:
 # (`hold="model"`), as the iterative method keeps its start values.
 
 # %%
-direct_mech, direct_report = identify.direct(start, noisy, elements=A_B, hold="model")
+direct_mech, direct_report = identify.direct(start, noisy, A_B, hold="model")
 print("measured parts (direct only):", noisy.parts)
 print(direct_report.table())
 
@@ -211,7 +211,7 @@ print(direct_report.table())
 # physical, and not written to the model):
 
 # %%
-_, eliminated = identify.direct(start, noisy, elements=A_B, hold="model", eliminate=True)
+_, eliminated = identify.direct(start, noisy, A_B, hold="model", eliminate=True)
 print("with eliminate=True, identified:", ", ".join(
     f"{n} = {v:.5g} ({s:.2g} %)" for n, v, s, ok in zip(
         eliminated.names, eliminated.values, eliminated.sigma_pct, eliminated.identified,

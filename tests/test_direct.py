@@ -102,7 +102,7 @@ def test_r1_offsets_and_preloads_are_identified(bushing_cases):
     meas = measure.synthesize(mech, loads)
     where = lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,  # noqa: E731
                        m.bushings.offset_rot)
-    fitted, report = identify.direct(base, meas, where=where)
+    fitted, report = identify.direct(base, meas, where)
     assert report.names[:6] == ("bush.Ktx", "bush.Kty", "bush.Ktz", "bush.Krx", "bush.Kry",
                                 "bush.Krz")
     assert report.names[6:] == ("bush.Fx0", "bush.Fy0", "bush.Fz0", "bush.Mx0", "bush.My0",
@@ -139,7 +139,7 @@ def test_polish_returns_the_model_it_judges(bushing_cases):
                               jax.random.PRNGKey(1209))
     where = lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,  # noqa: E731
                        m.bushings.offset_rot)
-    fitted, report = identify.direct(mech, noisy, where=where, polish=True)
+    fitted, report = identify.direct(mech, noisy, where, polish=True)
     # The consistency is the returned model's (the polish's values where it determines them).
     assert report.polished is not None
     again = check_consistency(fitted, check_data(mech, noisy),
@@ -174,7 +174,7 @@ def test_polish_returns_the_model_it_judges(bushing_cases):
     assert "held at the model's value" in report.table()
     # Verdicts that agree: the same linear estimate with a σ claimed 10× below the noise is
     # inconsistent with the data, and no status (table, rows) then says "identified".
-    _, lie = identify.direct(mech, dataclasses.replace(noisy, sigma=0.001), where=where,
+    _, lie = identify.direct(mech, dataclasses.replace(noisy, sigma=0.001), where,
                              polish=False)
     assert lie.consistent is False and lie.determined.all()
     assert set(lie.status) == {identify.direct_report.INCONSISTENT_STATUS}
@@ -363,7 +363,7 @@ def test_equations_match_an_independent_construction():
     meas = measure.from_poses(mech.parts, rot, trans, loads)
     # Every element named: the directions at 0 in the model (left out by default) included.
     system = identify.direct_system(mech, meas,
-                                    elements=[*mech.bushings.names, *mech.springs.names])
+                                    [*mech.bushings.names, *mech.springs.names])
     r = system.rows_per_case
     assert r == 24 - 12 and system.W.shape == (n_cases * r, 20)
     ours = np.column_stack([system.W, system.y]).reshape(n_cases, r, -1)
@@ -384,9 +384,9 @@ def test_bad_input(coupler):
     with pytest.raises(InputError, match=r"no pose for part\(s\) 'coupler'.*fix its pose"):
         identify.direct(mech, missing)
     with pytest.raises(InputError, match="where= selected something"):
-        identify.direct(mech, meas, where=lambda m: m.markers.position)
-    with pytest.raises(InputError, match="elements= names 'bushing_9'"):
-        identify.direct(mech, meas, elements=("bushing_9",))
+        identify.direct(mech, meas, lambda m: m.markers.position)
+    with pytest.raises(InputError, match="params names 'bushing_9'"):
+        identify.direct(mech, meas, ("bushing_9",))
     with pytest.raises(InputError, match="method must be"):
         identify.direct(mech, meas, method="qr")
     other = isolated_bushing()

@@ -391,7 +391,7 @@ def test_correction_bad_input(solved, data):
     with pytest.raises(InputError, match="case 5 is out of range"):
         correct_geometry(truth, meas, case=5)
     with pytest.raises(InputError, match="element 'nope' is not a joint or bushing"):
-        correct_geometry(truth, meas, elements=["nope"])
+        correct_geometry(truth, meas, ["nope"])
 
 
 def test_design_of_cases(solved, data):

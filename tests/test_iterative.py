@@ -58,7 +58,7 @@ def r5():
                          ref.bushings.k_rot.at[idx].set(1e4 / DEG)))
     # The rig's measurement resolves 1 µm and 0.01°: below that a direction carries no
     # information (spec §2.8, §2.10).
-    fitted, report = iterative(start, loads, measured, bushings=NAMES,
+    fitted, report = iterative(start, loads, NAMES, measured=measured,
                                resolution=(1e-3, 0.01 * DEG))
     return ref, start, loads, fitted, report, measured
 
@@ -120,15 +120,15 @@ def test_bad_measurements_are_reported(r5):
     ref, start, loads, _, _, _ = r5
     good = np.zeros((13, 2, 6))
     with pytest.raises(diffsusp.InputError, match="shape"):
-        iterative(start, loads, good[:5], bushings=NAMES)
+        iterative(start, loads, NAMES, measured=good[:5])
     bad = good.copy()
     bad[4, 1, 2] = np.nan
     with pytest.raises(diffsusp.InputError, match="bushing_B.*Ktz.*case 4"):
-        iterative(start, loads, bad, bushings=NAMES)
+        iterative(start, loads, NAMES, measured=bad)
     with pytest.raises(diffsusp.InputError, match="missing"):
-        iterative(start, loads, {"bushing_A": good[:, 0]}, bushings=NAMES)
+        iterative(start, loads, NAMES, measured={"bushing_A": good[:, 0]})
     with pytest.raises(diffsusp.InputError, match="axisymmetric"):
-        iterative(start, loads, good, bushings=NAMES, axisymmetric=("bushing_F",))
+        iterative(start, loads, NAMES, measured=good, axisymmetric=("bushing_F",))
 
 
 def test_cli_from_a_landmark_table_without_the_strut(r5, tmp_path):

@@ -138,10 +138,10 @@ def test_table_json_agree(feda, tmp_path):
     # the shared writers render the same statuses
     import csv as csv_mod
 
-    from diffsusp.identify.report import format_table, write_report
+    from diffsusp.identify.report import format_table
 
-    write_report(rep, tmp_path / "r.csv")
-    write_report(rep, tmp_path / "r.html")
+    rep.write(tmp_path / "r.csv")
+    rep.write(tmp_path / "r.html")
     with open(tmp_path / "r.csv", newline="") as f:
         rows = [r for r in csv_mod.DictReader(f) if r.get("parameter") in rep.names]
     assert [r["status"] for r in rows] == list(rep.status_list)

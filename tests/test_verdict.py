@@ -28,7 +28,6 @@ from diffsusp.identify.report import (
     IdentificationReport,
     consistency_from_residuals,
     format_table,
-    write_report,
 )
 from diffsusp.kc.corner import equilibrium_load
 
@@ -136,7 +135,7 @@ def test_statuses_writers_and_an_inconsistent_fit(tmp_path):
     assert max(len(line) for line in text.splitlines()) <= 80
     assert "[1] σ% 75 > 10 at the start values" in text
     for suffix in ("csv", "json", "html", "txt"):
-        write_report(toy, tmp_path / f"r.{suffix}")
+        toy.write(tmp_path / f"r.{suffix}")
     rows = list(csv.DictReader((tmp_path / "r.csv").read_text(encoding="utf-8").splitlines()))
     assert [r["status"] for r in rows] == list(toy.statuses)
     data = json.loads((tmp_path / "r.json").read_text())
@@ -154,4 +153,4 @@ def test_statuses_writers_and_an_inconsistent_fit(tmp_path):
     assert not any(r["identified"] for r in bad.rows())
     assert "INCONSISTENT" in bad.fit_verdict
     with pytest.raises(ValueError, match="unknown report format"):
-        write_report(toy, tmp_path / "r.xlsx")
+        toy.write(tmp_path / "r.xlsx")

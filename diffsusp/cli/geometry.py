@@ -10,7 +10,7 @@ geometric correction (spec geometry §3.8, chapter 2).
   one status: identified / not determined (why) / not seen; the registration's verdict,
   warnings for swapped or moved landmarks; the model's compliance bias carried in σ unless
   `--no-compliance`) goes to the terminal (or `--json`), optionally to `--out` (.csv, .json,
-  .html, .txt: `identify.report.write_report`, the same rows), the former one-row-per-joint
+  .html, .txt: `IdentificationReport.write`, the same rows), the former one-row-per-joint
   table to `--joint-table`, the model with the identified joints to `--write-model`, and a
   figure of the located joints against the model to `--figures`.
 - `correct`: the model's joint frames moved so that its equilibrium under the loads of case
@@ -92,7 +92,7 @@ def geometry_command(
         check_number(value, option, positive=True, unit=unit)  # nan, inf, <= 0: exit 2
     enable_x64()
     from ..identify import geometric
-    from ..identify.report import format_table, write_report
+    from ..identify.report import format_table
     from ..measure import read_measurements
 
     with cli_errors():
@@ -112,7 +112,7 @@ def geometry_command(
                                          max_sigma=max_sigma, min_snr=min_snr,
                                          model=mech if compliance else None)
         if out is not None:
-            write_report(report, out)
+            report.write(out)
         if joint_table is not None:
             geometric.write_joints(report, joint_table)
         if write_model is not None:
@@ -167,7 +167,7 @@ def correct_command(
         raise fail("--max-iterations must be at least 1.", EXIT_BAD_INPUT)
     enable_x64()
     from ..identify import geometric
-    from ..identify.report import format_table, write_report
+    from ..identify.report import format_table
     from ..measure import read_measurements
 
     with cli_errors():
@@ -178,12 +178,12 @@ def correct_command(
             raise fail(f"--case '{case}' is not a case of {measurements.name} (cases: "
                        f"{', '.join(meas.cases)}).", EXIT_BAD_INPUT)
         corrected, report = geometric.correct_geometry(
-            mech, meas, case=meas.cases.index(case), elements=element or None, tol=tol,
+            mech, meas, element or None, case=meas.cases.index(case), tol=tol,
             max_iterations=max_iterations)
         if write_model is not None:
             write_model_file(corrected, write_model, model_file)
         if out is not None:
-            write_report(report, out)
+            report.write(out)
     if json_output:
         print_json(report.summary() | dict(
             case_errors=dict(zip(meas.cases, report.case_errors, strict=True))))

@@ -60,7 +60,7 @@ Method = enum.StrEnum("Method", {v: v for v in ("basic", "min_norm", "tsvd", "ti
 Hold = enum.StrEnum("Hold", {v: v for v in ("zero", "model")})
 Weighting = enum.StrEnum("Weighting", {v: v for v in ("noise", "none")})
 Polish = enum.StrEnum("Polish", {v: v for v in ("auto", "on", "off")})
-Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # identify.LOSSES
+Loss = enum.StrEnum("Loss", {v: v for v in ("linear", "huber", "cauchy")})  # lsq.LOSSES
 
 
 # Options shared by the identify verbs.
@@ -123,18 +123,13 @@ def direct_command(
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        where = None
-        if offsets:
-            def where(m):
-                return (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
-                        m.bushings.offset_rot, m.springs.k, m.springs.free_length)
+        selection = identify.direct_selection(mech, element, offsets=offsets)
         fitted, report = identify.direct(
-            mech, meas, where=where, elements=element or None,
-            axisymmetric=tuple(axisymmetric or ()), method=method, hold=hold,
-            eliminate=eliminate, weighting=weighting, threshold=threshold,
+            mech, meas, selection, axisymmetric=tuple(axisymmetric or ()), method=method,
+            hold=hold, eliminate=eliminate, weighting=weighting, threshold=threshold,
             max_sigma_pct=max_sigma_pct, polish={"on": True, "off": False}.get(polish, "auto"))
         if out is not None:
-            _write_report(report, out)
+            report.write(out)
         if write_model is not None:
             write_model_file(fitted, write_model, model_file)
     if json_output:
@@ -142,26 +137,6 @@ def direct_command(
     else:
         _print(report, mech, measurements, out, write_model)
     _exit_if_unsolvable(report)
-
-
-def _write_report(report, path: Path, rows=None):
-    """The report to `path` by its suffix, every format from the one report object: .csv the
-    method's rows (`rows`, default `report.rows()`: thesis units, each with the report's status
-    and reason), .json `to_dict()` (with the same rows under "parameters"), .html the one-page
-    report (`identify.report.html_text`). Written under a temporary name, then renamed."""
-    import json
-
-    from ..identify.report import html_text, rows_csv
-    from ..io.files import write_text_atomic
-
-    suffix = path.suffix.lower()
-    if suffix == ".json":
-        text = json.dumps(report.to_dict(), indent=2) + "\n"
-    elif suffix in (".html", ".htm"):
-        text = html_text(report)
-    else:
-        text = rows_csv(report.rows() if rows is None else rows)
-    write_text_atomic(path, text)
 
 
 def _exit_if_unsolvable(report):
@@ -216,9 +191,6 @@ def _print(report, mech, measurements, out, write_model):
 # ----------------------------------------------------------------------------- shared
 
 
-_DEG = 3.141592653589793 / 180.0
-
-
 def _save_figures(figures: dict, folder: Path) -> list:
     """Save each figure as folder/<name>.png and .svg; the paths written."""
     from .. import plot
@@ -230,6 +202,7 @@ def _save_figures(figures: dict, folder: Path) -> list:
 def _save_on_interrupt(out, rows, what):
     """On SIGINT / SIGTERM, write the last estimate (`rows()`: the report rows of the last
     accepted step, each with status 'interrupted') to `out` before exiting with 130."""
+    from ..identify.report import RowsReport
     from .common import EXIT_INTERRUPTED, Terminated, interruptible
 
     try:
@@ -240,16 +213,7 @@ def _save_on_interrupt(out, rows, what):
         data = rows()
         where = ""
         if out is not None and data:
-            if out.suffix.lower() == ".json":
-                import json
-
-                out.write_text(json.dumps({"interrupted": True, "rows": data}, indent=2) + "\n",
-                               encoding="utf-8")
-            else:
-                from ..identify.report import rows_csv
-                from ..io.files import write_text_atomic
-
-                write_text_atomic(out, rows_csv(data))
+            RowsReport(tuple(data), {"interrupted": True}).write(out)
             where = f"; the estimate of the last {what} is in {out} (status 'interrupted')"
         elif not data:
             where = f"; no {what} had finished"
@@ -309,11 +273,13 @@ def iterative_command(
         except ValueError:
             raise fail(f"--resolution must be 'mm,deg' or 'none'; got '{resolution}'.",
                        EXIT_BAD_INPUT) from None
-        res = (mm, deg * _DEG)
+        res = (mm, deg)
     enable_x64()
     from .. import measure
     from ..identify.iterative import iterative
-    from ..identify.selection import measured_bushings, with_start
+    from ..identify.selection import DEG, measured_bushings, with_start
+
+    res = None if res is None else (res[0], res[1] * DEG)  # deg → rad
     from ..identify.tables import interrupted_iterative_rows, iterative_figures
 
     with cli_errors():
@@ -336,13 +302,11 @@ def iterative_command(
                                 f"{100 * record.max_change:.3g}%")
 
             fitted, report = iterative(
-                mech0, meas.loads, measured, bushings=names,
+                mech0, meas.loads, names, measured=measured,
                 axisymmetric=tuple(axisymmetric or ()), r_min=r_min, resolution=res, eps=eps,
                 max_iterations=max_iterations, callback=step, polish=polish)
         if out is not None:
-            from ..identify.tables import iterative_rows
-
-            _write_report(report, out, iterative_rows(report))
+            report.write(out)
         if write_model is not None:
             write_model_file(fitted, write_model, model_file)
         paths = []
@@ -423,8 +387,6 @@ def fit_command(
     travel of each case, σ per channel; format in `diffsusp.measure.rig`) is fitted as rig
     curves: the model on a K&C rig, the tyre force at the ground contact point.
     """
-    from ..identify.tables import fit_rows
-
     check_identify_outputs(out, write_model, figures)
     loss = Loss(loss).value
     if not (sigma > 0 and sigma_rotation > 0):
@@ -432,7 +394,7 @@ def fit_command(
     enable_x64()
     from .. import measure
     from ..identify.least_squares import least_squares, returned_values
-    from ..identify.selection import fit_selection
+    from ..identify.selection import DEG, fit_selection
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements
     from ..measure.rig import is_rig_table, read_rig_table, rig_measurement
@@ -452,7 +414,7 @@ def fit_command(
                              "or pose table (use --sigma).")
         else:
             meas = measure.read_measurements(measurements, mech, reorder=reorder)
-            data = from_measurements(meas, sigma, sigma_rotation * _DEG)
+            data = from_measurements(meas, sigma, sigma_rotation * DEG)
         params, notes = fit_selection(fit_mech, bushing, axes, centres=centres,
                                       springs=springs, start=start)
         notes = [*rig_notes, *notes]
@@ -473,7 +435,7 @@ def fit_command(
         if fit_mech is not mech:  # the rig's model → the user's, with the same values
             fitted = params.apply(mech, returned_values(report))
         if out is not None:
-            _write_report(report, out, fit_rows(report))
+            report.write(out)
         if write_model is not None:
             write_model_file(fitted, write_model, model_file)
         paths = []
@@ -504,9 +466,7 @@ def _print_fit(report, mech, measurements, meas, out, write_model, paths, notes=
     for col in ("parameter", "start", "estimate", "sigma", "sigma%", "unit", "status"):
         table.add_column(col, justify="left" if col in ("parameter", "unit", "status")
                          else "right", no_wrap=col != "status")
-    from ..identify.tables import fit_rows
-
-    for row in fit_rows(report):
+    for row in report.csv_rows():
         pct = row["sigma_pct"]
         table.add_row(row["parameter"], f"{row['start']:.6g}", f"{row['value']:.6g}",
                       f"{row['sigma']:.3g}", f"{pct:.3g}" if pct == pct else "—", row["unit"],

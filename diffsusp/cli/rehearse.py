@@ -45,41 +45,6 @@ def _floats(text: str, what: str) -> list[float]:
     return values
 
 
-def corner_cases(mech):
-    """The default load table of a suspension rehearsal: at the corner's contact point, the
-    design load × 0.7, 1, 1.3, each with lateral −2, 0, +2 kN and longitudinal ±1.5 kN (18
-    cases: a K&C rig's combined-load grid)."""
-    from ..kc.corner import corners_of, design_load
-
-    corner = corners_of(mech)[""].resolve(mech)
-    f0 = design_load(mech, corners_of(mech)[""])
-    force = [[x, y, z] for z in (0.7 * f0, f0, 1.3 * f0) for y in (-2000.0, 0.0, 2000.0)
-             for x in (-1500.0, 1500.0)]
-    name = mech.load_points.names[corner.contact_point]
-    return mech.loads(forces={name: force})
-
-
-def _params(mech, names: str | None):
-    """The default selection, or the named stiffnesses ('bushing.Ktx,...')."""
-    from ..identify import Params
-    from ..identify.selection import fit_selection
-
-    default = fit_selection(mech)[0]
-    if not names:
-        return default
-    wanted = [n.strip() for n in names.split(",") if n.strip()]
-    unknown = [n for n in wanted if n not in default.names]
-    if unknown:
-        raise fail(f"unknown parameter(s) {', '.join(unknown)}; the model's: "
-                   f"{', '.join(default.names)}.", EXIT_BAD_INPUT)
-    params = None
-    for bushing in dict.fromkeys(n.rsplit(".", 1)[0] for n in wanted):
-        axes = tuple(n.rsplit(".", 1)[1] for n in wanted if n.rsplit(".", 1)[0] == bushing)
-        p = Params.bushing_stiffness(mech, (bushing,), axes=axes)
-        params = p if params is None else params + p
-    return params
-
-
 def register(app: typer.Typer) -> None:
     """Add `rehearse` to `app`."""
     app.command("rehearse")(rehearse_command)
@@ -145,15 +110,9 @@ def rehearse_command(
             if len(factors) != 2 or not 0 < factors[0] < factors[1]:
                 raise fail(f"--spread must be 'low,high' factors with 0 < low < high; got "
                            f"{spread!r}.", EXIT_BAD_INPUT)
-            selection = _params(mech, params)
-            if cases == Cases.thesis:
-                from ..models import thesis_load_cases
-
-                loads = thesis_load_cases(mech)
-            else:
-                loads = corner_cases(mech)
-            scenario = SuspensionScenario(method.replace("-", "_"), mech, loads, selection,
-                                          noise=sigma[0], spread=tuple(factors))
+            names = [n.strip() for n in params.split(",")] if params else None
+            scenario = SuspensionScenario(method.replace("-", "_"), mech, _loads(mech, cases),
+                                          names, noise=sigma[0], spread=tuple(factors))
         report = rehearse(scenario, n=n, seed=seed)
         if out is not None:
             report.write(out)
@@ -188,7 +147,6 @@ def _mf_scenario(path: str, noise, spread, params):
 
 
 def _geometry_scenario(model: str, noise, spread, params, cases):
-    from ..identify.geometric import joints_from_model
     from ..identify.rehearse import GeometryScenario
     from .common import load_model_file
 
@@ -201,23 +159,16 @@ def _geometry_scenario(model: str, noise, spread, params, cases):
     if len(mm) != 1 or not mm[0] > 0:
         raise fail(f"--spread must be one displacement > 0 (mm) of the joint hardpoints; got "
                    f"{spread!r}.", EXIT_BAD_INPUT)
-    joints = joints_from_model(mech, mech.parts)[0]
-    if params:
-        wanted = [n.strip() for n in params.split(",") if n.strip()]
-        known = [j.name for j in joints]
-        unknown = [n for n in wanted if n not in known]
-        if unknown or not wanted:
-            raise fail(f"unknown parameter(s) {', '.join(unknown) or repr(params)}: --params "
-                       f"names the joints to locate; the model's: {', '.join(known)}.",
-                       EXIT_BAD_INPUT)
-        joints = tuple(j for j in joints if j.name in wanted)
-    if cases == Cases.thesis:
-        from ..models import thesis_load_cases
+    names = [n.strip() for n in params.split(",")] if params else None
+    return GeometryScenario(mech, _loads(mech, cases), names, noise=sigma[0], spread=mm[0])
 
-        loads = thesis_load_cases(mech)
-    else:
-        loads = corner_cases(mech)
-    return GeometryScenario(mech, loads, joints, noise=sigma[0], spread=mm[0])
+
+def _loads(mech, cases):
+    """The load table `--cases` names: the thesis's, or None: the scenario's default (the
+    corner's combined-load grid, `identify.rehearse.corner_cases`)."""
+    from ..kc.loadcases import thesis_load_cases
+
+    return thesis_load_cases(mech) if cases == Cases.thesis else None
 
 
 def _onboard_scenario(model: str, noise, spread, params, delay, duration, n):

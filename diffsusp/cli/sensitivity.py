@@ -28,7 +28,6 @@ from .common import (
     enable_x64,
     fail,
     load_model_file,
-    nan_to_none,
     print_json,
 )
 from .kc import Event, EventOption
@@ -100,7 +99,7 @@ def sensitivity_command(
                 fig = report.plot(name, top=max(top, 12))
                 paths += plot.save(fig, out / f"sensitivity_{name.replace('/', '_')}")
     if as_json:
-        print_json(nan_to_none(_json(report, mech.name, ev)))
+        print_json({"model": mech.name, **report.summary()})
         return
     con = console(markup=False)
     con.print(_table(report, mech.name, ev, params, top))
@@ -124,21 +123,3 @@ def _table(report, mech_name, ev, params, top) -> Table:
             table.add_row(name if k == 0 else "", str(k + 1), p, f"{v:+.4g}",
                           end_section=k == min(top, len(report.params)) - 1)
     return table
-
-
-def _json(report, mech_name, ev) -> dict:
-    from diffsusp import kc
-
-    return {
-        "model": mech_name, "event": ev.name, "x": {"name": ev.x_name, "values": ev.x.tolist()},
-        "params": list(report.params), "theta": report.theta.tolist(),
-        "metrics": {
-            name: {"unit": kc.display_unit(name),
-                   "values": kc.display(name, report.values[name]).tolist(),
-                   "jacobian": report.jacobian[name].tolist(),
-                   "elasticity": report.elasticity[name].tolist(),
-                   "ranked": [[p, v] for p, v in report.ranked(name)]}
-            for name in report.elasticity},
-        "units": "jacobian: metric internal units (mm, N, rad) per parameter unit (N/mm, "
-                 "N·mm/rad, mm)",
-    }

@@ -463,9 +463,7 @@ def fit_command(
         if report is not None and report.suffix.lower() == ".json":
             report.write_text(json.dumps({"+".join(groups): rep.to_dict()}, indent=2) + "\n")
         elif report is not None:   # the shared writers: the same statuses as the table
-            from diffsusp.identify.report import write_report
-
-            write_report(rep, report)
+            rep.write(report)
         if figures is not None:
             F.plot_fit(fitted, bench, folder=figures)
             c.print(f"figures written to {figures}")

@@ -32,7 +32,14 @@ from ..measure.data import (
     Poses,
     from_measurements,
 )
-from .direct import DirectReport, DirectSystem, direct, direct_batch, direct_system
+from .direct import (
+    DirectReport,
+    DirectSystem,
+    direct,
+    direct_batch,
+    direct_selection,
+    direct_system,
+)
 from .geometric import (
     CorrectionReport,
     GeometricJoint,
@@ -75,7 +82,8 @@ __all__ = [
     "joints_from_model", "locate_joints", "offset_equivalent", "read_joints", "write_joints",
     "BatchFitReport", "Channel", "Deformations", "DesignReport", "DirectReport", "DirectSystem",
     "FitReport", "IterativeReport", "Landmarks", "Measurement", "Params", "Poses",
-    "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_system",
+    "SensitivityReport", "design_experiment", "direct", "direct_batch", "direct_selection",
+    "direct_system",
     "iterative", "fit_selection", "from_measurements", "measured_bushings", "with_start",
     "least_squares", "least_squares_batch", "predict", "RehearsalReport", "SuspensionScenario",
     "GeometryScenario",

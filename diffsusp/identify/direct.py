@@ -97,18 +97,20 @@ from .direct_unknowns import (
     bushing_arrays,
     default_where,
     derived,
+    direct_selection,
     free_axes,
     parameters,
     prior,
     selected_fields,
     selection_of,
+    with_offsets,
 )
 from .least_squares import least_squares_batch
 from .params import Params
 from .report import MAX_SIGMA_PCT, check_consistency, check_data, within_bar
 
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
-           "direct_system"]
+           "direct_selection", "direct_system", "with_offsets"]
 
 DEFAULT_THRESHOLD = 1e-5
 """Default identifiability threshold of the direct method (relative, on unit-norm columns: see
@@ -273,10 +275,8 @@ def _prepare(mech, measurements, where, elements, axisymmetric) -> _Context:
 def direct_system(
     mech: Mechanism,
     measurements: Measurements,
-    params: Params | Callable[[Mechanism], object] | None = None,
+    params: Params | Callable[[Mechanism], object] | Sequence[str] | None = None,
     *,
-    where: Callable[[Mechanism], object] | Params | None = None,
-    elements: Sequence[str] | None = None,
     axisymmetric: Sequence[str] = (),
     weights_at: Float[np.ndarray, " p"] | None = None,
 ) -> DirectSystem:
@@ -288,8 +288,7 @@ def direct_system(
     unknowns, table units), each case's rows are whitened by the covariance that pose errors
     cause at those values (see `direct`, `weighting="noise"`).
     """
-    selected = selection_of(params, where)
-    ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
+    ctx = _prepare(mech, measurements, *selection_of(params), axisymmetric)
     return ctx.system(None if weights_at is None else ctx.whitener(weights_at))
 
 
@@ -370,10 +369,8 @@ def _negligible(system: DirectSystem, threshold: float) -> np.ndarray:
 def direct(
     mech: Mechanism,
     measurements: Measurements,
-    params: Params | Callable[[Mechanism], object] | None = None,
+    params: Params | Callable[[Mechanism], object] | Sequence[str] | None = None,
     *,
-    where: Callable[[Mechanism], object] | Params | None = None,
-    elements: Sequence[str] | None = None,
     axisymmetric: Sequence[str] = (),
     method: str = "basic",
     hold: str = "zero",
@@ -388,7 +385,7 @@ def direct(
     """Identify bushing and spring stiffnesses from measured equilibria by the direct (linear)
     method of the thesis's Chapter 4 (spec stiffness §1.8–1.14; see the module docstring).
 
-    Select (`where`, `elements`), partition into the known and unknown parts of the internal
+    Select (`params`), partition into the known and unknown parts of the internal
     forces, solve the stacked linear system with `diffsusp.lsq`, combine the identified values
     back into the model.
 
@@ -398,15 +395,15 @@ def direct(
       prior, and are kept where the data do not determine them).
     - `measurements`: `diffsusp.measure.Measurements` (part poses of every moving part and the
       loads, per case), or a `Poses` measurement (`measure.as_equilibria`).
-    - `params` (or `where=`, the same): the selection every identification method takes: a
-      `Params` or a `where` function, equinox style, among `m.bushings.k_trans`, `k_rot`
-      (stiffness per axis), `offset_trans`, `offset_rot` (offsets δ0, identified as the
-      constant force K·δ0), `m.springs.k`, `free_length` (with k: the unknowns K and K·L0);
-      a `Params` selects single entries (e.g. `Params.bushing_stiffness(mech, ["A"],
-      ["Ktx"])`; its start values and bounds are not used: the model's values are the prior).
-      Default: all bushing stiffnesses and the springs' K and K·L0.
-    - `elements`: names of the bushings and springs to identify (default all); the others
-      keep their model values (their forces move to the right-hand side).
+    - `params`: the selection every identification method takes: a `Params` or a `where`
+      function, equinox style, among `m.bushings.k_trans`, `k_rot` (stiffness per axis),
+      `offset_trans`, `offset_rot` (offsets δ0, identified as the constant force K·δ0),
+      `m.springs.k`, `free_length` (with k: the unknowns K and K·L0); a `Params` selects
+      single entries (e.g. `Params.bushing_stiffness(mech, ["A"], ["Ktx"])`; its start values
+      and bounds are not used: the model's values are the prior); or a sequence of element
+      names (bushings and springs: their stiffnesses and K·L0; the other elements keep their
+      model values, their forces moving to the right-hand side). Default: all bushing
+      stiffnesses and the springs' K and K·L0.
     - `axisymmetric`: bushings with Ktx = Kty and Krx = Kry (4 unknowns: Ktr, Ktz, Krr, Krz;
       spec §1.8, 4.40).
     - `method`: "basic" (pivoted-QR basic solution, like MATLAB's backslash in the thesis),
@@ -472,7 +469,7 @@ def direct(
     if not max_sigma_pct > 0:
         raise InputError(f"max_sigma_pct must be positive; got {max_sigma_pct!r}.")
     threshold = DEFAULT_THRESHOLD if threshold is None else float(threshold)
-    selected = selection_of(params, where)
+    selected, elements = selection_of(params)
     ctx = _prepare(mech, measurements, selected, elements, axisymmetric)
     raw = ctx.system()
     # Structure: what the equations determine (unweighted, as the thesis writes them).
@@ -522,7 +519,7 @@ def direct(
     if free:
         notes.append("left out " + ", ".join(
             f"{mech.bushings.names[e]}.{STIFFNESS_NAMES[a]}" for e, a in free) + ": 0 in the "
-            "model (free directions; select them with where= or elements= to identify them)")
+            "model (free directions; select them with params to identify them)")
     if negative.any():
         notes.append(f"{', '.join(np.asarray(raw.names)[negative])} came out negative and "
                      "were not kept: check the values held for the other unknowns and the "
@@ -606,9 +603,9 @@ def direct_batch(
               for m in measurements]
     if not polish:
         return tuple(linear)
-    unknowns = parameters(mech, selected_fields(mech, selection_of(params, None)
-                                                or default_where),
-                          options.get("elements"), options.get("axisymmetric", ()))
+    where, elements = selection_of(params)
+    unknowns = parameters(mech, selected_fields(mech, where or default_where), elements,
+                          options.get("axisymmetric", ()))
     plan = polish_plan(mech, unknowns)
     if plan is None:
         return tuple(linear)

@@ -11,14 +11,13 @@ import numpy as np
 
 from ..errors import index_of
 from .report import AT_START, Consistency, IdentificationReport, MeasurementResiduals
+from .selection import DEG
 
 __all__ = ["DirectReport"]
 
 INCONSISTENT_STATUS = "determined, but not identified: the model is inconsistent with the data"
 """The status of an unknown the data determine when the identified model does not reproduce
 the measurements (`Consistency.verdict`: "no value is reported as identified")."""
-
-DEG = math.pi / 180.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,6 +151,14 @@ class DirectReport(IdentificationReport):
                             identified=bool(np.isfinite(v)) and self.consistent is not False,
                             prior=None, status="derived", reason=""))
         return out
+
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`): `rows()` (the thesis's units)."""
+        return self.rows()
+
+    def json_data(self) -> dict:
+        """The .json content (`write`): `to_dict()`."""
+        return self.to_dict()
 
     def to_dict(self) -> dict:
         return {

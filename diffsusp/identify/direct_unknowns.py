@@ -1,19 +1,20 @@
-"""The unknowns of the direct method: which stiffnesses and constants a selection (`params=`,
-`where=`, `elements=`, `axisymmetric=`) makes unknown, their values in the model (the prior),
+"""The unknowns of the direct method: which stiffnesses and constants a selection (`params`,
+`axisymmetric=`) makes unknown, their values in the model (the prior),
 and the quantities derived from them (free lengths, offsets). spec: stiffness §1.10 (the
 internal forces are linear in these parameters), §7 R3."""
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from ..errors import InputError, ModelError
 from ..model.mechanism import Mechanism
-from .direct_report import DEG
-from .params import selected_entries
+from .params import Params, selected_entries
+from .selection import DEG
 
-__all__ = ["Parameter"]  # re-exported by `identify.direct`; the rest serves direct, direct_polish
+# re-exported by `identify.direct`; the rest serves direct, direct_polish
+__all__ = ["Parameter", "direct_selection", "with_offsets"]
 
 AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -66,7 +67,7 @@ def selected_fields(mech: Mechanism, where) -> dict[str, np.ndarray]:
             raise InputError(
                 "where= selected something the direct method cannot identify: it identifies "
                 "the parameters the internal forces are linear in, entries of "
-                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements with elements=(...) "
+                f"{', '.join('m.' + p for p in _FIELDS)}. Choose elements by their names "
                 "or entries with a Params; for other parameters (hardpoints, nonlinear laws) "
                 "use a least-squares fit through the equilibrium."
             )
@@ -93,7 +94,7 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
     unknown = [e for e in elements if e not in names]
     if unknown:
         raise InputError(
-            f"elements= names {', '.join(map(repr, unknown))}, which model '{mech.name}' does "
+            f"params names {', '.join(map(repr, unknown))}, which model '{mech.name}' does "
             f"not have; its bushings: {', '.join(b.names) or 'none'}; springs: "
             f"{', '.join(s.names) or 'none'}."
         )
@@ -130,8 +131,8 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
             if spline[e, a]:
                 raise ModelError(
                     f"bushing '{name}' uses a spline law on axis {AXES[a]}; the direct method "
-                    "identifies linear stiffness. Leave it out (elements=...) or replace the "
-                    "spline by its slope."
+                    "identifies linear stiffness. Leave it out (params: the other elements) or "
+                    "replace the spline by its slope."
                 )
         for a in sorted(c_axes):
             if cubic[e, a] != 0:
@@ -158,13 +159,14 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
             continue
         if s.tabulated[e]:
             raise ModelError(f"spring '{name}' has a tabulated law; the direct method "
-                             "identifies linear springs (K, L0). Leave it out (elements=...).")
+                             "identifies linear springs (K, L0). Leave it out (params: the "
+                             "other elements).")
         if spring_k:
             params.append(Parameter(f"{name}.K", "spring_k", e, (), "N/mm", 1.0))
         if spring_c:
             params.append(Parameter(f"{name}.KL0", "spring_c", e, (), "N", 1.0))
     if not params:
-        raise InputError("nothing to identify: the selection (where=, elements=) picks no "
+        raise InputError("nothing to identify: the selection (params) picks no "
                          "stiffness of this model.")
     return tuple(params)
 
@@ -197,12 +199,50 @@ def prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
     return np.asarray(out, dtype=float)
 
 
-def selection_of(params, where):
-    """The one selector of `params=` (positional, as in every identification method) and
-    `where=` (this method's historical keyword)."""
-    if params is not None and where is not None:
-        raise InputError("give the selection once: params= or where=, not both.")
-    return where if params is None else params
+def selection_of(params) -> tuple[object, tuple[str, ...] | None]:
+    """(entries, elements) of the one selector `params`: a `Params` or a `where` function
+    selects entries (of every element), a sequence of names selects elements (bushings and
+    springs, their default entries: `default_where`); None: the default entries of every
+    element."""
+    if params is None or isinstance(params, Params) or callable(params):
+        return params, None
+    names = (params,) if isinstance(params, str) else tuple(params)
+    if not all(isinstance(n, str) for n in names):
+        raise InputError("params must be a Params, a `where` function (lambda m: "
+                         "m.bushings.k_trans, ...) or a sequence of element names.")
+    return None, names
+
+
+def with_offsets(m: Mechanism):
+    """The default entries and the bushings' offsets (identified as the constant force
+    K·δ0): stiffnesses, offsets, the springs' K and free length."""
+    return (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
+            m.bushings.offset_rot, m.springs.k, m.springs.free_length)
+
+
+def direct_selection(mech: Mechanism, elements: Sequence[str] | None = None,
+                     offsets: bool = False):
+    """The one selector of `direct` for "these elements" and "with their offsets": None (the
+    default), the element names, `with_offsets`, or, for both, a `Params` of the entries of
+    `with_offsets` that belong to the named bushings and springs."""
+    if not offsets:
+        return tuple(elements) if elements else None
+    if not elements:
+        return with_offsets
+    known = set(mech.bushings.names) | set(mech.springs.names)
+    unknown = [e for e in elements if e not in known]
+    if unknown:
+        raise InputError(f"params names {', '.join(map(repr, unknown))}, which model "
+                         f"'{mech.name}' does not have; its bushings: "
+                         f"{', '.join(mech.bushings.names) or 'none'}; springs: "
+                         f"{', '.join(mech.springs.names) or 'none'}.")
+    masks = []
+    for path in selected_entries(mech, with_offsets):
+        group = getattr(mech, path[0])
+        shape = np.shape(getattr(group, path[1]))
+        rows = np.isin(np.asarray(group.names, dtype=object), list(elements))
+        masks.append(np.broadcast_to(rows.reshape((-1,) + (1,) * (len(shape) - 1)), shape))
+    return Params.leaves(mech, with_offsets, tuple(masks), positive=False)
 
 
 def derived(params, values, cov, mech, identified_mask):

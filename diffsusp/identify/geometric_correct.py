@@ -138,7 +138,7 @@ def _element_markers(mech, elements, side):
     dup = sorted({mech.markers.names[m] for m in moved if moved.count(m) > 1})
     if dup:
         raise InputError(f"marker(s) {', '.join(dup)} would be moved by several elements; "
-                         "correct one element per marker (pass elements=...).")
+                         "correct one element per marker (name them in params).")
     return tuple(pairs)
 
 
@@ -184,10 +184,10 @@ def _global(rot, trans, part, x, o):
 def correct_geometry(
     mech,
     measurements,
+    params: Sequence[str] | None = None,
     *,
     case: int = 0,
     loads=None,
-    elements: Sequence[str] | None = None,
     side: str | dict = "i",
     tol: float | None = None,
     max_iterations: int = 20,
@@ -215,9 +215,9 @@ def correct_geometry(
       `case`: which measured case is the reference equilibrium (0-based). Every measured case
       is solved at each pass (one batched solve); the others are reported, not corrected for.
     - `loads`: the loads of every measured case (default: the measurements' own).
-    - `elements`: joints and bushings to correct (default: all); `side`: which marker moves,
-      `'i'` (the Adams I marker: the inner sleeve, bolted, in the thesis's convention) or
-      `'j'`, or a dict name → side.
+    - `params`: the joints and bushings to correct, by name (default: all); `side`: which
+      marker moves, `'i'` (the Adams I marker: the inner sleeve, bolted, in the thesis's
+      convention) or `'j'`, or a dict name → side.
     - `tol` (mm): stop when the pose error is below it. Default None: relative to the noise —
       stop when the error is below `TOL_FLOOR` (1e-4 mm: noise-free data, as before) or when a
       correction no longer lowers it (by less than `STALL_SIGMA`·σ and less than a factor
@@ -248,7 +248,7 @@ def correct_geometry(
     if table_loads.n_cases != n_cases:
         raise InputError(f"loads must have one case per measured case ({n_cases}); got "
                          f"{table_loads.n_cases}.")
-    pairs = _element_markers(mech, elements, side)
+    pairs = _element_markers(mech, params, side)
     rot_all = np.asarray(measurements.rotation)
     trans_all = np.asarray(measurements.translation)
     rot_m, trans_m = rot_all[case], trans_all[case]

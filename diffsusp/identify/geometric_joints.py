@@ -18,7 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import InputError, ModelFileError
-from .report import Consistency, IdentificationReport
+from .report import Consistency, IdentificationReport, sigma_pct
 
 JOINT_KINDS = ("ball", "revolute", "ball_known_slide", "ball_unknown_slide",
                "compliant_bushing")
@@ -193,8 +193,7 @@ class CoordinateRows:
 
     @property
     def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
+        return sigma_pct(self.sigmas, self.estimates)
 
     @property
     def estimate_units(self) -> tuple[str, ...]:
@@ -231,7 +230,7 @@ class GeometricReport(CoordinateRows, IdentificationReport):
     against σ_L (χ² with 3n − 6 dof per part and case); `warnings`: the parts and cases whose
     own registration residual is beyond noise (swapped or moved landmarks), which make the
     verdict inconsistent. Each joint's own lack of fit is judged joint by joint (σ inflated, or
-    the joint flagged). Every writer (`format_table`, `csv_text`, `html_text`, `write_report`)
+    the joint flagged). Every writer (`format_table`, `csv_text`, `html_text`, `write`)
     renders these rows; `joint_rows()` keeps the former one row per joint.
     """
 

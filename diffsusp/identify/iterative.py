@@ -19,7 +19,6 @@ offsets E0 (eq. 5.17); the stiffnesses themselves need not be unique (§2.7).
 """
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import ClassVar
 
@@ -46,13 +45,13 @@ from .report import (
     check_consistency,
     check_data,
     chi2_quantile,
+    sigma_pct,
     sigma_pct_at_start,
 )
+from .selection import DEG
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
-
-_DEG = math.pi / 180.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -177,8 +176,7 @@ class IterativeReport(IdentificationReport):
 
     @property
     def sigma_pct(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return 100.0 * self.sigmas / np.abs(self.estimates)
+        return sigma_pct(self.sigmas, self.estimates)
 
     @property
     def reasons(self) -> tuple[str, ...]:
@@ -226,7 +224,7 @@ class IterativeReport(IdentificationReport):
         (start value kept), `=` = equalised by axisymmetry."""
         head = f"{'bushing':<14}" + "".join(f"{a:>12}" for a in AXES)
         lines = [head, "-" * len(head)]
-        scale = np.array([1, 1, 1, _DEG, _DEG, _DEG])
+        scale = np.array([1, 1, 1, DEG, DEG, DEG])
         for b, name in enumerate(self.bushings):
             cells = []
             for a in range(6):
@@ -247,6 +245,33 @@ class IterativeReport(IdentificationReport):
                              "(report.polish(), iterative(..., polish=True), or "
                              "`diffsusp identify iterative --polish`).")
         return "\n".join(lines)
+
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`), one per identified direction (`names`): parameter, value,
+        unit, start (the thesis's units: rotational per degree), status and reason (the
+        report's one verdict: `statuses`), identified (status is 'identified'), gate_passed
+        (the correlation gate passed at least once), equalised, r."""
+        rows = []
+        sel = self._selected
+        statuses, reasons, ident = self.statuses, self.status_reasons, self.is_identified
+        k = 0
+        for b, name in enumerate(self.bushings):
+            for a, axis in enumerate(AXES):
+                if not sel[b, a]:
+                    continue
+                scale, unit = (DEG, "N*mm/deg") if a >= 3 else (1.0, "N/mm")
+                rows.append(dict(
+                    parameter=f"{name}.{axis}", value=float(self.stiffness[b, a] * scale),
+                    unit=unit, start=float(self.start[b, a] * scale), status=statuses[k],
+                    reason=reasons[k], identified=bool(ident[k]),
+                    gate_passed=bool(self.identified[b, a]),
+                    equalised=bool(self.equalised[b, a]), r=float(self.r[b, a])))
+                k += 1
+        return rows
+
+    def json_data(self) -> dict:
+        """The .json content (`write`): `to_dict()`."""
+        return self.to_dict()
 
     def to_dict(self) -> dict:
         return {
@@ -335,9 +360,9 @@ def _states(mech: Mechanism, q, index: tuple[int, ...]):
 def iterative(
     mech: Mechanism,
     data: Measurement | Measurements | Loads,
-    params: Params | Callable[[Mechanism], object] | None = None,
+    params: Params | Callable[[Mechanism], object] | Sequence[str] | None = None,
     *,
-    bushings: Sequence[str] | None = None,
+    measured=None,
     axisymmetric: Sequence[str] = (),
     r_min: float = 0.75,
     resolution: tuple[float, float] | None = None,
@@ -357,14 +382,16 @@ def iterative(
     - `data`: the measurements every identification method takes: a `Deformations`, or
       measured part poses (`measure.Measurements`, `Poses`) from which the bushings'
       deformations are computed (`measure.as_deformations`); their load table is the rig's.
-      The historical form `iterative(mech, loads, measured, ...)` is still accepted: `loads`
-      (leading case axis) and `measured` deformations `(cases, n, 6)` in the order of
-      `bushings` or a mapping name → `(cases, 6)`: Tx, Ty, Tz (mm) and projected angles
-      AX, AY, AZ (rad) of I relative to J, in J.
+      Or the thesis's form: `data` the `Loads` (leading case axis) and `measured=` the
+      deformations `(cases, n, 6)` in the order of the bushings `params` names, or a mapping
+      name → `(cases, 6)`: Tx, Ty, Tz (mm) and projected angles AX, AY, AZ (rad) of I relative
+      to J, in J.
     - `params`: the selection every identification method takes (a `Params` or a `where`
       function) among the bushings' `k_trans` and `k_rot` entries: the bushings with a selected
-      entry are identified, and only the selected directions are updated. Or `bushings`: names
-      to identify, every direction (default: all of the model's bushings).
+      entry are identified, and only the selected directions are updated; or a sequence of
+      names: bushings (every direction) or directions ('bushing_A.Ktz'). Default: every
+      direction of all of the model's bushings.
+    - `measured`: with `data` a `Loads` only: the measured deformations (see `data`).
     - `axisymmetric`: names whose x and y stiffnesses are merged (eq. 5.13).
     - `r_min`: correlation gate (spec: 0.75); `eps`: relative-change stop (spec: 0.01).
     - `resolution`: (mm, rad) — a direction whose measured deformation varies less than this
@@ -389,12 +416,15 @@ def iterative(
 
     **Returns:** the identified mechanism and an `IterativeReport`.
     """
-    if isinstance(data, Loads):  # the historical form (mech, loads, measured)
-        loads, measured, selected = data, params, None
-        names = tuple(mech.bushings.names if bushings is None else bushings)
-    else:
-        names, selected = _selection(mech, params, bushings)
-        measured = None
+    names, selected = _selection(mech, params)
+    if isinstance(data, Loads):  # the thesis's form (mech, loads, names, measured=)
+        if measured is None:
+            raise InputError("iterative(mech, loads, ...) needs the measured deformations "
+                             "(measured=); or give measurements as data.")
+        loads = data
+    elif measured is not None:
+        raise InputError("measured= goes with a Loads as data; these data carry their own "
+                         "measurements.")
     index = np.array([mech.bushings.index(n) for n in names], dtype=int)
     unknown = set(axisymmetric) - set(names)
     if unknown:
@@ -595,22 +625,34 @@ def _slope_sigma(delta: np.ndarray, force: np.ndarray, slope: np.ndarray) -> np.
         return np.sqrt((e * e).sum(axis=0) / max(c - 2, 1) / sxx)
 
 
-def _selection(mech: Mechanism, params, bushings) -> tuple[tuple[str, ...], np.ndarray | None]:
-    """(bushing names, selected directions `(n, 6)`) of a `Params`/`where` selection, or of
-    `bushings=` (every direction)."""
+def _selection(mech: Mechanism, params) -> tuple[tuple[str, ...], np.ndarray | None]:
+    """(bushing names, selected directions `(n, 6)`; None: every direction) of the one
+    selector: a `Params` or a `where` function, or a sequence of bushing or direction names
+    ('bushing_A', 'bushing_A.Ktz'); None: every bushing of the model."""
     if params is None:
-        return tuple(mech.bushings.names if bushings is None else bushings), None
-    if bushings is not None:
-        raise InputError("give the selection once: params (or a where function) or "
-                         "bushings=, not both.")
+        return tuple(mech.bushings.names), None
     sel = np.zeros((len(mech.bushings.names), 6), bool)
-    for path, idx in selected_entries(mech, params).items():
-        if path not in (("bushings", "k_trans"), ("bushings", "k_rot")):
-            raise InputError(f"the iterative method identifies bushing stiffnesses "
-                             f"(m.bushings.k_trans, m.bushings.k_rot); the selection has "
-                             f"m.{'.'.join(path)}. Use least_squares for other parameters.")
-        offset = 0 if path[-1] == "k_trans" else 3
-        sel[idx // 3, offset + idx % 3] = True
+    if isinstance(params, str) or (not isinstance(params, Params) and not callable(params)):
+        wanted = (params,) if isinstance(params, str) else tuple(params)
+        if not all(isinstance(n, str) for n in wanted):
+            raise InputError("params must be a Params, a `where` function or a sequence of "
+                             "bushing names.")
+        if all("." not in n for n in wanted):  # bushings: every direction, in the given order
+            return wanted, None
+        for n in wanted:
+            bushing, _, axis = n.rpartition(".") if "." in n else (n, "", "")
+            if axis and axis not in AXES:
+                raise InputError(f"'{n}': the iterative method identifies the directions "
+                                 f"{', '.join(AXES)} of a bushing.")
+            sel[mech.bushings.index(bushing), [AXES.index(axis)] if axis else slice(None)] = True
+    else:
+        for path, idx in selected_entries(mech, params).items():
+            if path not in (("bushings", "k_trans"), ("bushings", "k_rot")):
+                raise InputError(f"the iterative method identifies bushing stiffnesses "
+                                 f"(m.bushings.k_trans, m.bushings.k_rot); the selection has "
+                                 f"m.{'.'.join(path)}. Use least_squares for other parameters.")
+            offset = 0 if path[-1] == "k_trans" else 3
+            sel[idx // 3, offset + idx % 3] = True
     rows = np.flatnonzero(sel.any(axis=1))
     if not rows.size:
         raise InputError("nothing to identify: the selection picks no bushing stiffness.")

@@ -59,20 +59,16 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..errors import InputError
+from ..lsq.robust import DEFAULT_LOSS_SCALE, LOSSES, robust
 from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, solve_statics
-from .least_squares_report import FitReport, NullDirection, StepRecord, fit_report
+from .least_squares_report import FitReport, LMRun, NullDirection, StepRecord, fit_report
 from .params import Params
 
-__all__ = ["BatchFitReport", "DEFAULT_LOSS_SCALE", "FitReport", "LOSSES", "NullDirection",
-           "StepRecord", "least_squares", "least_squares_batch", "predict", "whitened_residuals"]
+__all__ = ["BatchFitReport", "FitReport", "NullDirection", "StepRecord", "least_squares",
+           "least_squares_batch", "predict", "whitened_residuals"]
 
-LOSSES = {"linear": 0, "huber": 1, "cauchy": 2}
-"""Loss names → codes (a runtime value: every loss shares one compiled program)."""
-
-DEFAULT_LOSS_SCALE = {"linear": 1.0, "huber": 1.345, "cauchy": 2.385}
-"""Default robust-loss scales in units of σ (95 % efficiency under Gaussian noise)."""
 
 FAILED_RESIDUAL = 1e8
 """Whitened residual given to every entry of a load case whose equilibrium failed."""
@@ -111,19 +107,6 @@ class _Problem(eqx.Module):
         return TANGENT_BLOCK * max(1, -(-len(self.params) // TANGENT_BLOCK))
 
 
-def _robust(z, kind, c):
-    """r̃ = sign(r)·√(2ρ(r)) for ρ linear (kind 0), Huber (1) or Cauchy (2) with scale c."""
-    a = jnp.abs(z)
-    big = a > c
-    a_big = jnp.where(big, a, 2.0 * c)
-    huber = jnp.where(big, jnp.sign(z) * jnp.sqrt(2.0 * c * a_big - c * c), z)
-    x2 = (z / c) ** 2
-    small = x2 < 1e-8
-    x2s = jnp.where(small, 1.0, x2)
-    cauchy = z * jnp.sqrt(jnp.where(small, 1.0 - 0.5 * x2, jnp.log1p(x2s) / x2s))
-    return jnp.where(kind == 0, z, jnp.where(kind == 1, huber, cauchy))
-
-
 # The residual is evaluated in three separately compiled pieces, so that the costly one (the
 # equilibria and their tangents, which contains the Newton loop) depends only on the model, the
 # load table and the padded number of parameters, and is shared by every fit of that model:
@@ -160,7 +143,7 @@ def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents, prior_scale=
         zs, raws = [], []
         for meas, (a, b) in zip(problem.data, problem.slices, strict=True):
             raw = meas.residual(m, qq[a:b])
-            z = _robust(raw * meas.weight, problem.loss, problem.loss_scale)
+            z = robust(raw * meas.weight, problem.loss, problem.loss_scale)
             good = ok[a:b].reshape((-1,) + (1,) * (raw.ndim - 1)) & jnp.isfinite(z)
             zs.append(jnp.where(good, z, FAILED_RESIDUAL).reshape(-1))
             raws.append(raw.reshape(-1))
@@ -184,16 +167,47 @@ def _quiet(**kwargs):
     pass
 
 
+class _Damping(eqx.Module):
+    """The state of `_TrustRegion`: the step size 1/λ of the damped Newton descent, and
+    whether its last step accepted the point evaluated."""
+
+    step_size: Array
+    accepted: Array
+
+
+class _TrustRegion(optx.ClassicalTrustRegion):
+    """optimistix's classical trust region, grown after any step that achieves 3/4 of its
+    predicted reduction (the default, 0.99, keeps a far start crawling for dozens of steps),
+    and started at the damping λ0 = `INITIAL_DAMPING`·max diag(JᵀJ) of the first point's
+    Jacobian (Madsen, Nielsen & Tingleff's τ) instead of optimistix's λ = 1, far too little
+    damping for residuals whitened by 0.05 mm. The first step is always accepted, so the step
+    size is only used after it."""
+
+    high_cutoff: float = 0.75
+
+    def init(self, y, f_info_struct) -> _Damping:
+        del y, f_info_struct
+        return _Damping(step_size=jnp.array(1.0), accepted=jnp.array(False))
+
+    def step(self, first_step, y, y_eval, f_info, f_eval_info, state: _Damping):
+        jacobian = f_eval_info.jac.as_matrix()
+        lam0 = INITIAL_DAMPING * jnp.max(jnp.sum(jacobian ** 2, axis=0))
+        start = _Damping(step_size=jnp.where(first_step, 1.0 / jnp.maximum(lam0, 1e-300),
+                                             state.step_size), accepted=state.accepted)
+        step_size, accept, result, _ = super().step(first_step, y, y_eval, f_info,
+                                                    f_eval_info, start)
+        return step_size, accept, result, _Damping(step_size=step_size, accepted=accept)
+
+
 class _LevenbergMarquardt(optx.AbstractGaussNewton):
-    """optimistix's Levenberg–Marquardt (damped Newton descent, classical trust region) with
-    the trust region grown after any step that achieves 3/4 of its predicted reduction (the
-    default, 0.99, keeps a far start crawling for dozens of steps)."""
+    """optimistix's Levenberg–Marquardt (damped Newton descent) with `_TrustRegion` as its
+    search."""
 
     rtol: float
     atol: float
     norm: Callable = optx.max_norm
     descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent()
-    search: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion(high_cutoff=0.75)
+    search: _TrustRegion = _TrustRegion()
     verbose: Callable = _quiet
 
 
@@ -220,17 +234,11 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
     solver = _LevenbergMarquardt(rtol, atol)
     static = eqx.filter(_lm_state(solver, u, residual.size), eqx.is_array, inverse=True)
     state = eqx.combine(dyn_state, static)
-    # optimistix starts its trust region at λ = 1, far too little damping for residuals whitened
-    # by 0.05 mm: start from λ0 = τ·max diag(JᵀJ) instead (the first step is always accepted,
-    # so the step size is only used after it).
-    lam0 = INITIAL_DAMPING * jnp.max(jnp.sum(jacobian ** 2, axis=0))
-    state = eqx.tree_at(lambda s: s.search_state.step_size, state,
-                        jnp.where(state.first_step, 1.0 / jnp.maximum(lam0, 1e-300),
-                                  state.search_state.step_size))
     args = (residual, jacobian, state.y_eval)
     new_u, new_state, _ = solver.step(_model, u, args, {}, state, _TAGS)
     _, result = solver.terminate(_model, new_u, args, {}, new_state, _TAGS)
-    accepted = new_state.num_accepted_steps > state.num_accepted_steps
+    damping = new_state.search_state  # `_TrustRegion`'s own state
+    accepted = damping.accepted
     # The stop does not look at the step in u (optimistix's Cauchy test): along a direction
     # the data barely see, steps stay large long after the fit has settled, and a parameter
     # there may wander. It asks what the data can still give: at an accepted point,
@@ -249,7 +257,7 @@ def _lm_step_impl(u, dyn_state, residual, jacobian, active, rtol: float, atol: f
     new_u, new_dyn = jax.tree.map(lambda n, o: jnp.where(active, n, o), (new_u, new_dyn),
                                   (u, dyn_state))
     record = dict(accepted=active & accepted,
-                  step_size=new_state.search_state.step_size, terminate=terminate,
+                  step_size=damping.step_size, terminate=terminate,
                   failed=result != optx.RESULTS.successful, reason=reason,
                   predicted=predicted)
     return new_u, new_dyn, record
@@ -341,10 +349,7 @@ def _combined_loads(data) -> tuple[Loads, tuple[tuple[int, int], ...]]:
     return jax.tree.map(lambda *a: jnp.concatenate(a), *tables), tuple(slices)
 
 
-def _as_params(mech, params, where=None) -> Params:
-    if params is not None and where is not None:
-        raise InputError("give the selection once: params or where=, not both.")
-    params = where if params is None else params
+def _as_params(mech, params) -> Params:
     if isinstance(params, Params):
         # `mech`'s values, unless set with with_start; `given` cleared once resolved, so that
         # a selection with or without given starts compiles to the same programs.
@@ -519,7 +524,9 @@ def _run(problem: _Problem, values, u0, *, batched, max_steps, rtol, atol, ftol,
         STOP_REASONS[reasons[b]].format(gtol=gtol, ftol=ftol) if converged[b] else
         ("the LM linear solve failed" if failed[b] else
          f"max_steps={max_steps} reached") for b in range(n_sets)]
-    return u, last, histories, converged, steps, accepted_steps, messages, first_jac, q0
+    return LMRun(u=u, last=last, histories=histories, converged=converged, steps=steps,
+                 accepted_steps=accepted_steps, messages=messages, first_jacobian=first_jac,
+                 q_last=q0)
 
 
 STOP_REASONS = {
@@ -556,14 +563,16 @@ def _run_adaptive(problem: _Problem, values, u0, *, adaptive: bool, max_steps, *
     """`_run`, then, for the data sets whose whitened data residual is below the stated noise
     (RMS ŝ < 1: nearly noise-free data), refit with the prior rows scaled by ŝ, up to
     `ADAPTIVE_PRIOR_ROUNDS` times (see `least_squares`, `prior`)."""
-    *out, jac0, q_last = _run(problem, values, u0, max_steps=max_steps, **kw)
+    run = _run(problem, values, u0, max_steps=max_steps, **kw)
     if not adaptive:
-        return (*out, jac0)
-    u, last, hist, conv, steps, acc, msg = out
+        return run
+    u, last, hist = run.u, run.last, run.histories
+    conv, steps, acc, msg = run.converged, run.steps, run.accepted_steps, run.messages
     n_sets, p = u.shape
     n_data = [int(np.count_nonzero(np.asarray(m.weight))) for m in problem.data]
     dof = max(sum(n_data) - p, 1)
     scale = np.ones(n_sets)
+    q_last = run.q_last
     for _ in range(ADAPTIVE_PRIOR_ROUNDS):
         z = np.asarray(last[0])[:, :-p] if p else np.asarray(last[0])
         rms = np.sqrt(np.sum(z ** 2, axis=1) / dof)
@@ -571,16 +580,17 @@ def _run_adaptive(problem: _Problem, values, u0, *, adaptive: bool, max_steps, *
         if not again.any():
             break
         scale = np.where(again, np.maximum(rms, 1e-12), scale)
-        u2, last2, hist2, conv2, steps2, acc2, msg2, _, q_last = _run(
-            problem, values, u, max_steps=max_steps, prior_scale=scale,
-            step0=int(steps.max()) + 1, q_start=q_last, active0=again, **kw)
+        refit = _run(problem, values, u, max_steps=max_steps, prior_scale=scale,
+                     step0=int(steps.max()) + 1, q_start=q_last, active0=again, **kw)
+        q_last = refit.q_last
         for b in np.flatnonzero(again):
-            u = u.at[b].set(u2[b])
-            last = tuple(a.at[b].set(a2[b]) for a, a2 in zip(last, last2, strict=True))
-            hist[b] = hist[b] + hist2[b]
-            conv[b], steps[b], acc[b] = conv2[b], steps[b] + 1 + steps2[b], acc[b] + acc2[b]
-            msg[b] = msg2[b]
-    return u, last, hist, conv, steps, acc, msg, jac0
+            u = u.at[b].set(refit.u[b])
+            last = tuple(a.at[b].set(a2[b]) for a, a2 in zip(last, refit.last, strict=True))
+            hist[b] = hist[b] + refit.histories[b]
+            conv[b], steps[b] = refit.converged[b], steps[b] + 1 + refit.steps[b]
+            acc[b] = acc[b] + refit.accepted_steps[b]
+            msg[b] = refit.messages[b]
+    return dataclasses.replace(run, u=u, last=last, q_last=q_last)
 
 
 def least_squares(
@@ -588,7 +598,6 @@ def least_squares(
     data: Measurement | Sequence[Measurement],
     params: Params | Callable[[Mechanism], object] | None = None,
     *,
-    where: Params | Callable[[Mechanism], object] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
     prior: Mechanism | Float[Array, " p"] | Mapping[str, float] | str | None = "weak",
@@ -612,7 +621,7 @@ def least_squares(
     - `data`: one measurement or several (`Landmarks`, `Poses`, `Deformations`, `Channel`, or
       a `measure.Measurements`: its landmarks, or its poses, whitened by its own σ), each with
       its own load table; one data set each (see `least_squares_batch` for many).
-    - `params` (or `where=`, the same): a `Params`, or a `where` function
+    - `params`: the selection every identification method takes: a `Params`, or a `where` function
       (`lambda m: (m.bushings.k_trans, ...)`, every entry of the selected leaves; stiffnesses
       log-scaled).
     - `loss`: `'linear'`, `'huber'` or `'cauchy'`; `loss_scale` in units of σ (default 1.345
@@ -656,15 +665,14 @@ def least_squares(
     data = _as_data(data)
     if {m.n_sets for m in data} != {None}:
         raise InputError("the measured values have a data-set axis: use least_squares_batch.")
-    params = _as_params(mech, params, where)
+    params = _as_params(mech, params)
     problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
     u0 = params.to_internal(params.start)[None]
-    u, last, hist, conv, steps, acc, msg, jac0 = _run_adaptive(
+    run = _run_adaptive(
         problem, None, u0, adaptive=_is_weak(prior, prior_sigma), batched=False,
         max_steps=max_steps, rtol=rtol, atol=atol, ftol=ftol, gtol=gtol, callback=callback)
     # The first evaluation is at the start values: the identifiability gate's information.
-    report = fit_report(params, problem, u[0], [a[0] for a in last], hist[0], bool(conv[0]),
-                        int(steps[0]), int(acc[0]), msg[0], loss, identifiable_sigma, jac0[0])
+    report = fit_report(params, problem, run, 0, loss, identifiable_sigma)
     report = dataclasses.replace(report, max_sigma_pct=float(max_sigma_pct))
     return params.apply(mech, jnp.asarray(returned_values(report))), report
 
@@ -695,7 +703,6 @@ def least_squares_batch(
     data: Measurement | Sequence[Measurement],
     params: Params | Callable[[Mechanism], object] | None = None,
     *,
-    where: Params | Callable[[Mechanism], object] | None = None,
     start: Float[Array, "sets p"] | None = None,
     loss: str = "linear",
     loss_scale: float | None = None,
@@ -727,7 +734,7 @@ def least_squares_batch(
         raise InputError("every measurement needs the same leading data-set axis for a batch; "
                          f"got {sorted(str(s) for s in sets)}.")
     n_sets = sets.pop()
-    params = _as_params(mech, params, where)
+    params = _as_params(mech, params)
     problem = _problem(mech, data, params, loss, loss_scale, prior, prior_sigma, inner_max_steps)
     if start is None:
         u0 = jnp.broadcast_to(params.to_internal(params.start), (n_sets, len(params)))
@@ -740,9 +747,10 @@ def least_squares_batch(
             params.with_start(row)
         u0 = jax.vmap(params.to_internal)(jnp.asarray(start))
     values = _values_of(data)
-    u, last, hist, conv, steps, acc, msg, jac0 = _run_adaptive(
+    run = _run_adaptive(
         problem, values, u0, adaptive=_is_weak(prior, prior_sigma), batched=True,
         max_steps=max_steps, rtol=rtol, atol=atol, ftol=ftol, gtol=gtol, callback=callback)
+    jac0 = run.first_jacobian
     if start is not None:
         # The identifiability gate's information at `params.start` (the same for every set:
         # see `FitReport.determined`), not at the given starts (e.g. the direct method's
@@ -754,12 +762,12 @@ def least_squares_batch(
     for b in range(n_sets):
         one_problem = _with_values(problem, jax.tree.map(lambda a, b=b: a[b], values))
         reports.append(dataclasses.replace(
-            fit_report(params, one_problem, u[b], [a[b] for a in last], hist[b], bool(conv[b]),
-                       int(steps[b]), int(acc[b]), msg[b], loss, identifiable_sigma, jac0[b]),
+            fit_report(params, one_problem, run, b, loss, identifiable_sigma, jac0[b]),
             max_sigma_pct=float(max_sigma_pct)))
     return BatchFitReport(
         names=params.names, estimates=np.stack([r.estimate for r in reports]),
-        sigma=np.stack([r.sigma for r in reports]), converged=conv.copy(), steps=steps.copy(),
+        sigma=np.stack([r.sigma for r in reports]), converged=run.converged.copy(),
+        steps=run.steps.copy(),
         reports=tuple(reports))
 
 
@@ -776,7 +784,7 @@ def whitened_residuals(
     parameters θ, and its Jacobian with respect to θ (implicit differentiation through the
     equilibria, forward mode). Uses the same compiled programs as `least_squares`."""
     data = _as_data(data)
-    params = _as_params(mech, params, None)
+    params = _as_params(mech, params)
     problem = _problem(mech, data, params, loss, loss_scale, None, None, 50)
     u = params.to_internal(jnp.asarray(theta, dtype=float))
     q0 = jnp.zeros((problem.loads.n_cases, mech.n_coordinates))

@@ -21,6 +21,7 @@ from .report import (
     MeasurementResiduals,
     consistency_from_residuals,
 )
+from .selection import display_value
 
 __all__ = ["FitReport", "NullDirection", "StepRecord"]
 
@@ -223,6 +224,29 @@ class FitReport(IdentificationReport):
             lines += [f"  {d.text}  (σ {d.sigma:.3g})" for d in self.null_space]
         return "\n".join(lines)
 
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`), one per parameter: parameter, value, sigma, sigma_pct,
+        unit, start, identifiable (the data see it), identified (`is_identified`: determined
+        and the model consistent), status and reason (the report's one verdict, `statuses`);
+        values and σ in the thesis's units, `selection.display_value`."""
+        rows = []
+        identified, statuses, reasons = self.is_identified, self.statuses, self.status_reasons
+        for k, name in enumerate(self.names):
+            value, unit = display_value(name, self.estimate[k])
+            scale = value / self.estimate[k] if self.estimate[k] else 1.0
+            rows.append(dict(parameter=name, value=float(value),
+                             sigma=float(self.sigma[k] * scale),
+                             sigma_pct=float(self.sigma_percent[k]), unit=unit,
+                             start=float(display_value(name, self.start[k])[0]),
+                             identifiable=bool(self.identifiable[k]),
+                             identified=bool(identified[k]), status=statuses[k],
+                             reason=reasons[k]))
+        return rows
+
+    def json_data(self) -> dict:
+        """The .json content (`write`): `to_dict()`."""
+        return self.to_dict()
+
     def to_dict(self) -> dict:
         return {
             "names": list(self.names), "estimate": self.estimate.tolist(),
@@ -260,8 +284,34 @@ def _gate_sigma_pct(params: Params, jac0, n_data: int) -> np.ndarray:
     return np.where(params.log_scaled, 100.0 * np.sqrt(var), np.nan)
 
 
-def fit_report(params: Params, problem, u, last, history, converged, steps,
-            accepted_steps, message, loss_name, identifiable_sigma, jac0=None) -> FitReport:
+@dataclasses.dataclass(frozen=True)
+class LMRun:
+    """What the Levenberg–Marquardt driver of `least_squares` returns for its data sets
+    (leading axis `sets`): `u` the final internal coordinates `(sets, p)`; `last` the last
+    accepted (whitened residual, Jacobian, raw residual), each with the leading set axis;
+    `histories` the `StepRecord`s of each set; `converged`, `steps`, `accepted_steps`,
+    `messages` per set; `first_jacobian` the Jacobian at the start (the identifiability
+    gate's information); `q_last` the last equilibria (warm start of a refit)."""
+
+    u: jnp.ndarray
+    last: tuple
+    histories: list
+    converged: np.ndarray
+    steps: np.ndarray
+    accepted_steps: np.ndarray
+    messages: list
+    first_jacobian: jnp.ndarray
+    q_last: jnp.ndarray
+
+
+def fit_report(params: Params, problem, run: LMRun, b: int, loss_name: str,
+               identifiable_sigma: float, jac0=None) -> FitReport:
+    """The `FitReport` of data set `b` of `run` (`problem`: that set's, its measured values
+    selected); `jac0` the Jacobian at the start values when it is not the run's own."""
+    u, last, history = run.u[b], [a[b] for a in run.last], run.histories[b]
+    converged, steps = bool(run.converged[b]), int(run.steps[b])
+    accepted_steps, message = int(run.accepted_steps[b]), run.messages[b]
+    jac0 = run.first_jacobian[b] if jac0 is None else jac0
     names = params.names
     p = len(names)
     z, jac, raw_all = (np.asarray(a, dtype=float) for a in last)
@@ -334,4 +384,4 @@ def fit_report(params: Params, problem, u, last, history, converged, steps,
         converged=converged, steps=steps, accepted_steps=accepted_steps,
         history=tuple(history), message=message, loss_name=loss_name,
         units=params.units(problem.mech), consistency=consistency, stop_reason=message,
-        gate_sigma_pct=None if jac0 is None else _gate_sigma_pct(params, jac0, n_data))
+        gate_sigma_pct=_gate_sigma_pct(params, jac0, n_data))

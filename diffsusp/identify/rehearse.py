@@ -29,9 +29,7 @@ geometric location (joint hardpoints displaced, landmarks measured); the tyre be
 """
 
 import dataclasses
-import json
 import math
-import pathlib
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -41,7 +39,7 @@ import numpy as np
 
 from .. import measure
 from ..errors import ConvergenceError, InputError
-from ..io.files import write_text_atomic
+from ..kc.corner import corners_of, design_load
 from ..model.mechanism import Loads, Mechanism
 from .direct import direct, direct_batch
 from .geometric import (
@@ -53,14 +51,27 @@ from .geometric import (
 )
 from .iterative import iterative
 from .least_squares import least_squares, least_squares_batch
-from .report import check_data, rows_csv
-from .selection import fit_selection
+from .report import Report, check_data
+from .selection import named_stiffnesses
 
 __all__ = ["GeometryScenario", "ParameterRehearsal", "RehearsalReport", "SuspensionScenario",
-           "rehearse"]
+           "corner_cases", "rehearse"]
 
 METHODS = ("direct", "iterative", "least_squares")
 """The suspension methods `SuspensionScenario` runs."""
+
+
+def corner_cases(mech: Mechanism) -> Loads:
+    """The default load table of a suspension rehearsal: at the corner's contact point, the
+    design load × 0.7, 1, 1.3, each with lateral −2, 0, +2 kN and longitudinal ±1.5 kN (18
+    cases: a K&C rig's combined-load grid)."""
+    stated = corners_of(mech)[""]
+    corner = stated.resolve(mech)
+    f0 = design_load(mech, stated)
+    force = [[x, y, z] for z in (0.7 * f0, f0, 1.3 * f0) for y in (-2000.0, 0.0, 2000.0)
+             for x in (-1500.0, 1500.0)]
+    name = mech.load_points.names[corner.contact_point]
+    return mech.loads(forces={name: force})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,10 +98,13 @@ class ParameterRehearsal:
 
 
 @dataclasses.dataclass(frozen=True)
-class RehearsalReport:
+class RehearsalReport(Report):
     """What a rehearsal found: `method`, `n` truths, `parameters` (one `ParameterRehearsal`
     each), `consistent_rate` (fits whose consistency verdict is "consistent", of those that
-    ran), `failed` (runs without a report), `seed`."""
+    ran), `failed` (runs without a report), `seed`. On the report base (`Report`): `rows()`,
+    `summary()`, `to_json()`, `write(path)` (.csv, .json)."""
+
+    kind = "rehearsal"
 
     method: str
     n: int
@@ -113,8 +127,9 @@ class RehearsalReport:
                 "false_identified_rate": self.false_identified_rate,
                 "parameters": self.rows(), "bottom_line": self.bottom_line()}
 
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(self.summary(), **kwargs)
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`write`): `rows()` with the method on each."""
+        return [{"method": self.method, **r} for r in self.rows()]
 
     def bottom_line(self) -> list[str]:
         """One sentence per parameter a user acts on."""
@@ -155,18 +170,6 @@ class RehearsalReport:
                      "68.3 / 95.4 / 99.7)")
         lines += self.bottom_line()
         return "\n".join(lines)
-
-    def write(self, path) -> None:
-        """.json (`summary()`) or .csv (`rows()`), by suffix; written atomically."""
-        path = pathlib.Path(path)
-        if path.suffix.lower() == ".json":
-            text = json.dumps(self.summary(), indent=2) + "\n"
-        elif path.suffix.lower() == ".csv":
-            text = rows_csv([{"method": self.method, **r} for r in self.rows()])
-        else:
-            raise InputError(f"{path}: unknown format '{path.suffix}' for a rehearsal; use "
-                             ".csv or .json.")
-        write_text_atomic(path, text)
 
 
 def _number(v):
@@ -232,14 +235,16 @@ class SuspensionScenario:
     stiffness §1.12, §2.8), identified from the start model.
 
     **Fields:** `method`; `mech` the user's start model; `loads` the load table (leading case
-    axis); `params` the `Params` whose truths are drawn and identified (default: every bushing
-    stiffness that is not 0 in the model, `selection.fit_selection`); `noise` the landmark σ
-    (mm, > 0); `spread` (low, high): each truth is the start × a log-uniform factor in it
-    (default 0.5–2); `per_part` landmarks per part; `layout_seed`."""
+    axis; default `corner_cases`); `params` the `Params` whose truths are drawn and
+    identified, or the names of stiffnesses among the default ('bushing_A.Ktx',
+    `selection.named_stiffnesses`); default: every bushing stiffness that is not 0 in the
+    model (`selection.fit_selection`); `noise` the landmark σ (mm, > 0); `spread` (low,
+    high): each truth is the start × a log-uniform factor in it (default 0.5–2); `per_part`
+    landmarks per part; `layout_seed`."""
 
     method: str
     mech: Mechanism
-    loads: Loads
+    loads: Loads | None = None
     params: object = None
     noise: float = 0.05
     spread: tuple[float, float] = (0.5, 2.0)
@@ -259,8 +264,10 @@ class SuspensionScenario:
         if not (0 < lo <= hi and math.isfinite(hi)) or lo == hi:
             raise InputError(f"the spread must be (low, high) factors with 0 < low < high; "
                              f"got {self.spread!r}: a spread of 0 draws the start every time.")
-        if self.params is None:
-            self.params = fit_selection(self.mech)[0]
+        if self.params is None or isinstance(self.params, list | tuple):
+            self.params = named_stiffnesses(self.mech, self.params)
+        if self.loads is None:
+            self.loads = corner_cases(self.mech)
         if self.loads.n_cases is None:
             raise InputError("the rehearsal needs a table of load cases (leading case axis).")
 
@@ -325,6 +332,21 @@ def _stack(items: Sequence):
                        tuple(jnp.stack([getattr(it, f) for it in items]) for f in fields))
 
 
+def _joints_named(mech: Mechanism, names: Sequence[str] | None) -> tuple:
+    """The joints `joints_from_model` finds in `mech` (every part), those named in `names` if
+    given. Raises `InputError` for a name that is not one of them."""
+    joints = joints_from_model(mech, mech.parts)[0]
+    if names is None:
+        return joints
+    wanted = [n.strip() for n in names if n.strip()]
+    known = [j.name for j in joints]
+    unknown = [n for n in wanted if n not in known]
+    if unknown or not wanted:
+        raise InputError(f"unknown parameter(s) {', '.join(unknown) or repr(names)}: params "
+                         f"names the joints to locate; the model's: {', '.join(known)}.")
+    return tuple(j for j in joints if j.name in wanted)
+
+
 @dataclasses.dataclass
 class GeometryScenario:
     """The rehearsal of the geometric location (`identify.geometric.locate_joints`, spec
@@ -337,16 +359,18 @@ class GeometryScenario:
     `'<joint>.axis_y'`…); a truth's value of each is the truth model's own (its hardpoint; a
     revolute's line cut at the prior's plane and its axis).
 
-    **Fields:** `mech` the user's model; `loads` the load table; `joints` the joint list
-    (default `joints_from_model` over every part); `noise` landmark σ (mm, > 0); `spread`
-    (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as `locate_joints`.
+    **Fields:** `mech` the user's model; `loads` the load table (default `corner_cases`);
+    `params` the joints to locate, `GeometricJoint`s or their names among those
+    `joints_from_model` finds over every part (default: all of them); `noise` landmark σ (mm,
+    > 0); `spread` (mm, > 0); `per_part`; `layout_seed`; `max_sigma`, `min_snr` as
+    `locate_joints`.
 
     `draw` keeps the hardpoint displacements it drew for the next `identify` (the truths it
     returns are the coordinates, not the displacements)."""
 
     mech: Mechanism
-    loads: Loads
-    joints: tuple = None
+    loads: Loads | None = None
+    params: tuple = None
     noise: float = 0.05
     spread: float = 5.0
     per_part: int = 4
@@ -366,23 +390,25 @@ class GeometryScenario:
             raise InputError(f"the spread must be a positive displacement (mm) of the "
                              f"hardpoints; got {self.spread!r}: a spread of 0 draws the start "
                              "every time.")
+        if self.params is None or (self.params and all(isinstance(j, str) for j in self.params)):
+            self.params = _joints_named(self.mech, self.params)
+        if self.loads is None:
+            self.loads = corner_cases(self.mech)
         if self.loads.n_cases is None:
             raise InputError("the rehearsal needs a table of load cases (leading case axis).")
-        if self.joints is None:
-            self.joints = joints_from_model(self.mech, self.mech.parts)[0]
-        self.joints = tuple(self.joints)
-        if not self.joints:
+        self.params = tuple(self.params)
+        if not self.params:
             raise InputError(f"model '{self.mech.name}' has no joint the geometric location "
                              "can locate.")
         parts = tuple(p for p in self.mech.parts
-                      if any(p in j.parts for j in self.joints))
+                      if any(p in j.parts for j in self.params))
         self.layout = measure.place_landmarks(self.mech, self.per_part, parts=parts,
                                               seed=self.layout_seed)
         nominal = self._locate(measure.synthesize(self.mech, self.loads, layout=self.layout))
         self._names = nominal.names
         # the cut coordinate / left-out axis component of each joint, as the nominal reports
         self._rows = {j.name: self._row_map(j, est) for j, est in
-                      zip(self.joints, nominal.joints, strict=True)}
+                      zip(self.params, nominal.joints, strict=True)}
         self._drawn = None
 
     @staticmethod
@@ -399,14 +425,14 @@ class GeometryScenario:
         return tuple(self._names)
 
     def _locate(self, meas):
-        return locate_joints(meas, self.joints, landmark_sigma=float(self.noise),
+        return locate_joints(meas, self.params, landmark_sigma=float(self.noise),
                              max_sigma=self.max_sigma, min_snr=self.min_snr, model=self.mech)
 
     def truth_values(self, mech) -> np.ndarray:
         """The coordinates (in `names` order) of the joints of model `mech` (NaN where the
         model has no element for a joint)."""
         values = {}
-        for j in self.joints:
+        for j in self.params:
             geo = model_geometry(mech, j)
             if geo is None:
                 continue
@@ -417,9 +443,9 @@ class GeometryScenario:
         return np.array([values.get(n, np.nan) for n in self._names])
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.joints), 3))
+        offsets = rng.uniform(-self.spread, self.spread, size=(n, len(self.params), 3))
         self._drawn = offsets
-        return np.stack([self.truth_values(displace_joints(self.mech, self.joints, o))
+        return np.stack([self.truth_values(displace_joints(self.mech, self.params, o))
                          for o in offsets])
 
     def identify(self, truths: np.ndarray, rng: np.random.Generator) -> list:
@@ -428,7 +454,7 @@ class GeometryScenario:
         noise = measure.GaussianNoise(landmarks=float(self.noise))
         reports = []
         for offsets in self._drawn:
-            truth = displace_joints(self.mech, self.joints, offsets)
+            truth = displace_joints(self.mech, self.params, offsets)
             key = jax.random.PRNGKey(int(rng.integers(2**31)))
             try:
                 meas = measure.synthesize(truth, self.loads, layout=self.layout, noise=noise,

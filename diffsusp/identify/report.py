@@ -48,6 +48,7 @@ from typing import ClassVar
 import equinox as eqx
 import numpy as np
 
+from ..errors import InputError
 from ..io.files import write_text_atomic
 from ..measure.data import as_fit_data, from_measurements
 from ..measure.measurements import Measurements
@@ -264,6 +265,13 @@ AT_START = "the start values"
 """Where the suspension identifications judge σ % (`judged_at`): see `sigma_pct_at_start`."""
 
 
+def sigma_pct(sigma, estimate) -> np.ndarray:
+    """σ % at the estimate: 100·σ/|estimate| (inf where the estimate is 0, NaN where both
+    are)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return 100.0 * np.asarray(sigma, dtype=float) / np.abs(np.asarray(estimate, dtype=float))
+
+
 def sigma_pct_at_start(sigma, start) -> np.ndarray:
     """The one rule for "determined" of `direct`, `iterative` and `least_squares`:
     σ % judged at the start values, 100·σ/|start|, where σ is what the experiment gives at the
@@ -300,6 +308,93 @@ def bar_reason(pct: float, bar: float = MAX_SIGMA_PCT) -> str:
     return f"σ% {pct:.3g} > {bar:g} at {AT_START}"
 
 
+def plain(value):
+    """`value` as JSON data: mappings and sequences recursively, numpy scalars and arrays as
+    Python numbers and lists, NaN and ±inf as None (JSON has no such numbers)."""
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist())
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return _number(value)
+    return value
+
+
+class Report:
+    """The one base of the library's reports (the identifications, their rehearsals, the
+    sensitivities, the tyre fits): a subclass gives `rows()` (one dict of plain values per
+    row) and `summary()` (the whole report as plain data); the base gives `to_json()` and the
+    one writer `write(path)`, which chooses the format by the suffix of `path`.
+
+    A subclass may change what a file gets: `csv_rows()` (default `rows()`), `json_data()`
+    (default `summary()`), and more formats by extending `formats()`."""
+
+    kind: ClassVar[str] = "report"
+    """What the report is, for messages ('rehearsal', 'identification', …)."""
+
+    def rows(self) -> list[dict]:
+        """One dict per row (parameter, metric, …) of plain values."""
+        raise NotImplementedError(f"{type(self).__name__} gives no rows()")
+
+    def summary(self) -> dict:
+        """The whole report as plain data (default: its `rows()` under "rows")."""
+        return {"rows": self.rows()}
+
+    def to_json(self, **kwargs) -> str:
+        """`summary()` as JSON (NaN and inf written as null); `kwargs` go to `json.dumps`."""
+        return json.dumps(plain(self.summary()), **kwargs)
+
+    def csv_rows(self) -> list[dict]:
+        """The rows a .csv file gets (default `rows()`)."""
+        return self.rows()
+
+    def json_data(self) -> dict:
+        """What a .json file gets (default `summary()`)."""
+        return self.summary()
+
+    def formats(self) -> dict:
+        """Suffix → a function giving the file's text: .csv (`csv_rows()` by `rows_csv`),
+        .json (`json_data()`, NaN and inf as null)."""
+        return {".csv": lambda: rows_csv(self.csv_rows() or [{"parameter": None}]),
+                ".json": lambda: json.dumps(plain(self.json_data()), indent=2,
+                                            allow_nan=False) + "\n"}
+
+    def write(self, path) -> None:
+        """Write the report to `path` in the format its suffix names (`formats()`: .csv,
+        .json, and for an identification .html and .txt). Every format renders the same
+        rows, so they cannot disagree; the file is written under a temporary name and renamed
+        (never left truncated). Raises `InputError` for another suffix."""
+        path = pathlib.Path(path)
+        formats = self.formats()
+        render = formats.get(path.suffix.lower())
+        if render is None:
+            raise InputError(f"{path}: unknown report format '{path.suffix}' for a "
+                             f"{self.kind} (use {', '.join(formats)}).")
+        write_text_atomic(path, render())
+
+
+@dataclasses.dataclass(frozen=True)
+class RowsReport(Report):
+    """Rows of plain values with a few fields around them, written by the report base: e.g.
+    the estimate at an interruption (`table`: the rows; `fields`: what `summary()` adds to
+    them, e.g. {"interrupted": True})."""
+
+    table: tuple[dict, ...]
+    fields: dict = dataclasses.field(default_factory=dict)
+
+    def rows(self) -> list[dict]:
+        return list(self.table)
+
+    def summary(self) -> dict:
+        return {**self.fields, "rows": self.rows()}
+
+
 STATUSES = ("identified", "not determined", "held", "not seen")
 """The one status of a parameter in every identification report: *identified* (determined by
 the data and the fit consistent with them), *not determined* (with the reason: σ % above the
@@ -307,7 +402,7 @@ bar, only a combination determined, the fit inconsistent, …), *held* (at its s
 estimated), *not seen* (the data carry no information on it: σ infinite)."""
 
 
-class IdentificationReport:
+class IdentificationReport(Report):
     """Base of the identification reports (see the module docstring for what a subclass
     provides). Not a dataclass itself, so that its subclasses keep their own fields.
 
@@ -316,7 +411,9 @@ class IdentificationReport:
     (text per parameter: why it is not determined, "" otherwise), `judged_at` (where the σ %
     bar was applied), `stop_reason` (why the method stopped). The base derives from them one
     status per parameter (`statuses`, `status_reasons`), and every writer — `table_text`,
-    `rows()`, `summary()`/`to_json()`, `write_report` (.csv, .json, .html) — renders those."""
+    `rows()`, `summary()`/`to_json()`, `write` (.csv, .json, .html, .txt) — renders those."""
+
+    kind: ClassVar[str] = "identification"
 
     family: ClassVar[str] = "identification"
     """The method's name: 'direct', 'iterative', 'least_squares'."""
@@ -459,9 +556,23 @@ class IdentificationReport:
                 "stop_reason": getattr(self, "stop_reason", ""), "judged_at": self.judged_at,
                 "warnings": [str(w) for w in getattr(self, "warnings", ()) or ()]}
 
-    def to_json(self, **kwargs) -> str:
-        """`summary()` as JSON (NaN and inf written as null); `kwargs` go to `json.dumps`."""
-        return json.dumps(self.summary(), **kwargs)
+    def csv_rows(self) -> list[dict]:
+        """The .csv rows (`csv_text`): the base `rows()` (model units), with the method and
+        the fit's verdict on every row."""
+        rows = IdentificationReport.rows(self) or [{"parameter": None}]
+        return [{"method": self.family, **row, "fit_verdict": self.fit_verdict}
+                for row in rows]
+
+    def json_data(self) -> dict:
+        """The .json content: the base `summary()` (a method's report with a fuller
+        `to_dict()` writes that)."""
+        return IdentificationReport.summary(self)
+
+    def formats(self) -> dict:
+        """The base's .csv and .json, and .html (`html_text`), .txt (`format_table`)."""
+        return super().formats() | {".html": lambda: html_text(self),
+                                    ".htm": lambda: html_text(self),
+                                    ".txt": lambda: format_table(self) + "\n"}
 
     def table_text(self, width: int | None = 100) -> str:
         """The report as text (`format_table`)."""
@@ -554,11 +665,9 @@ def format_table(report: IdentificationReport, width: int | None = 100) -> str:
 
 
 def csv_text(report: IdentificationReport) -> str:
-    """The base `rows()` (model units) as CSV, with the method and the fit's verdict on every
-    row."""
-    rows = IdentificationReport.rows(report) or [{"parameter": None}]
-    return rows_csv([{"method": report.family, **row, "fit_verdict": report.fit_verdict}
-                     for row in rows])
+    """The report's .csv text: `IdentificationReport.csv_rows` (the base `rows()` in model
+    units, with the method and the fit's verdict on every row)."""
+    return rows_csv(IdentificationReport.csv_rows(report))
 
 
 def rows_csv(rows: Sequence[dict]) -> str:
@@ -628,28 +737,7 @@ def html_text(report: IdentificationReport, figures: bool = True) -> str:
         + (f"<h2>Figure</h2>{svg}" if svg else "") + "</body></html>\n")
 
 
-def write_report(report: IdentificationReport, path) -> None:
-    """Write `report` by the suffix of `path`: .csv (`csv_text`: one row per parameter, with
-    its status, reason and the fit's verdict), .json (`summary()`), .html (`html_text`), .txt
-    (`format_table`). Every writer renders the same `rows()`, so they cannot disagree. The file
-    is written under a temporary name and renamed (never left truncated)."""
-    path = pathlib.Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
-        text = csv_text(report)
-    elif suffix == ".json":
-        text = json.dumps(IdentificationReport.summary(report), indent=2, allow_nan=False) + "\n"
-    elif suffix in (".html", ".htm"):
-        text = html_text(report)
-    elif suffix == ".txt":
-        text = format_table(report) + "\n"
-    else:
-        raise ValueError(f"write_report: unknown report format '{path.suffix}' "
-                         "(use .csv, .json, .html or .txt).")
-    write_text_atomic(path, text)
-
-
 __all__ = ["CONSISTENCY_ALPHA", "STATUSES", "Consistency", "IdentificationReport",
-           "MeasurementResiduals", "check_consistency", "check_data", "chi2_quantile",
-           "consistency_from_residuals", "csv_text", "rows_csv", "format_table", "html_text",
-           "write_report"]
+           "MeasurementResiduals", "Report", "RowsReport", "check_consistency", "check_data",
+           "chi2_quantile", "consistency_from_residuals", "csv_text", "format_table",
+           "html_text", "plain", "rows_csv", "sigma_pct"]

@@ -70,6 +70,26 @@ def without_zeros(mech: Mechanism) -> Mechanism:
                                                   mech.springs.k)))
 
 
+def named_stiffnesses(mech: Mechanism, names: Sequence[str] | None = None) -> Params:
+    """The stiffnesses named 'bushing.Ktx', … among the default fit selection (`fit_selection`:
+    every stiffness that is not 0 in the model), in that order by bushing; None or empty: the
+    whole default. Raises `InputError` for a name outside it."""
+    default = fit_selection(mech)[0]
+    wanted = [n.strip() for n in names or () if n.strip()]
+    if not wanted:
+        return default
+    unknown = [n for n in wanted if n not in default.names]
+    if unknown:
+        raise InputError(f"unknown parameter(s) {', '.join(unknown)}; the model's: "
+                         f"{', '.join(default.names)}.")
+    params = None
+    for bushing in dict.fromkeys(n.rsplit(".", 1)[0] for n in wanted):
+        axes = tuple(n.rsplit(".", 1)[1] for n in wanted if n.rsplit(".", 1)[0] == bushing)
+        p = Params.bushing_stiffness(mech, (bushing,), axes=axes)
+        params = p if params is None else params + p
+    return params
+
+
 def fit_selection(mech: Mechanism, bushings: Sequence[str] | None = None,
                   axes: str | Sequence[str] | None = None, *, centres: bool = False,
                   springs: bool = False, start: float | None = None
@@ -145,4 +165,4 @@ def display_value(name: str, value: float) -> tuple[float, str]:
 
 
 __all__ = ["DEG", "ROTATIONAL", "display_value", "fit_selection", "measured_bushings",
-           "with_start", "without_zeros"]
+           "named_stiffnesses", "with_start", "without_zeros"]

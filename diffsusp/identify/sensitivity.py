@@ -28,10 +28,11 @@ import numpy as np
 from .. import plot
 from ..errors import InputError
 from ..kc.events import evaluate, raw_metrics
-from ..kc.metrics import DERIVATIVE_METRICS, flagged
+from ..kc.metrics import DERIVATIVE_METRICS, display, display_unit, flagged
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, marker_poses, solve_statics
 from .params import Params
+from .report import Report, plain
 
 PARAMETER_SETS = {
     "stiffness": "every non-zero bushing stiffness and spring rate (log-scaled: per relative "
@@ -72,7 +73,7 @@ def _as_params(mech: Mechanism, params) -> Params:
 
 
 @dataclasses.dataclass(frozen=True)
-class SensitivityReport:
+class SensitivityReport(Report):
     """Sensitivities of K&C metrics to parameters at each case of an event.
 
     - `jacobian`: metric name → `(cases, p)` ∂metric/∂θ (metric units per parameter unit).
@@ -81,13 +82,42 @@ class SensitivityReport:
       relative change of θ; for parameters that can be zero or negative, such as positions,
       θ is replaced by 1 unit: per mm).
     - `values`: metric name → `(cases,)`; `params`: names and values θ.
+    - `event`, `x_name`, `x`: the K&C event's name and its input per case (empty for a rig).
+
+    On the report base (`Report`): `rows()` (metric, rank, parameter, elasticity), `summary()`
+    (everything, as plain data), `to_json()`, `write(path)` (.csv, .json).
     """
+
+    kind = "sensitivity"
 
     params: tuple[str, ...]
     theta: np.ndarray
     values: dict
     jacobian: dict
     elasticity: dict
+    event: str = ""
+    x_name: str = ""
+    x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+    def rows(self) -> list[dict]:
+        """One row per metric and parameter, by decreasing |elasticity| (the largest over the
+        cases): metric, rank (1 = the largest), parameter, elasticity."""
+        return [dict(metric=name, rank=k + 1, parameter=p, elasticity=plain(v))
+                for name in self.elasticity for k, (p, v) in enumerate(self.ranked(name))]
+
+    def summary(self) -> dict:
+        """The event, the parameters and θ, and per metric its display unit, its values (in
+        that unit), the Jacobian, the elasticities and the parameters ranked."""
+        return plain({
+            "event": self.event, "x": {"name": self.x_name, "values": self.x},
+            "params": list(self.params), "theta": self.theta,
+            "metrics": {
+                name: {"unit": display_unit(name), "values": display(name, self.values[name]),
+                       "jacobian": self.jacobian[name], "elasticity": self.elasticity[name],
+                       "ranked": [[p, v] for p, v in self.ranked(name)]}
+                for name in self.elasticity},
+            "units": "jacobian: metric internal units (mm, N, rad) per parameter unit (N/mm, "
+                     "N·mm/rad, mm)"})
 
     def ranked(self, metric: str, case: int | None = None) -> list[tuple[str, float]]:
         """Parameters by decreasing |elasticity| of `metric` (at `case`, or the largest over
@@ -205,7 +235,9 @@ def sensitivity(event, params, *, loads: Loads | None = None,
         scale = np.nanmax(np.abs(values[k])) if np.any(np.isfinite(values[k])) else np.nan
         elasticity[k] = j * unit / scale if scale > 0 else np.full_like(j, np.nan)
     return SensitivityReport(params=params.names, theta=th, values=values, jacobian=jac,
-                             elasticity=elasticity)
+                             elasticity=elasticity, event=getattr(event, "name", ""),
+                             x_name=getattr(event, "x_name", ""),
+                             x=np.asarray(getattr(event, "x", np.zeros(0))))
 
 
 # ----------------------------------------------------------------------------- experiment design

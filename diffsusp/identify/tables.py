@@ -26,30 +26,6 @@ def _stiffness_display(axis: str) -> tuple[float, str]:
     return (DEG, "N*mm/deg") if axis in ROTATIONAL else (1.0, "N/mm")
 
 
-def iterative_rows(report: IterativeReport) -> list[dict]:
-    """One row per identified direction (`report.names`): parameter, value, unit, start (the
-    thesis's units), status and reason (the report's one verdict: `statuses`), identified
-    (status is 'identified'), gate_passed (the correlation gate passed at least once),
-    equalised, r."""
-    rows = []
-    sel = report._selected
-    statuses, reasons, ident = report.statuses, report.status_reasons, report.is_identified
-    k = 0
-    for b, name in enumerate(report.bushings):
-        for a, axis in enumerate(AXES):
-            if not sel[b, a]:
-                continue
-            scale, unit = _stiffness_display(axis)
-            rows.append(dict(
-                parameter=f"{name}.{axis}", value=float(report.stiffness[b, a] * scale),
-                unit=unit, start=float(report.start[b, a] * scale), status=statuses[k],
-                reason=reasons[k], identified=bool(ident[k]),
-                gate_passed=bool(report.identified[b, a]),
-                equalised=bool(report.equalised[b, a]), r=float(report.r[b, a])))
-            k += 1
-    return rows
-
-
 def interrupted_iterative_rows(mech0: Mechanism, names: Sequence[str],
                                record: IterationRecord | None) -> list[dict]:
     """The estimate of the last finished iteration (`record`; None: none finished, no rows),
@@ -66,25 +42,6 @@ def interrupted_iterative_rows(mech0: Mechanism, names: Sequence[str],
             rows.append(dict(parameter=f"{name}.{axis}",
                              value=float(record.stiffness[b, a] * scale), unit=unit,
                              start=float(start) * scale, status="interrupted"))
-    return rows
-
-
-def fit_rows(report: FitReport) -> list[dict]:
-    """One row per parameter: parameter, value, sigma, sigma_pct, unit, start, identifiable
-    (the data see it), identified (`FitReport.is_identified`: determined and the model
-    consistent), status and reason (the report's one verdict, `statuses`); values and σ
-    in the thesis's units, `display_value`."""
-    rows = []
-    identified, statuses, reasons = report.is_identified, report.statuses, report.status_reasons
-    for k, name in enumerate(report.names):
-        value, unit = display_value(name, report.estimate[k])
-        scale = value / report.estimate[k] if report.estimate[k] else 1.0
-        rows.append(dict(parameter=name, value=float(value), sigma=float(report.sigma[k] * scale),
-                         sigma_pct=float(report.sigma_percent[k]), unit=unit,
-                         start=float(display_value(name, report.start[k])[0]),
-                         identifiable=bool(report.identifiable[k]),
-                         identified=bool(identified[k]), status=statuses[k],
-                         reason=reasons[k]))
     return rows
 
 
@@ -174,6 +131,5 @@ def fit_figures(report: FitReport, mech0: Mechanism, fitted: Mechanism, meas) ->
                                            f"{fitted.name}: measured vs identified")}
 
 
-__all__ = ["case_channels", "comparison_figure", "fit_figures", "fit_rows",
-           "interrupted_fit_rows", "interrupted_iterative_rows", "iterative_figures",
-           "iterative_rows"]
+__all__ = ["case_channels", "comparison_figure", "fit_figures", "interrupted_fit_rows",
+           "interrupted_iterative_rows", "iterative_figures"]

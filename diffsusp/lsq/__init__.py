@@ -10,7 +10,8 @@ The one linear least-squares engine of diffsusp, for any linear-in-parameter mod
   symbolically ("Krx1 + Krx2", "a - 0.07413 b");
 - solutions: basic (non-identifiable parameters at 0 or their prior), minimum norm, truncated
   SVD, Tikhonov toward a prior, non-negative / box-bounded (own active-set BVLS), TLS;
-- σ, σ%, confidence index, intervals; the elimination loop with its log; a-priori re-injection.
+- σ, σ%, confidence index, intervals; the elimination loop with its log; a-priori re-injection;
+- the one robust loss of the nonlinear fits (`robust`, `LOSSES`).
 
 ```python
 from diffsusp import lsq
@@ -23,9 +24,10 @@ sol = jax.vmap(lambda y: lsq.solve_arrays(W, y))(Y)   # pure arrays, batched (Mo
 from .accumulate import Accumulator
 from .core import METHODS, Solution, qr_r, solve_arrays, solve_r, tls_arrays
 from .fit import Fit, Problem, Step, eliminate, format_combination, problem, solve, tls
+from .robust import DEFAULT_LOSS_SCALE, LOSSES, robust
 
 __all__ = [
-    "METHODS", "Accumulator", "Fit", "Problem", "Solution", "Step", "eliminate",
-    "format_combination", "problem", "qr_r", "solve", "solve_arrays", "solve_r", "tls",
-    "tls_arrays",
+    "DEFAULT_LOSS_SCALE", "LOSSES", "METHODS", "Accumulator", "Fit", "Problem", "Solution",
+    "Step", "eliminate", "format_combination", "problem", "qr_r", "robust", "solve",
+    "solve_arrays", "solve_r", "tls", "tls_arrays",
 ]

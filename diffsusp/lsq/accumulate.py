@@ -166,7 +166,7 @@ class Accumulator:
         weights, sigma = self.block_weights, self.block_sigma
         w = weights if np.any(weights != 1.0) else None
         s = sigma if np.any(np.isfinite(sigma)) else None
-        return fit_mod.Problem(R=self.R, n=self.rows, names=fit_mod._names(names, self.p),
+        return fit_mod.Problem(R=self.R, n=self.rows, names=fit_mod.parameter_names(names, self.p),
                                block_weights=w, block_sigma=s)
 
     def solve(self, *, names=None, **options) -> fit_mod.Fit:

@@ -42,7 +42,9 @@ def _data(W, y):
     return W, y
 
 
-def _names(names, p):
+def parameter_names(names, p: int) -> tuple[str, ...]:
+    """`names` checked against `p` columns (distinct, as many as columns), or x0, x1, … when
+    None."""
     if names is None:
         return tuple(f"x{i}" for i in range(p))
     names = tuple(str(n) for n in names)
@@ -268,7 +270,7 @@ class Problem:
             self.R, np.float64(self.n), np.append(keep, p), base.kept, base.identifiable,
             base.regrouping, scale=scale))
         sigma, sigma_pct, rv, rs, ic = stats
-        idx = np.nonzero(base._nontrivial())[0]
+        idx = np.nonzero(base.nontrivial())[0]
         # ‖W x − y‖ = ‖R_m [x; 1]‖ (spec §3.3).
         resid = float(np.linalg.norm(np.asarray(self.R) @ np.append(x, 1.0)))
         return dataclasses.replace(
@@ -291,7 +293,7 @@ class Problem:
             if check is not None:
                 candidate = check(fit)
                 if candidate is not None:
-                    i = fit._index(candidate)
+                    i = fit.index(candidate)
                     if fixed_m[i]:
                         raise InputError(f"check returned {candidate!r}, which is already "
                                          "removed; return None when the behaviour is fine.")
@@ -338,7 +340,7 @@ def problem(W, y, *, names=None, weights=None, blocks=None, threshold=None) -> P
     """Validate the data, apply the row/block weights and reduce to the R-factor (one QR)."""
     check_x64()
     W, y = _data(W, y)
-    names = _names(names, W.shape[1])
+    names = parameter_names(names, W.shape[1])
     if threshold is not None:
         _options("basic", threshold, "n-rank")
     row_w, block_w, block_sigma = _row_weights(W, y, weights, blocks, threshold)

@@ -126,14 +126,15 @@ class Fit:
         return (lo <= 0) & (hi >= 0)
 
     def value(self, name: str) -> float:
-        return float(self.x[self._index(name)])
+        return float(self.x[self.index(name)])
 
-    def _index(self, name: str) -> int:
+    def index(self, name: str) -> int:
+        """The position of parameter `name` (`InputError` naming the known ones otherwise)."""
         return index_of(self.names, name)
 
     def combination(self, name: str) -> str:
         """The printed combination estimated by the kept parameter `name` (itself if alone)."""
-        j = self._index(name)
+        j = self.index(name)
         if not self.kept[j]:
             raise InputError(f"parameter {name!r} is not kept in the reduced model; its value is "
                              "its prior. Ask for one of the kept parameters.")
@@ -149,7 +150,7 @@ class Fit:
         given = np.zeros(self.p, bool)
         x = self.x.copy()
         for name, value in priors.items():
-            i = self._index(name)
+            i = self.index(name)
             given[i] = True
             x[i] = float(value)
         G = self.regrouping[self.kept]
@@ -186,7 +187,7 @@ class Fit:
         for i, name in enumerate(self.names):
             lines.append(f"{name:<{width}}  {self.x[i]:>13.6g}  {_num(self.sigma[i], '.3g'):>10}"
                          f"  {_pct(self.sigma_pct[i]):>8}  {_num(self.confidence[i], '.3f'):>6}"
-                         f"  {self._status(i)}")
+                         f"  {self.status(i)}")
         if self.relations:
             lines.append("identifiable combinations:")
             for text, v, s in zip(self.relations, self.relation_values, self.relation_sigma,
@@ -205,9 +206,11 @@ class Fit:
     def __str__(self) -> str:
         return self.table()
 
-    def _status(self, i: int) -> str:
+    def status(self, i: int) -> str:
+        """The status of parameter `i` in words ("" when identified): fixed at its prior, at a
+        bound, not identifiable (with the combination it is in), not essential."""
         name_rel = None
-        for text, j in zip(self.relations, np.nonzero(self._nontrivial())[0], strict=True):
+        for text, j in zip(self.relations, np.nonzero(self.nontrivial())[0], strict=True):
             if self.regrouping[j, i] != 0:
                 name_rel = text
         if self.fixed[i]:
@@ -224,7 +227,9 @@ class Fit:
             return "not essential (IC < 0.1)"
         return ""
 
-    def _nontrivial(self) -> np.ndarray:
+    def nontrivial(self) -> np.ndarray:
+        """Which kept parameters estimate a combination with others (a row of `regrouping`
+        beyond its diagonal): the `relations` printed, in order."""
         off = self.regrouping.copy()
         np.fill_diagonal(off, 0.0)
         return self.kept & np.any(off != 0, axis=1)

@@ -78,7 +78,6 @@ from ..identify.report import (
     MeasurementResiduals,
     consistency_from_residuals,
     rows_csv,
-    write_report,
 )
 from ..io.files import write_text_atomic
 from . import relaxation
@@ -669,7 +668,7 @@ class ReportSet:
     there are several); `summary()`: each report's own `summary()` with those rows as its
     `parameters` (a single unlabelled report: its summary itself, else `{"reports": [...]}`),
     `extra` merged; `to_json()`; `write(path)` by suffix: .csv (`rows()`, the base's
-    `rows_csv`), .json (`summary()`), .html (the base's `write_report`, one report)."""
+    `rows_csv`), .json (`summary()`), .html (the base's `write`, one report)."""
 
     reports: Sequence
     labels: Sequence[str] | None = None
@@ -710,7 +709,7 @@ class ReportSet:
         elif suffix == ".json":
             write_text_atomic(path, self.to_json(indent=2) + "\n")
         elif suffix in (".html", ".htm") and len(self.reports) == 1:
-            write_report(self.reports[0], path)
+            self.reports[0].write(path)
         else:
             raise InputError(f"{path}: the report is written as .csv, .json or .html (HTML: "
                              "one report)")
@@ -1153,7 +1152,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
             # dropped for rank (neither kept nor removed by the search): no effect, or a
             # combination of others
             if not fit.kept[i] and not fit.fixed[i]:
-                not_ident[n] = fit._status(i) or "not identifiable"
+                not_ident[n] = fit.status(i) or "not identifiable"
         for n, why in list(removed.items()):
             if why.startswith("not separable"):
                 removed.pop(n)

@@ -902,7 +902,7 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
     ident_lin[fi] = np.asarray(lin.identifiable, bool)
     sigma = np.where(ident_lin, sd, np.nan)
     for j in np.flatnonzero(~idl):   # inf: no information at all (a null column)
-        if (lin._status(int(j)) or "").endswith("no effect on the data"):
+        if (lin.status(int(j)) or "").endswith("no effect on the data"):
             sigma[fi[j]] = np.inf
     with np.errstate(divide="ignore", invalid="ignore"):
         pct = 100.0 * sigma / np.abs(x)
@@ -914,7 +914,7 @@ def _report(problem, x, steps, ok, threshold, file_start, noise, noise_src, nois
             continue
         j = int(np.flatnonzero(fi == i)[0])
         if not ident_lin[i]:
-            reasons.append(lin._status(j) or "not identifiable")
+            reasons.append(lin.status(j) or "not identifiable")
         elif not (pct[i] <= MAX_SIGMA_PCT):
             reasons.append(f"σ % = {pct[i]:.3g} > {MAX_SIGMA_PCT:g}: the data do not fix its "
                            "value")
