@@ -276,8 +276,9 @@ def iterative_command(
         res = (mm, deg)
     enable_x64()
     from .. import measure
+    from ..geometry import DEG
     from ..identify.iterative import iterative
-    from ..identify.selection import DEG, measured_bushings, with_start
+    from ..identify.selection import measured_bushings, with_start
 
     res = None if res is None else (res[0], res[1] * DEG)  # deg → rad
     from ..identify.tables import interrupted_iterative_rows, iterative_figures
@@ -393,8 +394,9 @@ def fit_command(
         raise fail("--sigma and --sigma-rotation must be positive.", EXIT_BAD_INPUT)
     enable_x64()
     from .. import measure
+    from ..geometry import DEG
     from ..identify.least_squares import least_squares, returned_values
-    from ..identify.selection import DEG, fit_selection
+    from ..identify.selection import fit_selection
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements
     from ..measure.rig import is_rig_table, read_rig_table, rig_measurement

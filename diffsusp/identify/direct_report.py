@@ -10,8 +10,8 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import index_of
+from ..geometry import DEG
 from .report import AT_START, Consistency, IdentificationReport, MeasurementResiduals
-from .selection import DEG
 
 __all__ = ["DirectReport"]
 

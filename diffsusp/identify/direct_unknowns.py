@@ -9,9 +9,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..errors import InputError, ModelError
+from ..geometry import DEG
 from ..model.mechanism import Mechanism
 from .params import Params, selected_entries
-from .selection import DEG
 
 # re-exported by `identify.direct`; the rest serves direct, direct_polish
 __all__ = ["Parameter", "direct_selection", "with_offsets"]

@@ -29,6 +29,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import InputError
+from ..geometry import DEG
 from ..measure.data import Deformations, Measurement, as_deformations
 from ..measure.measurements import Measurements
 from ..measure.noise import ARM_SIGMA
@@ -48,7 +49,6 @@ from .report import (
     sigma_pct,
     sigma_pct_at_start,
 )
-from .selection import DEG
 
 AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 """Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""

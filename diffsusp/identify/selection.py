@@ -14,11 +14,9 @@ import equinox as eqx
 import numpy as np
 
 from ..errors import InputError
+from ..geometry import DEG
 from ..model import Mechanism
 from .params import AXES, Params
-
-DEG = np.pi / 180.0
-"""One degree in radians (rotational stiffness per degree = per radian × DEG)."""
 
 ROTATIONAL = ("Krx", "Kry", "Krz")
 
@@ -164,5 +162,5 @@ def display_value(name: str, value: float) -> tuple[float, str]:
     return value, "mm"
 
 
-__all__ = ["DEG", "ROTATIONAL", "display_value", "fit_selection", "measured_bushings",
+__all__ = ["ROTATIONAL", "display_value", "fit_selection", "measured_bushings",
            "named_stiffnesses", "with_start", "without_zeros"]

@@ -13,13 +13,14 @@ import numpy as np
 
 from .. import kc, plot
 from ..errors import InputError
+from ..geometry import DEG
 from ..kc.metrics import corner_geometry
 from ..model import Mechanism
 from ..statics import part_poses, solve_statics
 from .iterative import AXES, IterationRecord, IterativeReport
 from .least_squares import FitReport, StepRecord
 from .params import Params
-from .selection import DEG, ROTATIONAL, display_value
+from .selection import ROTATIONAL, display_value
 
 
 def _stiffness_display(axis: str) -> tuple[float, str]:
