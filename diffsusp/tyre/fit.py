@@ -64,6 +64,7 @@ from ..identify.report import (
     chi2_quantile,
 )
 from ..io.tables import Table, read_table, split_header, unit_factor
+from ..lsq.robust import LOSSES, robust
 from . import fit_start, mf6
 from .fit_start import noise_sigma
 
@@ -434,20 +435,6 @@ def _open_ranges(model):
     return model.with_limits(mf6.LIMITS)
 
 
-LOSSES = ("linear", "huber", "cauchy")
-
-
-def _robust(z, code, k):
-    """sgn(z)·√(2ρ(z)) for the loss `LOSSES[code]` (traced: one compiled program for all)."""
-    a = jnp.abs(z)
-    safe = jnp.maximum(a, k)
-    huber = jnp.where(a <= k, z, jnp.sign(z) * jnp.sqrt(2.0 * k * safe - k * k))
-    small = a < 1e-8 * k
-    zs = jnp.where(small, 1.0, z)
-    cauchy = jnp.where(small, z, jnp.sign(zs) * k * jnp.sqrt(jnp.log1p((zs / k) ** 2)))
-    return jnp.where(code == 0, z, jnp.where(code == 1, huber, cauchy))
-
-
 class _Problem(eqx.Module):
     model: eqx.Module
     data: BenchData
@@ -464,7 +451,7 @@ class _Problem(eqx.Module):
 
     @property
     def loss(self) -> str:
-        return LOSSES[int(self.loss_code)]
+        return list(LOSSES)[int(self.loss_code)]
 
     def x_of(self, u):
         u = jnp.where(self.free, u, 0.0)
@@ -482,7 +469,7 @@ class _Problem(eqx.Module):
         return jnp.where(self.data.valid & self.rows, z, 0.0)
 
     def residual_x(self, x):
-        return _robust(self.whitened(x), self.loss_code, self.k).ravel()
+        return robust(self.whitened(x), self.loss_code, self.k).ravel()
 
     def residual_u(self, u, _args=None):
         return self.residual_x(self.x_of(u))
@@ -733,7 +720,7 @@ def _prepare(model, data, names, noise, loss, loss_scale, combined, hold=()):
     return _Problem(_open_ranges(model), data, jnp.asarray(x0),
                     jnp.asarray(np.maximum(np.abs(x0), 0.1)), jnp.asarray(positive),
                     jnp.asarray(free), jnp.ones(np.shape(data.measured), bool),
-                    jnp.asarray(sigma), jnp.asarray(LOSSES.index(loss)),
+                    jnp.asarray(sigma), jnp.asarray(LOSSES[loss]),
                     jnp.asarray(float(loss_scale)), names, combined)
 
 
