@@ -32,7 +32,7 @@ from diffsusp import solve_statics  # noqa: E402
 from diffsusp.identify.geometric import START_OFFSETS, joints_from_model, locate_joints  # noqa: E402
 from diffsusp.measure import place_landmarks  # noqa: E402
 from diffsusp.measure.measurements import from_landmarks  # noqa: E402
-from diffsusp.models.pseudo_mcpherson_steering import pseudo_mcpherson_steering  # noqa: E402
+from diffsusp.models import pseudo_mcpherson_steering  # noqa: E402
 from diffsusp.statics import part_poses  # noqa: E402
 
 MEASURED = ("front_arm", "rear_arm", "tie_rod", "hub_carrier")

@@ -33,12 +33,12 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
-from diffsusp.identify.data import Landmarks  # noqa: E402
-from diffsusp.identify.least_squares import (  # noqa: E402
+from diffsusp.identify import (  # noqa: E402
     least_squares,
     least_squares_batch,
     predict,
 )
+from diffsusp.identify.data import Landmarks  # noqa: E402
 from diffsusp.identify.params import Params  # noqa: E402
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 

@@ -20,7 +20,7 @@ import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 
 import diffsusp as ds  # noqa: E402
-from diffsusp.identify.iterative import _equalise, iterative  # noqa: E402
+from diffsusp.identify._iterative import _equalise, iterative  # noqa: E402
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))

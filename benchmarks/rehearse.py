@@ -33,8 +33,11 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from diffsusp import load_model  # noqa: E402
-from diffsusp.identify import Params  # noqa: E402
-from diffsusp.identify.rehearse import SuspensionScenario, rehearse  # noqa: E402
+from diffsusp.identify import (  # noqa: E402
+    Params,  # noqa: E402
+    SuspensionScenario,
+    rehearse,
+)
 from diffsusp.kc.corner import equilibrium_load  # noqa: E402
 from diffsusp.models import isolated_bushing, pseudo_mcpherson, thesis_load_cases  # noqa: E402
 

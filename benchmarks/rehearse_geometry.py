@@ -33,7 +33,7 @@ from _common import RESULTS
 jax.config.update("jax_enable_x64", True)
 
 from diffsusp import load_model  # noqa: E402
-from diffsusp.identify.rehearse import GeometryScenario, corner_cases, rehearse  # noqa: E402
+from diffsusp.identify._rehearse import GeometryScenario, corner_cases, rehearse  # noqa: E402
 from diffsusp.models import double_wishbone, pseudo_mcpherson  # noqa: E402
 
 CHRONO = pathlib.Path(__file__).parents[1] / "tests" / "data" / "DoubleWishbone_bushings.json"

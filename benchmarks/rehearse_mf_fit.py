@@ -106,7 +106,7 @@ def main():
         sc = scenario(name)
         t0 = time.perf_counter()
         try:
-            from diffsusp.identify.rehearse import rehearse
+            from diffsusp.identify import rehearse
             rep = rehearse(sc, n=args.n, seed=args.seed)
             out = rep.summary() if hasattr(rep, "summary") else rep.to_dict()
         except ImportError:

@@ -36,7 +36,7 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from diffsusp.identify.rehearse import rehearse  # noqa: E402
+from diffsusp.identify import rehearse  # noqa: E402
 from diffsusp.tyre import onboard  # noqa: E402
 from diffsusp.tyre.onboard_rehearse import OnboardScenario  # noqa: E402
 

@@ -29,8 +29,8 @@ import numpy as np
 
 import diffsusp
 from diffsusp import kc, plot
+from diffsusp.identify import sensitivity
 from diffsusp.identify.params import Params
-from diffsusp.identify.sensitivity import sensitivity
 
 # %% [markdown]
 # ## The model

@@ -42,9 +42,8 @@ from matplotlib.figure import Figure
 
 import diffsusp
 from diffsusp import identify, kc, measure, plot
+from diffsusp.identify import AXES, iterative, least_squares
 from diffsusp.identify.data import Landmarks
-from diffsusp.identify.iterative import AXES, iterative
-from diffsusp.identify.least_squares import least_squares
 from diffsusp.identify.params import Params
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases
 

@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsusp import kc
+from diffsusp.identify import design_experiment, sensitivity
 from diffsusp.identify.params import Params
-from diffsusp.identify.sensitivity import design_experiment, sensitivity
 from diffsusp.models import TABLE_4_4, TABLE_5_1, pseudo_mcpherson, thesis_load_cases
 
 mech = pseudo_mcpherson()

@@ -39,9 +39,12 @@ from diffsusp.identify.geometric import (
 )
 from diffsusp.measure import place_landmarks
 from diffsusp.measure.measurements import case_subset, from_landmarks
-from diffsusp.models import TABLE_4_4
-from diffsusp.models.pseudo_mcpherson import JOINT_POSITIONS, JOINT_REULER_DEG
-from diffsusp.models.pseudo_mcpherson_steering import pseudo_mcpherson_steering
+from diffsusp.models import (
+    PSEUDO_MCPHERSON_JOINTS,
+    PSEUDO_MCPHERSON_REULER_DEG,
+    TABLE_4_4,
+    pseudo_mcpherson_steering,
+)
 from diffsusp.statics import part_poses
 
 truth = pseudo_mcpherson_steering()
@@ -94,7 +97,7 @@ report = locate_joints(steering, joints)
 print(report)
 print()
 for j in report.joints:
-    error = np.linalg.norm(j.estimate - np.asarray(JOINT_POSITIONS[truth_of[j.name]]))
+    error = np.linalg.norm(j.estimate - np.asarray(PSEUDO_MCPHERSON_JOINTS[truth_of[j.name]]))
     print(f"{j.name:<18} error {error:7.3f} mm   largest σ {j.sigma.max():7.3f} mm   "
           f"χ²/E {j.chi2:6.2f}   weakest s.v. / noise {j.snr:7.1f}")
 
@@ -107,7 +110,7 @@ for j in report.joints:
 # it is reported. The strut axis comes out along the strut slide:
 
 # %%
-z5 = np.asarray(reuler_deg_to_matrix(np.array(JOINT_REULER_DEG["L5"])))[:, 2]
+z5 = np.asarray(reuler_deg_to_matrix(np.array(PSEUDO_MCPHERSON_REULER_DEG["L5"])))[:, 2]
 strut = report["bushing_F"]
 if strut.observable:
     print(f"strut axis {np.round(strut.axis, 4)}, angle to the slide "
@@ -138,7 +141,7 @@ print({k: round(v, 3) for k, v in moved.items()})
 
 def toe(mech):
     r, _ = part_poses(mech, solve_statics(mech, loads).q)
-    z9 = np.asarray(reuler_deg_to_matrix(np.array(JOINT_REULER_DEG["L9"])))[:, 2]
+    z9 = np.asarray(reuler_deg_to_matrix(np.array(PSEUDO_MCPHERSON_REULER_DEG["L9"])))[:, 2]
     spin = np.asarray(r)[:, mech.parts.index("hub_carrier")] @ z9
     return np.degrees(np.arctan2(spin[:, 0], -spin[:, 1]))[[2, 7, 12, 17, 22]]
 

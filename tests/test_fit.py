@@ -17,13 +17,13 @@ import pytest
 
 import diffsusp
 from diffsusp.errors import InputError
-from diffsusp.identify.data import Channel, Deformations, Landmarks, Poses
-from diffsusp.identify.least_squares import (
+from diffsusp.identify import (
     least_squares,
     least_squares_batch,
     predict,
     whitened_residuals,
 )
+from diffsusp.identify.data import Channel, Deformations, Landmarks, Poses
 from diffsusp.identify.params import AXES, Params
 from diffsusp.lsq.robust import robust as _robust
 from diffsusp.models import isolated_bushing, pseudo_mcpherson, thesis_load_cases

@@ -22,10 +22,9 @@ from diffsusp.identify.geometric import GeometricJoint, correct_geometry, locate
 from diffsusp.measure import place_landmarks
 from diffsusp.measure.measurements import from_landmarks
 from diffsusp.model import Loads
-from diffsusp.models import TABLE_4_4
-from diffsusp.models.pseudo_mcpherson import JOINT_POSITIONS as L
-from diffsusp.models.pseudo_mcpherson import JOINT_REULER_DEG
-from diffsusp.models.pseudo_mcpherson_steering import pseudo_mcpherson_steering
+from diffsusp.models import TABLE_4_4, pseudo_mcpherson_steering
+from diffsusp.models._pseudo_mcpherson import PSEUDO_MCPHERSON_JOINTS as L
+from diffsusp.models._pseudo_mcpherson import PSEUDO_MCPHERSON_REULER_DEG
 from diffsusp.statics import part_poses
 
 MEASURED = ("front_arm", "rear_arm", "tie_rod", "hub_carrier")
@@ -125,7 +124,7 @@ def test_noise_free_bushings_within_a_few_mm(steering):
     assert report["bushing_A"].chi2 > 1.5  # the stiff bushing deflects: a lack of fit
     strut = report["bushing_F"]
     assert strut.observable
-    z5 = np.asarray(reuler_deg_to_matrix(np.array(JOINT_REULER_DEG["L5"])))[:, 2]
+    z5 = np.asarray(reuler_deg_to_matrix(np.array(PSEUDO_MCPHERSON_REULER_DEG["L5"])))[:, 2]
     angle = np.degrees(np.arccos(abs(strut.axis @ z5)))
     assert angle < 0.5
     # the identified strut line against the true slide axis through L5
@@ -178,7 +177,7 @@ def test_bushing_pair_axis_on_a_model():
     axis: CORRECTIONS 17); with 0.05 mm noise (20 seeds) the reported σ of the point and of
     the axis agree with the Monte-Carlo spread within a factor 1.5."""
     from diffsusp.models import double_wishbone_bushing_pairs
-    from diffsusp.models.double_wishbone import HARDPOINTS as P
+    from diffsusp.models._double_wishbone import HARDPOINTS as P
 
     mech = double_wishbone_bushing_pairs()
     # structure as documented: n = 18, 7 joint rows and the driver, each pair's frames along
@@ -317,7 +316,7 @@ REFERENCE = 12  # 4500 N, rack 0
 
 def _toe(mech, rot):
     """Toe (deg) of the wheel spin axis (z of L9) from the hub carrier's rotations."""
-    z9 = np.asarray(reuler_deg_to_matrix(np.array(JOINT_REULER_DEG["L9"])))[:, 2]
+    z9 = np.asarray(reuler_deg_to_matrix(np.array(PSEUDO_MCPHERSON_REULER_DEG["L9"])))[:, 2]
     spin = np.asarray(rot)[:, mech.parts.index("hub_carrier")] @ z9
     return np.degrees(np.arctan2(spin[:, 0], -spin[:, 1]))
 

@@ -3,7 +3,7 @@ and validated; no solve here: a model build's validation is already a compile)."
 
 import numpy as np
 
-from diffsusp.models.front_axle_table_3_3 import (
+from diffsusp.models._front_axle_table_3_3 import (
     TABLE_3_3_AXES,
     TABLE_3_3_CENTRES,
     front_axle_table_3_3,

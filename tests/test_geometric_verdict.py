@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 
 from diffsusp import load_model, measure
 from diffsusp.cli import app
-from diffsusp.identify.rehearse import GeometryScenario, rehearse
+from diffsusp.identify import GeometryScenario, rehearse
 from diffsusp.kc.corner import equilibrium_load
 
 MODEL = pathlib.Path(__file__).parent / "data" / "DoubleWishbone_bushings.json"

@@ -489,7 +489,7 @@ def test_an_interrupted_fit_leaves_its_last_estimate_on_disk(tmp_path, monkeypat
     import importlib
 
     # The package re-exports the function under the module's name: fetch the module itself.
-    lsq_module = importlib.import_module("diffsusp.identify.least_squares")
+    lsq_module = importlib.import_module("diffsusp.identify._least_squares")
 
     def fit_then_interrupt(mech, data, params, *, callback, **kwargs):
         estimate = np.asarray(params.start) * 2.0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import diffsusp
-from diffsusp.identify.iterative import _equalise, _regress, iterative
+from diffsusp.identify._iterative import _equalise, _regress, iterative
 from diffsusp.models import pseudo_mcpherson, thesis_load_cases
 
 NAMES = ("bushing_A", "bushing_B")

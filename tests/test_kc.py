@@ -29,8 +29,8 @@ from diffsusp.models import (
     double_wishbone,
     pseudo_mcpherson,
 )
-from diffsusp.models.double_wishbone import HARDPOINTS
-from diffsusp.models.pseudo_mcpherson import JOINT_POSITIONS, JOINT_REULER_DEG
+from diffsusp.models._double_wishbone import HARDPOINTS
+from diffsusp.models._pseudo_mcpherson import PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
 
 N = 13
 TRAVEL = np.linspace(-60.0, 60.0, N)
@@ -52,7 +52,7 @@ ANGLES = {"toe", "steer", "camber", "caster", "kingpin_inclination", "spin_axis_
 def _pm_lower_pivot():
     """Midpoint of the common perpendicular of the lower links L1–L8 and L2–L7 (least squares
     on the two line parameters), global Adams/Car position of the left model."""
-    p = {k: np.array(v) for k, v in JOINT_POSITIONS.items()}
+    p = {k: np.array(v) for k, v in PSEUDO_MCPHERSON_JOINTS.items()}
     u, v = p["L8"] - p["L1"], p["L7"] - p["L2"]
     (s, t), *_ = np.linalg.lstsq(np.column_stack([u, -v]), p["L2"] - p["L1"], rcond=None)
     return 0.5 * (p["L1"] + s * u + p["L2"] + t * v)
@@ -343,10 +343,10 @@ def test_pm_design_angles_by_hand(pm_travel):
     rig = pm_travel.rig
     rc = rig.corners[0]
     geo = kc.corner_geometry(rig.mech, rc, jnp.zeros(rig.mech.n_coordinates))
-    psi, theta, _ = JOINT_REULER_DEG["L9"]
+    psi, theta, _ = PSEUDO_MCPHERSON_REULER_DEG["L9"]
     assert abs(np.degrees(float(geo["toe"])) - (-psi)) < 1e-10
     assert abs(np.degrees(float(geo["camber"])) - (theta - 90.0)) < 1e-10
-    k = np.array(JOINT_POSITIONS["L4"]) - _pm_lower_pivot()
+    k = np.array(PSEUDO_MCPHERSON_JOINTS["L4"]) - _pm_lower_pivot()
     assert abs(float(geo["caster"]) - np.arctan2(k[0], k[2])) < 1e-12
     assert abs(float(geo["kingpin_inclination"]) - np.arctan2(k[1], k[2])) < 1e-12
     assert np.degrees(float(geo["caster"])) > 7.0 and np.degrees(
@@ -403,7 +403,8 @@ def test_pm_steering_matches_oracle_and_sign(pm_steering):
     assert_geometry(ev, (0, 12), pm_spec())
     steer = np.asarray(ev.metrics["steer"])
     assert np.all(np.diff(steer) > 0) and steer[-1] > 0 > steer[0]
-    assert JOINT_POSITIONS["L6"][0] < JOINT_POSITIONS["L9"][0]  # L6 ahead (x rearward)
+    # L6 ahead (x rearward)
+    assert PSEUDO_MCPHERSON_JOINTS["L6"][0] < PSEUDO_MCPHERSON_JOINTS["L9"][0]
     for c in (3, 9):
         rig = ev.rig
         unit = np.eye(len(rig.mech.drivers.names))[rig.rack_driver]

@@ -15,7 +15,7 @@ from diffsusp import measure
 from diffsusp.errors import InputError
 from diffsusp.geometry import reuler_deg_to_matrix
 from diffsusp.models import isolated_bushing
-from diffsusp.models.isolated_bushing import ISOLATED_BUSHING_REULER_DEG
+from diffsusp.models._isolated_bushing import ISOLATED_BUSHING_REULER_DEG
 
 ASYMMETRIC = np.array([[0.0, 0.0, 0.0], [180.0, 10.0, 0.0], [40.0, 95.0, 5.0],
                        [130.0, 60.0, 70.0]])

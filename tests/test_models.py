@@ -19,8 +19,8 @@ from diffsusp.models import (
     ZOO,
     thesis_load_cases,
 )
-from diffsusp.models.isolated_bushing import ISOLATED_BUSHING_REULER_DEG
-from diffsusp.models.pseudo_mcpherson import SPRING_FREE_LENGTH, _builder
+from diffsusp.models._isolated_bushing import ISOLATED_BUSHING_REULER_DEG
+from diffsusp.models._pseudo_mcpherson import SPRING_FREE_LENGTH, _builder
 
 # name: (coordinates, constraint rows, rank, kinematic DOF, redundant rows)
 EXPECTED_STRUCTURE = {

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from diffsusp.errors import InputError
-from diffsusp.identify.rehearse import rehearse
+from diffsusp.identify import rehearse
 from diffsusp.tyre import onboard
 from diffsusp.tyre.onboard_rehearse import OnboardScenario
 

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from diffsusp.cli import app
 from diffsusp.errors import InputError
-from diffsusp.identify.rehearse import SuspensionScenario, rehearse
+from diffsusp.identify import SuspensionScenario, rehearse
 from diffsusp.identify.report import IdentificationReport
 from diffsusp.models import isolated_bushing
 

@@ -12,8 +12,8 @@ import pytest
 
 import diffsusp as ds
 from diffsusp import kc
+from diffsusp.identify import design_experiment, sensitivity, sensitivity_metrics
 from diffsusp.identify.params import Params
-from diffsusp.identify.sensitivity import design_experiment, sensitivity, sensitivity_metrics
 from diffsusp.models import isolated_bushing, pseudo_mcpherson, two_bushing_coupler
 
 

@@ -277,7 +277,7 @@ def iterative_command(
     enable_x64()
     from .. import measure
     from ..geometry import DEG
-    from ..identify.iterative import iterative
+    from ..identify import iterative
     from ..identify.selection import measured_bushings, with_start
 
     res = None if res is None else (res[0], res[1] * DEG)  # deg → rad
@@ -395,7 +395,7 @@ def fit_command(
     enable_x64()
     from .. import measure
     from ..geometry import DEG
-    from ..identify.least_squares import least_squares, returned_values
+    from ..identify._least_squares import least_squares, returned_values
     from ..identify.selection import fit_selection
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements

@@ -88,7 +88,7 @@ def rehearse_command(
         raise fail(f"--n must be at least 1 random truth; got {n}.", EXIT_BAD_INPUT)
     method = Method(method).value
     enable_x64()
-    from ..identify.rehearse import SuspensionScenario, rehearse
+    from ..identify import SuspensionScenario, rehearse
 
     with cli_errors():
         if method == "mf-fit":
@@ -147,7 +147,7 @@ def _mf_scenario(path: str, noise, spread, params):
 
 
 def _geometry_scenario(model: str, noise, spread, params, cases):
-    from ..identify.rehearse import GeometryScenario
+    from ..identify import GeometryScenario
     from .common import load_model_file
 
     mech = load_model_file(model).mechanism

@@ -38,6 +38,7 @@ The same fleet gives the same numbers in-process and on a cluster (same batches,
 programs, float64); the summary holds no timing, so it is identical.
 """
 
+from ._run import FleetResult, Item, run
 from .engine import HARD_GRACE, DaskEngine, Engine, InProcessEngine
 from .recipes import (
     KC,
@@ -50,7 +51,6 @@ from .recipes import (
     TyreFit,
     recipe,
 )
-from .run import FleetResult, Item, run
 from .store import FleetStatus, status
 
 __all__ = [

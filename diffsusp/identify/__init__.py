@@ -32,7 +32,7 @@ from ..measure.data import (
     Poses,
     from_measurements,
 )
-from .direct import (
+from ._direct import (
     DirectReport,
     DirectSystem,
     direct,
@@ -40,6 +40,34 @@ from .direct import (
     direct_selection,
     direct_system,
 )
+from ._iterative import IterativeReport, iterative
+from ._least_squares import (
+    BatchFitReport,
+    FitReport,
+    least_squares,
+    least_squares_batch,
+    predict,
+    whitened_residuals,
+)
+from ._rehearse import (
+    GeometryScenario,
+    ParameterRehearsal,
+    RehearsalReport,
+    SuspensionScenario,
+    corner_cases,
+    rehearse,
+)
+from ._sensitivity import (
+    PARAMETER_SETS,
+    DesignReport,
+    SensitivityReport,
+    design_experiment,
+    landmark_model,
+    parameter_set,
+    sensitivity,
+    sensitivity_metrics,
+)
+from .direct_unknowns import Parameter, with_offsets
 from .geometric import (
     CorrectionReport,
     GeometricJoint,
@@ -56,25 +84,8 @@ from .geometric import (
     read_joints,
     write_joints,
 )
-from .iterative import IterativeReport, iterative
-from .least_squares import (
-    BatchFitReport,
-    FitReport,
-    least_squares,
-    least_squares_batch,
-    predict,
-    whitened_residuals,
-)
-from .params import Params
-from .rehearse import GeometryScenario, RehearsalReport, SuspensionScenario, rehearse
+from .params import AXES, Params
 from .selection import fit_selection, measured_bushings, with_start
-from .sensitivity import (
-    DesignReport,
-    SensitivityReport,
-    design_experiment,
-    sensitivity,
-    sensitivity_metrics,
-)
 
 __all__ = [
     "CorrectionReport", "GeometricJoint", "GeometricReport", "GeometryDesign", "JointEstimate",
@@ -89,4 +100,6 @@ __all__ = [
     "GeometryScenario",
     "rehearse",
     "sensitivity", "sensitivity_metrics", "whitened_residuals",
+    "AXES", "PARAMETER_SETS", "Parameter", "ParameterRehearsal", "corner_cases", "landmark_model",
+    "parameter_set", "with_offsets",
 ]

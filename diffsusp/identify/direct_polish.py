@@ -11,9 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.mechanism import Mechanism
+from ._least_squares import least_squares_batch
 from .direct_report import DirectReport
 from .direct_unknowns import STIFFNESS_NAMES, Parameter, derived, prior
-from .least_squares import least_squares_batch
 from .params import Params
 from .report import MAX_SIGMA_PCT, bar_reason, check_consistency, within_bar
 

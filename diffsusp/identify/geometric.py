@@ -62,6 +62,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..statics import part_poses
+from ._sensitivity import design_experiment
 from .geometric_correct import CorrectionReport, correct_geometry, offset_equivalent
 from .geometric_joints import (
     FREE_AXIS_RATIO,
@@ -89,7 +90,6 @@ from .geometric_locate import (
     skew,
 )
 from .params import Params
-from .sensitivity import design_experiment
 
 __all__ = [
     "JOINT_KINDS",

@@ -17,8 +17,8 @@ from ..geometry import DEG
 from ..kc.metrics import corner_geometry
 from ..model import Mechanism
 from ..statics import part_poses, solve_statics
-from .iterative import AXES, IterationRecord, IterativeReport
-from .least_squares import FitReport, StepRecord
+from ._iterative import AXES, IterationRecord, IterativeReport
+from ._least_squares import FitReport, StepRecord
 from .params import Params
 from .selection import ROTATIONAL, display_value
 

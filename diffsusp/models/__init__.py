@@ -21,15 +21,24 @@ models are the thesis's reference models.
 from collections.abc import Callable
 
 from ..model import Mechanism
-from .crank_slider import crank_slider
-from .double_wishbone import DOUBLE_WISHBONE_DESIGN_LOAD, double_wishbone
-from .double_wishbone_bushing_pairs import double_wishbone_bushing_pairs
-from .front_axle_table_3_3 import front_axle_table_3_3
-from .isolated_bushing import isolated_bushing
+from ._crank_slider import crank_slider
+from ._double_wishbone import DOUBLE_WISHBONE_DESIGN_LOAD, double_wishbone
+from ._double_wishbone_bushing_pairs import double_wishbone_bushing_pairs
+from ._front_axle_table_3_3 import (
+    TABLE_3_3_AXES,
+    TABLE_3_3_CENTRES,
+    TABLE_3_3_WHEEL_CENTRE,
+    front_axle_table_3_3,
+)
+from ._isolated_bushing import isolated_bushing
+from ._pseudo_mcpherson import (
+    PSEUDO_MCPHERSON_JOINTS,
+    PSEUDO_MCPHERSON_REULER_DEG,
+    pseudo_mcpherson,
+)
+from ._pseudo_mcpherson_steering import RACK_AXIS, pseudo_mcpherson_steering
+from ._two_bushing_coupler import two_bushing_coupler
 from .loadcases import TABLE_4_4, TABLE_5_1, thesis_load_cases
-from .pseudo_mcpherson import pseudo_mcpherson
-from .pseudo_mcpherson_steering import pseudo_mcpherson_steering
-from .two_bushing_coupler import two_bushing_coupler
 
 ZOO: dict[str, Callable[[], Mechanism]] = {
     "isolated_bushing": isolated_bushing,
@@ -56,4 +65,6 @@ __all__ = [
     "double_wishbone", "front_axle_table_3_3", "isolated_bushing", "pseudo_mcpherson",
     "double_wishbone_bushing_pairs",
     "pseudo_mcpherson_steering", "thesis_load_cases", "two_bushing_coupler",
+    "PSEUDO_MCPHERSON_JOINTS", "PSEUDO_MCPHERSON_REULER_DEG", "RACK_AXIS", "TABLE_3_3_AXES",
+    "TABLE_3_3_CENTRES", "TABLE_3_3_WHEEL_CENTRE",
 ]

@@ -1,7 +1,7 @@
 """Static equilibrium (KKT Newton), sweeps and derived outputs."""
 
+from ._linearize import Linearization, linearize, linearize_internal, residual, scaled_solve
 from .kernel import generalised_forces, to_internal, to_public
-from .linearize import Linearization, linearize, linearize_internal, residual, scaled_solve
 from .outputs import (
     bushing_states,
     flagged_cases,

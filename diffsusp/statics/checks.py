@@ -51,7 +51,7 @@ from jaxtyping import Array, Bool, Float
 from ..compilation import filter_jit
 from ..errors import ModelWarning
 from ..model.mechanism import Loads, Mechanism
-from .linearize import linearize
+from ._linearize import linearize
 from .outputs import bushing_states
 
 STABILITY_TOLERANCE = 1e-9

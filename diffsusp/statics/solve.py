@@ -33,9 +33,9 @@ from jaxtyping import Array, Bool, Float, Int
 from ..compilation import filter_jit
 from ..errors import ConvergenceError
 from ..model.mechanism import Loads, Mechanism
+from ._linearize import linearize_internal, scaled_solve
 from .checks import warn_law_validity, with_flags
 from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
-from .linearize import linearize_internal, scaled_solve
 from .outputs import bushing_states
 
 

@@ -8,7 +8,7 @@ Chrono's suspension frame (x forward, y to the left, z up), the left side.
 
 
 from ..model import Mechanism, MechanismBuilder
-from .double_wishbone import (
+from ._double_wishbone import (
     HARDPOINTS,
     LOADED_RADIUS,
     SPRING_FREE_LENGTH,

@@ -4,10 +4,10 @@
 import numpy as np
 
 from ..model import Mechanism, MechanismBuilder
-from .pseudo_mcpherson import (
-    JOINT_POSITIONS,
-    JOINT_REULER_DEG,
+from ._pseudo_mcpherson import (
     LOADED_RADIUS,
+    PSEUDO_MCPHERSON_JOINTS,
+    PSEUDO_MCPHERSON_REULER_DEG,
     SPRING_FREE_LENGTH,
     SPRING_RATE,
     add_arm_markers,
@@ -86,7 +86,7 @@ def pseudo_mcpherson_steering(*, strut: bool = True, rack: bool = True,
 
     **Returns:** the validated `Mechanism`.
     """
-    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    p, e = PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
     name = "pseudo-McPherson half axle, tie rod and rack" if rack else \
         "pseudo-McPherson half axle, tie rod"
     b = MechanismBuilder(name + ("" if strut else ", strut removed")

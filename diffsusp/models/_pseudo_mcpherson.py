@@ -10,7 +10,7 @@ __all__ = ["pseudo_mcpherson"]
 
 # Table 2.2: joint poses of the loaded half axle (4500 N vertical), Adams/Car frame, mm and
 # REULER (ψ, θ, φ) in degrees. Ball joints have no orientation.
-JOINT_POSITIONS = {
+PSEUDO_MCPHERSON_JOINTS = {
     "L1": (-294.7, -365.1, 246.1),
     "L2": (61.1, -383.5, 186.2),
     "L3": (-73.7, -353.4, 228.3),
@@ -23,7 +23,7 @@ JOINT_POSITIONS = {
 }
 """Table 2.2 joint positions (mm, Adams/Car frame: x rearward, y right, z up; left side)."""
 
-JOINT_REULER_DEG = {
+PSEUDO_MCPHERSON_REULER_DEG = {
     "L1": (129.5, 90.22, 181.79),
     "L2": (79.58, 90.24, 4.11),
     "L4": (321.5, 166.7, 53.68),
@@ -74,7 +74,7 @@ def virtual_lower_pivot() -> tuple[float, float, float]:
     (front arm L1–L8, rear arm L2–L7, Table 2.2), at (−1.62, −716.49, 197.11) mm in the
     Adams/Car frame. The two lines pass 70 mm apart vertically; in plan view they cross 8–12 %
     beyond the ball joints."""
-    p = JOINT_POSITIONS
+    p = PSEUDO_MCPHERSON_JOINTS
     pivot = common_perpendicular_midpoint(p["L1"], p["L8"], p["L2"], p["L7"])
     return design_offset(pivot, p["L9"], "adams", "left")
 
@@ -226,7 +226,7 @@ BUSHING_JOINTS = {"bushing_B": (("ground", "front_arm"), "L1"),
 
 def add_arm_markers(b: MechanismBuilder) -> None:
     """The lower arms' hardpoint markers (L1, L8 on the front arm; L2, L7 on the rear arm)."""
-    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    p, e = PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
     b.marker("L1_front_arm_bushing", "front_arm", p["L1"], reuler_deg=e["L1"])
     b.marker("L8_front_arm_ball", "front_arm", p["L8"])
     b.marker("L2_rear_arm_bushing", "rear_arm", p["L2"], reuler_deg=e["L2"])
@@ -235,7 +235,7 @@ def add_arm_markers(b: MechanismBuilder) -> None:
 
 def add_hub_markers(b: MechanismBuilder) -> None:
     """The hub carrier's hardpoint markers (L5, L6, L7, L8) and the wheel centre (L9)."""
-    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    p, e = PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
     b.marker("L5_strut_base", "hub_carrier", p["L5"], reuler_deg=e["L5"])
     b.marker("L6_tie_rod_outer", "hub_carrier", p["L6"])
     b.marker("L7_hub_rear_ball", "hub_carrier", p["L7"])
@@ -246,7 +246,7 @@ def add_hub_markers(b: MechanismBuilder) -> None:
 def add_bushings(b: MechanismBuilder, names) -> None:
     """The named bushings at their hardpoints (`BUSHING_JOINTS`) with the Table 2.1 nominal
     stiffnesses (`BUSHING_STIFFNESS`, the rotational rates converted to N·mm/rad)."""
-    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    p, e = PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
     for name in names:
         parts, joint = BUSHING_JOINTS[name]
         k_trans, k_rot_deg = BUSHING_STIFFNESS[name]
@@ -259,7 +259,7 @@ def _builder(wheel_travel: bool, spring_free_length: float, *, tie_rod_part: boo
     """The builder of `pseudo_mcpherson`. `tie_rod_part=True` models the tie rod as a part
     between two ball joints and `strut_joint='cylindrical'` uses the physical strut joint: the
     two free modes the public model removes (kept for tests of `validate`)."""
-    p, e = JOINT_POSITIONS, JOINT_REULER_DEG
+    p, e = PSEUDO_MCPHERSON_JOINTS, PSEUDO_MCPHERSON_REULER_DEG
     b = MechanismBuilder("pseudo-McPherson half axle" + (" (wheel travel)" if wheel_travel else "")
                          + (" (stops)" if stops else ""))
     for part in ("front_arm", "rear_arm", "strut", "hub_carrier"):

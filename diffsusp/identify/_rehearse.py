@@ -41,7 +41,9 @@ from .. import measure
 from ..errors import ConvergenceError, InputError
 from ..kc.corner import corners_of, design_load
 from ..model.mechanism import Loads, Mechanism
-from .direct import direct, direct_batch
+from ._direct import direct, direct_batch
+from ._iterative import iterative
+from ._least_squares import least_squares, least_squares_batch
 from .geometric import (
     displace_joints,
     joint_values,
@@ -49,8 +51,6 @@ from .geometric import (
     locate_joints,
     model_geometry,
 )
-from .iterative import iterative
-from .least_squares import least_squares, least_squares_batch
 from .report import Report, check_data
 from .selection import named_stiffnesses
 

@@ -25,11 +25,11 @@ TABLE_3_3_AXES = {
 }
 """Table 3.3 joint axes (unit directions as printed; the rack's was assumed a priori)."""
 
-WHEEL_CENTRE = (0.0, -740.0, 290.0)
+TABLE_3_3_WHEEL_CENTRE = (0.0, -740.0, 290.0)
 """Wheel centre on the hub carrier (mm): **not in the thesis**; an assumption (outboard of the
 ball joints, about a loaded radius above the ground) for the wheel-travel driver only."""
 
-__all__ = ["TABLE_3_3_AXES", "TABLE_3_3_CENTRES", "WHEEL_CENTRE", "front_axle_table_3_3"]
+__all__ = ["TABLE_3_3_AXES", "TABLE_3_3_CENTRES", "TABLE_3_3_WHEEL_CENTRE", "front_axle_table_3_3"]
 
 
 def _unit(v):
@@ -80,8 +80,9 @@ def front_axle_table_3_3() -> Mechanism:
       `'drop_link_bar'` (again removing the link's spin).
 
     **Drivers:** `'rack_travel'` (rack along +y, mm) and `'wheel_travel'` (vertical travel of
-    the wheel centre, mm; the wheel centre `WHEEL_CENTRE` is an assumption): with both, the
-    model has no degree of freedom left (7 parts, 42 coordinates, 40 joint rows + 2 drivers).
+    the wheel centre, mm; the wheel centre `TABLE_3_3_WHEEL_CENTRE` is an assumption): with both,
+    the model has no degree of freedom left (7 parts, 42 coordinates, 40 joint rows + 2
+    drivers).
 
     **Returns:** the validated `Mechanism`.
     """
@@ -106,7 +107,7 @@ def front_axle_table_3_3() -> Mechanism:
     b.joint("drop_link_hub", "spherical", parts=("drop_link", "hub_carrier"),
             at=c["drop_link_hub"])
     _universal(b, "drop_link_bar", ("drop_link", "bar"), c["drop_link_bar"], c["drop_link_hub"])
-    b.marker("wheel_centre", "hub_carrier", WHEEL_CENTRE, z=(0.0, -1.0, 0.0))
+    b.marker("wheel_centre", "hub_carrier", TABLE_3_3_WHEEL_CENTRE, z=(0.0, -1.0, 0.0))
     b.marker("rack_end", "rack", c["tie_rod_inner"])
     b.driver("rack_travel", marker="rack_end", direction=(0.0, 1.0, 0.0))
     b.driver("wheel_travel", marker="wheel_centre", direction=(0.0, 0.0, 1.0))

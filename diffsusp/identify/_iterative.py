@@ -35,8 +35,8 @@ from ..measure.measurements import Measurements
 from ..measure.noise import ARM_SIGMA
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, bushing_states, solve_statics
-from .least_squares import least_squares, whitened_residuals
-from .params import Params, selected_entries
+from ._least_squares import least_squares, whitened_residuals
+from .params import AXES, Params, selected_entries
 from .report import (
     AT_START,
     MAX_SIGMA_PCT,
@@ -49,9 +49,6 @@ from .report import (
     sigma_pct,
     sigma_pct_at_start,
 )
-
-AXES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
-"""Direction names, in the order of a bushing's six stiffnesses (translations, then rotations)."""
 
 
 @dataclasses.dataclass(frozen=True)

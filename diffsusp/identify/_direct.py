@@ -79,6 +79,7 @@ from ..errors import InputError
 from ..measure.data import as_equilibria
 from ..measure.measurements import Measurements
 from ..model.mechanism import Mechanism
+from ._least_squares import least_squares_batch
 from .direct_analysis import analyse, structure_of
 from .direct_data import check_measurements, pose_covariance_jit
 from .direct_equations import r_factor, system_arrays, whiteners
@@ -105,7 +106,6 @@ from .direct_unknowns import (
     selection_of,
     with_offsets,
 )
-from .least_squares import least_squares_batch
 from .params import Params
 from .report import MAX_SIGMA_PCT, check_consistency, check_data, within_bar
 
