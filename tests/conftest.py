@@ -27,6 +27,13 @@ if os.environ.get("DIFFSUSP_TEST_O0", "1") != "0":
 set_xla_flags(os.environ)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_num_cpu_devices", 2)  # as the CLI does: `solve_statics(devices=2)` works
+# ... and so do the processes the tests start (the mkdocs build, the notebook kernels, CLI
+# subprocesses): a program compiled for a backend of one device has another key in the
+# compilation cache than the same program compiled with two, so a process started with JAX's
+# default of one device found none of the workers' programs in the run's cache (measured: the
+# pseudo-McPherson's 13-case parallel travel, 14.8 s of CPU cold, 9.0 s from the cache of a
+# two-device process only when the second has two devices too).
+os.environ["JAX_NUM_CPU_DEVICES"] = "2"
 os.environ["DIFFSUSP_DEVICES"] = "1"  # but the CLI's commands run in-process keep one device
 # The CLI's own cache (DIFFSUSP_CACHE) is off inside the tests.
 os.environ["DIFFSUSP_CACHE"] = ""
