@@ -250,7 +250,7 @@ def test_from_measurements_keeps_every_landmark_and_masks_the_missing(tables):
 def test_cli_loss_choices_are_the_libraries():
     from diffsusp.cli import identify as cli_identify
     from diffsusp.cli import tyre as cli_tyre
-    from diffsusp.lsq.robust import LOSSES
+    from diffsusp.lsq import LOSSES
     from diffsusp.tyre.fit import LOSSES as TYRE_LOSSES
 
     assert {m.value for m in cli_identify.Loss} == set(LOSSES)

@@ -25,7 +25,7 @@ from diffsusp.identify import (
 )
 from diffsusp.identify.data import Channel, Deformations, Landmarks, Poses
 from diffsusp.identify.params import AXES, Params
-from diffsusp.lsq.robust import robust as _robust
+from diffsusp.lsq import robust as _robust
 from diffsusp.models import isolated_bushing, pseudo_mcpherson, thesis_load_cases
 
 DEG = math.pi / 180

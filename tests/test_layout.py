@@ -1,6 +1,10 @@
 """The package's layout, read from its own imports (AST, no import, no compilation):
 
-- no `_private` name is imported from another module (a name a sibling needs is not private);
+- no `_private` name is imported from another module (a name a sibling needs is not private),
+  and a private module (`identify/_direct.py`) is imported only by its own package: the others
+  import the package's face (`from ..identify import direct`);
+- no package binds a name of one of its public submodules to something else (a function that
+  shadows its module: the module is private instead);
 - internal imports inside functions only under `diffsusp/cli/` (lazy start-up of the command),
   except the edges listed in `LAZY` below (none today), each with its reason;
 - no module-level `__getattr__` (no compatibility shims);
@@ -55,11 +59,21 @@ def _scan():
                 target = _target(name, path, node)
                 if not target.startswith("diffsusp"):
                     continue
+                home = name if path.name == "__init__.py" else name.rpartition(".")[0]
                 for alias in node.names:
                     sub = f"{target}.{alias.name}"
                     dest = sub if sub in mods else target
                     if dest in mods and dest != name:
                         edges[name].add(dest)
+                    parts = dest.split(".")
+                    if any(p.startswith("_") for p in parts) and \
+                            not (home + ".").startswith(".".join(parts[:-1]) + "."):
+                        private.append(f"{path.relative_to(ROOT.parent)}:{node.lineno} "
+                                       f"{dest} (a private module outside its package)")
+                    if path.name == "__init__.py" and node.level == 1 and node.module and \
+                            f"{name}.{alias.asname or alias.name}" in mods:
+                        shims.append(f"{name}.{alias.asname or alias.name} (a name that "
+                                     "shadows its module)")
                     if alias.name.startswith("_") and not alias.name.startswith("__"):
                         private.append(f"{path.relative_to(ROOT.parent)}:{node.lineno} "
                                        f"{target}.{alias.name}")
@@ -117,23 +131,30 @@ def _circles(edges):
 def test_one_face_per_module_no_hidden_doors():
     private, lazy, shims, edges = _scan()
     assert not private, "private names imported from another module:\n" + "\n".join(private)
-    assert not shims, f"module-level __getattr__ shims: {shims}"
+    assert not shims, f"module-level __getattr__ shims, or names shadowing modules: {shims}"
     assert lazy == LAZY, ("internal imports inside functions outside cli/ (new: "
                           f"{sorted(lazy - LAZY)}; gone, remove from LAZY: {sorted(LAZY - lazy)})")
     assert _circles(edges) == CIRCLES, _circles(edges)
 
 
 def test_the_scan_sees_what_it_forbids(tmp_path, monkeypatch):
-    """The scan itself: a private import, a lazy import, a shim and a circle, all found."""
+    """The scan itself: a private import, a private module imported from another package, a
+    lazy import, a shim, a name shadowing its module and a circle, all found."""
     pkg = tmp_path / "diffsusp"
     (pkg / "a").mkdir(parents=True)
+    (pkg / "b").mkdir()
     (pkg / "__init__.py").write_text("")
-    (pkg / "a" / "__init__.py").write_text("def __getattr__(name):\n    raise AttributeError\n")
-    (pkg / "a" / "x.py").write_text("from .y import _hidden\n")
+    (pkg / "a" / "__init__.py").write_text("from ._z import z\nfrom .x import x\n\n"
+                                           "def __getattr__(name):\n    raise AttributeError\n")
+    (pkg / "a" / "_z.py").write_text("def z():\n    pass\n")
+    (pkg / "b" / "__init__.py").write_text("from ..a._z import z\n")
+    (pkg / "a" / "x.py").write_text("from .y import _hidden\nx = 1\n")
     (pkg / "a" / "y.py").write_text("_hidden = 1\n\ndef f():\n    from . import x\n")
     monkeypatch.setattr(__import__(__name__), "ROOT", pkg)
     private, lazy, shims, edges = _scan()
-    assert private == ["diffsusp/a/x.py:1 diffsusp.a.y._hidden"]
+    assert sorted(private) == [
+        "diffsusp/a/x.py:1 diffsusp.a.y._hidden",
+        "diffsusp/b/__init__.py:1 diffsusp.a._z (a private module outside its package)"]
     assert lazy == {("diffsusp.a.y", "diffsusp.a.x")}
-    assert shims == ["diffsusp.a"]
+    assert sorted(shims) == ["diffsusp.a", "diffsusp.a.x (a name that shadows its module)"]
     assert _circles(edges) == {frozenset({"diffsusp.a.x", "diffsusp.a.y"})}

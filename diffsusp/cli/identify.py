@@ -395,7 +395,7 @@ def fit_command(
     enable_x64()
     from .. import measure
     from ..geometry import DEG
-    from ..identify._least_squares import least_squares, returned_values
+    from ..identify import least_squares, returned_values
     from ..identify.selection import fit_selection
     from ..identify.tables import fit_figures, interrupted_fit_rows
     from ..measure.data import from_measurements

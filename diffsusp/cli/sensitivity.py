@@ -17,7 +17,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from ..identify._sensitivity import PARAMETER_SETS
+from ..identify import PARAMETER_SETS
 from ..kc.dispatch import corner_with, run_event
 from .common import (
     EXIT_BAD_INPUT,
@@ -76,7 +76,7 @@ def sensitivity_command(
         raise fail("--top must be at least 1.", EXIT_BAD_INPUT)
     check_output(out, what="figures folder", directory=True)
     enable_x64()
-    from diffsusp.identify._sensitivity import parameter_set, sensitivity, sensitivity_metrics
+    from ..identify import parameter_set, sensitivity, sensitivity_metrics
 
     err = console(stderr=True, markup=False)
     with cli_errors():

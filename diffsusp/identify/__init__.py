@@ -47,6 +47,7 @@ from ._least_squares import (
     least_squares,
     least_squares_batch,
     predict,
+    returned_values,
     whitened_residuals,
 )
 from ._rehearse import (
@@ -101,5 +102,5 @@ __all__ = [
     "rehearse",
     "sensitivity", "sensitivity_metrics", "whitened_residuals",
     "AXES", "PARAMETER_SETS", "Parameter", "ParameterRehearsal", "corner_cases", "landmark_model",
-    "parameter_set", "with_offsets",
+    "parameter_set", "returned_values", "with_offsets",
 ]

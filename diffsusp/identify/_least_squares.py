@@ -59,7 +59,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..errors import InputError
-from ..lsq.robust import DEFAULT_LOSS_SCALE, LOSSES, robust
+from ..lsq import DEFAULT_LOSS_SCALE, LOSSES, robust
 from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, solve_statics

@@ -24,7 +24,7 @@ sol = jax.vmap(lambda y: lsq.solve_arrays(W, y))(Y)   # pure arrays, batched (Mo
 from .accumulate import Accumulator
 from .core import METHODS, Solution, qr_r, solve_arrays, solve_r, tls_arrays
 from .fit import Fit, Problem, Step, eliminate, format_combination, problem, solve, tls
-from .robust import DEFAULT_LOSS_SCALE, LOSSES, robust
+from .losses import DEFAULT_LOSS_SCALE, LOSSES, robust
 
 __all__ = [
     "DEFAULT_LOSS_SCALE", "LOSSES", "METHODS", "Accumulator", "Fit", "Problem", "Solution",

@@ -64,7 +64,7 @@ from ..identify.report import (
     chi2_quantile,
 )
 from ..io.tables import Table, read_table, split_header, unit_factor
-from ..lsq.robust import LOSSES, robust
+from ..lsq import LOSSES, robust
 from . import fit_start, mf6
 from .fit_start import noise_sigma
 
