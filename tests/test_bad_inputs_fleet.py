@@ -1,4 +1,4 @@
-"""Bad inputs of `diffsusp fleet` (`reviews/bad_inputs.md` D1, D18, D22): a
+"""Bad inputs of `diffsusp fleet`: a
 FIFO item fails alone (no hang), unknown options and a bad model are exit 2 before any item,
 a damaged state file is named, summary cells are neutralised. No item is fitted here."""
 

@@ -1,4 +1,4 @@
-"""Bad options of `identify geometry` and `identify correct` (reviews/bad_inputs.md D11, D14):
+"""Bad options of `identify geometry` and `identify correct`:
 a non-finite or non-positive number, or a figures folder that is a file, is exit 2 naming the
 option, before any work (the measurements given are not even a table: they are never read)."""
 

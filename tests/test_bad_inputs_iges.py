@@ -1,4 +1,4 @@
-"""`io.read_iges` on hostile files (`reviews/bad_inputs.md` D19): an entity of
+"""`io.read_iges` on hostile files: an entity of
 200 000 parameters reads in linear time, a model scale that sends coordinates to infinity is
 an error naming the line. The files are written here (a point and a line)."""
 

@@ -1,4 +1,4 @@
-"""Bad inputs of the tyre verbs end in a clear error (`reviews/bad_inputs.md`):
+"""Bad inputs of the tyre verbs end in a clear error:
 exit 2 naming the file, the line and the field before any work, exit 3 for a fit that did not
 converge, or a warning; never a traceback, a hang, an internal error or NaN with exit 0. Every
 bad file is written here, from a shipped file the checks were not written against."""

@@ -1,5 +1,5 @@
 """Outputs that cannot be written and interrupted writers
-(`reviews/bad_inputs.md` D11, D12): a file-size limit reached while a table is written is exit 2
+a file-size limit reached while a table is written is exit 2
 "cannot write" (not an internal error), and leaves neither a half table under the final name nor
 a temporary file; a streamed table interrupted is marked incomplete."""
 

@@ -119,7 +119,7 @@ def test_r1_offsets_and_preloads_are_identified(bushing_cases):
 
 
 def test_polish_returns_the_model_it_judges(bushing_cases):
-    """Errors in variables (issue 12): the polish covers the stiffnesses and holds the offsets
+    """Errors in variables: the polish covers the stiffnesses and holds the offsets
     δ0 at the model's values (here the truth's). The model returned is the one whose
     consistency is reported: re-solved independently (`check_consistency`) it gives the
     report's χ² (the code before returned the noisy linear constants K·δ0 with the polished
@@ -457,7 +457,7 @@ def test_pseudo_mcpherson_noisy_monte_carlo():
     determine are flagged, not given a number. The noisy-data recipe: the undetermined
     unknowns held at the model's values and eliminated one by one, GLS weighting (the
     default). The linear estimate alone
-    (`polish=False`): the polish through the equilibrium, the default since issue 12, is
+    (`polish=False`): the polish through the equilibrium, the default, is
     checked on random stiffnesses in test_identify_trust."""
     mech = pseudo_mcpherson()
     loads = thesis_load_cases(mech)

@@ -150,7 +150,6 @@ def test_tyre_fits(tmp_path):
     _, reports = F.fit_many([start, start, start, own], datas, names, noise={"FY": 20.0},
                             combined=False)
     # a fit whose optimiser did not converge is a failure with its report, never "ok"
-    # (`reviews/bad_inputs.md` D4)
     stuck = sum(not r.converged for r in reports)
     assert (result.ok, result.failed, result.batches) == (4 - stuck, 1 + stuck, 2)
     for item, ref in zip(("p0", "p1", "p2", "own"), reports, strict=True):

@@ -4,7 +4,7 @@ contact-patch cases of test_geometric_free_axis, so that the compiled programs a
 
 - `identify geometry` prints its table within 120 columns and writes CSV and JSON that agree
   with it on every status (identified; not determined: a revolute's position along its axis);
-- a landmark table with two landmarks of one part swapped in three cases (bad_inputs D6): the
+- a landmark table with two landmarks of one part swapped in three cases: the
   part and the cases are named in a warning, the verdict is inconsistent and no coordinate is
   "identified";
 - a small rehearsal (`GeometryScenario`: hardpoints ±5 mm, σ 0.05 mm) whose claims stay within

@@ -1,4 +1,4 @@
-"""One front door for identification (issue 11; DESIGN.md "Identification"): `direct`,
+"""One front door for identification (DESIGN.md "Identification"): `direct`,
 `iterative` and `least_squares` take the same measurement object and the same selection, and
 return reports with the same base API.
 
@@ -125,7 +125,7 @@ def test_the_measurement_conversions_name_what_is_missing(case):
 
 
 def test_the_bushing_selection_and_the_start_values(case):
-    """What `identify iterative|fit` select by default, named in the library (issue 11)."""
+    """What `identify iterative|fit` select by default, named in the library."""
     ref = case[0]
     # Every part measured: every bushing (ground counts as measured). Only the front arm:
     # bushing_B alone joins it to ground (A holds the rear arm, F the strut).
@@ -268,7 +268,7 @@ def test_a_noise_draw_that_crosses_the_bar_is_judged_at_the_start(case):
     """One noisy draw (σ 0.05 mm) from the truth as the start: for the parameter whose σ % at
     the estimate and at the start lie furthest apart, a bar between the two. The verdict
     follows the σ % at the start (as least squares judges), never the estimate's own noise
-    (the bar at the estimate selected draws: issue 12, A.Ktz −1.98σ over 15 of 100 draws);
+    (the bar at the estimate selected draws: A.Ktz −1.98σ over 15 of 100 draws);
     what the returned model carries is what the report calls determined."""
     ref, _, params, _, _ = case
     import jax

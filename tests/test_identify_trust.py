@@ -1,4 +1,4 @@
-"""Identification you can trust (issue 12): a held-out-style Monte-Carlo of all three methods.
+"""Identification you can trust: a held-out-style Monte-Carlo of all three methods.
 
 Random true stiffnesses (×0.5–×2 of the thesis values, Table 2.1, for bushings A and B of
 `pseudo_mcpherson`; seeds 1208, 1211 and 1207, used nowhere else), the 13 cases of Table 5-1,
@@ -9,7 +9,7 @@ its data keep the strut's landmarks. Every method starts from the thesis values 
 The landmarks (and their registered poses) are shipped in tests/data/identify_trust.npz,
 written by tests/data/make_identify_trust.py with `measure.synthesize` and `measure.add_noise`.
 
-The bars (issue 12, "Done when"): no parameter reported *identified* with a bias larger than
+The bars: no parameter reported *identified* with a bias larger than
 2× its reported σ; noise-free, every parameter reported identified within 1e-6 of the truth
 (relative) and every other flagged; every LM fit converges; spread / σ of each identified
 parameter within [1/1.5, 1.5]; `iterative` on the noise-free random case either recovers the

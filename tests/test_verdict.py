@@ -83,7 +83,7 @@ def test_default_options_on_a_torsion_free_chrono_corner(corner, verb, tmp_path)
     from_table = table_statuses(first.stdout, set(names))
     html = paths["html"].read_text()
     assert from_csv == from_json == from_table, (from_csv, from_json, from_table)
-    # one rule for the three verbs: σ % judged at the start values (issue 27 item 7)
+    # one rule for the three verbs: σ % judged at the start values
     assert json.loads(second.stdout)["judged_at"] == "the start values"
     assert all(f"<td>{n}</td><td>" in html for n in names)
     assert html.count("<tr class='identified'>") == sum(s == "identified"

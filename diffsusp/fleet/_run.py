@@ -265,7 +265,7 @@ def _prepare(items: list[Item], salt: bytes, models: _Models) -> list[_Prepared]
         model_bytes = fp.encode() if fp else _digest(b"unloadable", repr(it.model).encode(
             ) if not isinstance(it.model, str | os.PathLike) else _file_bytes(it.model)).encode()
         if it.path is not None:
-            try:   # a regular file within the table limit: never a FIFO or /dev/zero (D1)
+            try:   # a regular file within the table limit: never a FIFO or /dev/zero
                 content = read_input(it.path, "fleet item", "table")
             except (OSError, ModelFileError) as e:
                 content = None
@@ -416,7 +416,7 @@ def run_batch(batch: _Batch, own_process: bool = True) -> dict:
         entry = results[k]
         if isinstance(outcome, ItemTimeout):
             entry.update(status="timeout", message=str(outcome))
-        elif isinstance(outcome, NotConverged):   # a failure, with its report (D4)
+        elif isinstance(outcome, NotConverged):   # a failure, with its report
             entry.update(status="not converged", message=str(outcome))
             entry["report"], entry["values"] = outcome.report, outcome.values
         elif isinstance(outcome, Exception):

@@ -52,7 +52,7 @@ class ItemTimeout(Exception):
 
 class NotConverged(Exception):
     """An item whose fit ran but did not converge: its report and values are kept, its status
-    is `not converged` (a failure, never `ok`: bad_inputs D4)."""
+    is `not converged` (a failure, never `ok`)."""
 
     def __init__(self, message, report, values):
         super().__init__(message)
@@ -89,7 +89,7 @@ class Recipe:
 
     def _check_keywords(self, function, own=()) -> None:
         """Every option a keyword argument of `function` (or one of `own`): an unknown key is
-        bad input before any item runs, not ignored nor an error on every item (D18)."""
+        bad input before any item runs, not ignored nor an error on every item."""
         import inspect
 
         params = inspect.signature(function).parameters
@@ -397,7 +397,7 @@ class TyreFit(Recipe):
 
     def check(self):
         """Unknown option keys, groups or losses are bad input before any item runs
-        (bad_inputs D18), not an error on every item."""
+        not an error on every item."""
         unknown = [k for k in self.options if k not in self._OPTIONS]
         if unknown:
             raise InputError(f"tyre-fit option(s) {', '.join(map(repr, unknown))} unknown; "

@@ -56,7 +56,7 @@ class Store:
             return last
         # a regular file within the table limit (never a FIFO); a line that is not JSON (cut
         # by a crash) is skipped, that item re-runs; a JSON line that is not an entry is an
-        # error naming the line (bad_inputs D18)
+        # error naming the line
         data = read_input(self.journal_path, "fleet journal", "table")
         for k, raw in enumerate(data.splitlines(), start=1):
             line = raw.decode("utf-8", errors="replace").strip()
@@ -94,8 +94,8 @@ class Store:
 
     def manifest(self) -> dict:
         """The folder's `fleet.json` ({} when there is none). A damaged one (not a regular
-        file, not UTF-8 JSON, not a fleet's manifest) is an error naming the file and the line
-        (bad_inputs D18): remove it to start the fleet again."""
+        file, not UTF-8 JSON, not a fleet's manifest) is an error naming the file and the line:
+        remove it to start the fleet again."""
         path = self.out / "fleet.json"
         if not path.exists():
             return {}
@@ -147,7 +147,7 @@ class Store:
 def _cell(v) -> str:
     """A summary cell: a number as Python writes it (round-trips); a text with its control
     characters escaped (a newline in an item's name cannot forge a row) and, when a spreadsheet
-    would run it as a formula (leading = + - @, not a number), quoted with ' (bad_inputs D22)."""
+    would run it as a formula (leading = + - @, not a number), quoted with '."""
     if v is None:
         return ""
     if not isinstance(v, str):

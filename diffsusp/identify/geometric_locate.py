@@ -801,8 +801,8 @@ def _model_located(model, measurements, joints, loads, run):
 
 
 def registration_check(measurements, landmark_sigma: float):
-    """The registration residuals of every part and case against the landmark σ (D6 of the
-    bad-input review): χ² = Σ ‖R P + T − Q‖² / σ_L² over the landmarks used, 3n − 6 dof per
+    """The registration residuals of every part and case against the landmark σ:
+    χ² = Σ ‖R P + T − Q‖² / σ_L² over the landmarks used, 3n − 6 dof per
     part and case. A part and case beyond the upper `CONSISTENCY_ALPHA`/(parts × cases)
     quantile (swapped or moved landmarks) is named in a warning and makes the verdict
     inconsistent; so does the total χ² beyond its quantile. Returns `(Consistency, warnings)`.

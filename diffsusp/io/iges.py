@@ -124,7 +124,7 @@ def _split_free(text: str, pdelim: str, rdelim: str, path, line: int) -> list[st
     """Free-format parameters up to the record delimiter; Hollerith strings kept whole.
 
     Linear in the length of `text` (every match starts at a position, no slice of the rest:
-    an entity of 1.6 M parameters took 85 s with slices, bad_inputs D19)."""
+    an entity of 1.6 M parameters took 85 s with slices)."""
     out, i, n = [], 0, len(text)
     while i < n:
         # a Hollerith string: digits, 'H', then that many characters
@@ -161,7 +161,7 @@ def _split_free(text: str, pdelim: str, rdelim: str, path, line: int) -> list[st
 
 COORDINATE_LIMIT = 1e12
 """Largest coordinate (mm) after the model scale: beyond it (a scale of 1e300) a line has no
-direction and a point no meaning (bad_inputs D19)."""
+direction and a point no meaning."""
 
 
 def _in_range(values, path, line, what, scale):

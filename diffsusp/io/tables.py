@@ -451,7 +451,7 @@ class TableWriter:
     def __exit__(self, kind, value, tb):
         if kind is not None and self.kind == "csv" and not self._file.closed:
             # the rows so far stay readable; the mark says the table is not complete (a
-            # reader skips '#' lines): bad_inputs D12
+            # reader skips '#' lines)
             try:
                 self._file.write(f"# INCOMPLETE: {self.rows} rows written, then "
                                  f"{kind.__name__}\n")
@@ -477,7 +477,7 @@ def write_table(path, columns: Mapping, units: Mapping | None = None) -> None:
         if _HEADER_RE.match(name) or "\n" in name or "\r" in name:
             raise ValueError(f"write_table: column name {name!r} cannot hold a unit or a newline.")
     # Through a temporary file renamed at the end: an interrupted or failed write never leaves
-    # a table cut after whole rows under the final name (bad_inputs D12).
+    # a table cut after whole rows under the final name.
     if kind == "csv":
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")

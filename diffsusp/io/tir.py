@@ -185,7 +185,7 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
                 # the same name in [UNITS] and another section (MASS in [UNITS] and [INERTIA])
                 # is kept under SECTION.NAME; twice in one section is an error, and so is a
                 # coefficient in two sections (a stray PCY1 in [LONGITUDINAL_COEFFICIENTS]
-                # would silently replace the lateral one: bad_inputs D3)
+                # would silently replace the lateral one)
                 first = entries[name]
                 key = f"{section}.{name}"
                 if first.section == section or key in entries:
@@ -220,7 +220,7 @@ def tir_from_text(text: str, path: str | None = None) -> TirFile:
 POSITIVE = ("FNOMIN", "UNLOADED_RADIUS", "LONGVL", "WIDTH", "RIM_RADIUS",
             "VERTICAL_STIFFNESS")
 """Quantities that must be > 0 when present (a zero or negative FNOMIN, radius or reference
-speed divides the Magic Formula by zero or flips its signs: bad_inputs D2)."""
+speed divides the Magic Formula by zero or flips its signs)."""
 NON_NEGATIVE = ("NOMPRES", "INFLPRES", "PRESMIN", "PRESMAX", "FZMIN", "FZMAX")
 """Quantities that must be >= 0 when present (0 is written by some exporters for "none")."""
 

@@ -1,6 +1,6 @@
 """Writes the shipped data of the identification tests.
 
-identify_trust.npz, the data of tests/test_identify_trust.py (issue 12): random true
+identify_trust.npz, the data of tests/test_identify_trust.py: random true
 stiffnesses of bushings A and B of `pseudo_mcpherson` (×0.5–×2 of the thesis values, Table 2.1;
 seeds 1208, then 1211 and 1207, used nowhere else), the 13 cases of Table 5-1, four landmarks
 per part (`measure.place_landmarks(seed=0)`) synthesised by `diffsusp.measure`: 20 noise draws
