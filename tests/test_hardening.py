@@ -486,19 +486,17 @@ def test_mutated_adams_files_raise_the_library_error(cut, junk):
 
 @pytest.mark.parametrize("suffix", [".csv", ".json"])
 def test_an_interrupted_fit_leaves_its_last_estimate_on_disk(tmp_path, monkeypatch, suffix):
-    import importlib
-
-    # The package re-exports the function under the module's name: fetch the module itself.
-    lsq_module = importlib.import_module("diffsusp.identify._least_squares")
+    import diffsusp.identify
+    from diffsusp.identify.least_squares_report import StepRecord
 
     def fit_then_interrupt(mech, data, params, *, callback, **kwargs):
         estimate = np.asarray(params.start) * 2.0
-        callback(0, lsq_module.StepRecord(step=0, trial=estimate, trial_loss=1.0,
+        callback(0, StepRecord(step=0, trial=estimate, trial_loss=1.0,
                                           failed_cases=0, accepted=True, estimate=estimate,
                                           step_size=1.0))
         os.kill(os.getpid(), signal.SIGTERM)
 
-    monkeypatch.setattr(lsq_module, "least_squares", fit_then_interrupt)
+    monkeypatch.setattr(diffsusp.identify, "least_squares", fit_then_interrupt)
     table = tmp_path / "marks.csv"
     table.write_text(LANDMARKS)
     out = tmp_path / f"fit{suffix}"

@@ -6,7 +6,7 @@ from ..geometry import DEG
 from ..model import Mechanism, MechanismBuilder
 from ..model.corner import Corner, common_perpendicular_midpoint, design_offset
 
-__all__ = ["pseudo_mcpherson"]
+__all__ = ["PSEUDO_MCPHERSON_JOINTS", "PSEUDO_MCPHERSON_REULER_DEG", "pseudo_mcpherson"]
 
 # Table 2.2: joint poses of the loaded half axle (4500 N vertical), Adams/Car frame, mm and
 # REULER (ψ, θ, φ) in degrees. Ball joints have no orientation.

@@ -431,8 +431,23 @@ def _cosmf(B, C, E, x, fm):
     return fm.cos(C * fm.arctan(bx - E * (bx - fm.arctan(bx))))
 
 
-def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm, ts=None):
-    """Pure lateral force (4.E19–4.E30): returns Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0, ζ2.
+class _PureLateral(NamedTuple):
+    """The pure lateral force (4.E19–4.E30) and the quantities the combined slip and the
+    aligning torque reuse."""
+
+    Fy0: Array
+    muy: Array
+    Kya: Array
+    SHy: Array
+    SVy: Array
+    By: Array
+    Cy: Array
+    Kyg0: Array
+    zeta2: Array
+
+
+def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm, ts=None) -> _PureLateral:
+    """Pure lateral force (4.E19–4.E30): Fy0, μ_y, K_yα, S_Hy, S_Vy, B_y, C_y, K_yγ0, ζ2.
     `ts`: the turn-slip state (`_TurnSlip`) or None (all ζ = 1)."""
     Fz0p = c["LFZO"] * c["FNOMIN"]
     if v52:
@@ -488,7 +503,7 @@ def _fy0(c, v52, fz, dfz, dpi, alpha_s, gamma_s, limits, fm, ts=None):
         Ey = jnp.minimum(Ey, 1.0)
     By = Kya / (Cy * Dy + EPS * _sgn(Dy))
     Fy0 = Dy * _mf(By, Cy, Ey, ay, fm) + SVy
-    return Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0, zeta2
+    return _PureLateral(Fy0, muy, Kya, SHy, SVy, By, Cy, Kyg0, zeta2)
 
 
 class _TurnSlip(NamedTuple):
@@ -501,7 +516,20 @@ class _TurnSlip(NamedTuple):
     alpha: Array
 
 
-def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
+class _Inputs(NamedTuple):
+    """The inputs as evaluated: load (clipped to FZMAX with `limits`) and the unclipped load,
+    slips, camber, speed and pressure (clipped to their ranges with `limits`)."""
+
+    fz: Array
+    ufz: Array
+    kappa: Array
+    alpha: Array
+    gamma: Array
+    vx: Array
+    p: Array
+
+
+def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits) -> _Inputs:
     c = model.coefficients
     lim = model.limit
     fz = jnp.maximum(jnp.asarray(fz, dtype=float), 0.0)
@@ -515,7 +543,7 @@ def _inputs(model, fz, kappa, alpha, gamma, vx, pressure, limits):
         alpha = jnp.clip(alpha, lim["ALPMIN"], lim["ALPMAX"])
         gamma = jnp.clip(gamma, lim["CAMMIN"], lim["CAMMAX"])
         p = jnp.clip(p, lim["PRESMIN"], lim["PRESMAX"])
-    return fz, ufz, kappa, alpha, gamma, vx, p
+    return _Inputs(fz, ufz, kappa, alpha, gamma, vx, p)
 
 
 def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: ArrayLike,
@@ -623,7 +651,7 @@ def evaluate(model: MagicFormula6, fz: ArrayLike, kappa: ArrayLike, alpha: Array
 
     if want_mz:
         # pure aligning torque (4.E31–4.E49, A58, A60)
-        Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits, fm)[0]
+        Fy0_g0 = _fy0(c, v52, fz, dfz, dpi, a_s, 0.0 * g_s, limits, fm).Fy0
         fz_mz = jnp.where(fz <= 0.0, 0.0, jnp.maximum(fz, lim["FZMIN"])) if limits else fz
         SHt = c["QHZ1"] + c["QHZ2"] * dfz + (c["QHZ3"] + c["QHZ4"] * dfz) * g_s
         Kyap = Kya + EPS * _sgn(Kya)
