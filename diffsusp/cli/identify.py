@@ -98,6 +98,9 @@ def direct_command(
         help="Bushing with Ktx = Kty and Krx = Kry (repeatable).")] = None,
     offsets: Annotated[bool, typer.Option(
         help="Also identify the bushings' offsets.")] = False,
+    cubic: Annotated[bool, typer.Option(
+        help="Also identify the bushings' cubic terms S of F = K·d + S·d³ (N/mm³, "
+        "N·mm/deg³).")] = False,
     reorder: ReorderOpt = False,
     max_sigma_pct: Annotated[float, typer.Option(
         help="Largest sigma% still called identified.")] = 10.0,
@@ -123,7 +126,8 @@ def direct_command(
         model_file = load_model_file(model, side=side)
         mech = model_file.mechanism
         meas = measure.read_measurements(measurements, mech, reorder=reorder)
-        selection = identify.direct_selection(mech, element, offsets=offsets)
+        selection = identify.direct_selection(mech, element, offsets=offsets,
+                                                cubic=cubic)
         fitted, report = identify.direct(
             mech, meas, selection, axisymmetric=tuple(axisymmetric or ()), method=method,
             hold=hold, eliminate=eliminate, weighting=weighting, threshold=threshold,

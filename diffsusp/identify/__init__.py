@@ -68,7 +68,7 @@ from ._sensitivity import (
     sensitivity,
     sensitivity_metrics,
 )
-from .direct_unknowns import Parameter, with_offsets
+from .direct_unknowns import Parameter, with_cubic, with_offsets
 from .geometric import (
     CorrectionReport,
     GeometricJoint,
@@ -102,5 +102,5 @@ __all__ = [
     "rehearse",
     "sensitivity", "sensitivity_metrics", "whitened_residuals",
     "AXES", "PARAMETER_SETS", "Parameter", "ParameterRehearsal", "corner_cases", "landmark_model",
-    "parameter_set", "returned_values", "with_offsets",
+    "parameter_set", "returned_values", "with_cubic", "with_offsets",
 ]

@@ -82,7 +82,7 @@ from ..model.mechanism import Mechanism
 from ._least_squares import least_squares_batch
 from .direct_analysis import analyse, structure_of
 from .direct_data import check_measurements, pose_covariance_jit
-from .direct_equations import r_factor, system_arrays, whiteners
+from .direct_equations import BUSHING_COLUMNS, r_factor, system_arrays, whiteners
 from .direct_polish import (
     POLISH_CHI2,
     as_batch,
@@ -104,13 +104,14 @@ from .direct_unknowns import (
     prior,
     selected_fields,
     selection_of,
+    with_cubic,
     with_offsets,
 )
 from .params import Params
 from .report import MAX_SIGMA_PCT, check_consistency, check_data, within_bar
 
 __all__ = ["DirectReport", "DirectSystem", "Parameter", "direct", "direct_batch",
-           "direct_selection", "direct_system", "with_offsets"]
+           "direct_selection", "direct_system", "with_cubic", "with_offsets"]
 
 DEFAULT_THRESHOLD = 1e-5
 """Default identifiability threshold of the direct method (relative, on unit-norm columns: see
@@ -132,18 +133,15 @@ METHODS = ("basic", "min_norm", "tsvd", "tikhonov", "nonneg")
 
 def _evaluation_model(mech: Mechanism, params: tuple[Parameter, ...]) -> Mechanism:
     """`mech` with the unknowns removed from its laws: what remains of Q_int is known."""
-    b, s = mech.bushings, mech.springs
-    k = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    offset = np.concatenate([np.asarray(b.offset_trans), np.asarray(b.offset_rot)], axis=1) \
-        if b.names else np.zeros((0, 6))
-    preload = np.concatenate([np.asarray(b.preload_force), np.asarray(b.preload_torque)],
-                             axis=1) if b.names else np.zeros((0, 6))
+    s = mech.springs
+    k, offset, preload, cubic = bushing_arrays(mech, cubic=True)
     spring_k = np.asarray(s.k).copy()
     free_length = np.asarray(s.free_length).copy()
     for p in params:
         if p.kind == "stiffness":
             k[p.element, list(p.axes)] = 0.0
+        elif p.kind == "cubic":
+            cubic[p.element, list(p.axes)] = 0.0
         elif p.kind == "constant":
             offset[p.element, list(p.axes)] = 0.0
             preload[p.element, list(p.axes)] = 0.0
@@ -152,12 +150,14 @@ def _evaluation_model(mech: Mechanism, params: tuple[Parameter, ...]) -> Mechani
         else:
             free_length[p.element] = 0.0
     return eqx.tree_at(
-        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
-                   m.bushings.offset_rot, m.bushings.preload_force, m.bushings.preload_torque,
-                   m.springs.k, m.springs.free_length),
+        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.cubic_trans,
+                   m.bushings.cubic_rot, m.bushings.offset_trans, m.bushings.offset_rot,
+                   m.bushings.preload_force, m.bushings.preload_torque, m.springs.k,
+                   m.springs.free_length),
         mech,
-        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], offset[:, :3], offset[:, 3:],
-                                       preload[:, :3], preload[:, 3:], spring_k, free_length)),
+        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], cubic[:, :3], cubic[:, 3:],
+                                       offset[:, :3], offset[:, 3:], preload[:, :3],
+                                       preload[:, 3:], spring_k, free_length)),
     )
 
 
@@ -166,23 +166,26 @@ def _evaluation_model(mech: Mechanism, params: tuple[Parameter, ...]) -> Mechani
 
 def _selection(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
     """Matrix M (table, p) mapping the unknowns (table units) onto the table of unit columns:
-    per bushing 6 stiffness axes (model units) then 6 constants, then per spring K and K·L0.
+    per bushing 6 stiffness axes (model units), 6 constants and 6 cubic terms (model units),
+    then per spring K and K·L0 (`direct_equations.BUSHING_COLUMNS`).
     Axisymmetric unknowns feed two axes; N·mm/deg unknowns carry their 180/π. The selection is
     data (not compiled structure), so every choice of unknowns of one model shares one compiled
     assembly per number of unknowns."""
     n_b = len(mech.bushings.names)
-    table = 12 * n_b + 2 * len(mech.springs.names)
+    nc = BUSHING_COLUMNS
+    table = nc * n_b + 2 * len(mech.springs.names)
     m = np.zeros((table, len(params)))
     for i, p in enumerate(params):
-        if p.kind == "stiffness":
+        if p.kind in ("stiffness", "cubic"):
+            first = nc * p.element + (0 if p.kind == "stiffness" else 12)
             for a in p.axes:
-                m[12 * p.element + a, i] = p.to_internal
+                m[first + a, i] = p.to_internal
         elif p.kind == "constant":
-            m[12 * p.element + 6 + p.axes[0], i] = 1.0
+            m[nc * p.element + 6 + p.axes[0], i] = 1.0
         elif p.kind == "spring_k":
-            m[12 * n_b + 2 * p.element, i] = 1.0
+            m[nc * n_b + 2 * p.element, i] = 1.0
         else:
-            m[12 * n_b + 2 * p.element + 1, i] = 1.0
+            m[nc * n_b + 2 * p.element + 1, i] = 1.0
     return m
 
 
@@ -315,12 +318,14 @@ def _prior_sigma(prior: np.ndarray, params, prior_sigma) -> np.ndarray:
 def _apply(mech: Mechanism, params, values, write) -> Mechanism:
     """The mechanism with the written unknowns replaced (table units → model units)."""
     s = mech.springs
-    k, off, pre = bushing_arrays(mech)
+    k, off, pre, cubic = bushing_arrays(mech, cubic=True)
     spring_k = np.asarray(s.k).copy()
     free_length = np.asarray(s.free_length).copy()
     for i, p in enumerate(params):
         if write[i] and p.kind == "stiffness":
             k[p.element, list(p.axes)] = values[i] * p.to_internal
+        if write[i] and p.kind == "cubic":
+            cubic[p.element, list(p.axes)] = values[i] * p.to_internal
         if write[i] and p.kind == "spring_k":
             spring_k[p.element] = values[i]
     for i, p in enumerate(params):
@@ -337,12 +342,14 @@ def _apply(mech: Mechanism, params, values, write) -> Mechanism:
         elif p.kind == "spring_c" and spring_k[p.element] > 0:
             free_length[p.element] = values[i] / spring_k[p.element]
     return eqx.tree_at(
-        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.offset_trans,
-                   m.bushings.offset_rot, m.bushings.preload_force, m.bushings.preload_torque,
-                   m.springs.k, m.springs.free_length),
+        lambda m: (m.bushings.k_trans, m.bushings.k_rot, m.bushings.cubic_trans,
+                   m.bushings.cubic_rot, m.bushings.offset_trans, m.bushings.offset_rot,
+                   m.bushings.preload_force, m.bushings.preload_torque, m.springs.k,
+                   m.springs.free_length),
         mech,
-        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], off[:, :3], off[:, 3:], pre[:, :3],
-                                       pre[:, 3:], spring_k, free_length)),
+        tuple(jnp.asarray(a) for a in (k[:, :3], k[:, 3:], cubic[:, :3], cubic[:, 3:],
+                                       off[:, :3], off[:, 3:], pre[:, :3], pre[:, 3:], spring_k,
+                                       free_length)),
     )
 
 
@@ -398,6 +405,9 @@ def direct(
     - `params`: the selection every identification method takes: a `Params` or a `where`
       function, equinox style, among `m.bushings.k_trans`, `k_rot` (stiffness per axis),
       `offset_trans`, `offset_rot` (offsets δ0, identified as the constant force K·δ0),
+      `cubic_trans`, `cubic_rot` (the cubic terms S of F = −(K·δ + S·δ³), one column ∂Q/∂S
+      each, in N/mm³ and N·mm/deg³; not with an offset on the same axis, which a cubic law
+      makes nonlinear; `with_cubic` selects them with the default entries),
       `m.springs.k`, `free_length` (with k: the unknowns K and K·L0); a `Params` selects
       single entries (e.g. `Params.bushing_stiffness(mech, ["A"], ["Ktx"])`; its start values
       and bounds are not used: the model's values are the prior); or a sequence of element

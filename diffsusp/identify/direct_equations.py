@@ -30,6 +30,9 @@ from ..statics.kernel import (
 
 __all__: list[str] = []  # the assembly of `direct`; `direct` and `direct_system` are the API
 
+# Unit columns per bushing: 6 stiffnesses, 6 constant forces on I, 6 cubic terms.
+BUSHING_COLUMNS = 18
+
 
 def _scaling(mech: Mechanism) -> np.ndarray:
     """Per coordinate: 1 for translations, 1/ℓ for the Gibbs coordinates (turns N·mm into N)."""
@@ -42,18 +45,20 @@ def _mechanism_at(eval_mech: Mechanism, selection, x):
     stiffnesses and constants added, each unknown K·L0 = c turned into the free length c/K
     (the evaluation model has L0 = 0 there)."""
     b, s = eval_mech.bushings, eval_mech.springs
-    n_b = len(b.names)
+    n_b, nc = len(b.names), BUSHING_COLUMNS
     t = selection @ x
-    kb = t[: 12 * n_b].reshape(n_b, 12)
-    ks, cs = t[12 * n_b :: 2], t[12 * n_b + 1 :: 2]
+    kb = t[: nc * n_b].reshape(n_b, nc)
+    ks, cs = t[nc * n_b :: 2], t[nc * n_b + 1 :: 2]
     k_spring = s.k + ks
     free_length = s.free_length + cs / jnp.where(k_spring == 0, 1.0, k_spring)
     return eqx.tree_at(
         lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
-                    mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
+                    mm.bushings.preload_torque, mm.bushings.cubic_trans, mm.bushings.cubic_rot,
+                    mm.springs.k, mm.springs.free_length),
         eval_mech,
         (b.k_trans + kb[:, :3], b.k_rot + kb[:, 3:6], b.preload_force + kb[:, 6:9],
-         b.preload_torque + kb[:, 9:], k_spring, free_length),
+         b.preload_torque + kb[:, 9:12], b.cubic_trans + kb[:, 12:15],
+         b.cubic_rot + kb[:, 15:], k_spring, free_length),
     )
 
 
@@ -66,32 +71,29 @@ def _element_geometry(mech: Mechanism, y):
     return lay, yfull, offset
 
 
-def _scatter_vectors(n_full, idx, values):
-    """Σ over elements of (E, 12, k) values into (n_full, k) at coordinate indices (E, 12)."""
-    out = jnp.zeros((n_full,) + values.shape[2:], values.dtype)
-    return out.at[np.asarray(idx)].add(values)
-
-
 def _unit_forces(mech: Mechanism, loads, y):
-    """D = ∂Q/∂θ (n, 12·nb + 2·ns), `jax.jacfwd` of `statics.generalised_forces` with respect
+    """D = ∂Q/∂θ (n, 18·nb + 2·ns), `jax.jacfwd` of `statics.generalised_forces` with respect
     to, per bushing, θ = (Ktx, Kty, Ktz, Krx, Kry, Krz) in N/mm and N·mm/rad, then the six
     constant forces on I (preload, or K·δ0 of an offset) (Adams convention, spec stiffness
-    §1.8), and per spring (K, K·L0): the stiffness at the model's free length L0 (0 where K·L0
+    §1.8), then the six cubic terms S of F = −(K·δ + S·δ³) in N/mm³ and N·mm/rad³, and per
+    spring (K, K·L0): the stiffness at the model's free length L0 (0 where K·L0
     is an unknown) and the free length at unit stiffness, a tension −1 (spec §1.7,
     4.37–4.38). Exact: the forces are linear in θ."""
     b, s = mech.bushings, mech.springs
-    n_b, n_s = len(b.names), len(s.names)
+    n_b, n_s, nc = len(b.names), len(s.names), BUSHING_COLUMNS
 
     def forces(theta):
-        tb = theta[: 12 * n_b].reshape(n_b, 12)
-        ts = theta[12 * n_b :].reshape(n_s, 2)
+        tb = theta[: nc * n_b].reshape(n_b, nc)
+        ts = theta[nc * n_b :].reshape(n_s, 2)
         at = eqx.tree_at(
             lambda mm: (mm.bushings.k_trans, mm.bushings.k_rot, mm.bushings.preload_force,
-                        mm.bushings.preload_torque, mm.springs.k, mm.springs.free_length),
-            mech, (tb[:, :3], tb[:, 3:6], tb[:, 6:9], tb[:, 9:], ts[:, 0], ts[:, 1]))
+                        mm.bushings.preload_torque, mm.bushings.cubic_trans,
+                        mm.bushings.cubic_rot, mm.springs.k, mm.springs.free_length),
+            mech, (tb[:, :3], tb[:, 3:6], tb[:, 6:9], tb[:, 9:12], tb[:, 12:15], tb[:, 15:],
+                   ts[:, 0], ts[:, 1]))
         return generalised_forces(at, loads, y)
 
-    theta = jnp.concatenate([jnp.zeros(12 * n_b, y.dtype),
+    theta = jnp.concatenate([jnp.zeros(nc * n_b, y.dtype),
                              jnp.stack([jnp.ones(n_s, y.dtype), s.free_length], 1).ravel()])
     return jax.jacfwd(forces)(theta)
 
@@ -121,7 +123,7 @@ def _case_rows(eval_mech: Mechanism, selection, q, loads):
 
     D = ∂Q_int/∂k (`jax.jacfwd` of `statics.generalised_forces` in the stiffnesses), gathered
     onto the unknowns by `selection`; Q_known is the solver's own assembly (`assemble`) of
-    everything else: the loads, the elements and axes not identified, cubic terms."""
+    everything else: the loads, the elements, axes and cubic terms not identified."""
     lay = eval_mech.topology
     n, m = lay.n, lay.m
     y = to_internal(eval_mech, q)

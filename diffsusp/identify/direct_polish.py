@@ -44,36 +44,47 @@ def polish_plan(mech: Mechanism, params: tuple[Parameter, ...]) -> PolishPlan | 
     """The plan of the polish (see `PolishPlan`), None when nothing can be polished.
 
     Polished: every bushing stiffness per axis and spring rate among the unknowns whose model
-    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there.
-    A stiffness the model sets to 0 (no stiffness on that axis, e.g. the strut bushing's Krz
-    of the pseudo-McPherson) has no log to start from or to centre a prior on: it keeps its
-    linear value, like offsets, K·L0 and axisymmetric pairs."""
+    value is positive — log-scaled, started at `mech`'s values, the weak prior centred there —
+    and every cubic term per axis (S of F = −(K·δ + S·δ³), either sign: linear scale, no
+    prior). A stiffness the model sets to 0 (no stiffness on that axis, e.g. the strut
+    bushing's Krz of the pseudo-McPherson) has no log to start from or to centre a prior on:
+    it keeps its linear value, like offsets, K·L0 and axisymmetric pairs."""
     b, s = mech.bushings, mech.springs
     k_model = np.concatenate([np.asarray(b.k_trans), np.asarray(b.k_rot)], axis=1) \
         if b.names else np.zeros((0, 6))
     kt = np.zeros((len(b.names), 3), bool)
-    kr = np.zeros_like(kt)
+    kr, ct, cr = np.zeros_like(kt), np.zeros_like(kt), np.zeros_like(kt)
     ks = np.zeros(len(s.names), bool)
     lsq_name = {}
     for i, p in enumerate(params):
-        if p.kind == "stiffness" and len(p.axes) == 1 and k_model[p.element, p.axes[0]] > 0:
-            a = p.axes[0]
+        a = p.axes[0] if len(p.axes) == 1 else None
+        if p.kind == "stiffness" and a is not None and k_model[p.element, a] > 0:
             (kt if a < 3 else kr)[p.element, a % 3] = True
             lsq_name[i] = f"{b.names[p.element]}.{STIFFNESS_NAMES[a]}"
+        elif p.kind == "cubic" and a is not None:
+            (ct if a < 3 else cr)[p.element, a % 3] = True
+            field = "cubic_trans" if a < 3 else "cubic_rot"
+            lsq_name[i] = f"{b.names[p.element]}.{field}_{'xyz'[a % 3]}"
         elif p.kind == "spring_k" and float(s.k[p.element]) > 0:
             ks[p.element] = True
             lsq_name[i] = f"{s.names[p.element]}.k"
     if not lsq_name:
         return None
-    leaves, masks = [], []
-    for name, mask in (("k_trans", kt), ("k_rot", kr)):
-        if mask.any():
-            leaves.append(lambda m, name=name: getattr(m.bushings, name))
-            masks.append(mask)
-    if ks.any():
-        leaves.append(lambda m: m.springs.k)
-        masks.append(ks)
-    lsq_params = Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks))
+
+    def selection(groups, positive):
+        leaves, masks = [], []
+        for group, name, mask in groups:
+            if mask.any():
+                leaves.append(lambda m, group=group, name=name: getattr(getattr(m, group), name))
+                masks.append(mask)
+        return Params.leaves(mech, lambda m: tuple(f(m) for f in leaves), tuple(masks),
+                             positive=positive) if leaves else None
+
+    parts = [selection((("bushings", "k_trans", kt), ("bushings", "k_rot", kr),
+                        ("springs", "k", ks)), None),
+             selection((("bushings", "cubic_trans", ct), ("bushings", "cubic_rot", cr)), False)]
+    parts = [q for q in parts if q is not None]
+    lsq_params = parts[0] if len(parts) == 1 else parts[0] + parts[1]
     return PolishPlan(lsq_params, {i: lsq_params.index(n) for i, n in lsq_name.items()})
 
 
@@ -88,9 +99,10 @@ def polish_start(plan: PolishPlan, report: DirectReport) -> np.ndarray:
     at the polish's start)."""
     start = np.array(plan.params.start)
     plausible = within_bar(report.sigma_pct, MAX_SIGMA_PCT)  # a start, not the caller's bar
+    log_scaled = np.asarray(plan.params.log_scaled)
     for i, j in plan.index.items():
         v = report.values[i] * report.parameters_to_model[i]
-        if report.identified[i] and v > 0 and plausible[i]:
+        if report.identified[i] and (v > 0 or not log_scaled[j]) and plausible[i]:
             start[j] = v
     return start
 
@@ -150,7 +162,8 @@ def merge_polish(report: DirectReport, plan: PolishPlan, fit, params: tuple[Para
     if held:
         notes.append(f"{', '.join(report.names[i] for i in held)} held at the model's values "
                      "in the polish and in the returned model (the polish covers bushing "
-                     "stiffnesses per axis and spring rates whose model value is positive; a "
+                     "stiffnesses per axis and spring rates whose model value is positive, and "
+                     "cubic terms per axis; a "
                      "K·L0 keeps the spring's free length); their linear estimates are in "
                      "linear_values")
     derived_values = derived(params, values, np.asarray(report.fit.covariance, float), model,
@@ -167,11 +180,12 @@ def polish_linear(fitted: Mechanism, report: DirectReport, params: tuple[Paramet
                   max_sigma_pct: float, mech: Mechanism) -> tuple[Mechanism, DirectReport]:
     """Least squares through the equilibrium from the linear estimate (see `direct`,
     `polish`): every bushing stiffness per axis and spring rate among the unknowns with a
-    positive model value, the other unknowns held at the model's values (a linear K·L0 biased
-    by the errors in variables would bias the polish: notebook 02's data, max_steps with
-    χ²/dof ≈ 4000), the weak default prior centred on the model's values. Returns the polished
-    model (held values included) and its report (`merge_polish`); `fitted` (the linear
-    estimate's model) when there is nothing to polish."""
+    positive model value and every cubic term per axis, the other unknowns held at the
+    model's values (a linear K·L0 biased by the errors in variables would bias the polish:
+    notebook 02's data, max_steps with χ²/dof ≈ 4000), the weak default prior centred on the
+    model's values. Returns the polished model (held values included) and its report
+    (`merge_polish`); `fitted` (the linear estimate's model) when there is nothing to
+    polish."""
     plan = polish_plan(mech, params)
     if plan is None or not report.identified[plan.unknowns].any():
         return fitted, report  # nothing determined to polish (e.g. all came out negative)

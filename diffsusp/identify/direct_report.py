@@ -15,6 +15,9 @@ from .report import AT_START, Consistency, IdentificationReport, MeasurementResi
 
 __all__ = ["DirectReport"]
 
+# Table units in degrees → the model's radians: the factor on the value.
+_DEG_POWER = {"N·mm/deg": 1.0 / DEG, "N·mm/deg³": DEG**-3}
+
 INCONSISTENT_STATUS = "determined, but not identified: the model is inconsistent with the data"
 """The status of an unknown the data determine when the identified model does not reproduce
 the measurements (`Consistency.verdict`: "no value is reported as identified")."""
@@ -97,11 +100,12 @@ class DirectReport(IdentificationReport):
     # The base API (identify.report), in the model's units (N·mm/rad, not N·mm/deg).
     @property
     def _to_model(self) -> np.ndarray:
-        return np.array([1.0 / DEG if u == "N·mm/deg" else 1.0 for u in self.units])
+        return np.array([_DEG_POWER.get(u, 1.0) for u in self.units])
 
     @property
     def parameters_to_model(self) -> np.ndarray:
-        """Per unknown, the factor from its table unit to the model's (π/180 → 180/π)."""
+        """Per unknown, the factor from its table unit to the model's (N·mm/deg → N·mm/rad:
+        180/π; N·mm/deg³ → N·mm/rad³: (180/π)³)."""
         return self._to_model
 
     @property
@@ -114,7 +118,7 @@ class DirectReport(IdentificationReport):
 
     @property
     def estimate_units(self) -> tuple[str, ...]:
-        return tuple("N·mm/rad" if u == "N·mm/deg" else u for u in self.units)
+        return tuple(u.replace("/deg", "/rad") if u in _DEG_POWER else u for u in self.units)
 
     @property
     def residuals(self) -> dict:

@@ -14,7 +14,7 @@ from ..model.mechanism import Mechanism
 from .params import Params, selected_entries
 
 # re-exported by `identify.direct`; the rest serves direct, direct_polish
-__all__ = ["Parameter", "direct_selection", "with_offsets"]
+__all__ = ["Parameter", "direct_selection", "with_cubic", "with_offsets"]
 
 AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -25,15 +25,19 @@ STIFFNESS_NAMES = ("Ktx", "Kty", "Ktz", "Krx", "Kry", "Krz")
 OFFSET_NAMES = ("Fx0", "Fy0", "Fz0", "Mx0", "My0", "Mz0")
 
 
+CUBIC_NAMES = ("Stx", "Sty", "Stz", "Srx", "Sry", "Srz")
+
+
 @dataclasses.dataclass(frozen=True)
 class Parameter:
     """One unknown of the linear system (static description).
 
-    `kind`: 'stiffness' (bushing axis, column ∂Q/∂k), 'constant' (bushing axis: K·δ0 + preload),
-    'spring_k' (spring K, with the model's L0 if `spring_c` is not also unknown), 'spring_c'
-    (K·L0); `element` the bushing/spring index; `axes` the bushing axes it covers (two for an
+    `kind`: 'stiffness' (bushing axis, column ∂Q/∂k), 'cubic' (bushing axis: S of the law
+    F = −(K·δ + S·δ³), column ∂Q/∂S), 'constant' (bushing axis: K·δ0 + preload), 'spring_k'
+    (spring K, with the model's L0 if `spring_c` is not also unknown), 'spring_c' (K·L0);
+    `element` the bushing/spring index; `axes` the bushing axes it covers (two for an
     axisymmetric pair); `unit` of the table value; `to_internal` factor from the table unit to
-    the model's (N·mm/deg → N·mm/rad).
+    the model's (N·mm/deg → N·mm/rad, N·mm/deg³ → N·mm/rad³).
     """
 
     name: str
@@ -47,6 +51,8 @@ class Parameter:
 _FIELDS = {
     "bushings.k_trans": ("bushing", "k", (0, 1, 2)),
     "bushings.k_rot": ("bushing", "k", (3, 4, 5)),
+    "bushings.cubic_trans": ("bushing", "cubic", (0, 1, 2)),
+    "bushings.cubic_rot": ("bushing", "cubic", (3, 4, 5)),
     "bushings.offset_trans": ("bushing", "offset", (0, 1, 2)),
     "bushings.offset_rot": ("bushing", "offset", (3, 4, 5)),
     "springs.k": ("spring", "k", ()),
@@ -103,14 +109,16 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
     if bad:
         raise InputError(f"axisymmetric= names {', '.join(map(repr, bad))}, which are not "
                          f"bushings of the model ({', '.join(b.names) or 'none'}).")
-    # Selected axes per bushing: k (stiffness) and c (offset), (bushings, 6).
+    # Selected axes per bushing: k (stiffness), s (cubic term), c (offset), (bushings, 6).
     k_sel = np.zeros((len(b.names), 6), bool)
+    s_sel = np.zeros((len(b.names), 6), bool)
     c_sel = np.zeros((len(b.names), 6), bool)
+    sel_of = {"k": k_sel, "cubic": s_sel, "offset": c_sel}
     spring_sel = {"k": np.zeros(len(s.names), bool), "free_length": np.zeros(len(s.names), bool)}
     for path, idx in fields.items():
         group, kind, axes = _FIELDS[path]
         if group == "bushing":
-            (k_sel if kind == "k" else c_sel)[idx // 3, np.asarray(axes)[idx % 3]] = True
+            sel_of[kind][idx // 3, np.asarray(axes)[idx % 3]] = True
         else:
             spring_sel[kind][idx] = True
     spline = np.asarray(b.spline_axes, dtype=bool).reshape(len(b.names), 6)
@@ -122,12 +130,13 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
             continue
         sym = name in axisym
         if sym:  # an axisymmetric pair is one unknown: selected if either axis is
-            for sel in (k_sel, c_sel):
+            for sel in (k_sel, s_sel, c_sel):
                 for x in (0, 3):
                     sel[e, x:x + 2] = sel[e, x:x + 2].any()
         k_axes, c_axes = set(np.flatnonzero(k_sel[e])), set(np.flatnonzero(c_sel[e]))
+        s_axes = set(np.flatnonzero(s_sel[e]))
         k_axes -= {a for f, a in free if f == e and not (sym and a in (0, 1, 3, 4))}
-        for a in sorted(k_axes | c_axes):
+        for a in sorted(k_axes | s_axes | c_axes):
             if spline[e, a]:
                 raise ModelError(
                     f"bushing '{name}' uses a spline law on axis {AXES[a]}; the direct method "
@@ -135,21 +144,26 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
                     "replace the spline by its slope."
                 )
         for a in sorted(c_axes):
-            if cubic[e, a] != 0:
+            if cubic[e, a] != 0 or a in s_axes:
                 raise ModelError(
                     f"bushing '{name}' has a cubic term on axis {AXES[a]}, which makes its "
                     "offset enter nonlinearly; identify its offsets with a linear law only."
                 )
-        for a in sorted(k_axes):
-            if sym and a in (1, 4):
-                continue
-            rot = a >= 3
-            if sym and a in (0, 3):
-                label, axes = ("Krr" if rot else "Ktr"), (a, a + 1)
-            else:
-                label, axes = STIFFNESS_NAMES[a], (a,)
-            params.append(Parameter(f"{name}.{label}", "stiffness", e, axes,
-                                    "N·mm/deg" if rot else "N/mm", 1.0 / DEG if rot else 1.0))
+        for kind, axes_of_kind, names_of_kind in (("stiffness", k_axes, STIFFNESS_NAMES),
+                                                  ("cubic", s_axes, CUBIC_NAMES)):
+            power = 1 if kind == "stiffness" else 3
+            for a in sorted(axes_of_kind):
+                if sym and a in (1, 4):
+                    continue
+                rot = a >= 3
+                if sym and a in (0, 3):
+                    label = names_of_kind[a][:2] + "r"  # Ktr, Krr, Str, Srr: the radial pair
+                    axes = (a, a + 1)
+                else:
+                    label, axes = names_of_kind[a], (a,)
+                unit = ("N·mm/deg" if rot else "N/mm") + ("³" if power == 3 else "")
+                params.append(Parameter(f"{name}.{label}", kind, e, axes, unit,
+                                        DEG ** -power if rot else 1.0))
         for a in sorted(c_axes):
             params.append(Parameter(f"{name}.{OFFSET_NAMES[a]}", "constant", e, (a,),
                                     "N·mm" if a >= 3 else "N", 1.0))
@@ -171,24 +185,26 @@ def parameters(mech: Mechanism, fields: Mapping[str, np.ndarray], elements, axis
     return tuple(params)
 
 
-def bushing_arrays(mech: Mechanism) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The bushings' stiffnesses, offsets and preloads as (bushings, 6) arrays, translations
-    then rotations (model units)."""
+def bushing_arrays(mech: Mechanism, cubic: bool = False) -> tuple[np.ndarray, ...]:
+    """The bushings' stiffnesses, offsets and preloads (and with `cubic`, their cubic terms)
+    as (bushings, 6) arrays, translations then rotations (model units)."""
     b = mech.bushings
+    pairs = [(b.k_trans, b.k_rot), (b.offset_trans, b.offset_rot),
+             (b.preload_force, b.preload_torque)] + ([(b.cubic_trans, b.cubic_rot)] if cubic
+                                                     else [])
     if not b.names:
-        return np.zeros((0, 6)), np.zeros((0, 6)), np.zeros((0, 6))
-    return tuple(np.concatenate([np.asarray(t), np.asarray(r)], axis=1) for t, r in (
-        (b.k_trans, b.k_rot), (b.offset_trans, b.offset_rot),
-        (b.preload_force, b.preload_torque)))
+        return tuple(np.zeros((0, 6)) for _ in pairs)
+    return tuple(np.concatenate([np.asarray(t), np.asarray(r)], axis=1) for t, r in pairs)
 
 
 def prior(mech: Mechanism, params: tuple[Parameter, ...]) -> np.ndarray:
     s = mech.springs
-    k, off, pre = bushing_arrays(mech)
+    k, off, pre, cubic = bushing_arrays(mech, cubic=True)
     out = []
     for p in params:
-        if p.kind == "stiffness":
-            out.append(np.mean(k[p.element, list(p.axes)]) / p.to_internal)
+        if p.kind in ("stiffness", "cubic"):
+            value = (k if p.kind == "stiffness" else cubic)[p.element, list(p.axes)]
+            out.append(np.mean(value) / p.to_internal)
         elif p.kind == "constant":
             a = p.axes[0]
             out.append(k[p.element, a] * off[p.element, a] + pre[p.element, a])
@@ -220,15 +236,27 @@ def with_offsets(m: Mechanism):
             m.bushings.offset_rot, m.springs.k, m.springs.free_length)
 
 
+def with_cubic(m: Mechanism):
+    """The default entries and the bushings' cubic terms S of F = −(K·δ + S·δ³):
+    stiffnesses, cubic terms, the springs' K and free length."""
+    return (m.bushings.k_trans, m.bushings.k_rot, m.bushings.cubic_trans, m.bushings.cubic_rot,
+            m.springs.k, m.springs.free_length)
+
+
 def direct_selection(mech: Mechanism, elements: Sequence[str] | None = None,
-                     offsets: bool = False):
-    """The one selector of `direct` for "these elements" and "with their offsets": None (the
-    default), the element names, `with_offsets`, or, for both, a `Params` of the entries of
-    `with_offsets` that belong to the named bushings and springs."""
-    if not offsets:
+                     offsets: bool = False, cubic: bool = False):
+    """The one selector of `direct` for "these elements", "with their offsets" and "with
+    their cubic terms": None (the default), the element names, `with_offsets` or
+    `with_cubic`, or, for both, a `Params` of those entries that belong to the named bushings
+    and springs."""
+    if offsets and cubic:
+        raise ModelError("offsets and cubic terms cannot both be unknowns of the direct "
+                         "method: an offset under a cubic law enters the forces nonlinearly.")
+    where = with_offsets if offsets else with_cubic if cubic else None
+    if where is None:
         return tuple(elements) if elements else None
     if not elements:
-        return with_offsets
+        return where
     known = set(mech.bushings.names) | set(mech.springs.names)
     unknown = [e for e in elements if e not in known]
     if unknown:
@@ -237,12 +265,12 @@ def direct_selection(mech: Mechanism, elements: Sequence[str] | None = None,
                          f"{', '.join(mech.bushings.names) or 'none'}; springs: "
                          f"{', '.join(mech.springs.names) or 'none'}.")
     masks = []
-    for path in selected_entries(mech, with_offsets):
+    for path in selected_entries(mech, where):
         group = getattr(mech, path[0])
         shape = np.shape(getattr(group, path[1]))
         rows = np.isin(np.asarray(group.names, dtype=object), list(elements))
         masks.append(np.broadcast_to(rows.reshape((-1,) + (1,) * (len(shape) - 1)), shape))
-    return Params.leaves(mech, with_offsets, tuple(masks), positive=False)
+    return Params.leaves(mech, where, tuple(masks), positive=False)
 
 
 def derived(params, values, cov, mech, identified_mask):

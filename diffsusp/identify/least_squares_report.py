@@ -64,9 +64,9 @@ class FitReport(IdentificationReport):
       positions), `covariance` and `correlation` `(p, p)`; `gate_sigma_pct` the σ% the data
       give at the start values (data Jacobian there, no prior): what `determined` judges.
     - `identifiable` `(p,)`: the data alone determine the parameter to better than
-      `identifiable_sigma` (internal units: relative for log-scaled, mm for positions);
-      `unidentifiable` the names of the others; their `sigma` is inf when the data have no
-      information at all.
+      `identifiable_sigma` (internal units: relative for log-scaled parameters and cubic
+      terms, mm for positions); `unidentifiable` the names of the others; their `sigma` is
+      inf when the data have no information at all.
     - `singular_values` of the whitened data Jacobian in internal coordinates; `null_space`:
       the combinations the data cannot see (the thesis's "equivalent solutions", §2.7).
     - `residuals`: measurement name → `MeasurementResiduals`; `loss` ½Σr̃² (robust, with the
@@ -304,6 +304,25 @@ class LMRun:
     q_last: jnp.ndarray
 
 
+_RELATIVE_FIELDS = {("bushings", "cubic_trans"), ("bushings", "cubic_rot"), ("stops", "cubic")}
+
+
+def _identifiability_scale(params: Params, u) -> np.ndarray:
+    """Per parameter, the unit in which `identifiable_sigma` judges its σ (internal
+    coordinates): 1 (log-scaled parameters: relative already; positions and offsets: mm) but
+    for a cubic term (N/mm³, N·mm/rad³: units with no natural size), its size, the larger of
+    |start| and |estimate| (1 where both are 0), so that it is judged relative like a
+    stiffness."""
+    scale = np.ones(len(params))
+    size = np.maximum(np.abs(np.asarray(params.start, float)),
+                      np.abs(np.asarray(params.to_physical(jnp.asarray(u)), float)))
+    for t in params.targets:
+        if t.path in _RELATIVE_FIELDS:
+            idx = np.asarray(t.param_index, dtype=int)
+            scale[idx] = np.where(size[idx] > 0, size[idx], 1.0)
+    return scale
+
+
 def fit_report(params: Params, problem, run: LMRun, b: int, loss_name: str,
                identifiable_sigma: float, jac0=None) -> FitReport:
     """The `FitReport` of data set `b` of `run` (`problem`: that set's, its measured values
@@ -318,8 +337,10 @@ def fit_report(params: Params, problem, run: LMRun, b: int, loss_name: str,
     n_data = z.size - p
     j_data = jac[:n_data]
 
-    # Data-only identifiability (SVD of the whitened data Jacobian, internal coordinates).
-    _, s, vt = np.linalg.svd(j_data, full_matrices=False)
+    # Data-only identifiability (SVD of the whitened data Jacobian, internal coordinates; a
+    # cubic term's relative to its size, see `_identifiability_scale`).
+    _, s, vt = np.linalg.svd(j_data * _identifiability_scale(params, u)[None, :],
+                             full_matrices=False)
     s_max = s[0] if s.size and s[0] > 0 else 1.0
     floor = s_max * 1e-12
     s_safe = np.maximum(s, floor)
