@@ -123,6 +123,7 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
            "segment_inputs",
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
+           "behaviour_rules", "table6_features", "SIGN_FREE_BLOCKS",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
            "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT",
            "stability", "camber_levels", "report_rows", "format_report", "statuses",
@@ -136,25 +137,19 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
 
 def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radius: float = 0.294,
                     loads: tuple[float, ...] | None = None, well_excited_load: bool = True,
-                    ic_threshold: float = 0.1, sigma_pct_threshold: float | None = 100.0):
-    """A `check=` rule for `lsq.eliminate` (spec §3.3, §7 item 19): returns the name of the
-    coefficient to drop, or None when the identified polynomial behaves.
-
-    1. **load polynomials keep their sign**: c_{F,X,i}(F_z) of every kept (X, i) must not vanish
-       on [F_zmin, F_zmax] (a sign change is a structural discontinuity): drop the top monomial
-       in X of that P_{F,X} (`well_excited_load`) or the top power of F_z;
-    2. **concave stiffness**: the cornering stiffness c_{F,δ′,1}(F_z) (F_y) must be concave on
-       the range (d²/dF_z² ≤ 0), else drop its top load monomial;
-    3. **extremum counts** in the Table 6 domains, mapped from δ with δ′ = −R_r·tan δ
-       (CORRECTIONS 3): at each load, at most one maximum and one minimum of P_{F,δ′} in
-       the useful domain [−12°, 12°] (F_y) or [−6°, 6°] (M_z); else drop its top δ′ monomial.
+                    concave: bool = False, ic_threshold: float = 0.1,
+                    sigma_pct_threshold: float | None = 100.0):
+    """A `check=` rule for `lsq.eliminate` (spec §3.3, §7 item 19; thesis §3.3.2.1.1):
+    returns the name of the coefficient to drop, or None when the identified polynomial
+    behaves. The rules are `behaviour_rules`' (see there, with what they check and where they
+    depart from the thesis's wording).
 
     The rules judge a statistically clean model, as the thesis does (simplify after the
     significance tests): while a kept coefficient still fails IC ≥ `ic_threshold` or
     σ % ≤ `sigma_pct_threshold`, the rule returns None and lets the elimination remove it.
     """
     violation = behaviour_rules(output, fz_range, rolling_radius=rolling_radius, loads=loads,
-                           well_excited_load=well_excited_load)
+                                well_excited_load=well_excited_load, concave=concave)
 
     def rule(fit: lsq.Fit) -> str | None:
         free = fit.kept & ~fit.fixed
@@ -172,17 +167,72 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
     return rule
 
 
-def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_excited_load=True):
-    """The behaviour rules of `structure_rules` as a function of the active coefficients
-    (name → value): returns None, or (the coefficient the rule drops, the coefficients that
-    can fix the same fault (its load polynomial c_{F,X,i} for rule 1, the cornering stiffness's
-    for rule 2, the δ′ block's top-degree terms for rule 3), the rule's key). `excused`: keys
-    of faults the data support (every removal significant), skipped."""
+SIGN_FREE_BLOCKS = ("gamma", "one")
+"""Blocks whose load polynomials (3-21) keep a constant term and may change sign on the load
+range: the camber stiffness and the offset (aerodynamic and measurement offsets at zero load,
+thesis §3.3.1.1.1.2). The thesis's own M_z models cross zero there (every offset of Tables
+46–57, at 1.85–2.55 kN; γ², γ⁴ of Tables 47, 54, 57), so the sign rule reads "a structural
+discontinuity" as one of the deformation polynomials (3-20), which vanish at zero load."""
+
+
+def _real_roots(c: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Real roots in [lo, hi] of the polynomial with ascending coefficients `c`."""
+    c = np.trim_zeros(np.asarray(c, float), "b")
+    if c.size < 2:
+        return np.zeros(0)
+    r = np.polynomial.polynomial.polyroots(c)
+    scale = max(abs(lo), abs(hi), 1e-300)
+    r = r[np.abs(r.imag) <= 1e-9 * scale].real
+    return np.unique(np.round(r[(r >= lo) & (r <= hi)] / scale, 12)) * scale
+
+
+def table6_features(output: str, active: Mapping[str, float], fz: float, *,
+                    rolling_radius: float = 0.294) -> dict[str, int]:
+    """The number of each Table 6 feature of P_{F,δ′} + the offset (γ = φ′ = 0) at load `fz`
+    [kN], each counted in its own domain (spec §3.3 Table 6, δ′ = −R_r·tan δ): zeros in the
+    zero domain (δ ∈ [−1, 1]°), maxima in the maximum's, minima in the minimum's. The thesis
+    allows one of each."""
+    dom = table6_domains(rolling_radius)[output]
+    c = np.zeros(8)
+    for n, x in active.items():
+        _, block, i, j = parse_name(n)
+        if block == "delta":
+            c[i] += x * fz**j
+        elif block == "one":
+            c[0] += x * fz**j
+    dc = np.polynomial.polynomial.polyder(c)
+    d2 = np.polynomial.polynomial.polyder(dc)
+    out = {"zero": _real_roots(c, *dom["zero"]).size}
+    for kind, sign in (("max", -1.0), ("min", 1.0)):
+        x = _real_roots(dc, *dom[kind])
+        out[kind] = int(np.sum(sign * np.polynomial.polynomial.polyval(x, d2) > 0))
+    return out
+
+
+def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_excited_load=True,
+                    concave=False):
+    """The behaviour rules of the thesis (§3.3.2.1.1; spec §3.3) as a function of the active
+    coefficients (name → value): returns None, or (the coefficient the rule drops, the
+    coefficients that can fix the same fault, the rule's key). `excused`: keys of faults the
+    data support (every removal significant), skipped.
+
+    1. **Load polynomials keep their sign** on [F_zmin, F_zmax]: a deformation polynomial's
+       c_{F,X,i}(F_z) (3-20) that changes sign is a structural discontinuity. Fix: drop the
+       top monomial in X of that P_{F,X} when the load is well excited, else
+       (`well_excited_load=False`: one load level, say) the top power of F_z (the thesis
+       drops it from every c_{F,X,k}; the rule drops it from the failing block first and
+       fires again while a polynomial still changes sign). The camber and offset polynomials
+       (3-21) are not judged (`SIGN_FREE_BLOCKS`: the thesis's own models cross zero there).
+    2. **Table 6 counts**, each feature in its own domain (`table6_features`): at each load of
+       `loads` (default four across the range), at most one zero of F(δ′) near δ = 0, one
+       maximum and one minimum in their domains; extrema outside every domain are not
+       counted (the thesis's useful domain). Fix: drop the top δ′ monomial.
+    3. With `concave=True`, the cornering stiffness c_{Fy,δ′,1}(F_z) concave on the range
+       (|c| concave; a specification of §2.4.2 and the X2 > 0 of the Magic Formula conversion
+       (3-101), not one of the thesis's validation criteria; off by default).
+    """
     lo, hi = fz_range
     loads = loads or tuple(np.linspace(lo, hi, 4))
-    dom = table6_domains(rolling_radius)[output]
-    x_lo = min(v[0] for v in dom.values())
-    x_hi = max(v[1] for v in dom.values())
 
     def find(active: Mapping[str, float], excused=frozenset()):
         pneu = {n: x for n, x in active.items() if parse_name(n)[1] not in ("Ly", "P2")
@@ -195,11 +245,13 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
         def name(block, i, j):
             return f"b_{output}_{block}_{i}_{j}"
 
-        # 1. load polynomials keep their sign on [lo, hi] (and vanish only at F_z = 0)
+        # 1. deformation load polynomials keep their sign on [lo, hi]
         fz = np.linspace(lo, hi, 41)
         for (block, i), cj in sorted(by_block.items()):
+            if block in SIGN_FREE_BLOCKS or ("sign", block, i) in excused:
+                continue
             c = sum(v * fz**j for j, v in cj.items())
-            if np.min(c) < 0 < np.max(c) and ("sign", block, i) not in excused:
+            if np.min(c) < 0 < np.max(c):
                 top = [(ii, j) for (b, ii), cc in by_block.items() if b == block for j in cc]
                 if well_excited_load:
                     ii, j = max(top)
@@ -207,28 +259,24 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
                     j, ii = max((j, ii) for ii, j in top)
                 group = {name(block, i, jj) for jj in cj} | {name(block, ii, j)}
                 return name(block, ii, j), group, ("sign", block, i)
-        # 2. concave cornering stiffness (F_y)
-        if output == "Fy" and ("delta", 1) in by_block and ("concave",) not in excused:
+        # 2. Table 6: one zero, one maximum, one minimum, each in its domain
+        if any(b == "delta" for b, _ in by_block) and ("extrema",) not in excused:
+            for f in loads:
+                counts = table6_features(output, pneu, float(f), rolling_radius=rolling_radius)
+                if max(counts.values()) > 1:
+                    i, j = max((i, j) for (b, i), cc in by_block.items() if b == "delta"
+                               for j in cc)
+                    return (name("delta", i, j), {name("delta", i, jj) for jj in
+                                                  by_block[("delta", i)]}, ("extrema",))
+        # 3. (optional) concave cornering stiffness (F_y)
+        if (concave and output == "Fy" and ("delta", 1) in by_block
+                and ("concave",) not in excused):
             cj = by_block[("delta", 1)]
             d2 = sum(v * j * (j - 1) * fz ** max(j - 2, 0) for j, v in cj.items())
             # PSA sign: the stiffness is negative; concave in magnitude means |c| concave.
             if np.max(-d2) > 0 and max(cj) >= 2:
                 return (name("delta", 1, max(cj)), {name("delta", 1, j) for j in cj if j >= 2},
                         ("concave",))
-        # 3. extremum counts in the useful domain
-        if any(b == "delta" for b, _ in by_block) and ("extrema",) not in excused:
-            top_i = max(i for b, i in by_block if b == "delta")
-            model = PolynomialModel.create(output, {"delta": top_i},
-                                           values={n: x for n, x in pneu.items()
-                                                   if parse_name(n)[1] == "delta"})
-            for f in loads:
-                ex = model.extrema(float(f), "delta", x_lo, x_hi)
-                if (sum(k == "max" for _, _, k in ex) > 1
-                        or sum(k == "min" for _, _, k in ex) > 1):
-                    i, j = max((i, j) for (b, i), cc in by_block.items() if b == "delta"
-                               for j in cc)
-                    return (name("delta", i, j), {name("delta", i, jj) for jj in
-                                                  by_block[("delta", i)]}, ("extrema",))
         return None
 
     return find
@@ -1027,7 +1075,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
        model), not the white-residual σ of the least squares, which are twice the spread of
        the slip terms and made the search remove terms the data determine;
     2. once every kept coefficient passes, the behaviour rules (`structure_rules`: load
-       polynomials keep their sign, concave stiffness, extremum counts);
+       polynomials keep their sign, Table 6 counts per domain);
     3. **a removal must not raise the residual beyond the noise**: the residual increase of
        removing coefficient i (for the least squares ΔRSS = x_i²/[(WᵀW)⁻¹]_ii) is compared with
        the increase the noise alone would cause, under the same filtered noise model: an

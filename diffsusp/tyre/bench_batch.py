@@ -29,8 +29,8 @@ library's final pass under the instrumental-variable estimator
 (`identify_output(final_pass=True)`, the default), the traced search runs it too (its σ from
 `bench.two_step`, step 1 at the data's noise level).
 
-**The behaviour rules** (`bench.structure_rules`: load polynomials keep their sign, concave
-stiffness, extremum counts) are Python checks on the coefficient values; they run on the host
+**The behaviour rules** (`bench.structure_rules`: deformation load polynomials keep their
+sign, Table 6 counts per domain) are Python checks on the coefficient values; they run on the host
 after the program, on the state at which the library would run them (the end of each phase):
 a set for which a rule would remove a coefficient (one of the coefficients that mend the fault
 fails the F-test) is sent through the library's exact search (`bench.identify_output`), and its
