@@ -99,6 +99,10 @@ def test_each_rule_has_a_model_that_breaks_it():
     weak = bench.behaviour_rules("Fy", RANGE, well_excited_load=False)(bad)
     top_j = max(int(k.split("_")[4]) for k in bad if k.startswith("b_Fy_delta_"))
     assert weak[2] == ("sign", "delta", 1) and weak[0].endswith(f"_{top_j}")  # top F_z power
+    # The identification calls one load level (a load sine ±0.5 kN around 4.5 kN is barely
+    # more) weakly excited, the steering-feel range 1.5–6 kN well excited.
+    assert not bench.load_well_excited(4.45, 4.55) and not bench.load_well_excited(4.0, 4.8)
+    assert bench.load_well_excited(*RANGE)
     # The offset's sign change (a (3-21) polynomial) is not a fault.
     offset = {**good, "b_Fy_one_1_0": 50.0, "b_Fy_one_1_1": -20.0}
     assert rules(offset) is None

@@ -123,7 +123,7 @@ __all__ = ["REQUIRED", "Segments", "steering_feel_segments", "active_safety_segm
            "segment_inputs",
            "synthetic_flat_trac", "butterworth", "filtfilt", "condition", "Conditioned",
            "deformation_from_psa", "psa_from_deformation", "structure_rules", "identify",
-           "behaviour_rules", "table6_features", "SIGN_FREE_BLOCKS",
+           "behaviour_rules", "table6_features", "SIGN_FREE_BLOCKS", "load_well_excited",
            "BenchReport", "OutputReport", "Coefficients", "identify_output", "two_step",
            "monte_carlo", "filter_matrix", "difference_matrix", "MAX_SEGMENT",
            "stability", "camber_levels", "report_rows", "format_report", "statuses",
@@ -165,6 +165,18 @@ def structure_rules(output: str, fz_range: tuple[float, float], *, rolling_radiu
         return None if found is None else found[0]
 
     return rule
+
+
+WEAK_LOAD_SPREAD = 0.2
+"""A load range (F_zmax − F_zmin) below this fraction of its mid value is "barely excited"
+(thesis §3.3.2.1.1: "1 seul point de fonctionnement en charge notamment"): the sign rule then
+drops the top power of F_z instead of the top monomial in X."""
+
+
+def load_well_excited(fz_min: float, fz_max: float) -> bool:
+    """Whether a trajectory's load range excites the load polynomials (`WEAK_LOAD_SPREAD`)."""
+    mid = 0.5 * (fz_min + fz_max)
+    return mid > 0 and (fz_max - fz_min) >= WEAK_LOAD_SPREAD * mid
 
 
 SIGN_FREE_BLOCKS = ("gamma", "one")
@@ -219,7 +231,8 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
     1. **Load polynomials keep their sign** on [F_zmin, F_zmax]: a deformation polynomial's
        c_{F,X,i}(F_z) (3-20) that changes sign is a structural discontinuity. Fix: drop the
        top monomial in X of that P_{F,X} when the load is well excited, else
-       (`well_excited_load=False`: one load level, say) the top power of F_z (the thesis
+       (`well_excited_load=False`: one load level, say; the identification decides with
+       `load_well_excited`) the top power of F_z (the thesis
        drops it from every c_{F,X,k}; the rule drops it from the failing block first and
        fires again while a polynomial still changes sign). The camber and offset polynomials
        (3-21) are not judged (`SIGN_FREE_BLOCKS`: the thesis's own models cross zero there).
@@ -1167,8 +1180,10 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     removed, not_ident, excused = {}, {}, []
     if search:
         fz = cond.inputs["fz"]
-        behaviour = behaviour_rules(output, (float(fz.min()), float(fz.max())),
-                               rolling_radius=rolling_radius) if rules else None
+        fz_range = (float(fz.min()), float(fz.max()))
+        behaviour = behaviour_rules(output, fz_range, rolling_radius=rolling_radius,
+                                    well_excited_load=load_well_excited(*fz_range)
+                                    ) if rules else None
         # The search judges the least squares with their noise-model σ at the noise level of
         # the data (above the cut-off: independent of the structure): the instrumental-
         # variable refinement and the residual's noise estimate need a sound structure (with

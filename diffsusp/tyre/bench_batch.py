@@ -553,8 +553,9 @@ def identify_many(data: Sequence, *, structure: str = "just-necessary", degrees=
         if ic_threshold > 0:
             why = f"ic_threshold {ic_threshold:g} (the IC rule is not traced)"
         elif rules:
-            behaviour = bench.behaviour_rules("Fy", (float(fz_range[i][0]), float(fz_range[i][1])),
-                                         rolling_radius=r_m)
+            lo, hi = float(fz_range[i][0]), float(fz_range[i][1])
+            behaviour = bench.behaviour_rules("Fy", (lo, hi), rolling_radius=r_m,
+                                              well_excited_load=bench.load_well_excited(lo, hi))
             phases = [("x", "stat", "active")]
             # the rules at the end of each phase, as the library; with σ % ≤ 100/√crit
             # (30.4 % at 10⁻³) every coefficient a phase keeps passes the F-test (F =
