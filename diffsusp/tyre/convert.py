@@ -39,7 +39,8 @@ from . import fit as mf_fit
 from . import mf89
 from .poly import PolynomialModel, parse_name, table6_domains
 
-__all__ = ["step1", "refine", "to_magic_formula", "fit_slip_polynomial", "slip_data"]
+__all__ = ["step1", "refine", "to_magic_formula", "fit_slip_polynomial", "slip_data",
+           "torsion_set", "torsion_stiffness"]
 
 
 def deg_to_dp(delta_deg, radius):
@@ -207,3 +208,58 @@ def fit_slip_polynomial(output: str, fz_kn, delta_p, y, *, degree: int = 5) -> P
     x = np.linalg.lstsq(W / scale, np.asarray(y, float).ravel(), rcond=None)[0] / scale
     return PolynomialModel.create(output, {"delta": degree}, values=dict(zip(names, x,
                                                                              strict=True)))
+
+
+def torsion_stiffness(model: PolynomialModel, fz) -> np.ndarray:
+    """The torsion stiffness of a polynomial model, ∂F/∂φ′ at φ′ = 0 per degree of torsion:
+    (π/180)·c_{F,φ′,1}(F_z) [N/° or N·m/°] at loads `fz` [kN] (spec §3.2, (3-58), (3-66))."""
+    fz = np.asarray(fz, float)
+    slope = [np.r_[model.input_polynomial(float(f), "phi"), 0.0][1] for f in fz.ravel()]
+    return math.radians(1.0) * np.reshape(slope, fz.shape)
+
+
+def torsion_set(model: PolynomialModel, *, loads=(3.0, 4.5, 6.0), ramp_deg: float = 0.85,
+                c0: float = 2.5, c9: float = 0.01) -> tuple[mf89.MagicFormula89, dict]:
+    """The torsion Magic Formula set of a polynomial model's φ′ response by the step-1 closed
+    forms (thesis §3.6.2, the "comportement en torsion" sets of Tables 14/15, 18/19, 22/23,
+    26/27; spec §3.8, §4.6): the c-set of (B-17…B-24) on the torsion abscissa in degrees, from
+    P_{F,φ′} at `loads` [kN] (the thesis's 3, 4.5 and 6 kN):
+
+    - stiffness BCD(F_z) = c3·F_z² + c4·F_z (c5 = 0) by least squares on `torsion_stiffness`;
+    - extrema of P_{F,φ′} inside the thesis's torsion ramp ±`ramp_deg` (§3.5.5.3; a maximum
+      and a minimum at two loads at least): D = (|Y_max| + |Y_min|)/2 quadratic in load
+      (c1, c2) and S_h = −(φ_max + φ_min)/2 [°] affine in load (c12, c13);
+    - none: the linear law, D = 0 (c1 = c2 = 0), S_h = 0, as the thesis's tables print
+      where no extremum was identified (spec §3.8 (e));
+    - C = `c0` and E = `c9` a priori (the tables' placeholders 2.5 and 0.01).
+
+    Where there are extrema the thesis refined the set by its step 2 (C, E and D fitted),
+    which this function does not do: its D and stiffness are the polynomial's.
+
+    **Returns:** (a `MagicFormula89` whose `mz0(m, torsion_deg, fz)` is the torsion response,
+    in the model's output unit (N for F_y, N·m for M_z), notes).
+    """
+    loads = np.asarray(loads, float)
+    k = torsion_stiffness(model, loads)
+    c3, c4 = np.linalg.lstsq(np.stack([loads**2, loads], 1), k, rcond=None)[0]
+    values = {"c0": c0, "c3": float(c3), "c4": float(c4), "c9": c9}
+    r = math.radians(ramp_deg)
+    found = []
+    for f in loads:
+        ex = algebra.extrema(model.input_polynomial(float(f), "phi"), -r, r)
+        maxima = [e for e in ex if e[2] == "max"]
+        minima = [e for e in ex if e[2] == "min"]
+        if maxima and minima:
+            a = min(maxima, key=lambda e: abs(e[0]))
+            b = min(minima, key=lambda e: abs(e[0]))
+            found.append((f, -math.degrees(a[0] + b[0]) / 2, (abs(a[1]) + abs(b[1])) / 2))
+    if len(found) >= 2:
+        f, shift, peak = (np.array(v) for v in zip(*found, strict=True))
+        c1, c2 = np.linalg.lstsq(np.stack([f**2, f], 1), peak, rcond=None)[0]
+        c12, c13 = np.polyfit(f, shift, 1)
+        values.update(c1=float(c1), c2=float(c2), c12=float(c12), c13=float(c13))
+        notes = (f"extrema inside ±{ramp_deg:g}° at {len(f)} loads: D and S_h from them; "
+                 "C and E a priori")
+    else:
+        notes = f"no extremum inside ±{ramp_deg:g}°: the linear law (D = 0)"
+    return mf89.MagicFormula89.from_values(values), {"torsion": notes}
