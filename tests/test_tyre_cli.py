@@ -159,13 +159,25 @@ def test_identify_bad_input_and_options(tmp_path):
     rng = np.random.default_rng(7)
     table["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(rows))
     table["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(rows))
+    # the wheel's aerodynamic force (laminar, 0.05 N per rad/s) on the bench, and the
+    # wheel-in-the-air spin-down run that identifies it (--aero removes it first)
+    table["FY"] = table["FY"] + 0.05 * table["omega"]
+    ta = np.arange(0, 30, 0.005)
+    wa = 75.0 * np.exp(-ta / 10.0)
+    air = {"t": ta, "segment": np.zeros_like(ta), "omega": wa,
+           "FY": 2.0 + 0.05 * wa + 0.5 * rng.standard_normal(ta.size)}
+    write_table(tmp_path / "air.csv", air)
     data = tmp_path / "bench.csv"
     write_table(data, table)
     rep = tmp_path / "report.json"
     r = _run("identify", data, "--structure", "just-necessary", "--significance", "1e-4",
-             "--sigma-pct", "20", "--report", rep, "--figures", tmp_path / "fig")
+             "--sigma-pct", "20", "--report", rep, "--figures", tmp_path / "fig",
+             "--aero", tmp_path / "air.csv")
     assert r.exit_code == 0, r.output
+    assert "aerodynamic FY removed: laminar law" in _text(r)
     out = json.loads(rep.read_text())
+    law = out["aero"]["FY"]
+    assert law["law"] == "laminar" and abs(law["laminar"] - 0.05) < 3 * law["sigma"]["laminar"]
     crit = "15.1"  # χ²₁ quantile of 10⁻⁴ (10⁻³, the default: 10.8)
     for o in ("Fy", "Mz"):
         reasons = [w for w in out["outputs"][o]["removed"].values() if "sigma%" in w]

@@ -71,6 +71,10 @@ def identify_command(
     cutoff: Annotated[float, typer.Option(help="Low-pass cut-off [Hz].")] = 25.0,
     allow_unstable: Annotated[bool, typer.Option(help="Report an unstable model, exit 0.")]
     = False,
+    aero: Annotated[Path | None, typer.Option(
+        help="Wheel-in-the-air spin-down run (t, segment, omega, FY, optional MZ): its "
+             "aerodynamic force against spin speed is identified (laminar, turbulent or both) "
+             "and removed from the bench data first.")] = None,
 ):
     """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
     structure = Structure(structure).value
@@ -89,13 +93,30 @@ def identify_command(
         raw = read_tyre_table(data, "Flat Trac table")   # regular file, UTF-8, FZ >= 0, units
         table = flat_trac_columns(raw, rolling_radius=rolling_radius, cutoff=cutoff)
         enable_x64()
+        from diffsusp.errors import InputError
+        from diffsusp.tyre import aero as aerodynamics
         from diffsusp.tyre import bench, convert
+        laws = {}
+        if aero is not None:
+            air = flat_trac_columns(read_tyre_table(aero, "wheel-in-the-air run"),
+                                    rolling_radius=rolling_radius, cutoff=cutoff)
+            if "omega" not in air or "FY" not in air:
+                raise InputError(f"{aero}: a wheel-in-the-air run needs 'omega' and 'FY' "
+                                 "columns (and optionally 'MZ').")
+            laws = aerodynamics.identify(air["omega"], {ch: air[ch] for ch in ("FY", "MZ")
+                                                        if ch in air})
+            table = aerodynamics.remove(table, laws)
+            for law in laws.values():
+                c.print(f"aerodynamic {law.channel} removed: {law.law} law, "
+                        f"{law.laminar:.4g}·ω + {law.turbulent:.4g}·ω|ω| "
+                        f"(σ {law.sigma[1]:.2g}, {law.sigma[2]:.2g}; ω in rad/s)")
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
                              rolling_radius=rolling_radius, significance=significance,
                              sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()))
         c.print(rep.table())
         if report is not None:
-            bench.write_reports(report, [rep])
+            bench.write_reports(report, [rep], extra={"aero": {k: v.to_dict() for k, v in
+                                                              laws.items()}} if laws else None)
         if out is not None:
             out.write_text(json.dumps({o: {"degrees": dict(r.model.degrees),
                                            "coefficients": r.model.values(),
