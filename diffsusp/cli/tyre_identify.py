@@ -71,6 +71,9 @@ def identify_command(
     cutoff: Annotated[float, typer.Option(help="Low-pass cut-off [Hz].")] = 25.0,
     allow_unstable: Annotated[bool, typer.Option(help="Report an unstable model, exit 0.")]
     = False,
+    median: Annotated[int | None, typer.Option(
+        help="Running median of this many samples (odd) on every channel before the "
+             "low-pass filter: removes spikes.")] = None,
     aero: Annotated[Path | None, typer.Option(
         help="Wheel-in-the-air spin-down run (t, segment, omega, FY, optional MZ): its "
              "aerodynamic force against spin speed is identified (laminar, turbulent or both) "
@@ -112,7 +115,8 @@ def identify_command(
                         f"(σ {law.sigma[1]:.2g}, {law.sigma[2]:.2g}; ω in rad/s)")
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
                              rolling_radius=rolling_radius, significance=significance,
-                             sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()))
+                             sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()),
+                             median=median)
         c.print(rep.table())
         if report is not None:
             bench.write_reports(report, [rep], extra={"aero": {k: v.to_dict() for k, v in

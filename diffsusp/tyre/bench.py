@@ -95,6 +95,7 @@ from .bench_condition import (  # noqa: F401  (re-exported)
     filtfilt,
     kept_rows,
     kinematics,
+    median_filter,
     noise_band,
     noise_dof,
     noise_model,
@@ -1593,11 +1594,13 @@ class NoiseGram:
 def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float = 25.0,
              rolling_radius: float = 294.0, decimate: int | None = None, search: bool = True,
              outputs=("Fy", "Mz"), sigma_pct_threshold: float | None = 10.0,
-             significance: float = 1e-3, ic_threshold: float = 0.0, fixed=()) -> BenchReport:
+             significance: float = 1e-3, ic_threshold: float = 0.0, fixed=(),
+             median: int | None = None) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else the whole structure estimated as it
-    is, `identify_output`); `fixed`: coefficients held at 0 (names of either output). Bad
+    is, `identify_output`); `fixed`: coefficients held at 0 (names of either output);
+    `median`: a running median of that many samples before the filter (`condition`). Bad
     input raises `InputError`; an identified model that is
     unstable on the data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and
     `report.stable`."""
@@ -1613,7 +1616,8 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     if unknown:
         raise InputError(f"fixed: {unknown} are not coefficients of the {structure} models of "
                          f"{', '.join(outputs)}")
-    cond = condition(table, cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate)
+    cond = condition(table, cutoff=cutoff, rolling_radius=rolling_radius, decimate=decimate,
+                     median=median)
     r_m = rolling_radius * 1e-3
     reports = {}
     for o in sorted(outputs, key=lambda o: o != "Fy"):  # F_y first: M_z's instrument

@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy import signal
 
 from ..compilation import CPU_OPTIONS
 from ..errors import InputError
@@ -458,6 +459,25 @@ def check_table(table, cutoff):
     return blocks, blocks["FY"].shape[0], m, rate
 
 
+MEDIAN_CHANNELS = ("steer", "camber", "speed", "omega", "FZ", "FX", "FY", "MZ")
+"""The measured channels the median filter cleans (not the time and segment columns)."""
+
+
+def median_filter(blocks: Mapping[str, np.ndarray], width: int) -> dict[str, np.ndarray]:
+    """The measured channels (`MEDIAN_CHANNELS`) of (segments, samples) blocks through a
+    running median of `width` samples (odd), segment by segment (`scipy.signal.medfilt`, the
+    ends padded with zeros as it does: they fall in the trimmed edge of each segment): the
+    thesis's filter against "Dirac" spikes, joined to the zero-phase low-pass (§1.3.3). A
+    spike narrower than half the window is removed; a step or a ramp passes unchanged."""
+    if width < 3 or width % 2 == 0:
+        raise InputError(f"median filter width {width}: an odd number of samples ≥ 3.")
+    out = dict(blocks)
+    for c in MEDIAN_CHANNELS:
+        if c in out:
+            out[c] = np.stack([signal.medfilt(row, width) for row in np.asarray(out[c], float)])
+    return out
+
+
 def kept_rows(m, rate, cutoff, decimate, trim):
     # (+1e-6: a rate of 199.999… Hz from the time column still thins by 4 at 25 Hz)
     k = decimate if decimate is not None else max(1, int(rate / (2 * cutoff) + 1e-6))
@@ -471,7 +491,7 @@ def kept_rows(m, rate, cutoff, decimate, trim):
 
 def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 294.0,
               decimate: int | None = None, trim: int | None = None, order: int = 4,
-              outliers: bool = True) -> Conditioned:
+              outliers: bool = True, median: int | None = None) -> Conditioned:
     """Check and condition a bench table (see the module docstring and `Conditioned`).
 
     **Arguments:** `table` (column → array, library units, `REQUIRED`); `cutoff` [Hz] (25 Hz:
@@ -479,10 +499,17 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
     `order` of the Butterworth filter (run forward and backward); `decimate`: keep every m-th
     row (default m = ⌊rate/(2·cutoff)⌋); `trim`: samples dropped at
     each end of a segment (the filter's edge transient; default 2·rate/cutoff, at least 5);
-    `outliers`: replace the F_y and M_z samples that `noise_model` flags (default on).
+    `outliers`: replace the F_y and M_z samples that `noise_model` flags (default on);
+    `median`: a running median of this many samples on every measured channel first
+    (`median_filter`; default none). The trim must cover its half-width (its zero-padded ends).
     """
     cols, n_seg, m, rate = check_table(table, cutoff)
     rows, k = kept_rows(m, rate, cutoff, decimate, trim)
+    if median:
+        if rows[0] < median // 2:
+            raise InputError(f"median filter width {median}: wider than twice the trimmed "
+                             f"edge ({rows[0]} samples); trim more or narrow the window.")
+        cols = median_filter(cols, median)
     Fm = filter_matrix(float(cutoff), float(rate), m, order)
     H = Fm[rows]
     # The noise of F_y and M_z from their content above the cut-off (the residual of the
