@@ -72,8 +72,8 @@ def identify_command(
     allow_unstable: Annotated[bool, typer.Option(help="Report an unstable model, exit 0.")]
     = False,
     median: Annotated[int | None, typer.Option(
-        help="Running median of this many samples (odd) on every channel before the "
-             "low-pass filter: removes spikes.")] = None,
+        help="Remove spikes first: a sample far from the running median of this many "
+             "samples (odd) is replaced by it, on every channel.")] = None,
     aero: Annotated[Path | None, typer.Option(
         help="Wheel-in-the-air spin-down run (t, segment, omega, FY, optional MZ): its "
              "aerodynamic force against spin speed is identified (laminar, turbulent or both) "

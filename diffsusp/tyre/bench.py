@@ -1600,7 +1600,8 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else the whole structure estimated as it
     is, `identify_output`); `fixed`: coefficients held at 0 (names of either output);
-    `median`: a running median of that many samples before the filter (`condition`). Bad
+    `median`: spikes replaced by the running median of that many samples before the
+    filter (`condition`, `median_filter`). Bad
     input raises `InputError`; an identified model that is
     unstable on the data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and
     `report.stable`."""

@@ -14,7 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import signal
+from scipy import ndimage, signal
 
 from ..compilation import CPU_OPTIONS
 from ..errors import InputError
@@ -462,19 +462,50 @@ def check_table(table, cutoff):
 MEDIAN_CHANNELS = ("steer", "camber", "speed", "omega", "FZ", "FX", "FY", "MZ")
 """The measured channels the median filter cleans (not the time and segment columns)."""
 
+SPIKE_LEVEL = 6.0
+"""`median_filter` replaces a sample that departs from its window's median by more than this
+many σ of the channel's noise, estimated robustly from its second differences (white noise
+of σ has Var Δ²x = 6σ²; σ = 1.4826·MAD(Δ²x)/√6, a spike or a smooth signal barely moves it)."""
+
 
 def median_filter(blocks: Mapping[str, np.ndarray], width: int) -> dict[str, np.ndarray]:
-    """The measured channels (`MEDIAN_CHANNELS`) of (segments, samples) blocks through a
-    running median of `width` samples (odd), segment by segment (`scipy.signal.medfilt`, the
-    ends padded with zeros as it does: they fall in the trimmed edge of each segment): the
-    thesis's filter against "Dirac" spikes, joined to the zero-phase low-pass (§1.3.3). A
-    spike narrower than half the window is removed; a step or a ramp passes unchanged."""
+    """The measured channels (`MEDIAN_CHANNELS`) of (segments, samples) blocks cleaned of
+    "Dirac" spikes by a running median of `width` samples (odd; `scipy.signal.medfilt`),
+    segment by segment: the thesis's median filter joined to the zero-phase low-pass
+    (§1.3.3), used as a spike detector (a Hampel identifier) — a sample that departs from its
+    window's median by more than `SPIKE_LEVEL` σ of the channel's noise, and most within its
+    window, is replaced by the median of the window's other samples; again until none is
+    left (a spike moves its neighbours' medians). The others, and the half-window at each
+    end, are kept as measured.
+
+    Why not the plain running median: it flattens the peaks of the slip and force sines, a
+    distortion different on each channel, and the relaxation's lateral stiffness is read
+    from their phase — on the shipped campaign with 1 % spikes, a plain 5-sample median gave
+    K_y = 3.7e6 N/m (truth 157 381), the spike-only replacement 157 686 ± 0.73 %."""
     if width < 3 or width % 2 == 0:
         raise InputError(f"median filter width {width}: an odd number of samples ≥ 3.")
+    h = width // 2
     out = dict(blocks)
     for c in MEDIAN_CHANNELS:
-        if c in out:
-            out[c] = np.stack([signal.medfilt(row, width) for row in np.asarray(out[c], float)])
+        if c not in out:
+            continue
+        rows = []
+        for row in np.asarray(out[c], float):
+            scale = 1.4826 * np.median(np.abs(np.diff(row, 2))) / math.sqrt(6.0)
+            for _ in range(width):  # the worst first: a spike shifts its neighbours' median
+                dev = np.abs(row - signal.medfilt(row, width))
+                spike = (dev > SPIKE_LEVEL * scale) & (dev >= ndimage.maximum_filter1d(dev,
+                                                                                       width))
+                spike[:h] = spike[row.size - h:] = False
+                if not spike.any():
+                    break
+                # the median of the window's other samples (a slope's centre, not a neighbour)
+                i = np.flatnonzero(spike)
+                window = row[i[:, None] + np.r_[-h:0, 1:h + 1][None, :]]
+                row = row.copy()
+                row[i] = np.median(window, axis=1)
+            rows.append(row)
+        out[c] = np.stack(rows)
     return out
 
 
@@ -500,8 +531,8 @@ def condition(table: Mapping, *, cutoff: float = 25.0, rolling_radius: float = 2
     row (default m = ⌊rate/(2·cutoff)⌋); `trim`: samples dropped at
     each end of a segment (the filter's edge transient; default 2·rate/cutoff, at least 5);
     `outliers`: replace the F_y and M_z samples that `noise_model` flags (default on);
-    `median`: a running median of this many samples on every measured channel first
-    (`median_filter`; default none). The trim must cover its half-width (its zero-padded ends).
+    `median`: spikes replaced by the running median of this many samples on every measured
+    channel first (`median_filter`; default none). The trim must cover its half-width.
     """
     cols, n_seg, m, rate = check_table(table, cutoff)
     rows, k = kept_rows(m, rate, cutoff, decimate, trim)
