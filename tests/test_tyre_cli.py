@@ -172,12 +172,22 @@ def test_identify_bad_input_and_options(tmp_path):
     rep = tmp_path / "report.json"
     r = _run("identify", data, "--structure", "just-necessary", "--significance", "1e-4",
              "--sigma-pct", "20", "--report", rep, "--figures", tmp_path / "fig",
-             "--aero", tmp_path / "air.csv")
+             "--aero", tmp_path / "air.csv", "--to-mf", tmp_path / "mf.json")
     assert r.exit_code == 0, r.output
     assert "aerodynamic FY removed: laminar law" in _text(r)
     out = json.loads(rep.read_text())
     law = out["aero"]["FY"]
     assert law["law"] == "laminar" and abs(law["laminar"] - 0.05) < 3 * law["sigma"]["laminar"]
+    # --to-mf: the 1989 set, and the torsion sets of the φ′ responses (the campaign's truth is
+    # the Dunlop R16 at 2 bar: linear torsion laws, stiffness within 8 % of Table 14/15's)
+    mf = json.loads((tmp_path / "mf.json").read_text())
+    assert mf["coefficients"]["a3"] > 0 and set(mf["torsion"]) == {"Fy", "Mz"}
+    from diffsusp.tyre import thesis_sets
+    for o, kind in (("Fy", "torsion_fy"), ("Mz", "torsion_mz")):
+        c, ref = mf["torsion"][o]["coefficients"], thesis_sets.coefficients("dunlop_r16", 2.0,
+                                                                           kind)
+        ratio = (c["c4"] + 4.5 * c["c3"]) / (ref["c4"] + 4.5 * ref.get("c3", 0.0))
+        assert 0.85 < ratio < 1.15, (o, ratio)
     crit = "15.1"  # χ²₁ quantile of 10⁻⁴ (10⁻³, the default: 10.8)
     for o in ("Fy", "Mz"):
         reasons = [w for w in out["outputs"][o]["removed"].values() if "sigma%" in w]

@@ -61,7 +61,8 @@ def identify_command(
     figures: Annotated[Path | None, typer.Option(help="Measured-vs-model figures folder.")]
     = None,
     to_mf: Annotated[Path | None, typer.Option(
-        "--to-mf", help="Convert to the Magic Formula 1989 set (.json).")] = None,
+        "--to-mf", help="Convert to the Magic Formula 1989 set (.json), with the torsion "
+                        "sets of the phi' responses.")] = None,
     radius: Annotated[float, typer.Option(help=plain("Conversion radius for --to-mf [m]."))]
     = 0.33,
     rolling_radius: Annotated[float, typer.Option(help=plain("Rolling radius R_r [mm]."))]
@@ -134,10 +135,18 @@ def identify_command(
             fy = rep.outputs["Fy"].model
             mz = rep.outputs["Mz"].model if "Mz" in rep.outputs else None
             fitted, mf_rep, notes, _ = convert.to_magic_formula(fy, mz, radius=radius)
+            torsion = {}
+            for o, model in (("Fy", fy), ("Mz", mz)):
+                if model is not None and dict(model.degrees).get("phi", 0):
+                    ts, ts_notes = convert.torsion_set(model)
+                    torsion[o] = {"coefficients": {k: float(ts.coefficients[k]) for k in
+                                                   ("c0", "c1", "c2", "c3", "c4", "c9", "c12",
+                                                    "c13")}, "notes": ts_notes["torsion"]}
             to_mf.write_text(json.dumps({"coefficients": {k: float(v) for k, v in
                                                           fitted.coefficients.items()},
                                          "notes": notes, "radius_m": radius,
-                                         "converged": mf_rep.converged}, indent=2) + "\n")
+                                         "converged": mf_rep.converged,
+                                         "torsion": torsion}, indent=2) + "\n")
             c.print(f"Magic Formula 1989 set written to {to_mf}")
         if not rep.stable and not allow_unstable:
             raise fail("; ".join(f for f in rep.flags if f.startswith("unstable")),
