@@ -128,7 +128,8 @@ def test_identify_bad_input_and_options(tmp_path):
     (missing channel, an unknown --structure or an out-of-range --significance: Typer
     choices); --significance and --sigma-pct reach the structure search (its removal
     reasons quote them); the report says why camber powers are not determined; the
-    measured-vs-model figures are written."""
+    measured-vs-model figures are written; --aero identifies the wheel-in-the-air law and
+    removes it (the report carries it); --to-mf writes the 1989 set and the torsion sets."""
     import pathlib
 
     from diffsusp.io.tables import write_table
