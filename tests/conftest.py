@@ -11,6 +11,12 @@ import tempfile  # noqa: E402
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
+
+# Property tests draw the same examples on every run (hypothesis's derandomize): a CI run is
+# reproducible, and a failing example is one a developer meets again.
+settings.register_profile("diffsusp", derandomize=True)
+settings.load_profile("diffsusp")
 
 from diffsusp.compilation import set_xla_flags  # noqa: E402
 
