@@ -53,3 +53,24 @@ def table_statuses(text: str, names) -> dict:
             assert found, line
             out[words[0]] = found[0][1]  # the status cell starts with the status
     return out
+
+
+def noisy_campaign(seed: int):
+    """The shipped noise-free steering-feel campaign (tests/data/tyre_flat_trac_campaign.npz,
+    made by tests/test_tyre_bench.py) cut to its 3 Hz slip sines (even segments), load sines
+    and ramps, with the bench's noise (6 N on F_y, 600 N·mm on M_z) drawn from `seed`; returns
+    (table, rng) so a caller can go on drawing from the same generator."""
+    import pathlib
+
+    z = np.load(pathlib.Path(__file__).parent / "data" / "tyre_flat_trac_campaign.npz")
+    table = {c: np.asarray(z[c], float) for c in z.files}
+    n = len(table["FY"]) // 24  # 24 segments of 200 samples
+    keep = [k for k in range(24) if k >= 16 or k % 2 == 0]
+    rows = np.concatenate([np.arange(k * n, (k + 1) * n) for k in keep])
+    table = {c: v[rows] for c, v in table.items()}
+    table["t"] = np.tile(np.arange(n) / 200.0, len(keep))
+    table["segment"] = np.repeat(np.arange(len(keep), dtype=float), n)
+    rng = np.random.default_rng(seed)
+    table["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(rows))
+    table["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(rows))
+    return table, rng

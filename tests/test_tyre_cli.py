@@ -7,6 +7,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import noisy_campaign
 from typer.testing import CliRunner
 
 from diffsusp.cli import app
@@ -130,7 +131,6 @@ def test_identify_bad_input_and_options(tmp_path):
     reasons quote them); the report says why camber powers are not determined; the
     measured-vs-model figures are written; --aero identifies the wheel-in-the-air law and
     removes it (the report carries it); --to-mf writes the 1989 set and the torsion sets."""
-    import pathlib
 
     from diffsusp.io.tables import write_table
 
@@ -148,18 +148,7 @@ def test_identify_bad_input_and_options(tmp_path):
     r = _run("identify", bad, "--significance", "2")
     assert r.exit_code == 2 and "--significance" in _text(r)
     # the shipped noise-free campaign (tests/test_tyre_bench.py) with the bench's noise
-    z = np.load(pathlib.Path(__file__).parent / "data" / "tyre_flat_trac_campaign.npz")
-    table = {c: np.asarray(z[c], float) for c in z.files}
-    # 24 segments of 200 samples: keep the 3 Hz slip sines (even), the load sines and ramps
-    n = len(table["FY"]) // 24
-    keep = [k for k in range(24) if k >= 16 or k % 2 == 0]
-    rows = np.concatenate([np.arange(k * n, (k + 1) * n) for k in keep])
-    table = {c: v[rows] for c, v in table.items()}
-    table["t"] = np.tile(np.arange(n) / 200.0, len(keep))
-    table["segment"] = np.repeat(np.arange(len(keep), dtype=float), n)
-    rng = np.random.default_rng(7)
-    table["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(rows))
-    table["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(rows))
+    table, rng = noisy_campaign(7)
     # the wheel's aerodynamic force (laminar, 0.05 N per rad/s) on the bench, and the
     # wheel-in-the-air spin-down run that identifies it (--aero removes it first)
     table["FY"] = table["FY"] + 0.05 * table["omega"]

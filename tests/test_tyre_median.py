@@ -3,10 +3,9 @@ low-pass against "Dirac" spikes), used as a spike detector: against an independe
 median on spikes, steps and smooth signals, and through the bench identification, where spikes
 on every channel would otherwise bias K_y."""
 
-import pathlib
-
 import numpy as np
 import pytest
+from helpers import noisy_campaign
 from typer.testing import CliRunner
 
 from diffsusp.cli import app
@@ -43,19 +42,10 @@ def test_spikes_replaced_by_the_window_median():
 def spiky_campaign():
     """The shipped noise-free steering-feel campaign (tests/test_tyre_bench.py) with bench
     noise, and 1 % of the samples of F_y, M_z, the steer angle and F_z hit by spikes."""
-    z = np.load(pathlib.Path(__file__).parent / "data" / "tyre_flat_trac_campaign.npz")
-    table = {c: np.asarray(z[c], float) for c in z.files}
-    n = len(table["FY"]) // 24
-    keep = [k for k in range(24) if k >= 16 or k % 2 == 0]
-    rows = np.concatenate([np.arange(k * n, (k + 1) * n) for k in keep])
-    table = {c: v[rows] for c, v in table.items()}
-    table["t"] = np.tile(np.arange(n) / 200.0, len(keep))
-    table["segment"] = np.repeat(np.arange(len(keep), dtype=float), n)
-    rng = np.random.default_rng(3)
-    table["FY"] = table["FY"] + 6.0 * rng.standard_normal(len(rows))
-    table["MZ"] = table["MZ"] + 600.0 * rng.standard_normal(len(rows))
+    table, rng = noisy_campaign(3)
+    n = len(table["FY"])
     for c, amp in (("FY", 3000.0), ("MZ", 3e5), ("steer", 0.02), ("FZ", 2000.0)):
-        idx = rng.choice(len(rows), len(rows) // 100, replace=False)
+        idx = rng.choice(n, n // 100, replace=False)
         table[c][idx] += amp * rng.choice([-1, 1], idx.size)
     return table
 

@@ -80,6 +80,7 @@ from ..identify.report import (
     rows_csv,
 )
 from ..io.files import write_text_atomic
+from ..lsq import algebra
 from . import relaxation
 from .bench_condition import (  # noqa: F401  (re-exported)
     MAX_SEGMENT,
@@ -188,17 +189,6 @@ thesis §3.3.1.1.1.2). The thesis's own M_z models cross zero there (every offse
 discontinuity" as one of the deformation polynomials (3-20), which vanish at zero load."""
 
 
-def _real_roots(c: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """Real roots in [lo, hi] of the polynomial with ascending coefficients `c`."""
-    c = np.trim_zeros(np.asarray(c, float), "b")
-    if c.size < 2:
-        return np.zeros(0)
-    r = np.polynomial.polynomial.polyroots(c)
-    scale = max(abs(lo), abs(hi), 1e-300)
-    r = r[np.abs(r.imag) <= 1e-9 * scale].real
-    return np.unique(np.round(r[(r >= lo) & (r <= hi)] / scale, 12)) * scale
-
-
 def table6_features(output: str, active: Mapping[str, float], fz: float, *,
                     rolling_radius: float = 0.294) -> dict[str, int]:
     """The number of each Table 6 feature of P_{F,δ′} + the offset (γ = φ′ = 0) at load `fz`
@@ -213,12 +203,11 @@ def table6_features(output: str, active: Mapping[str, float], fz: float, *,
             c[i] += x * fz**j
         elif block == "one":
             c[0] += x * fz**j
-    dc = np.polynomial.polynomial.polyder(c)
-    d2 = np.polynomial.polynomial.polyder(dc)
-    out = {"zero": _real_roots(c, *dom["zero"]).size}
-    for kind, sign in (("max", -1.0), ("min", 1.0)):
-        x = _real_roots(dc, *dom[kind])
-        out[kind] = int(np.sum(sign * np.polynomial.polynomial.polyval(x, d2) > 0))
+    lo, hi = dom["zero"]
+    roots = algebra.real_roots(c)
+    out = {"zero": int(np.sum((roots >= lo) & (roots <= hi)))}
+    for kind in ("max", "min"):
+        out[kind] = sum(e[2] == kind for e in algebra.extrema(c, *dom[kind]))
     return out
 
 
