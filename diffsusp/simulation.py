@@ -19,7 +19,7 @@ import numpy as np
 from .errors import InputError, ModelFileError
 from .io import ModelFile, loads_from_table, read_table, results_table
 from .io.tables import RESULT_STATUS, Table, TableWriter
-from .statics import bushing_states, flagged_cases, solve_statics_chunks, spring_states
+from .statics import Status, bushing_states, flagged_cases, solve_statics_chunks, spring_states
 
 __all__ = ["CHUNK", "TableRun", "load_cases", "simulate_table"]
 
@@ -85,7 +85,7 @@ class TableRun:
         finite = self.residual[np.isfinite(self.residual)]
         return dict(
             cases=int(self.status.size),
-            converged=int(np.sum(self.status == 0)),
+            converged=int(np.sum(self.status == Status.CONVERGED)),
             not_solved=int(np.sum(self.status == -1)),
             failed=[dict(case=int(c), status=RESULT_STATUS.get(int(self.status[c]),
                                                                str(self.status[c])),

@@ -37,6 +37,7 @@ from ..model import GROUND, Loads, Mechanism
 from ..statics import (
     STATUS_TEXT,
     StaticSolution,
+    Status,
     bushing_states,
     linearize,
     solve_statics,
@@ -366,7 +367,7 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     derived, compliance = jax.vmap(lambda m_, j_: _derived(rig, m_, j_))(m, jac)
     metrics = {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
     metrics.update(derived)
-    ok = sol.status == 0
+    ok = sol.status == Status.CONVERGED
     metrics = {k: jnp.where(ok, v, jnp.nan) for k, v in metrics.items()}
     compliance = {k: jnp.where(ok[:, None, None], v, jnp.nan) for k, v in compliance.items()}
     angles = jax.lax.stop_gradient(angles)  # for the flags and the warning only
@@ -435,7 +436,7 @@ class KCEvent:
 
     @property
     def converged(self) -> np.ndarray:
-        return np.asarray(self.solution.status) == 0
+        return np.asarray(self.solution.status) == Status.CONVERGED
 
     @property
     def prefixes(self) -> tuple[str, ...]:
@@ -555,7 +556,7 @@ def _run(name, rig, loads, x, x_name, x_unit, held, q0=None, throw=True, label=N
          **solver) -> KCEvent:
     sol, metrics, compliance = evaluate(rig, loads, q0=q0, **solver)
     status = np.asarray(sol.status)
-    bad = np.flatnonzero(status != 0)
+    bad = np.flatnonzero(status != Status.CONVERGED)
     if bad.size and throw:
         c = int(bad[0])
         raise ConvergenceError(

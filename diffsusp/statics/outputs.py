@@ -24,6 +24,7 @@ from .kernel import (
     spring_tension,
     to_internal,
 )
+from .status import Status
 
 
 def _batched(fn):
@@ -156,7 +157,7 @@ def flagged_cases(sol) -> dict[str, np.ndarray]:
     A flag that is None (a solution computed under a transformation) flags no case.
     """
     status = np.atleast_1d(np.asarray(sol.status))
-    converged = status == 0
+    converged = status == Status.CONVERGED
 
     def failing(flag):
         if flag is None:
