@@ -30,11 +30,18 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ..compilation import filter_jit
 from ..errors import ConvergenceError, InputError, ModelError
+from ..geometry import projected_angles
 from ..model.mechanism import Loads, Mechanism
 from ._linearize import linearize_internal, scaled_solve
 from .checks import STABILITY_TOLERANCE, kkt_stability_margin, law_validity, warn_law_validity
-from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
-from .outputs import bushing_states
+from .kernel import (
+    assemble_batch,
+    generalised_residual,
+    part_poses_internal,
+    retract,
+    to_internal,
+    to_public,
+)
 from .status import Status
 
 _STALL_STEPS = 4  # consecutive steps shorter than 1/100 of Newton's before giving up
@@ -194,12 +201,15 @@ def _step(mech: Mechanism, tol: _Tolerances, s: _NewtonState, loads: Loads, y_tr
     shrink = jnp.where(jnp.isfinite(merit) & (curvature > 0),
                        phi0 / jnp.maximum(curvature * alpha, 1e-300), 0.1)
     backtracks = s.backtracks + 1
-    rejected = eqx.tree_at(
+    running = _running(s, tol)
+    # A stopped case keeps its state; a rejected point changes only the line search's fields.
+    kept = eqx.tree_at(
         lambda t: (t.alpha, t.trial, t.backtracks, t.status), s,
-        (alpha * jnp.clip(shrink, 0.1, 0.5), s.trial + 1, backtracks,
-         jnp.where(backtracks >= _MAX_BACKTRACKS, Status.STALLED, s.status)))
-    new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
-    return jax.tree.map(lambda a, b: jnp.where(_running(s, tol), a, b), new, s)
+        tuple(jnp.where(running, a, b) for a, b in (
+            (alpha * jnp.clip(shrink, 0.1, 0.5), s.alpha), (s.trial + 1, s.trial),
+            (backtracks, s.backtracks),
+            (jnp.where(backtracks >= _MAX_BACKTRACKS, Status.STALLED, s.status), s.status))))
+    return jax.tree.map(lambda a, b: jnp.where(running & accept, a, b), accepted, kept)
 
 
 class _Outcome(eqx.Module):
@@ -328,6 +338,20 @@ def _equilibrium_jvp(primals, tangents, *, tol, flags):
     return (y, out), (dy, jax.tree.map(zero, out))
 
 
+def _bushing_angles(mech: Mechanism, y):
+    """Projected angles (bushings, 3) (rad) of every bushing at solver coordinates y (n,): the
+    rotation of its I marker's axes in its J marker's, AX, AY, AZ (spec stiffness §0); the
+    angles of `bushing_states` without its deformations and forces."""
+    b = mech.bushings
+    part = np.asarray(mech.topology.marker_part)
+    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+    rot = part_poses_internal(y)[1]
+    axes = mech.markers.orientation
+    ai = jnp.einsum("eij,ejk->eik", rot[part[i]], axes[i])
+    aj = jnp.einsum("eij,ejk->eik", rot[part[j]], axes[j])
+    return jax.vmap(projected_angles)(jnp.einsum("eji,ejk->eik", aj, ai))
+
+
 def _solve_batch_cases(mech, loads, q0, tol, flags):
     """Public-coordinate solutions of a batch of cases (leading axis), and with `flags` the
     bushings' projected angles (cases, bushings, 3) for the validity warning."""
@@ -341,9 +365,9 @@ def _solve_batch_cases(mech, loads, q0, tol, flags):
     if not flags:
         return sol, None
     converged = out.status == Status.CONVERGED
-    m_, q_ = jax.lax.stop_gradient((mech, jnp.where(converged[:, None], q, 0.0)))
+    m_, y_ = jax.lax.stop_gradient((mech, jnp.where(converged[:, None], y[:, :n], 0.0)))
     if mech.bushings.names:
-        angles = jax.vmap(lambda q1: bushing_states(m_, q1)[1])(q_)
+        angles = jax.vmap(lambda y1: _bushing_angles(m_, y1))(y_)
         ratio = jax.vmap(lambda a: law_validity(m_, None, angles=a))(angles)
     else:
         angles, ratio = None, jnp.zeros(q.shape[0], q.dtype)
