@@ -47,6 +47,23 @@ def test_status_vocabulary_is_one_table():
     assert Status(3) is Status.STALLED and "stalled" in Status(3).text
 
 
+def test_no_status_is_compared_with_a_bare_number():
+    """Every status comparison of the library names a `Status` member (AST scan): a bare
+    `status == 0` is a second status table in disguise."""
+    import ast
+    import pathlib
+
+    bare = []
+    for path in sorted((pathlib.Path(ds.__file__).parent).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Compare) and "status" in ast.unparse(node.left).lower():
+                for right in node.comparators:
+                    value = right.operand if isinstance(right, ast.UnaryOp) else right
+                    if isinstance(value, ast.Constant) and isinstance(value.value, int):
+                        bare.append(f"{path.name}:{node.lineno} {ast.unparse(node)}")
+    assert not bare, bare
+
+
 def test_bad_values_raise_library_errors(coupler):
     loads = coupler.loads(forces={"coupler_middle": np.array([[0.0, 0.0, 100.0]] * 3)})
     bad = eqx.tree_at(lambda m: m.bushings.k_trans, coupler,

@@ -149,8 +149,8 @@ def flagged_cases(sol) -> dict[str, np.ndarray]:
     equilibrium" (failures are reported per case). `sol` is a `StaticSolution` with a leading
     case axis, or anything with its `status`, `stable` and `law_valid` arrays:
 
-    - 'failed': the cases that did not converge (status > 0; a negative status, a case that
-      was not solved, is in no list);
+    - 'failed': the cases that did not converge (a case that was not solved,
+      `Status.NOT_SOLVED`, is in no list);
     - 'unstable': converged cases whose `stable` flag is False;
     - 'law_invalid': converged cases whose `law_valid` flag is False.
 
@@ -164,5 +164,6 @@ def flagged_cases(sol) -> dict[str, np.ndarray]:
             return np.zeros(0, dtype=int)
         return np.flatnonzero(converged & ~np.atleast_1d(np.asarray(flag, dtype=bool)))
 
-    return {"failed": np.flatnonzero(status > 0), "unstable": failing(sol.stable),
+    failed = (status != Status.CONVERGED) & (status != Status.NOT_SOLVED)
+    return {"failed": np.flatnonzero(failed), "unstable": failing(sol.stable),
             "law_invalid": failing(sol.law_valid)}

@@ -365,7 +365,10 @@ def _solve_batch_cases(mech, loads, q0, tol, flags):
     if not flags:
         return sol, None
     converged = out.status == Status.CONVERGED
-    m_, y_ = jax.lax.stop_gradient((mech, jnp.where(converged[:, None], y[:, :n], 0.0)))
+    # The angles of every case with finite coordinates (the warning names a case that did not
+    # converge too, as its pose may be why); the flag only for converged ones.
+    finite = jnp.all(jnp.isfinite(y[:, :n]), axis=1)
+    m_, y_ = jax.lax.stop_gradient((mech, jnp.where(finite[:, None], y[:, :n], 0.0)))
     if mech.bushings.names:
         angles = jax.vmap(lambda y1: _bushing_angles(m_, y1))(y_)
         ratio = jax.vmap(lambda a: law_validity(m_, None, angles=a))(angles)

@@ -14,10 +14,11 @@ class Status(enum.IntEnum):
     and read a code's meaning with `Status(code).text`.
     """
 
+    NOT_SOLVED = -1, "not solved (the run was interrupted)"  # a results table's case never run
     CONVERGED = 0, "converged"
     MAX_STEPS = 1, "max_steps reached"
     NONFINITE = 2, "non-finite"
-    STALLED = 3, "stalled: no descent in the last steps"
+    STALLED = 3, "stalled"  # the line search found no descent in the last steps
 
     def __new__(cls, code: int, text: str):
         member = int.__new__(cls, code)
