@@ -239,7 +239,8 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
     loads = loads or tuple(np.linspace(lo, hi, 4))
 
     def find(active: Mapping[str, float], excused=frozenset()):
-        pneu = {n: x for n, x in active.items() if parse_name(n)[1] not in ("Ly", "P2")
+        pneu = {n: x for n, x in active.items()
+                if parse_name(n)[1] not in ("Ly", "P2", bench_speed.SPEED_LY)
                 and x != 0}
         by_block: dict[tuple[str, int], dict[int, float]] = {}
         for n, x in pneu.items():
@@ -313,7 +314,7 @@ def coefficient_unit(name: str) -> str:
     top = "N·m" if out == "Mz" else "N"
     if block == "P2":
         return "m/N"
-    if block in bench_speed.SPEED_BLOCKS:
+    if block in bench_speed.SPEED_BLOCKS + (bench_speed.SPEED_LY,):
         return bench_speed.speed_unit(out, block, i, j)
     if block == "Ly":
         top = "m" if out == "Mz" else "1"
@@ -1032,8 +1033,9 @@ def _whiten(xp, e, sources):
 
 def block_masks(names):
     blocks = [parse_name(n)[1] for n in names]
-    return (np.array([b == "Ly" for b in blocks], bool),
-            np.array([b not in ("Ly", "P2") for b in blocks], bool),
+    relax = ("Ly", bench_speed.SPEED_LY)  # the relaxation columns (and the speed test's)
+    return (np.array([b in relax for b in blocks], bool),
+            np.array([b not in relax + ("P2",) for b in blocks], bool),
             np.array([b == "P2" for b in blocks], bool))
 
 

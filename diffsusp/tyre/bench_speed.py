@@ -14,9 +14,12 @@ the noise (the F-test of `bench.identify_output`). The columns, named as the pol
 
 - `b_<F>_wdelta_<k>_<j>`: δ′·ω₀^k·F_z^j (j = 1…3), the speed part of K_δ;
 - `b_<F>_wone_<k>_<j>`: ω₀^k·F_z^j (j = 0…3), the speed part of S_v;
-- L_R(ω): not a free column. In this library the relaxation is L = (∂F_pneu/∂δ′)·K_y⁻¹
-  (3-50), so a speed-dependent K_δ carries its speed-dependent relaxation through the
-  δ′-derivative of its columns (the step-2 gain of `bench.two_step`).
+- `b_<F>_wLy_<k>_<j>`: (Ḟ_y/ω)·ω₀^k·F_z^j (j = 1…3), the speed part of the relaxation L_R:
+  in step 1 the free image of the δ′·ω₀^k·F_z^j column, as `b_<F>_Ly_0_<j>` is that of
+  δ′·F_z^j (L = (∂F_pneu/∂δ′)·K_y⁻¹, (3-50)); step 2 then reads K_y from the δ′-derivative
+  of the kept columns, the speed ones included (`bench.two_step`). Without these images a
+  speed-dependent cornering stiffness (b_Fy_wdelta_1_1 = −15 on the campaign) was detected
+  but K_y came out 2.5–3.5 σ high.
 
 **The speed variable** is the run's speed level ω₀ = V_T/R_r [rad/s] (`speed_levels`), not
 the instantaneous ω. A Flat Trac holds the belt speed V_T per run while ω = V_T·cos δ/(R_r +
@@ -38,11 +41,14 @@ import numpy as np
 from ..lsq import algebra
 from .poly import parse_name
 
-__all__ = ["SPEED_BLOCKS", "SPEED_POWERS", "LEVEL_RTOL", "speed_columns", "speed_levels",
-           "speed_powers", "speed_unit", "speed_notes"]
+__all__ = ["SPEED_BLOCKS", "SPEED_LY", "SPEED_POWERS", "LEVEL_RTOL", "speed_columns",
+           "speed_levels", "speed_powers", "speed_unit", "speed_notes"]
 
 SPEED_BLOCKS = ("wdelta", "wone")
 """Blocks of the speed columns: δ′·ω₀^k·F_z^j (K_δ's) and ω₀^k·F_z^j (S_v's), (3-54)."""
+SPEED_LY = "wLy"
+"""Block of the speed test's relaxation columns (Ḟ_y/ω)·ω₀^k·F_z^j: relaxation columns of
+`bench.two_step` (free in step 1), not interaction ones."""
 SPEED_POWERS = (1, 2)
 """The powers of ω in (3-54)."""
 LEVEL_RTOL = 0.02
@@ -50,18 +56,22 @@ LEVEL_RTOL = 0.02
 
 
 def speed_columns(output: str, powers=SPEED_POWERS) -> algebra.LinearModel:
-    """The speed candidate columns of `output` (3-54), inputs `fz` [kN], `delta` δ′ [m] and
-    `omega0` ω₀ [rad/s]: b_<F>_wdelta_<k>_<j> (δ′·ω₀^k·F_z^j, j = 1…3) then b_<F>_wone_<k>_<j>
-    (ω₀^k·F_z^j, j = 0…3), k in `powers`, lower powers first."""
-    cols = ([(f"b_{output}_wdelta_{k}_{j}", k, j, True) for k in powers for j in (1, 2, 3)]
-            + [(f"b_{output}_wone_{k}_{j}", k, j, False) for k in powers for j in range(4)])
+    """The speed candidate columns of `output` (3-54), inputs `fz` [kN], `delta` δ′ [m],
+    `omega0` ω₀ [rad/s] and `fydot_w` Ḟ_y/ω [N]: b_<F>_wdelta_<k>_<j> (δ′·ω₀^k·F_z^j,
+    j = 1…3), b_<F>_wone_<k>_<j> (ω₀^k·F_z^j, j = 0…3) and their relaxation images
+    b_<F>_wLy_<k>_<j> ((Ḟ_y/ω)·ω₀^k·F_z^j, j = 1…3), k in `powers`, lower powers first."""
+    cols = ([(f"b_{output}_wdelta_{k}_{j}", k, j, "delta") for k in powers for j in (1, 2, 3)]
+            + [(f"b_{output}_wone_{k}_{j}", k, j, None) for k in powers for j in range(4)]
+            + [(f"b_{output}_{SPEED_LY}_{k}_{j}", k, j, "fydot_w") for k in powers
+               for j in (1, 2, 3)])
 
     def function(u):
-        w, fz, d = u["omega0"], u["fz"], u["delta"]
-        return jnp.stack([(d if dep else jnp.ones_like(fz)) * w**k * fz**j
-                          for _, k, j, dep in cols], axis=-1)
+        w, fz = u["omega0"], u["fz"]
+        return jnp.stack([(jnp.ones_like(fz) if x is None else u[x]) * w**k * fz**j
+                          for _, k, j, x in cols], axis=-1)
 
-    return algebra.LinearModel(tuple(c[0] for c in cols), ("fz", "delta", "omega0"), function)
+    return algebra.LinearModel(tuple(c[0] for c in cols),
+                               ("fz", "delta", "omega0", "fydot_w"), function)
 
 
 def speed_levels(samples: Mapping, rolling_radius: float, *, rtol: float = LEVEL_RTOL
@@ -94,7 +104,7 @@ def speed_powers(names, levels) -> dict:
     out = {}
     for n in names:
         _, block, i, _ = parse_name(n)
-        if block in SPEED_BLOCKS and i > k - 1:
+        if block in SPEED_BLOCKS + (SPEED_LY,) and i > k - 1:
             out[n] = (f"not identifiable: the data hold {k} speed level(s) (ω₀ "
                       + ", ".join(f"{w:.1f}" for w in levels)
                       + f" rad/s), so ω₀^{i} is a "
@@ -104,8 +114,11 @@ def speed_powers(names, levels) -> dict:
 
 
 def speed_unit(output: str, block: str, i: int, j: int) -> str:
-    """The unit of a speed coefficient: F/(m·(rad/s)^i·kN^j) (wdelta) or F/((rad/s)^i·kN^j)."""
+    """The unit of a speed coefficient: F/(m·(rad/s)^i·kN^j) (wdelta), F/((rad/s)^i·kN^j)
+    (wone) or (F/N)/((rad/s)^i·kN^j) (wLy: it multiplies Ḟ_y/ω [N])."""
     top = "N·m" if output == "Mz" else "N"
+    if block == SPEED_LY:
+        top = "m" if output == "Mz" else "1"
     parts = (["m"] if block == "wdelta" else []) + [
         "rad/s" if i == 1 else f"(rad/s)^{i}"] + ([] if j == 0 else
                                                   ["kN" if j == 1 else f"kN^{j}"])
@@ -117,7 +130,7 @@ def speed_notes(output: str, reduced, levels) -> list[str]:
     (value ± σ, the data support a speed dependence) or none kept. `reduced`: the output's
     final coefficients (`bench.Coefficients`)."""
     kept = [(n, x, s) for n, x, s in zip(reduced.names, reduced.x, reduced.sigma, strict=True)
-            if parse_name(n)[1] in SPEED_BLOCKS]
+            if parse_name(n)[1] in SPEED_BLOCKS + (SPEED_LY,)]
     where = (f"{len(levels)} speed levels (ω₀ " + ", ".join(f"{w:.1f}" for w in levels)
              + " rad/s)")
     if len(levels) < 2:
