@@ -1142,9 +1142,10 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
     level; without it the M_z relaxation terms are least squares (biased toward 0 by the F_y
     noise).
 
-    `speed_test=True`: the speed test (3-54) (`bench_speed`): the columns δ′·ω₀^k·F_z^j and
-    ω₀^k·F_z^j (ω₀ the run's speed level) join the search as `extra` ones; those the speed
-    levels cannot determine are reported not identifiable."""
+    `speed_test=True`: the speed test (3-54) (`bench_speed`): the columns δ′·ω₀^k·F_z^j,
+    ω₀^k·F_z^j and their relaxation images (Ḟ_y/ω)·ω₀^k·F_z^j (ω₀ the run's speed level)
+    join the search as `extra` ones; those the speed levels cannot determine are held at 0
+    and reported not identifiable."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
     own = set(lip.names)
