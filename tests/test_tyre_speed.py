@@ -108,10 +108,9 @@ def test_no_speed_term_on_a_speed_independent_campaign():
 @pytest.fixture(scope="module")
 def seeds():
     """Seeds 1 and 2 with the injected speed offset, seed 1 without (seed 7 without: above),
-    on the true structure and the speed columns. (With the four offset terms free too, the
-    injected 0.4·ω₀ is detected but found as ω₀·(b₁F_z + b₂F_z² + b₃F_z³), a cubic equal to
-    0.4 at the campaign's three load levels, 3, 4.5 and 6 kN: its load powers are aliased
-    there, as the δ′⁵ term splits over F_z and F_z³ in notebook 07.)"""
+    on the true structure and the speed columns (the offsets held but Table 34's: with the
+    four free, the injected offset is found as the aliased cubic of the test below on more
+    draws, as the δ′⁵ term splits over F_z and F_z³ in notebook 07)."""
     out = {}
     for seed, c in ((1, 0.0), (1, C_TRUE), (2, C_TRUE)):
         cond = bench.condition(_with_speed_term(_campaign(seed), c))
@@ -121,14 +120,23 @@ def seeds():
 
 
 def test_speed_offset_detected_and_recovered(seeds):
-    """With S_v = 0.4·ω₀ added, the search keeps b_Fy_wone_1_0 alone among the speed
-    columns, within 3σ of 0.4 (σ of the final structure); without it, none."""
+    """With S_v = 0.4·ω₀ added, the search keeps speed offset terms only, and their response
+    Σ_j b_Fy_wone_1_j·F_z^j at the campaign's loads (3, 4.5, 6 kN) is 0.4 within 3σ (σ of the
+    sum bounded by Σ_j F_z^j·σ_j, the final structure's σ): on these seeds the constant
+    b_Fy_wone_1_0 alone, 0.4 ± 0.0025 (over seeds 10–29: 16 of 20 so, mean 0.40014, spread
+    1.00 σ); on the other 4 the search kept the F_z, F_z², F_z³ terms instead, a cubic equal
+    to 0.4 at the three load levels, where those powers alias. Without the offset, no speed
+    term (none on those 20 seeds either, the offsets free)."""
     for (seed, c), rep in seeds.items():
         kept = _speed_kept(rep)
         if c == 0.0:
             assert kept == {}, (seed, kept)
             continue
-        assert set(kept) == {"b_Fy_wone_1_0"}, (seed, kept)
-        x, s = kept["b_Fy_wone_1_0"]
-        assert abs(x - C_TRUE) < 3 * s, (seed, x, s)
-        assert 100 * s / x < 2.0  # 0.4 ± 0.0025 on these draws
+        assert kept and all(poly.parse_name(n)[1] == "wone" for n in kept), (seed, kept)
+        for fz in (3.0, 4.5, 6.0):
+            v = sum(x * fz ** poly.parse_name(n)[3] for n, (x, _) in kept.items())
+            s = sum(sg * fz ** poly.parse_name(n)[3] for n, (_, sg) in kept.items())
+            assert abs(v - C_TRUE) < 3 * s, (seed, fz, v, s)
+        if set(kept) == {"b_Fy_wone_1_0"}:
+            x, s = kept["b_Fy_wone_1_0"]
+            assert 100 * s / x < 2.0, (seed, x, s)
