@@ -174,16 +174,20 @@ def test_one_joint_gradients_against_finite_differences(linear_y):
         return relaxation.simulate_descriptor(p, inputs_y, T, k_y=k_y, throw=False,
                                               adjoint=adjoint).fy[k]
 
-    grad = jax.jacfwd(lambda k_y, c: fy_at(k_y, c, diffrax.ForwardMode()), argnums=(0, 1))(
-        jnp.asarray(K_Y), jnp.asarray(c_fy))
+    # one forward-mode pass along the direction (K_y, c) = (1, r): both partials from two
+    # directions would be two passes; the closed form splits them (below)
+    r = 3.0
+    _, slope = jax.jvp(lambda k_y, c: fy_at(k_y, c, diffrax.ForwardMode()),
+                       (jnp.asarray(K_Y), jnp.asarray(c_fy)), (jnp.asarray(1.0), jnp.asarray(r)))
     hk, hc = 1e-4 * K_Y, 1e-4 * abs(c_fy)
     fd_k = (fy_at(K_Y + hk, c_fy) - fy_at(K_Y - hk, c_fy)) / (2 * hk)
     fd_c = (fy_at(K_Y, c_fy + hc) - fy_at(K_Y, c_fy - hc)) / (2 * hc)
-    np.testing.assert_allclose([float(g) for g in grad], [float(fd_k), float(fd_c)], rtol=1e-5)
+    assert float(slope) == pytest.approx(float(fd_k + r * fd_c), rel=1e-5)
     # and the closed form's, F = c·F_z·δ′·(1 − e^{−s/τ}·…), τ = |c·F_z|/(ω·K_y)
     closed = jax.grad(lambda k_y, c: c * FZ * STEP_Y * _lag_step(T[k], -c * FZ / (OMEGA * k_y)),
                       argnums=(0, 1))(K_Y, c_fy)
-    np.testing.assert_allclose([float(g) for g in grad], [float(g) for g in closed], rtol=1e-5)
+    np.testing.assert_allclose([float(fd_k), float(fd_c)], [float(g) for g in closed], rtol=1e-5)
+    assert float(slope) == pytest.approx(float(closed[0] + r * closed[1]), rel=1e-5)
 
 
 def test_beyond_the_grip_peak_and_not_index_one(linear_y):

@@ -585,7 +585,10 @@ def _simulate_descriptor(model, inputs, t, rtol, atol, max_steps, adjoint):
     u_all = jax.vmap(inputs)(t)
     f, _ = jax.vmap(model.solve)(sol.ys, u_all)
     fpn = jax.vmap(lambda u: model.interaction(u)[0])(u_all)
-    jac = jax.vmap(model.state_jacobian)(sol.ys, u_all)
+    # the stability diagnostic carries no derivative (a derivative through the solver would
+    # otherwise trace ∂F_pneu/∂τ to third order)
+    still = jax.lax.stop_gradient((model, sol.ys, u_all))
+    jac = jax.vmap(still[0].state_jacobian)(still[1], still[2])
     ok = ((sol.result == diffrax.RESULTS.successful) & steady & (condition < 1e12)
           & jnp.all(jnp.isfinite(f)))
     return DescriptorSimulation(t, f[:, 0], f[:, 1], f[:, 2], sol.ys, fpn, jac, model.flexible,
