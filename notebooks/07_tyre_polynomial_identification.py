@@ -274,3 +274,37 @@ ax.plot(bb.ravel()[inside], cc.ravel()[inside], ".", ms=1, color="0.5", label="t
 ax.plot(2.0, 0.3, "r+", ms=10, label="truth")
 ax.set(xlabel="b", ylabel="c")
 ax.legend()
+
+# %% [markdown]
+# ## The descriptor relaxation model (2-52…2-57)
+# The thesis's full contact model has three flexible joints between the tyre frame and the
+# contact patch — lateral y, longitudinal x, torsion β — of stiffnesses K_y, K_x, K_β; the
+# bench identification keeps K_y alone (the first-order model (3-49…3-52)).
+# `relaxation.DescriptorModel` takes any of them (`math.inf` locks one; locking is data, not
+# structure: one compiled program for every configuration). Its small-signal model at an
+# operating point (`linearise`, by automatic differentiation; with `small_displacement=True`
+# the linear model of (3-34), (3-35)) gives the relaxation time constants and the frequency
+# response; `relaxation.simulate_descriptor` integrates it by diffrax. Below, the Dunlop R16
+# at 2 bar (its δ′ response and offset: the whole model at φ′ = γ = 0), 4.5 kN, 60 rad/s, K_y
+# alone: at δ′ = 0 the time constant is the relaxation length over R_r·ω; it shortens towards
+# the grip peak, where ∂F_y/∂δ′ falls.
+
+# %%
+import equinox as eqx
+
+pneu = relaxation.PolynomialPneu(*(
+    poly.PolynomialModel.create(m.output, {"delta": 7, "one": 1}, values={
+        k: v for k, v in m.values().items() if poly.parse_name(k)[1] in ("delta", "one")})
+    for m in (fy, mz)))
+wheel = relaxation.DescriptorModel.create(pneu, k_y=k_fy)       # K_x = K_β = ∞
+lin_op = eqx.filter_jit(lambda m, d: m.linearise({"fz": 4.5, "delta": d, "omega": 60.0},
+                                                 keys=("delta",)))
+freqs = np.array([0.5, 2.0, 5.0, 10.0])
+for d in (0.0, -0.004, -0.008):
+    lin = lin_op(wheel, d)
+    a, b, c = (np.asarray(lin[k]) for k in ("state", "input", "output"))
+    h = np.array([c[:, :1] @ np.linalg.solve(2j * np.pi * f - a[:1, :1], b[:1]) for f in freqs])
+    print(f"δ′ = {1e3 * d:4.0f} mm: time constant {-1e3 / a[0, 0]:.1f} ms; |F_y/δ′| "
+          f"{np.round(np.abs(h[:, 1, 0]) / 1e3, 1)} kN/m at {freqs} Hz")
+print("σ/(R_r·ω) at δ′ = 0:",
+      round(1e3 * float(relaxation.relaxation_length(fy, 4.5, k_fy)[0]) / 0.294 / 60.0, 1), "ms")
