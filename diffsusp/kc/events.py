@@ -336,8 +336,7 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
     return out, compliance
 
 
-@filter_jit
-def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
+def metrics_at(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
     solve as `solve_statics`'s custom JVP rule), and the checks `solve_statics` would do
@@ -373,6 +372,9 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     law = jax.vmap(lambda a: law_validity(mech, None, angles=a))(angles)
     flags = (ok & (margin > STABILITY_TOLERANCE), ok & (law <= 1.0))
     return metrics, compliance, flags, jnp.where(ok[:, None, None], angles, 0.0)
+
+
+_metrics_kernel = filter_jit(metrics_at)
 
 
 def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = None,

@@ -1,0 +1,121 @@
+"""Second-order sensitivities of K&C metrics (kc.hessian_vector_product): Hessian-vector products
+through the equilibrium against central differences of the exact gradients, on two models.
+spec: stiffness §2.7, §3."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsusp import kc
+from diffsusp.errors import InputError
+from diffsusp.models import double_wishbone, pseudo_mcpherson
+
+METRICS = ("bump_steer", "wheel_rate", "lateral_compliance_steer")
+
+
+def _where(m):
+    return m.bushings.k_trans, m.springs.k, m.markers.position
+
+
+def _richardson(f, h):
+    """Central difference of f along its argument, Richardson-extrapolated from steps h and
+    h/2 (error O(h⁴))."""
+    def central(s):
+        return (f(s) - f(-s)) / (2 * s)
+    return (4 * central(h / 2) - central(h)) / 3
+
+
+def _case(mech, hardpoint):
+    """A ±30 mm parallel travel (3 points), θ = every bushing translational stiffness, the
+    spring rate and every marker position, and v: +1 relative on the first bushing's Ktx,
+    −0.5 relative on the spring, +1 mm on `hardpoint`'s z."""
+    ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
+    rig = ev.rig
+    sel = kc.select(rig.mech, _where)
+    theta = np.asarray(sel.values(rig.mech))
+    v = np.zeros(theta.size)
+    k_ktx = sel.names.index(".bushings.k_trans[0,0]")
+    k_spring = sel.names.index(".springs.k[0]")
+    k_hard = sel.names.index(f".markers.position[{rig.mech.markers.index(hardpoint)},2]")
+    v[k_ktx] = theta[k_ktx]
+    v[k_spring] = -0.5 * theta[k_spring]
+    v[k_hard] = 1.0
+    out = kc.hessian_vector_product(ev, _where, v, metrics=METRICS)
+
+    def at(s):  # the exact gradients (and values) at θ + s·v: the same compiled program
+        r = eqx.tree_at(lambda r_: r_.mech, rig, sel.apply(rig.mech, jnp.asarray(theta + s * v)))
+        return kc.hessian_vector_product(r, sel, v, loads=ev.loads, metrics=METRICS)
+
+    cache = {}
+
+    def grads(s):
+        if s not in cache:
+            cache[s] = at(s)
+        return cache[s]
+
+    h = 2e-3
+    fd_hvp = {m: _richardson(lambda s, m=m: grads(s).gradient[m], h) for m in METRICS}
+    fd_dir = {m: _richardson(lambda s, m=m: grads(s).values[m], h) for m in METRICS}
+    return out, fd_hvp, fd_dir, v, (k_ktx, k_spring, k_hard)
+
+
+@pytest.fixture(scope="module", params=["pseudo_mcpherson", "double_wishbone"])
+def case(request):
+    if request.param == "pseudo_mcpherson":
+        return _case(pseudo_mcpherson(), "tie_rod.j")
+    return _case(double_wishbone(bushings=True), "tierod_upright")
+
+
+def test_hessian_vector_products_match_differences_of_the_exact_gradients(case):
+    """∇²m·v of bump steer, wheel rate and lateral compliance steer, at every case and for
+    every parameter, equals the central difference of the exact gradients ∇m(θ ± h·v) to
+    1e-6 relative (per metric and case, relative to the largest entry of that parameter
+    group: stiffnesses in N/mm, positions in mm)."""
+    out, fd_hvp, _, _, picks = case
+    n_k = out.gradient[METRICS[0]].shape[1]
+    groups = [np.array([n.startswith(".bushings.k_trans") for n in out.params]),
+              np.array([n.startswith(".springs.k") for n in out.params]),
+              np.array([n.startswith(".markers.position") for n in out.params])]
+    assert sum(g.sum() for g in groups) == n_k
+    for m in METRICS:
+        hvp, fd = out.hvp[m], fd_hvp[m]
+        assert np.all(np.isfinite(hvp)) and hvp.shape == (3, n_k)
+        for g in groups:
+            scale = np.max(np.abs(fd[:, g]), axis=1, keepdims=True)
+            assert np.all(scale > 0), m
+            err = np.abs(hvp[:, g] - fd[:, g]) / scale
+            assert np.max(err) < 1e-6, (m, float(np.max(err)))
+        # the use case: how the sensitivity to the hardpoint changes along v, not zero
+        assert np.all(np.abs(hvp[:, picks[2]]) > 0)
+
+
+def test_gradients_match_differences_of_the_metrics(case):
+    """The gradient itself along v against central differences of the metric values (the
+    second order rests on an exact first order)."""
+    out, _, fd_dir, v, _ = case
+    for m in METRICS:
+        along = out.gradient[m] @ v
+        np.testing.assert_allclose(along, fd_dir[m], rtol=1e-6,
+                                   atol=1e-9 * np.max(np.abs(fd_dir[m])))
+
+
+def test_hessian_is_symmetric_across_directions():
+    """Unit directions e_i, e_j: (∇²m·e_i)_j = (∇²m·e_j)_i — a bushing stiffness and a
+    hardpoint, from the program of the fixture (new v: no new compile)."""
+    mech = pseudo_mcpherson()
+    ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
+    sel = kc.select(ev.rig.mech, _where)
+    i = ".bushings.k_trans[0,0]"
+    j = f".markers.position[{mech.markers.index('tie_rod.j')},2]"
+    a = kc.hessian_vector_product(ev, sel, i, metrics=METRICS)
+    b = kc.hessian_vector_product(ev, sel, j, metrics=METRICS)
+    ii, jj = sel.names.index(i), sel.names.index(j)
+    for m in METRICS:
+        np.testing.assert_allclose(a.hvp[m][:, jj], b.hvp[m][:, ii], rtol=1e-8)
+    with pytest.raises(InputError, match="unknown parameter"):
+        kc.hessian_vector_product(ev, sel, "nope", metrics=METRICS)
+    with pytest.raises(InputError, match="unknown metric"):
+        kc.hessian_vector_product(ev, sel, i, metrics=("bump_steering",))
+    with pytest.raises(InputError, match="float leaf|array leaves"):
+        kc.select(mech, lambda m: "spring")
