@@ -9,7 +9,10 @@ import pytest
 
 from diffsusp import kc
 from diffsusp.errors import InputError
-from diffsusp.models import double_wishbone, pseudo_mcpherson
+from diffsusp.identify import least_squares, predict
+from diffsusp.identify.data import Landmarks
+from diffsusp.identify.params import Params
+from diffsusp.models import double_wishbone, isolated_bushing, pseudo_mcpherson
 
 METRICS = ("bump_steer", "wheel_rate", "lateral_compliance_steer")
 
@@ -119,3 +122,45 @@ def test_hessian_is_symmetric_across_directions():
         kc.hessian_vector_product(ev, sel, i, metrics=("bump_steering",))
     with pytest.raises(InputError, match="float leaf|array leaves"):
         kc.select(mech, lambda m: "spring")
+
+
+# ----------------------------------------------------------------------------- covariance
+
+
+def test_least_squares_curvature_check_flags_model_mismatch_not_noise():
+    """Gauss–Newton (JᵀJ)⁻¹ against the full Hessian JᵀJ + Σ rᵢ∇²rᵢ (the HVPs through the
+    equilibrium) at the estimate. Isolated bushing, 6 light load cases, 3 landmarks, its six
+    stiffnesses and its centre. Noise only (0.05 mm): the curvature term leaves σ alone. A
+    2 mm probe bias on x (40σ, the model cannot explain it): it changes σ by far more than
+    the 10 % threshold, and the report says so."""
+    mech = isolated_bushing()
+    rng = np.random.default_rng(5)
+    loads = mech.loads(forces={"tip": 0.1 * rng.uniform(-300, 300, size=(6, 3))},
+                       moments={"tip": 0.1 * rng.uniform(-2e4, 2e4, size=(6, 3))})
+    points = np.array([[-300.0, 0, 0], [-150, 40, 0], [-100, 0, 50]])
+
+    def landmarks(values):
+        return Landmarks(loads, ("arm",) * 3, points, values, 0.05)
+
+    params = Params.bushing_stiffness(mech) + Params.bushing_centres(mech, ("bush",))
+    truth = np.asarray(params.start) * np.r_[np.linspace(0.8, 1.2, 6), np.ones(3)]
+    truth[6:] += [1.0, -0.5, 0.3]
+    pred = np.asarray(predict(params.apply(mech, jnp.asarray(truth)),
+                              landmarks(np.zeros((6, 3, 3))))["landmarks"])
+    noise = rng.normal(0, 0.05, pred.shape)
+    _, clean = least_squares(mech, landmarks(pred + noise), params, curvature=True)
+    assert clean.consistency.consistent
+    check = clean.curvature
+    assert check.positive_definite and not check.matters
+    assert np.max(np.abs(check.ratio - 1)) < 0.05
+    assert "does not change" in clean.table()
+    bias = np.zeros_like(pred)
+    bias[..., 0] = 2.0 * np.sign(pred[..., 0] - pred[..., 0].mean())
+    _, wrong = least_squares(mech, landmarks(pred + bias + noise), params, curvature=True)
+    assert not wrong.consistency.consistent
+    assert wrong.curvature.matters
+    assert np.max(np.abs(wrong.curvature.ratio - 1)) > 0.3
+    assert np.max(wrong.curvature.curvature_share) > 0.5
+    assert "changes σ by more than 10 %" in wrong.table()
+    # the GN σ of the check is the report's own
+    np.testing.assert_allclose(check.sigma_gauss_newton, clean.sigma, rtol=1e-6)

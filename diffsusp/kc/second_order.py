@@ -40,7 +40,8 @@ from ..statics import StaticSolution, linearize_internal, solve_statics, to_inte
 from .events import metrics_at
 from .metrics import flagged
 
-__all__ = ["HessianVectorProducts", "Selection", "hessian_vector_product", "select"]
+__all__ = ["HessianVectorProducts", "Selection", "hessian_vector_product", "pinned_solution",
+           "select"]
 
 
 # ----------------------------------------------------------------------------- selections
@@ -161,9 +162,12 @@ def _pinned_jvp(primals, tangents):
     return y, linearize_internal(mech, loads, y).tangent(t_mech, t_loads)
 
 
-def _pinned_solution(mech: Mechanism, loads: Loads, sol: StaticSolution) -> StaticSolution:
-    """`sol` (converged cases of `mech` under `loads`) with q and multipliers as functions of
-    `mech` and `loads` through `_pinned`."""
+def pinned_solution(mech: Mechanism, loads: Loads, sol: StaticSolution) -> StaticSolution:
+    """`sol` (equilibria of `mech` under `loads`, leading case axis, from `solve_statics`) with
+    q and multipliers as functions of `mech` and `loads` whose derivatives of every order at
+    this point are the implicit function's (forward and reverse mode, nested), with no Newton
+    in the traced program. Its values are `sol`'s whatever `mech` is: differentiate it at the
+    mechanism it was solved for, never evaluate it elsewhere."""
     n = mech.n_coordinates
     y_star = jax.lax.stop_gradient(jnp.concatenate(
         [jax.vmap(lambda q: to_internal(mech, q))(sol.q), sol.multipliers], axis=1))
@@ -181,7 +185,7 @@ def _products(rig, loads: Loads, sol: StaticSolution, chart, theta, direction,
     def metrics(th):
         mech = chart.apply(rig.mech, th)
         r = eqx.tree_at(lambda r_: r_.mech, rig, mech)
-        m = metrics_at(r, loads, _pinned_solution(mech, loads, sol))[0]
+        m = metrics_at(r, loads, pinned_solution(mech, loads, sol))[0]
         return {k: m[k] for k in names}
 
     def gradient(th):
