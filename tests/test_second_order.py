@@ -2,6 +2,8 @@
 through the equilibrium against central differences of the exact gradients, on two models.
 spec: stiffness §2.7, §3."""
 
+from types import SimpleNamespace
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -9,7 +11,7 @@ import pytest
 
 from diffsusp import kc
 from diffsusp.errors import InputError
-from diffsusp.identify import least_squares, predict
+from diffsusp.identify import least_squares, predict, sensitivity
 from diffsusp.identify.data import Landmarks
 from diffsusp.identify.params import Params
 from diffsusp.models import double_wishbone, isolated_bushing, pseudo_mcpherson
@@ -29,58 +31,64 @@ def _richardson(f, h):
     return (4 * central(h / 2) - central(h)) / 3
 
 
-def _case(mech, hardpoint):
+def _case(mech, hardpoint, via_identify):
     """A ±30 mm parallel travel (3 points), θ = every bushing translational stiffness, the
     spring rate and every marker position, and v: +1 relative on the first bushing's Ktx,
-    −0.5 relative on the spring, +1 mm on `hardpoint`'s z."""
+    −0.5 relative on the spring, +1 mm on `hardpoint`'s z. Through `kc.hessian_vector_product`
+    with a `where` selector, or through `identify.sensitivity(..., direction=v)` with a
+    `Params` selection of the same leaves."""
     ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
     rig = ev.rig
-    sel = kc.select(rig.mech, _where)
+    k_h = rig.mech.markers.index(hardpoint)
+    if via_identify:
+        sel = Params.leaves(rig.mech, _where)
+        names = (f"{rig.mech.bushings.names[0]}.Ktx", "spring.k", f"{hardpoint}.z")
+
+        def run(r, v):
+            rep = sensitivity(r, sel, loads=ev.loads, metrics=METRICS, direction=v)
+            return SimpleNamespace(params=rep.params, values=rep.values,
+                                   gradient=rep.jacobian, hvp=rep.hvp)
+    else:
+        sel = kc.select(rig.mech, _where)
+        names = (".bushings.k_trans[0,0]", ".springs.k[0]", f".markers.position[{k_h},2]")
+
+        def run(r, v):
+            return kc.hessian_vector_product(r, sel, v, loads=ev.loads, metrics=METRICS)
     theta = np.asarray(sel.values(rig.mech))
+    picks = [sel.names.index(n) for n in names]
     v = np.zeros(theta.size)
-    k_ktx = sel.names.index(".bushings.k_trans[0,0]")
-    k_spring = sel.names.index(".springs.k[0]")
-    k_hard = sel.names.index(f".markers.position[{rig.mech.markers.index(hardpoint)},2]")
-    v[k_ktx] = theta[k_ktx]
-    v[k_spring] = -0.5 * theta[k_spring]
-    v[k_hard] = 1.0
-    out = kc.hessian_vector_product(ev, _where, v, metrics=METRICS)
-
-    def at(s):  # the exact gradients (and values) at θ + s·v: the same compiled program
-        r = eqx.tree_at(lambda r_: r_.mech, rig, sel.apply(rig.mech, jnp.asarray(theta + s * v)))
-        return kc.hessian_vector_product(r, sel, v, loads=ev.loads, metrics=METRICS)
-
+    v[picks] = [theta[picks[0]], -0.5 * theta[picks[1]], 1.0]
+    out = run(rig, v)
     cache = {}
 
-    def grads(s):
+    def grads(s):  # the exact gradients (and values) at θ + s·v: the same compiled program
         if s not in cache:
-            cache[s] = at(s)
+            cache[s] = run(eqx.tree_at(lambda r_: r_.mech, rig,
+                                       sel.apply(rig.mech, jnp.asarray(theta + s * v))), v)
         return cache[s]
 
     h = 2e-3
     fd_hvp = {m: _richardson(lambda s, m=m: grads(s).gradient[m], h) for m in METRICS}
     fd_dir = {m: _richardson(lambda s, m=m: grads(s).values[m], h) for m in METRICS}
-    return out, fd_hvp, fd_dir, v, (k_ktx, k_spring, k_hard)
+    n = len(mech.bushings.names)
+    groups = [np.arange(3 * n), np.arange(3 * n, 3 * n + 1), np.arange(3 * n + 1, theta.size)]
+    return out, fd_hvp, fd_dir, v, picks, groups
 
 
 @pytest.fixture(scope="module", params=["pseudo_mcpherson", "double_wishbone"])
 def case(request):
     if request.param == "pseudo_mcpherson":
-        return _case(pseudo_mcpherson(), "tie_rod.j")
-    return _case(double_wishbone(bushings=True), "tierod_upright")
+        return _case(pseudo_mcpherson(), "tie_rod.j", via_identify=True)
+    return _case(double_wishbone(bushings=True), "tierod_upright", via_identify=False)
 
 
 def test_hessian_vector_products_match_differences_of_the_exact_gradients(case):
     """∇²m·v of bump steer, wheel rate and lateral compliance steer, at every case and for
     every parameter, equals the central difference of the exact gradients ∇m(θ ± h·v) to
     1e-6 relative (per metric and case, relative to the largest entry of that parameter
-    group: stiffnesses in N/mm, positions in mm)."""
-    out, fd_hvp, _, _, picks = case
-    n_k = out.gradient[METRICS[0]].shape[1]
-    groups = [np.array([n.startswith(".bushings.k_trans") for n in out.params]),
-              np.array([n.startswith(".springs.k") for n in out.params]),
-              np.array([n.startswith(".markers.position") for n in out.params])]
-    assert sum(g.sum() for g in groups) == n_k
+    group: bushing stiffnesses, spring rate, positions)."""
+    out, fd_hvp, _, _, picks, groups = case
+    n_k = len(out.params)
     for m in METRICS:
         hvp, fd = out.hvp[m], fd_hvp[m]
         assert np.all(np.isfinite(hvp)) and hvp.shape == (3, n_k)
@@ -96,7 +104,7 @@ def test_hessian_vector_products_match_differences_of_the_exact_gradients(case):
 def test_gradients_match_differences_of_the_metrics(case):
     """The gradient itself along v against central differences of the metric values (the
     second order rests on an exact first order)."""
-    out, _, fd_dir, v, _ = case
+    out, _, fd_dir, v, _, _ = case
     for m in METRICS:
         along = out.gradient[m] @ v
         np.testing.assert_allclose(along, fd_dir[m], rtol=1e-6,
@@ -105,12 +113,13 @@ def test_gradients_match_differences_of_the_metrics(case):
 
 def test_hessian_is_symmetric_across_directions():
     """Unit directions e_i, e_j: (∇²m·e_i)_j = (∇²m·e_j)_i — a bushing stiffness and a
-    hardpoint, from the program of the fixture (new v: no new compile)."""
-    mech = pseudo_mcpherson()
+    hardpoint of the double wishbone, from the program of the fixture (new v: no new
+    compile)."""
+    mech = double_wishbone(bushings=True)
     ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
     sel = kc.select(ev.rig.mech, _where)
     i = ".bushings.k_trans[0,0]"
-    j = f".markers.position[{mech.markers.index('tie_rod.j')},2]"
+    j = f".markers.position[{mech.markers.index('tierod_upright')},2]"
     a = kc.hessian_vector_product(ev, sel, i, metrics=METRICS)
     b = kc.hessian_vector_product(ev, sel, j, metrics=METRICS)
     ii, jj = sel.names.index(i), sel.names.index(j)
