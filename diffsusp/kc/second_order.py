@@ -36,7 +36,14 @@ from jaxtyping import Array, Float
 from ..compilation import filter_jit
 from ..errors import InputError
 from ..model import Loads, Mechanism
-from ..statics import StaticSolution, linearize_internal, solve_statics, to_internal, to_public
+from ..statics import (
+    StaticSolution,
+    Status,
+    linearize_internal,
+    solve_statics,
+    to_internal,
+    to_public,
+)
 from .events import metrics_at
 from .metrics import flagged
 
@@ -192,6 +199,9 @@ def _products(rig, loads: Loads, sol: StaticSolution, chart, theta, direction,
         return jax.jacrev(lambda t: (metrics(t), metrics(t)), has_aux=True)(th)
 
     (grad, values), (hvp, _) = jax.jvp(gradient, (theta,), (direction,))
+    ok = (sol.status == Status.CONVERGED)[:, None]  # a failed case has no derivative either
+    grad = {k: jnp.where(ok, v, jnp.nan) for k, v in grad.items()}
+    hvp = {k: jnp.where(ok, v, jnp.nan) for k, v in hvp.items()}
     return values, grad, hvp
 
 
