@@ -32,20 +32,21 @@ def _richardson(f, h):
 
 
 def _case(mech, hardpoint, via_identify):
-    """A ±30 mm parallel travel (3 points), θ = every bushing translational stiffness, the
-    spring rate and every marker position, and v: +1 relative on the first bushing's Ktx,
-    −0.5 relative on the spring, +1 mm on `hardpoint`'s z. Through `kc.hessian_vector_product`
-    with a `where` selector, or through `identify.sensitivity(..., direction=v)` with a
-    `Params` selection of the same leaves."""
-    ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
-    rig = ev.rig
+    """A ±30 mm parallel travel (3 points: the rig and its loads, without running the event),
+    θ = every bushing translational stiffness, the spring rate and every marker position, and
+    v: +1 relative on the first bushing's Ktx, −0.5 relative on the spring, +1 mm on
+    `hardpoint`'s z. Through `kc.hessian_vector_product` with a `where` selector, or through
+    `identify.sensitivity(..., direction=v)` with a `Params` selection of the same leaves. One
+    compiled program per model serves the products and the differences (new θ, new v)."""
+    rig = kc.travel_rig(mech)
+    loads = kc.events.event_loads(rig, 3, travel=np.linspace(-30.0, 30.0, 3))
     k_h = rig.mech.markers.index(hardpoint)
     if via_identify:
         sel = Params.leaves(rig.mech, _where)
         names = (f"{rig.mech.bushings.names[0]}.Ktx", "spring.k", f"{hardpoint}.z")
 
         def run(r, v):
-            rep = sensitivity(r, sel, loads=ev.loads, metrics=METRICS, direction=v)
+            rep = sensitivity(r, sel, loads=loads, metrics=METRICS, direction=v)
             return SimpleNamespace(params=rep.params, values=rep.values,
                                    gradient=rep.jacobian, hvp=rep.hvp)
     else:
@@ -53,7 +54,7 @@ def _case(mech, hardpoint, via_identify):
         names = (".bushings.k_trans[0,0]", ".springs.k[0]", f".markers.position[{k_h},2]")
 
         def run(r, v):
-            return kc.hessian_vector_product(r, sel, v, loads=ev.loads, metrics=METRICS)
+            return kc.hessian_vector_product(r, sel, v, loads=loads, metrics=METRICS)
     theta = np.asarray(sel.values(rig.mech))
     picks = [sel.names.index(n) for n in names]
     v = np.zeros(theta.size)
@@ -72,14 +73,20 @@ def _case(mech, hardpoint, via_identify):
     fd_dir = {m: _richardson(lambda s, m=m: grads(s).values[m], h) for m in METRICS}
     n = len(mech.bushings.names)
     groups = [np.arange(3 * n), np.arange(3 * n, 3 * n + 1), np.arange(3 * n + 1, theta.size)]
-    return out, fd_hvp, fd_dir, v, picks, groups
+    return SimpleNamespace(out=out, fd_hvp=fd_hvp, fd_dir=fd_dir, v=v, picks=picks,
+                           groups=groups, rig=rig, loads=loads, sel=sel)
+
+
+@pytest.fixture(scope="module")
+def double_wishbone_case():
+    return _case(double_wishbone(bushings=True), "tierod_upright", via_identify=False)
 
 
 @pytest.fixture(scope="module", params=["pseudo_mcpherson", "double_wishbone"])
 def case(request):
     if request.param == "pseudo_mcpherson":
         return _case(pseudo_mcpherson(), "tie_rod.j", via_identify=True)
-    return _case(double_wishbone(bushings=True), "tierod_upright", via_identify=False)
+    return request.getfixturevalue("double_wishbone_case")
 
 
 def test_hessian_vector_products_match_differences_of_the_exact_gradients(case):
@@ -87,50 +94,49 @@ def test_hessian_vector_products_match_differences_of_the_exact_gradients(case):
     every parameter, equals the central difference of the exact gradients ∇m(θ ± h·v) to
     1e-6 relative (per metric and case, relative to the largest entry of that parameter
     group: bushing stiffnesses, spring rate, positions)."""
-    out, fd_hvp, _, _, picks, groups = case
-    n_k = len(out.params)
+    n_k = len(case.out.params)
     for m in METRICS:
-        hvp, fd = out.hvp[m], fd_hvp[m]
+        hvp, fd = case.out.hvp[m], case.fd_hvp[m]
         assert np.all(np.isfinite(hvp)) and hvp.shape == (3, n_k)
-        for g in groups:
+        for g in case.groups:
             scale = np.max(np.abs(fd[:, g]), axis=1, keepdims=True)
             assert np.all(scale > 0), m
             err = np.abs(hvp[:, g] - fd[:, g]) / scale
             assert np.max(err) < 1e-6, (m, float(np.max(err)))
         # the use case: how the sensitivity to the hardpoint changes along v, not zero
-        assert np.all(np.abs(hvp[:, picks[2]]) > 0)
+        assert np.all(np.abs(hvp[:, case.picks[2]]) > 0)
 
 
 def test_gradients_match_differences_of_the_metrics(case):
     """The gradient itself along v against central differences of the metric values (the
     second order rests on an exact first order)."""
-    out, _, fd_dir, v, _, _ = case
     for m in METRICS:
-        along = out.gradient[m] @ v
-        np.testing.assert_allclose(along, fd_dir[m], rtol=1e-6,
-                                   atol=1e-9 * np.max(np.abs(fd_dir[m])))
+        along = case.out.gradient[m] @ case.v
+        np.testing.assert_allclose(along, case.fd_dir[m], rtol=1e-6,
+                                   atol=1e-9 * np.max(np.abs(case.fd_dir[m])))
 
 
-def test_hessian_is_symmetric_across_directions():
+def test_hessian_is_symmetric_across_directions(double_wishbone_case):
     """Unit directions e_i, e_j: (∇²m·e_i)_j = (∇²m·e_j)_i — a bushing stiffness and a
     hardpoint of the double wishbone, from the program of the fixture (new v: no new
     compile)."""
-    mech = double_wishbone(bushings=True)
-    ev = kc.parallel_travel(mech, travel=jnp.linspace(-30.0, 30.0, 3))
-    sel = kc.select(ev.rig.mech, _where)
+    rig, loads, sel = (double_wishbone_case.rig, double_wishbone_case.loads,
+                       double_wishbone_case.sel)
     i = ".bushings.k_trans[0,0]"
-    j = f".markers.position[{mech.markers.index('tierod_upright')},2]"
-    a = kc.hessian_vector_product(ev, sel, i, metrics=METRICS)
-    b = kc.hessian_vector_product(ev, sel, j, metrics=METRICS)
+    j = f".markers.position[{rig.mech.markers.index('tierod_upright')},2]"
+    a = kc.hessian_vector_product(rig, sel, i, loads=loads, metrics=METRICS)
+    b = kc.hessian_vector_product(rig, sel, j, loads=loads, metrics=METRICS)
     ii, jj = sel.names.index(i), sel.names.index(j)
     for m in METRICS:
         np.testing.assert_allclose(a.hvp[m][:, jj], b.hvp[m][:, ii], rtol=1e-8)
     with pytest.raises(InputError, match="unknown parameter"):
-        kc.hessian_vector_product(ev, sel, "nope", metrics=METRICS)
+        kc.hessian_vector_product(rig, sel, "nope", loads=loads, metrics=METRICS)
     with pytest.raises(InputError, match="unknown metric"):
-        kc.hessian_vector_product(ev, sel, i, metrics=("bump_steering",))
+        kc.hessian_vector_product(rig, sel, i, loads=loads, metrics=("bump_steering",))
+    with pytest.raises(InputError, match="shape"):
+        kc.hessian_vector_product(rig, sel, np.ones(3), loads=loads, metrics=METRICS)
     with pytest.raises(InputError, match="float leaf|array leaves"):
-        kc.select(mech, lambda m: "spring")
+        kc.select(rig.mech, lambda m: "spring")
 
 
 # ----------------------------------------------------------------------------- covariance

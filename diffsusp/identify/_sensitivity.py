@@ -208,17 +208,6 @@ def _metric_jacobian(rig, loads, params: Params, theta, derivatives: bool):
     return metrics(theta), jax.jacfwd(metrics)(theta)
 
 
-def _public_metrics(event, rig, loads, derivatives: bool) -> tuple[str, ...]:
-    """Every public metric name `evaluate` gives for `rig` (the event's, or from the shapes
-    of an evaluation), without the derivative metrics when `derivatives` is False."""
-    names = getattr(event, "metrics", None)
-    if names is None or loads is not getattr(event, "loads", None):
-        names = jax.eval_shape(lambda: evaluate(rig, loads)[1])
-    base = [(k, k.rsplit("/", 1)[-1]) for k in names]
-    return tuple(sorted(k for k, b in base if not b.startswith("_")
-                        and (derivatives or b not in DERIVATIVE_METRICS)))
-
-
 def sensitivity(event, params, *, loads: Loads | None = None,
                 metrics: Sequence[str] | None = None, derivatives: bool = True,
                 direction=None) -> SensitivityReport:
@@ -238,7 +227,9 @@ def sensitivity(event, params, *, loads: Loads | None = None,
       bushing stiffness, how each metric's sensitivity to every parameter changes with that
       stiffness). Computed by `kc.hessian_vector_product` (gradients by reverse mode, their
       derivative along v by forward mode, the equilibria pinned), which also gives the
-      Jacobian.
+      Jacobian. Without `metrics`, the metrics of `sensitivity_metrics` (the registry's
+      sensitivity set, not every metric: a third derivative of every metric is a very large
+      program).
 
     **Returns:** a `SensitivityReport`.
     """
@@ -252,8 +243,9 @@ def sensitivity(event, params, *, loads: Loads | None = None,
     if direction is None:
         values, jac = _metric_jacobian(rig, loads, params, theta, derivatives)
     else:
-        names = metrics if metrics is not None else _public_metrics(event, rig, loads,
-                                                                    derivatives)
+        names = metrics
+        if names is None and hasattr(event, "metrics"):  # a KCEvent: the registry's choice
+            names = sensitivity_metrics(event, derivatives=derivatives)
         out = hessian_vector_product(rig, params, direction, loads=loads, metrics=names)
         values, jac, hvp, direction = out.values, out.gradient, out.hvp, out.direction
     values = {k: np.asarray(v) for k, v in values.items()}
