@@ -340,7 +340,14 @@ def metrics_at(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
     solve as `solve_statics`'s custom JVP rule), and the checks `solve_statics` would do
-    (stability margin from the same linearisation, the bushings' projected angles)."""
+    (stability margin from the same linearisation, the bushings' projected angles).
+
+    The second half of `evaluate`, for callers that solve the cases themselves (the design
+    batch) or differentiate the metrics through pinned equilibria (`kc.hessian_vector_product`).
+
+    **Returns:** (metrics: name → (cases,), compliance: corner prefix → (cases, 6, 6),
+    (stable, law_valid) flags (cases,), bushing angles (cases, bushings, 3)); NaN metrics where
+    `sol.status` is not converged."""
     mech = rig.mech
     n = mech.n_coordinates
     basis = _basis(rig)
