@@ -24,8 +24,8 @@ is only correct at the solved point: the function is never evaluated elsewhere.
 
 Cost: the program holds third derivatives of the element assembly (a derivative metric is
 already a derivative of the equilibrium): about 25 000 jaxpr equations for three metrics of the
-pseudo-McPherson's travel rig, a minute of tracing and compilation on a loaded 2-core machine,
-once per rig structure, number of cases, parameter selection and metric names.
+pseudo-McPherson's travel rig, one to several minutes of tracing and compilation on a loaded
+2-core machine, once per rig structure, number of cases, parameter selection and metric names.
 """
 
 import dataclasses
