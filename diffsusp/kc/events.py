@@ -337,12 +337,18 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
     return out, compliance
 
 
-@filter_jit
-def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
+def metrics_at(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
     solve as `solve_statics`'s custom JVP rule), and the checks `solve_statics` would do
-    (stability margin from the same linearisation, the bushings' projected angles)."""
+    (stability margin from the same linearisation, the bushings' projected angles).
+
+    The second half of `evaluate`, for callers that solve the cases themselves (the design
+    batch) or differentiate the metrics through pinned equilibria (`kc.hessian_vector_product`).
+
+    **Returns:** (metrics: name → (cases,), compliance: corner prefix → (cases, 6, 6),
+    (stable, law_valid) flags (cases,), bushing angles (cases, bushings, 3)); NaN metrics where
+    `sol.status` is not converged."""
     mech = rig.mech
     n = mech.n_coordinates
     basis = _basis(rig)
@@ -374,6 +380,9 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     law = jax.vmap(lambda a: law_validity(mech, None, angles=a))(angles)
     flags = (ok & (margin > STABILITY_TOLERANCE), ok & (law <= 1.0))
     return metrics, compliance, flags, jnp.where(ok[:, None, None], angles, 0.0)
+
+
+_metrics_kernel = filter_jit(metrics_at)
 
 
 def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = None,
