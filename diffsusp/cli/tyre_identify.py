@@ -12,7 +12,10 @@ coefficient at 0), the identified polynomial models to `--out` (.json),
 measured-vs-model figures to `--figures`; `--to-mf FILE.json` converts the polynomials to
 the Magic Formula 1989 set (§3.8, conversion radius `--radius`); `--speed-test` runs the
 speed test (3-54) (`bench_speed`), `--select CHANNEL:LO:HI` keeps the samples in a range
-first (`bench_select`, thesis §1.3.6.3). Exit codes: 2 bad input
+first (`bench_select`, thesis §1.3.6.3). `--compliances` also
+identifies the contact compliances K_x, K_y, K_β on F_x, F_y, M_z (`bench.identify_compliances`,
+Table 7; `--compliance-outputs`), printed and written to `--report` with the polynomial
+report (labels "polynomial", "compliances"). Exit codes: 2 bad input
 (missing channels, non-monotonic time, a rate too low for the filter, an unknown structure),
 4 an unstable identified model (∂Fy_pneu/∂δ′ ≥ 0 on the data) unless `--allow-unstable`.
 """
@@ -93,6 +96,14 @@ def identify_command(
     select_duration: Annotated[float, typer.Option(
         "--select-duration", help="--select: the selected runs are cut into segments of "
                                   "this many seconds (shorter ones dropped).")] = 0.5,
+    # the contact compliances K_x, K_y, K_beta on F_x, F_y, M_z (spec §1.5, §3.3, Table 7)
+    compliances: Annotated[bool, typer.Option(
+        "--compliances", help="Also identify the contact compliances K_x, K_y, K_beta on "
+                              "F_x, F_y and M_z (two-step, Table 7 layout); added to the "
+                              "terminal table and to --report.")] = False,
+    compliance_outputs: Annotated[str, typer.Option(
+        "--compliance-outputs", help="Outputs for --compliances, comma-separated: Fx, Fy, "
+                                     "Mz.")] = "Fx,Fy,Mz",
 ):
     """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
     structure = Structure(structure).value
@@ -141,9 +152,19 @@ def identify_command(
                              sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()),
                              median=median, speed_test=speed_test)
         c.print(rep.table())
+        reps, labels = [rep], None
+        if compliances:
+            comp = bench.identify_compliances(
+                table, outputs=tuple(o.strip() for o in compliance_outputs.split(",")
+                                     if o.strip()),
+                cutoff=cutoff, rolling_radius=rolling_radius, sigma_pct_threshold=sigma_pct,
+                significance=significance)
+            c.print(comp.table())
+            reps, labels = [rep, comp], ["polynomial", "compliances"]
         if report is not None:
-            bench.write_reports(report, [rep], extra={"aero": {k: v.to_dict() for k, v in
-                                                              laws.items()}} if laws else None)
+            bench.write_reports(report, reps, labels,
+                                extra={"aero": {k: v.to_dict() for k, v in laws.items()}}
+                                if laws else None)
         if out is not None:
             out.write_text(json.dumps({o: {"degrees": dict(r.model.degrees),
                                            "coefficients": r.model.values(),

@@ -6,6 +6,7 @@ Every public name is importable from `diffsusp.tyre.bench`.
 """
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 
@@ -54,7 +55,9 @@ class Segments(eqx.Module):
     slip (B.3: an axle's camber-with-steer law); and a driving/braking excitation that the
     thesis's procedures do not have: `kappa_amp` [mm] smoothed steps of the longitudinal
     deformation κ′ = V_x/ω − R_r (> 0 braking) of period `kappa_period` [s] (F_x then varies
-    independently of F_z, which separates the −F_y·F_x coupling of M_z, (3-69))."""
+    independently of F_z, which separates the −F_y·F_x coupling of M_z, (3-69)), and a
+    sine of κ′ of amplitude `kappa_sine` [mm] at `kappa_freq` [Hz] (the transients of F_x
+    that determine the longitudinal compliance, `compliant_flat_trac`)."""
 
     speed: jax.Array
     fz0: jax.Array
@@ -74,6 +77,8 @@ class Segments(eqx.Module):
     camber_slip: jax.Array
     kappa_amp: jax.Array
     kappa_period: jax.Array
+    kappa_sine: jax.Array
+    kappa_freq: jax.Array
 
     @property
     def n(self) -> int:
@@ -164,8 +169,8 @@ def segment_inputs(seg: Segments, t, rolling_radius: float = 0.294) -> dict:
 
     d, ddot = jax.jvp(slip, (jnp.asarray(t, dtype=float),), (jnp.ones_like(t, dtype=float),))
     v = seg.speed / 3.6
-    kap = (1e-3 * seg.kappa_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.kappa_period))
-           / math.tanh(3.0))
+    kap = 1e-3 * (seg.kappa_amp * jnp.tanh(3.0 * jnp.sin(w * t / seg.kappa_period))
+                  / math.tanh(3.0) + seg.kappa_sine * jnp.sin(w * seg.kappa_freq * t))
     omega = v * jnp.cos(d) / (rolling_radius + kap)
     gamma = (jnp.deg2rad(seg.camber + seg.camber_amp
                          * jnp.tanh(3.0 * jnp.sin(w * t / seg.camber_period)) / math.tanh(3.0))
@@ -243,4 +248,209 @@ def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *,
                         + 10.0 * np.sin(2 * np.pi * 8.7 * tt + ph[2])
                         + 15.0 * np.sin(2 * np.pi * 0.53 * tt + ph[3]))
         table["MZ"] += 3000.0 * np.sin(theta + ph[4])
+    return table
+
+
+# --------------------------------------------------------------------------------------------
+# The three contact compliances (spec §1.5 (2-37…2-45)): a simulation the identification is
+# not written against
+
+
+class ContactTyre(eqx.Module):
+    """A Magic-Formula-shaped interaction law F_pneu(κ′, δ′, φ′, γ, F_z) of the contact patch,
+    thesis units (F_z [kN], κ′, δ′ [m], φ′, γ [rad] → F_x, F_y [N], M_z [N·m]): not a
+    polynomial, so that a polynomial identification of it is an approximation (the test of a
+    method on data from a model it was not written against). Frame of the patch: x forward,
+    y left, z up; κ′ > 0 braking; every slope has the stable sign (∂F_x/∂κ′ < 0,
+    ∂F_y/∂δ′ < 0, ∂M_z/∂φ′ < 0: each force opposes the deformation rate that creates it).
+
+    F_x = −D_x·sin(C_x·atan(B_x·κ′)) − f_r·F_z, D_x = μ_x·F_z,
+    B_x·C_x·D_x = k_x·sin(2·atan(F_z/a_x));
+    F_y = D_y·sin(C_y·atan(B_y·δ′)) + k_φ·F_z·a_φ·atan(φ′/a_φ) + k_γ·F_z·γ + s_y·F_z,
+    B_y·C_y·D_y = −k_y·sin(2·atan(F_z/a_y)); M_z = D_z·sin(C_z·atan(B_z·δ′)) + m_φ·F_z·a_φ·
+    atan(φ′/a_φ) + m_γ·F_z·γ + s_z·F_z, B_z·C_z·D_z = k_z·F_z²·exp(−F_z/a_z). Default values
+    near the thesis's Dunlop R16 at 2 bar ((3-78), (3-80)) where it prints them."""
+
+    mu_x: float = 1.1
+    c_x: float = 1.6
+    k_x: float = 3.6e5
+    a_x: float = 8.0
+    f_r: float = 12.0
+    mu_y: float = 1.0
+    c_y: float = 1.3
+    k_y: float = 4.5e5
+    a_y: float = 8.0
+    k_phi: float = 5.0e3
+    a_phi: float = 0.1
+    k_gamma: float = -1100.0
+    s_y: float = -35.0
+    d_z: float = 11.0
+    c_z: float = 2.3
+    k_z: float = 900.0
+    a_z: float = 12.0
+    m_phi: float = -1000.0
+    m_gamma: float = -133.0
+    s_z: float = 3.8
+
+    def __call__(self, kappa, delta, phi, gamma, fz):
+        """(F_x, F_y, M_z) at the deformation inputs and the load [kN]."""
+        def mf(D, C, BCD, x):
+            return D * jnp.sin(C * jnp.arctan(BCD / (C * D) * x))
+
+        fx = (-mf(self.mu_x * 1e3 * fz, self.c_x,
+                  self.k_x * jnp.sin(2.0 * jnp.arctan(fz / self.a_x)), kappa)
+              - self.f_r * fz)
+        turn = self.a_phi * jnp.arctan(phi / self.a_phi)
+        fy = (mf(self.mu_y * 1e3 * fz, self.c_y,
+                 -self.k_y * jnp.sin(2.0 * jnp.arctan(fz / self.a_y)), delta)
+              + self.k_phi * fz * turn + self.k_gamma * fz * gamma + self.s_y * fz)
+        mz = (mf(self.d_z * fz, self.c_z, self.k_z * fz**2 * jnp.exp(-fz / self.a_z), delta)
+              + self.m_phi * fz * turn + self.m_gamma * fz * gamma + self.s_z * fz)
+        return jnp.stack([fx, fy, mz])
+
+
+def _rot(b, v):
+    c, s = jnp.cos(b), jnp.sin(b)
+    return jnp.stack([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _contact_rates(tyre, k, u, q, guess, rolling_radius, newton):
+    """q̇ = (ẋ, ẏ, β̇) of the contact joints at state q and wheel inputs u, and the patch
+    deformation u_AC solving F_pneu(u_AC) = the joint forces (massless patch)."""
+    x, y, b = q
+    # the joint forces (2-39): K_x·x, K_y·y along R_p, K_β·β the moment at the patch
+    f_ac = jnp.concatenate([_rot(-b, jnp.stack([k[0] * x, k[1] * y])), (k[2] * b)[None]])
+    g, fz = u["gamma"], u["fz"]
+
+    def resid(v):
+        return tyre(v[0], v[1], v[2], g, fz) - f_ac
+
+    v = guess
+    for _ in range(newton):
+        v = v - jnp.linalg.solve(jax.jacfwd(resid)(v), resid(v))
+    w, psi = u["omega"], u["phi"] * u["omega"]
+    vx, vy = u["speed"] * jnp.cos(u["slip"]), -u["speed"] * jnp.sin(u["slip"])
+    # the patch velocity: R(β)·V_AC = V_P + ψ̇ ẑ × (x, y) + (ẋ, ẏ)  (2-43…2-45, exact)
+    vt = _rot(b, jnp.stack([(v[0] + rolling_radius) * w, v[1] * w]))
+    qd = jnp.stack([vt[0] - vx + psi * y, vt[1] - vy - psi * x, v[2] * w - psi])
+    return qd, v
+
+
+def _contact_segment(tyre, k, seg, t, rolling_radius, substeps, newton):
+    dt = (t[1] - t[0]) / substeps
+
+    def inputs(tt):
+        return segment_inputs(seg, tt, rolling_radius)
+
+    u0 = inputs(t[0])
+    v0 = jnp.stack([u0["kappa"], u0["delta"], u0["phi"]])
+
+    def steady(q, _):  # q̇ = 0: the joints under the forces of the rigid-patch deformation
+        x, y, b = q
+        w, psi = u0["omega"], u0["phi"] * u0["omega"]
+        vt = jnp.stack([u0["speed"] * jnp.cos(u0["slip"]) - psi * y,
+                        -u0["speed"] * jnp.sin(u0["slip"]) + psi * x])
+        va = _rot(-b, vt)
+        f = tyre(va[0] / w - rolling_radius, va[1] / w, u0["phi"], u0["gamma"], u0["fz"])
+        fp = _rot(b, f[:2])
+        return jnp.stack([fp[0] / k[0], fp[1] / k[1], (f[2]) / k[2]]), None
+
+    q0, _ = jax.lax.scan(steady, jnp.zeros(3), None, length=40)
+
+    def rk4(carry, tt):
+        q, v = carry
+        f1, v = _contact_rates(tyre, k, inputs(tt), q, v, rolling_radius, newton)
+        f2, v = _contact_rates(tyre, k, inputs(tt + dt / 2), q + dt / 2 * f1, v,
+                               rolling_radius, newton)
+        f3, v = _contact_rates(tyre, k, inputs(tt + dt / 2), q + dt / 2 * f2, v,
+                               rolling_radius, newton)
+        f4, v = _contact_rates(tyre, k, inputs(tt + dt), q + dt * f3, v, rolling_radius,
+                               newton)
+        return (q + dt / 6 * (f1 + 2 * f2 + 2 * f3 + f4), v), None
+
+    def sample(carry, tt):
+        q, _ = carry
+        carry, _ = jax.lax.scan(rk4, carry, tt + dt * jnp.arange(substeps))
+        return carry, q
+
+    _, qs = jax.lax.scan(sample, (q0, v0), t)
+    x, y, b = qs.T
+    fx, fy = k[0] * x, k[1] * y
+    # M_z at the wheel centre's trace: the joint's moment carried from the patch (x, y)
+    mz = k[2] * b + x * fy - y * fx
+    return fx, fy, mz, jax.vmap(inputs)(t)
+
+
+@functools.partial(jax.jit, static_argnames=("substeps", "newton"))
+def _contact_all(tyre, k, seg, t, rolling_radius, substeps, newton):
+    return jax.vmap(lambda s: _contact_segment(tyre, k, s, t, rolling_radius, substeps,
+                                               newton))(seg)
+
+
+def compliance_segments(speeds=(40.0, 80.0), loads=(3.0, 4.5, 6.0)) -> Segments:
+    """A Flat Trac programme that excites the three contact compliances, at `speeds` [km/h]
+    and `loads` [kN]: slip sines ±1° at 3 and 6 Hz at cambers ±1.5° (F_y, M_z and their
+    transients: K_y, and the torsion through M_z), κ′ sines ±3 mm (a slip ratio of ±1 %) at
+    4 Hz around slips ±0.5° (F_x transients: K_x; F_x·F_y products: the couplings), and a
+    load sine ±0.5 kN at 3 Hz with κ′ steps ±2 mm at slip 1°. The thesis's steering-feel
+    procedure is free rolling (κ′ never excited: K_x not identifiable, Table 7); this
+    programme is the one a bench user would add for K_x (spec §4.3 is silent on it)."""
+    rows = []
+    for v in speeds:
+        for f in loads:
+            rows += [dict(speed=v, fz0=f, camber=c, sine_amp=1.0, sine_freq=hz, sequence=4)
+                     for c, hz in ((-1.5, 3.0), (1.5, 6.0))]
+            rows += [dict(speed=v, fz0=f, slip0=s, kappa_sine=3.0, kappa_freq=4.0, sequence=9)
+                     for s in (-0.5, 0.5)]
+            rows.append(dict(speed=v, fz0=f, fz_amp=0.5, fz_freq=3.0, slip0=1.0, kappa_amp=2.0,
+                             kappa_period=1.0, sequence=3))
+    return make_segments(rows)
+
+
+def compliant_flat_trac(tyre: ContactTyre | None = None, *, k_x: float = 3.0e5,
+                        k_y: float = 1.6e5, k_beta: float = 1.3e4,
+                        segments: Segments | None = None, duration: float = 2.0,
+                        rate: float = 200.0, substeps: int = 10,
+                        noise: Mapping[str, float] | None = None, seed: int = 0,
+                        rolling_radius: float = 0.294) -> dict[str, np.ndarray]:
+    """A synthetic Flat Trac campaign from the contact model with its three compliances
+    (spec §1.5 (2-37…2-45)): the patch on the lateral (K_y [N/m]), longitudinal (K_x [N/m])
+    and torsion (K_β [N·m/rad]) joints, massless (the modes of Table 3 are far above the
+    band), under the interaction law `tyre` (`ContactTyre`, not a polynomial) of the patch's
+    own deformation inputs. Exact in the joint positions (finite rotation β, the patch at
+    (x, y)): at each instant the patch deformation u_AC solves F_pneu(u_AC) = the joint
+    forces (Newton), the joint rates follow from the patch twist (2-43), and the joints are
+    integrated by RK4 (`substeps` per sample); the measured wrench is that of the joints,
+    F_x = K_x·x, F_y = K_y·y, M_z = K_β·β + x·F_y − y·F_x. The identification
+    (`bench.identify_compliances`) linearises all of this; this simulation does not.
+
+    `segments` (default `compliance_segments()`), each `duration` s at `rate` Hz; `noise`:
+    white σ per channel in table units (default FY 20 N, MZ 2 000 N·mm, FX 10 N, FZ 10 N, as
+    `synthetic_flat_trac`). Returns a bench table (`REQUIRED` columns, library units)."""
+    tyre = ContactTyre() if tyre is None else tyre
+    segments = compliance_segments() if segments is None else segments
+    t = jnp.arange(int(round(duration * rate))) / rate
+    k = jnp.asarray([k_x, k_y, k_beta], dtype=float)
+    fx, fy, mz, u = _contact_all(tyre, k, segments, t, rolling_radius, int(substeps), 4)
+    if not bool(jnp.all(jnp.isfinite(fy)) & jnp.all(jnp.isfinite(mz))):
+        raise ModelError("the contact simulation diverged: a segment is past the grip peak "
+                         "or the step is too long for the torsion mode (raise `substeps`).")
+    n_seg, n_t = fy.shape
+    rng = np.random.default_rng(seed)
+    sig = {"FY": 20.0, "MZ": 2000.0, "FX": 10.0, "FZ": 10.0}
+    sig.update(noise or {})
+    table = {
+        "t": np.tile(np.asarray(t), n_seg),
+        "segment": np.repeat(np.arange(n_seg, dtype=float), n_t),
+        "steer": np.asarray(u["slip"]).ravel(),
+        "camber": np.asarray(u["gamma"]).ravel(),
+        "speed": 1e3 * np.asarray(u["speed"]).ravel(),
+        "omega": np.asarray(u["omega"]).ravel(),
+        "FZ": 1e3 * np.asarray(u["fz"]).ravel(),
+        "FX": np.asarray(fx).ravel(),
+        "FY": np.asarray(fy).ravel(),
+        "MZ": 1e3 * np.asarray(mz).ravel(),
+    }
+    for c in ("FY", "MZ", "FX", "FZ"):
+        table[c] = table[c] + sig[c] * rng.standard_normal(table[c].shape)
     return table
