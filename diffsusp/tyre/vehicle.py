@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..mdh import tables as mdh_tables
+from .vehicle_kc import KCTables, wheel_poses
 
 WHEELS = mdh_tables.WHEELS
 GRAVITY = 9.81
@@ -67,7 +68,13 @@ class TyreTruth(eqx.Module):
 class Vehicle(eqx.Module):
     """Masses, geometry, suspension and tyre of the synthetic car (a mid-size saloon; the
     thesis gives none of these numbers for its Peugeot 406). Corners in `WHEELS` order;
-    `corners` (4, 3) = (L_i, l_i, z0_i) in the body frame (m)."""
+    `corners` (4, 3) = (L_i, l_i, z0_i) in the body frame (m).
+
+    `kinematics`: None for the 12-DOF car (travel along the body's z, steer about it), or the
+    K&C tables of the 30-DOF model (`vehicle_kc.kc_tables`, spec tyre §5.2): each carrier's
+    toe, camber, half-track and wheelbase changes from its travel and the tyre's lateral force
+    (the compliance), the steer added to the toe. The unsprung masses still move along the
+    body's z (the tables' few-mm horizontal shifts are left out of the mass matrix)."""
 
     mass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(1350.0))
     inertia: Float[Array, "3"] = eqx.field(
@@ -85,6 +92,7 @@ class Vehicle(eqx.Module):
     rolling_radius: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(0.294))
     speed_gain: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(3000.0))
     tyre: TyreTruth = eqx.field(default_factory=TyreTruth)
+    kinematics: KCTables | None = None
 
     def static_loads(self):
         """Static wheel loads (N) from the weight distribution over the axles."""
@@ -119,9 +127,15 @@ def rot_z(a) -> Float[Array, "3 3"]:
     return jnp.stack([jnp.stack([c, -s, z]), jnp.stack([s, c, z]), jnp.stack([z, z, o])])
 
 
-def corner_poses(vehicle: Vehicle, travel: Float[Array, "4"], steer: Float[Array, "4"]):
-    """Wheel-carrier frames in the body frame: (R (4, 3, 3), O (4, 3)) — Table 30's chain of
-    the 12-DOF tree (travel along the body z, steer about it)."""
+def corner_poses(vehicle: Vehicle, travel: Float[Array, "4"], steer: Float[Array, "4"],
+                 fy: Float[Array, "4"] | None = None):
+    """Wheel-carrier frames in the body frame: (R (4, 3, 3), O (4, 3)) — Table 30's chain: of
+    the 12-DOF tree (travel along the body z, steer about it) without `vehicle.kinematics`, of
+    the 30-DOF model with them (`vehicle_kc.wheel_poses`, `fy` the tyres' lateral forces, N)."""
+    if vehicle.kinematics is not None:
+        fy = jnp.zeros(4) if fy is None else fy
+        R, O, _, _ = wheel_poses(vehicle.kinematics, vehicle.corners, travel, fy, steer)
+        return R, O
     O = vehicle.corners + jnp.stack([0 * travel, 0 * travel, travel], axis=1)
     return jax.vmap(rot_z)(steer), O
 
@@ -144,21 +158,29 @@ def _unpack(y):
     return y[:3], y[3:6], y[6:9], y[9:12], y[12:16], y[16:20], y[20:24]
 
 
-def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, steer, steer_rate):
+def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, steer, steer_rate,
+                    fy=None, fy_rate=None):
     """Per corner (4,): the tyre frame and its inputs from the body state (all in the road
     frame except where said): contact point P, axes x_p y_p, camber γ, loaded radius, V_x, V_y
-    of the tyre frame's origin, its yaw rate β̇, and the carrier pose (R, O in the body)."""
+    of the tyre frame's origin, its yaw rate β̇, and the carrier pose (R, O in the body).
+    `fy`, `fy_rate`: the tyres' lateral forces and their rates (the K&C compliance; default
+    0)."""
     R = rotation(*angles)
-    Rc, Oc = corner_poses(vehicle, travel, steer)
+    fy = jnp.zeros(4) if fy is None else fy
+    fy_rate = jnp.zeros(4) if fy_rate is None else fy_rate
+    # the carriers' poses and their rates relative to the body (first order in time)
+    (Rc, Oc), (dRc, dOc) = jax.jvp(lambda z, b, f: corner_poses(vehicle, z, b, f),
+                                   (travel, steer, fy), (travel_rate, steer_rate, fy_rate))
+
     ez = jnp.array([0.0, 0.0, 1.0])
 
-    def one(Rci, Oci, zi, zdi, bi, bdi):
+    def one(Rci, Oci, dRci, dOci):
         def frame(t):
             # pose of the corner at time t to first order (for the frame's own velocities)
             pos = p + t * (R @ v)
             Rb = R + t * (R @ _skew(w))
-            Oi = Oci + t * zdi * ez
-            Ri = Rci @ rot_z(t * bdi)
+            Oi = Oci + t * dOci
+            Ri = Rci + t * dRci
             O_world = pos + Rb @ Oi
             y_w = Rb @ Ri @ jnp.array([0.0, 1.0, 0.0])
             x_p = jnp.cross(y_w, ez)
@@ -176,7 +198,7 @@ def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, stee
                 "vx": jnp.dot(dP, x_p), "vy": jnp.dot(dP, y_p), "yaw_rate": jnp.dot(dx, y_p),
                 "O": O_w}
 
-    return jax.vmap(one)(Rc, Oc, travel, travel_rate, steer, steer_rate)
+    return jax.vmap(one)(Rc, Oc, dRc, dOc)
 
 
 def _skew(a):
@@ -204,8 +226,13 @@ def dynamics(t, y, args):
     beta, beta_rate = steer_fn(t)
     steer = jnp.stack([beta, beta, 0.0 * beta, 0.0 * beta])
     steer_rate = jnp.stack([beta_rate, beta_rate, 0.0 * beta, 0.0 * beta])
-    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate)
+    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy)
     fx, fz, fy_dot, _ = tyre_forces(vehicle, kin, fy, v[0] - speed)
+    if vehicle.kinematics is not None:
+        # the compliance moves the carriers at the rate of F_y, which the carriers' motion
+        # sets: one fixed-point pass (the coupling is ~1e-6 rad/N, its square negligible)
+        kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy, fy_dot)
+        fx, fz, fy_dot, _ = tyre_forces(vehicle, kin, fy, v[0] - speed)
     R = rotation(*ang)
     # tyre forces in the body frame, applied at the contact points (body-frame lever arms)
     f_world = (fx[:, None] * kin["x_p"] + fy[:, None] * kin["y_p"]
@@ -335,7 +362,7 @@ def _truth_channels(vehicle: Vehicle, sensors: Sensors, y, t, beta, beta_rate, s
     R = rotation(*ang)
     steer = jnp.stack([beta, beta, 0.0 * beta, 0.0 * beta])
     steer_rate = jnp.stack([beta_rate, beta_rate, 0.0 * beta, 0.0 * beta])
-    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate)
+    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy, yd[20:24])
     fx, fz, _, omega = tyre_forces(vehicle, kin, fy, v[0] - speed)
     zg = R[:, 2]
     heights = p[2] + sensors.lasers @ R[2]
@@ -350,7 +377,7 @@ def _truth_channels(vehicle: Vehicle, sensors: Sensors, y, t, beta, beta_rate, s
         w, jnp.cross(w, sensors.imu))
     imu = {"omega": w, "velocity": v + jnp.cross(w, sensors.imu), "specific_force": a_imu - g}
     # wheel-carrier wrench (massless wheel): tyre wrench carried to O, in R_pf
-    Rc, _ = corner_poses(vehicle, z, steer)
+    Rc, _ = corner_poses(vehicle, z, steer, fy)
     f_world = (fx[:, None] * kin["x_p"] + fy[:, None] * kin["y_p"]
                + fz[:, None] * jnp.array([0.0, 0.0, 1.0]))
     Rpf = jnp.einsum("ij,kjl->kil", R, Rc)  # road ← carrier
