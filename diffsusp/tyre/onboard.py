@@ -279,13 +279,21 @@ def tyre_inputs(data, normal, R, twist, kernels, raw_plane=None, kinematics=None
         tau_p = contact.tyre_twist_zero_wobble(jnp.concatenate([v_pf, w_pf]), q, qd)
         Rp, Pp = contact.carrier_to_tyre_closed(q[0], q[2], q[1])
         F = contact.wrench_to_tyre_closed(wrench, Rp, Pp)
-        return F[2], F[1], tau_p[1] / spin, tau_p[5] / spin, q[2]
+        return (F[2], F[1], tau_p[1] / spin, tau_p[5] / spin, q[2], Rci @ Rp[:, 1],
+                Oi + Rci @ Pp)
 
     per = jax.vmap(jax.vmap(wheel, in_axes=(None, 0, 0, 0, 0, 0, 0, 0, 0)))
-    fz, fy, delta_p, phi_p, gamma = per(twist, Rc, O, dO, w_rel, qp, qp_rate,
-                                        data["wrench"], spin)
+    fz, fy, delta_p, phi_p, gamma, y_p, P = per(twist, Rc, O, dO, w_rel, qp, qp_rate,
+                                                data["wrench"], spin)
+    # the lever arms of each tyre's lateral force in the body's equations (4-1): along the
+    # road plane's lateral direction u, and about the road normal through the body origin
+    u = jnp.array([0.0, 1.0, 0.0]) - normal[:, 1:2] * normal
+    u = u / jnp.linalg.norm(u, axis=-1, keepdims=True)
+    lat_arm = jnp.einsum("tkj,tj->tk", y_p, u)
+    yaw_arm = jnp.einsum("tkj,tj->tk", jnp.cross(P, y_p), normal)
     return {"fz": fz, "fy": fy, "delta_p": delta_p, "phi_p": phi_p, "gamma": gamma,
-            "spin": spin}
+            "spin": spin, "radius": -qp[..., 1], "radius_rate": -qp_rate[..., 1],
+            "lat_arm": lat_arm, "yaw_arm": yaw_arm}
 
 
 # --------------------------------------------------------------------------------------------
@@ -306,7 +314,7 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
     # frequencies of the sweep); the wrench (raw in `inputs`) is smoothed here
     second = np.ones(1) if second is None else second
     s = {k: _conv(_conv(v, smooth) if k in ("fy", "fz") else v, second)[idx]
-         for k, v in inputs.items()}
+         for k, v in inputs.items() if k in ("fz", "fy", "delta_p", "phi_p", "gamma", "spin")}
     s["fy_rate"] = _conv(_conv(inputs["fy"], slope), second)[idx]
     ok = valid[idx]
     weight = ok.astype(float)[:, None]
@@ -500,6 +508,42 @@ def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half:
     valid = _conv(valid.astype(float), np.ones(2 * half + 1)) > 2 * half + 0.5
     return {"normal": normal, "R": R, "twist": twist, "tyre": tyre, "valid": valid,
             "kernels": kernels, "half": half}
+
+
+def joint_signals(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0,
+                  kinematics=None) -> dict:
+    """Steps 1–3 on one checked record (`check`) for the joint vehicle + tyre identification
+    (4-1…4-3, `onboard_joint`), at the full rate (one compiled program per record length):
+    per wheel (n, 4) the tyre inputs δ′, φ′, γ, ω, the
+    loaded radius and its rate (m, m/s), the lateral force's arms `lat_arm` (along the road
+    plane's lateral direction u) and `yaw_arm` (m, about the road normal z_r through the
+    body origin); per instant (n, 3) the body's angular velocity ω, its derivative ω̇ and the
+    specific force f_O at the body origin (from the inertial unit, smoothed by the window),
+    z_r and u (body frame); `valid` (n,)."""
+    return _joint_program(data, opts, _window_length(opts, data["time"]), _step(data["time"]),
+                          jnp.asarray(correvit_delay_s, float), kinematics)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _joint_program(data, opts, half, dt, correvit_delay_s, kinematics):
+    if "laser_window_ok" not in data:  # a half record (`halves`)
+        data = dict(data, laser_window_ok=_window_ok(data["laser_valid"], half, opts.window))
+    res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt,
+                 kinematics=kinematics)
+    _, smooth, slope, _ = res["kernels"]
+    w = _conv(data["imu_omega"], smooth)
+    wd = _conv(data["imu_omega"], slope)
+    c0 = data["imu_position"]
+    f_c0 = _conv(data["imu_specific_force"], smooth)
+    f_o = f_c0 - jnp.cross(wd, c0) - jnp.cross(w, jnp.cross(w, c0))
+    normal = res["normal"]
+    u = jnp.array([0.0, 1.0, 0.0]) - normal[:, 1:2] * normal
+    u = u / jnp.linalg.norm(u, axis=-1, keepdims=True)
+    keys = ("delta_p", "phi_p", "gamma", "spin", "radius", "radius_rate", "lat_arm",
+            "yaw_arm")
+    out = {k: res["tyre"][k] for k in keys}
+    out.update(omega=w, omega_dot=wd, f_o=f_o, normal=normal, u=u, valid=res["valid"])
+    return out
 
 
 def _signals(data: dict, opts: Options, *, half: int, dt: float, correvit_delay_s=0.0,
@@ -892,6 +936,14 @@ def _delay_program(data, options, half, dt):
     return correvit_delay(data, normal, R, kernels, dt=dt, return_sigma=True)
 
 
+def estimate_delay(data: dict, options: Options = Options()):
+    """The Correvit's delay and its σ (s) on a checked record (`check`), as `identify`
+    estimates it (`correvit_delay`, the full-rate record)."""
+    est, sigma, _ = _delay_program(data, options, _window_length(options, data["time"]),
+                                   _step(data["time"]))
+    return float(est), float(sigma)
+
+
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _signals_program(data, options, half, dt, delay, remove_offsets, kinematics=None):
     return split_signals(data, options, half=half, dt=dt, correvit_delay_s=delay,
@@ -1064,6 +1116,7 @@ def _iv_program(sig, ok, wheels, camber, loads_kn):
 __all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "SIGNIFICANCE", "Options",
            "Report", "carrier_poses", "consistency", "MISFIT_RATIO",
            "DELAY_HAC_WINDOWS", "DELAY_STEP", "body_twist", "check", "correvit_delay",
+           "estimate_delay", "joint_signals",
            "ground_plane", "halves", "identify",
            "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
            "regressor", "shift_channel", "split_signals", "window_weights"]

@@ -65,6 +65,28 @@ class TyreTruth(eqx.Module):
         return k_d, self.b_phi_1 * fz_kn, self.b_gamma_1 * fz_kn, l_r
 
 
+class MagicTyre(eqx.Module):
+    """A tyre the reduced model (4-16…4-18) was not written against, for rehearsing the
+    identifications: the small-slip behaviour of a Magic Formula tyre (spec tyre §2.2; the
+    1989 set's cornering-stiffness law BCD = a3·sin(2·atan(F_z/a4))), the brush model's
+    torsion stiffness (proportional to the cornering stiffness times the squared contact
+    half-length, ∝ F_z), a camber stiffness ∝ F_z, and the relaxation length of a stretched
+    string, σ = K/C_y (cornering stiffness over the carcass's lateral stiffness). Units as
+    `TyreTruth` (K_δ in N/m of δ′, negative; F_z in kN); the defaults are close to
+    `TyreTruth`'s at 4 kN."""
+
+    a3: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-186000.0))
+    a4: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(6.0))
+    torsion: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-0.0465))
+    camber: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(1500.0))
+    carcass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(358000.0))
+
+    def stiffnesses(self, fz_kn):
+        """(K_δ, K_φ, K_γ, L_R) at F_z [kN]."""
+        k_d = self.a3 * jnp.sin(2.0 * jnp.arctan(fz_kn / self.a4))
+        return k_d, self.torsion * k_d * fz_kn, self.camber * fz_kn, k_d / self.carcass
+
+
 class Vehicle(eqx.Module):
     """Masses, geometry, suspension and tyre of the synthetic car (a mid-size saloon; the
     thesis gives none of these numbers for its Peugeot 406). Corners in `WHEELS` order;
@@ -91,7 +113,7 @@ class Vehicle(eqx.Module):
     tyre_damping: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(300.0))
     rolling_radius: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(0.294))
     speed_gain: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(3000.0))
-    tyre: TyreTruth = eqx.field(default_factory=TyreTruth)
+    tyre: TyreTruth | MagicTyre = eqx.field(default_factory=TyreTruth)
     kinematics: KCTables | None = None
 
     def static_loads(self):
@@ -455,6 +477,6 @@ _SIGMAS = ("sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity",
            "sigma_moment")
 
 
-__all__ = ["NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle", "WHEELS",
-           "add_noise", "channels", "corner_poses", "dynamics", "initial_state", "measure",
-           "rotation", "simulate", "steering_sine"]
+__all__ = ["MagicTyre", "NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle",
+           "WHEELS", "add_noise", "channels", "corner_poses", "dynamics", "initial_state",
+           "measure", "rotation", "simulate", "steering_sine"]

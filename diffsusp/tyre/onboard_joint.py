@@ -1,0 +1,435 @@
+"""Joint identification of the vehicle's and the tyres' parameters from on-board measurements,
+without the lateral forces (thesis (4-1)…(4-3)).
+
+spec: tyre_contact_model §5.1: the vehicle's inverse dynamic model is linear in its parameters,
+J_v·F = W_v·X_v (4-1), the tyre's is F = W_p·X_p (4-2), and substituting, W_p·X_p = J_v·W_v·X_v
+(4-3): vehicle and tyre parameters identified together, without the dynamometric wheels'
+forces. The thesis proposes it and does not do it; this module does, on the body's two
+equations that the tyres' lateral forces drive:
+
+* lateral, along the road plane's lateral direction u (the tyres' vertical loads drop out):
+  Σ_i (u·y_p,i) F_y,i = m·u·f_O + u·(ω̇ × m r_G + ω × (ω × m r_G));
+* yaw, about the road normal z_r through the body origin O:
+  Σ_i ((P_i − O) × y_p,i)·z_r F_y,i = z_r·(I_O ω̇ + ω × I_O ω + m r_G × f_O);
+
+with f_O the specific force at O (the inertial unit's, carried to O), ω and ω̇ the body's
+angular velocity and acceleration (body frame), the whole car taken as one rigid body (the
+wheels' travel relative to the body left out). Vehicle parameters X_v: the inertia I_O about
+O (I_xx, I_yy, I_zz, I_xz; the car symmetric about its x–z plane) and the first moments
+m·x_G, m·z_G; the mass m is given (a weighbridge): (4-3) is homogeneous, one scale must be
+known. The longitudinal forces drop out of both equations when the two wheels of an axle
+carry the same one (constant speed).
+
+Each tyre's F_y,i is the reduced model (4-16…4-18) in the same coefficients as
+`diffsusp.tyre.onboard` (F_pneu from δ′, φ′, γ at the load; the relaxation ODE
+F_y − (L_R/ω) Ḟ_y = F_pneu integrated over the record, trapezoidal input, exact decay),
+so the model is linear in all but the relaxation's coefficients: the equations are solved by
+Levenberg–Marquardt (`optimistix`) from a start found by linear least squares at a generic
+relaxation (L_R = −0.4), not from the truth. The vertical loads come from the tyres'
+deflection, F_z = k_t·(R_0 − r) − c_t·ṙ (r the loaded radius from the ground plane and the
+carrier's pose; k_t, R_0, c_t the tyre's vertical data, given): no wheel force is used.
+
+σ: the sandwich (Jᵀ J)⁻¹ (Σ_t g_t g_tᵀ) (Jᵀ J)⁻¹ of the whitened equations (each equation by
+its residual σ) at rows one window apart, clustered by instant (the two equations of an
+instant share the body's noise). Consistency: the residuals against their own row-to-row
+differences (the sensors' noise is independent from one row to the next, a misfit of the model
+is not), χ²/dof ≤ `onboard.MISFIT_RATIO`.
+
+Units SI (m, N, s, rad, kg); F_z in kN in the load polynomials.
+"""
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+import scipy.stats
+
+from ..errors import InputError
+from ..identify.report import IdentificationReport, consistency_from_residuals
+from . import onboard
+
+TYRE = onboard.NAMES
+VEHICLE = ("I_xx", "I_yy", "I_zz", "I_xz", "m_x_G", "m_z_G")
+NAMES = TYRE + VEHICLE
+"""The joint parameters: the reduced tyre model's (`onboard.NAMES`) then the vehicle's."""
+_UNITS = {"b_delta_2": "N/(m·kN^2)", "b_delta_1": "N/(m·kN)", "b_delta_0": "N/m",
+          "b_phi_1": "N/(rad·kN)", "b_gamma_1": "N/(rad·kN)", "b_L_2": "1/kN^2",
+          "b_L_1": "1/kN", "b_L_0": "1", "I_xx": "kg·m^2", "I_yy": "kg·m^2",
+          "I_zz": "kg·m^2", "I_xz": "kg·m^2", "m_x_G": "kg·m", "m_z_G": "kg·m"}
+_DEFAULT = onboard.Options()
+DEFAULT_HELD = {"b_delta_2": 0.0, "b_L_2": 0.0, "b_L_1": 0.0, "I_xx": 0.0, "I_yy": 0.0}
+"""What the joint identification holds by default: the load's curvature of the cornering
+stiffness and the relaxation's load dependence (two equations per instant see the four tyres'
+forces only through the axles' sums: K_δ linear in F_z and one relaxation L_R, as the thesis's
+Table 32 ends up with), and the roll and pitch inertias (their terms, the road normal's tilt
+times the roll and pitch accelerations, are below the yaw equation's noise; left free, their
+σ is larger than themselves)."""
+START_RELAXATION = -0.4
+IV_STEPS = 60
+"""The most instrumented Gauss–Newton steps of `identify`."""
+IV_TOL = 1e-5
+"""Convergence: the last step below this fraction of the start's magnitude in every
+parameter (far below their σ)."""
+IV_DAMPING = 0.5
+"""The fraction of the instrumented Gauss–Newton step taken."""
+"""The relaxation L_R of the linear start (dimensionless, the synthetic car's sign)."""
+
+
+class Signals(eqx.Module):
+    """The joint model's inputs (`onboard.joint_signals` plus the loads): per wheel (n, 4)
+    `fz_kn`, `delta_p`, `phi_p`, `gamma`, `spin`, `lat_arm`, `yaw_arm`; per instant (n, 3)
+    `omega`, `omega_dot`, `f_o`, `normal`, `u`; `dt` (s), `mass` (kg)."""
+
+    fz_kn: jax.Array
+    delta_p: jax.Array
+    phi_p: jax.Array
+    gamma: jax.Array
+    spin: jax.Array
+    lat_arm: jax.Array
+    yaw_arm: jax.Array
+    omega: jax.Array
+    omega_dot: jax.Array
+    f_o: jax.Array
+    normal: jax.Array
+    u: jax.Array
+    dt: jax.Array
+    mass: jax.Array
+
+
+def lateral_forces(x, sig: Signals):
+    """The tyres' lateral forces F_y (n, 4) (N) of the reduced model (4-16…4-18) with the
+    coefficients x[:8] (`TYRE` order), the relaxation ODE integrated over the record from its
+    steady state (trapezoidal input, exact decay per step)."""
+    b = x[:8]
+    f = sig.fz_kn
+    pneu = ((b[0] * f**2 + b[1] * f + b[2]) * sig.delta_p + b[3] * f * sig.phi_p
+            + b[4] * f * sig.gamma)
+    lr = b[5] * f**2 + b[6] * f + b[7]
+    # L_R < 0 in this sign convention (a decaying ODE); a trial step past 0 is held stable
+    tau = jnp.maximum(-lr, 1e-4) / sig.spin
+    decay = jnp.exp(-sig.dt / tau)
+    drive = 0.5 * (pneu[:-1] + pneu[1:])
+
+    def step(fy, inp):
+        a, p = inp
+        fy = a * fy + (1.0 - a) * p
+        return fy, fy
+
+    _, rest = jax.lax.scan(step, pneu[0], (decay[:-1], drive))
+    return jnp.concatenate([pneu[:1], rest])
+
+
+def equations(x, sig: Signals):
+    """The lateral (N) and yaw (N·m) equations' residuals (n, 2): tyre side − body side."""
+    fy = lateral_forces(x, sig)
+    ixx, iyy, izz, ixz, mx, mz = (x[8 + k] for k in range(6))
+    z = jnp.zeros_like(mx)
+    inertia = jnp.stack([jnp.stack([ixx, z, ixz]), jnp.stack([z, iyy, z]),
+                         jnp.stack([ixz, z, izz])])
+    mg = jnp.stack([mx, z, mz])
+    w, wd, f_o = sig.omega, sig.omega_dot, sig.f_o
+    body_force = (sig.mass * f_o + jnp.cross(wd, mg)
+                  + jnp.cross(w, jnp.cross(w, jnp.broadcast_to(mg, w.shape))))
+    lat = jnp.sum(sig.lat_arm * fy, axis=1) - jnp.sum(sig.u * body_force, axis=1)
+    iw = w @ inertia
+    body_moment = wd @ inertia + jnp.cross(w, iw) + jnp.cross(jnp.broadcast_to(mg, f_o.shape),
+                                                              f_o)
+    yaw = jnp.sum(sig.yaw_arm * fy, axis=1) - jnp.sum(sig.normal * body_moment, axis=1)
+    return jnp.stack([lat, yaw], axis=1)
+
+
+@eqx.filter_jit
+def _iv_step(x, scale, weights, rows, sig_e, sig_o, free):
+    """One instrumented Gauss–Newton step on the two half records: residuals r = [r_e; r_o],
+    Jacobians J = [J_e; J_o], instruments Z = [J_o; J_e] (the other half's Jacobian at the
+    same instants: its noise is independent of r's), Δ = −(Zᵀ J)⁻¹ Zᵀ r. Returns the new x,
+    the residuals (2, rows, 2), J and Z (scaled parameters)."""
+    free = np.asarray(free)
+
+    def full(theta):
+        return x.at[free].set(theta * scale)
+
+    def res(theta, sig):
+        return equations(full(theta), sig)[rows] * weights
+
+    theta = x[free] / scale
+    r = jnp.stack([res(theta, sig_e), res(theta, sig_o)])
+    je = jax.jacfwd(lambda t: res(t, sig_e))(theta).reshape(-1, theta.size)
+    jo = jax.jacfwd(lambda t: res(t, sig_o))(theta).reshape(-1, theta.size)
+    J = jnp.concatenate([je, jo])
+    Z = jnp.concatenate([jo, je])
+    step = jnp.linalg.solve(Z.T @ J, Z.T @ r.reshape(-1))
+    return full(theta - step), r, J, Z
+
+
+@eqx.filter_jit
+def _linear_start(base, sig, rows, weights, free):
+    """Least squares of the free coefficients but the relaxation's at L_R =
+    `START_RELAXATION`: the equations are linear in them there (the lateral forces are a
+    linear filter of them)."""
+    base = base.at[TYRE.index("b_L_0")].set(START_RELAXATION)
+    free = np.asarray(free) & np.array([n not in ("b_L_2", "b_L_1", "b_L_0") for n in NAMES])
+
+    def fn(v):
+        return (equations(base.at[free].set(v), sig)[rows] * weights).ravel()
+
+    v0 = jnp.zeros(int(free.sum()))
+    r0 = fn(v0)
+    J = jax.jacfwd(fn)(v0)
+    s = jnp.linalg.norm(J, axis=0)
+    s = jnp.where(s > 0, s, 1.0)
+    sol = lx.linear_solve(lx.MatrixLinearOperator(J / s), -r0,
+                          lx.AutoLinearSolver(well_posed=False))
+    return base.at[free].set(sol.value / s)
+
+
+@dataclasses.dataclass(frozen=True)
+class JointReport(IdentificationReport):
+    """The joint vehicle + tyre identification ((4-1)…(4-3), `identify`): the estimates in
+    `NAMES` order, their covariance, the equations' residuals (n_rows, 2) and residual σ, the
+    Correvit delay removed (s), and the consistency. As the shared report
+    (`IdentificationReport`): a coefficient is determined when |x|/σ ≥ 3.29
+    (`onboard.SIGNIFICANCE`) and the fit is consistent."""
+
+    x: np.ndarray
+    covariance: np.ndarray
+    residual: np.ndarray
+    residual_sigma: np.ndarray
+    delay: float
+    mass: float
+    converged: bool
+    consistency: object = None
+    held_mask_: np.ndarray | None = None
+
+    family = "onboard_joint"
+
+    @property
+    def names(self):
+        return NAMES
+
+    @property
+    def estimates(self):
+        return np.asarray(self.x, float)
+
+    @property
+    def sigmas(self):
+        s = np.sqrt(np.abs(np.diagonal(self.covariance)))
+        return np.where(self.held, np.nan, s)
+
+    @property
+    def sigma_pct(self):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.x != 0, 100.0 * self.sigmas / np.abs(self.x), np.nan)
+
+    @property
+    def estimate_units(self):
+        return tuple(_UNITS[n] for n in NAMES)
+
+    @property
+    def held(self):
+        if self.held_mask_ is None:
+            return np.zeros(len(NAMES), bool)
+        return np.asarray(self.held_mask_, bool)
+
+    @property
+    def identifiable(self):
+        crit = _critical()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z2 = (self.estimates / self.sigmas) ** 2
+        return np.isfinite(z2) & (z2 >= crit) & ~self.held
+
+    @property
+    def reasons(self):
+        crit = np.sqrt(_critical())
+        out = []
+        for i in range(len(NAMES)):
+            if self.held[i]:
+                out.append(f"held at {self.estimates[i]:g}")
+            elif not self.converged:
+                out.append("the fit did not converge")
+            elif not self.identifiable[i]:
+                out.append(f"not determined: |x|/sigma "
+                           f"{abs(self.estimates[i]) / self.sigmas[i]:.2g} < {crit:.3g}")
+            else:
+                out.append("")
+        return tuple(out)
+
+    @property
+    def residuals(self):
+        return {}
+
+    def table(self) -> str:
+        head = (f"joint vehicle + tyre identification (4-3), mass {self.mass:g} kg given, "
+                f"Correvit delay removed {1000 * self.delay:.1f} ms, {len(self.residual)} "
+                f"instants; residual sigma lateral {self.residual_sigma[0]:.3g} N, yaw "
+                f"{self.residual_sigma[1]:.3g} N·m")
+        lines = [head] + [f"{n:10s} {x:14.6g} ± {s:.3g}" for n, x, s in
+                          zip(NAMES, self.estimates, self.sigmas, strict=True)]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {"mass": self.mass, "delay_s": self.delay, "converged": self.converged,
+                "estimates": dict(zip(NAMES, self.estimates.tolist(), strict=True)),
+                "sigmas": dict(zip(NAMES, self.sigmas.tolist(), strict=True)),
+                "residual_sigma": self.residual_sigma.tolist(),
+                "consistency": None if self.consistency is None
+                else self.consistency.summary()}
+
+
+def _critical():
+    return float(scipy.stats.chi2.isf(onboard.SIGNIFICANCE, 1))
+
+
+def signals(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
+            delay: float = 0.0, kinematics=None) -> tuple[Signals, np.ndarray]:
+    """The joint model's `Signals` of a checked record and its per-instant validity.
+    `tyre_vertical` = (k_t N/m, R_0 m, c_t N·s/m): F_z = k_t (R_0 − r) − c_t ṙ."""
+    k_t, r_0, c_t = (float(v) for v in tyre_vertical)
+    js = onboard.joint_signals(data, options, correvit_delay_s=delay, kinematics=kinematics)
+    fz = (k_t * (r_0 - js["radius"]) - c_t * js["radius_rate"]) / 1000.0
+    t = np.asarray(data["time"])
+    sig = Signals(fz, js["delta_p"], js["phi_p"], js["gamma"], js["spin"], js["lat_arm"],
+                  js["yaw_arm"], js["omega"], js["omega_dot"], js["f_o"], js["normal"],
+                  js["u"], jnp.asarray(t[1] - t[0]), jnp.asarray(float(mass)))
+    return sig, np.asarray(js["valid"])
+
+
+def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
+             delay: float | None = None, kinematics=None, stride: int | None = None,
+             held: dict | None = None, max_steps: int = 200) -> JointReport:
+    """The joint vehicle + tyre identification (4-1…4-3; see the module docstring) on an
+    on-board record (`vehicle.measure`'s channels; the wheel forces are not used): `mass` the
+    car's mass (kg), `tyre_vertical` (k_t N/m, R_0 m, c_t N·s/m) the tyres' vertical data,
+    `delay` the Correvit's (s; None: estimated as `onboard.identify` does), `kinematics` the
+    30-DOF model's K&C tables (`vehicle_kc`) or None, `stride` samples between the equations'
+    rows (default one window); `held` {name: value} the parameters held (default
+    `DEFAULT_HELD`), the others estimated.
+
+    **Returns:** `JointReport`. **Raises:** `InputError` for a bad record or mass."""
+    if not (np.isfinite(mass) and mass > 0):
+        raise InputError(f"mass {mass!r}: the car's mass in kg, > 0.")
+    tv = np.asarray(tyre_vertical, float)
+    if tv.shape != (3,) or not np.all(np.isfinite(tv)) or tv[0] <= 0 or tv[1] <= 0:
+        raise InputError("tyre_vertical must be (k_t > 0 N/m, R_0 > 0 m, c_t N·s/m).")
+    data = onboard.check(data, options)
+    delay_sigma = 0.0
+    if delay is None:
+        delay, delay_sigma = onboard.estimate_delay(data, options)
+    # the even and the odd samples: two records of one motion with independent noise, the
+    # instruments of each other (as `onboard.iv_fit`): the lateral forces are a filter of
+    # measured inputs, and least squares would shorten the noise by lengthening the relaxation
+    hv = onboard.halves(data)
+    parts = [signals({k: (v[h] if k in onboard.PER_SAMPLE else v) for k, v in hv.items()},
+                     mass=mass, tyre_vertical=tv, options=options, delay=delay,
+                     kinematics=kinematics) for h in (0, 1)]
+    (sig_e, valid_e), (sig_o, valid_o) = parts
+    valid = valid_e & valid_o
+    t = np.asarray(hv["time"][0])
+    half = max(int(round(options.window_time / (t[1] - t[0]) / 2)), 1)
+    stride = stride or 2 * half + 1
+    rows = np.arange(2 * half + 1, len(t) - 2 * half - 1, stride)
+    rows = rows[valid[rows]]
+    sig = sig_e
+    if rows.size < 2 * len(NAMES):
+        raise InputError(f"{rows.size} valid instants: too few for {len(NAMES)} parameters; "
+                         "give a longer record.")
+    weights = jnp.array([1.0 / 50.0, 1.0 / 50.0])
+    held = DEFAULT_HELD if held is None else dict(held)
+    unknown = [k for k in held if k not in NAMES]
+    if unknown:
+        raise InputError(f"held: unknown parameter(s) {unknown}; the joint model's: "
+                         f"{', '.join(NAMES)}.")
+    free = tuple(n not in held for n in NAMES)
+    base = jnp.asarray([float(held.get(n, 0.0)) for n in NAMES])
+    x0 = _linear_start(base, sig, rows, weights, free)
+    if "b_L_0" in held:
+        x0 = x0.at[TYRE.index("b_L_0")].set(float(held["b_L_0"]))
+    fmask = np.asarray(free)
+    # the equations weighted by their residual σ at the start, then instrumented Gauss–Newton
+    # steps on both halves (least squares would drift to a long relaxation: it filters the
+    # measured inputs' noise; on the synthetic car L_R went from −0.5 to −5)
+    scale = jnp.where(jnp.abs(x0[fmask]) > 0, jnp.abs(x0[fmask]), 1.0)
+    _, r0, _, _ = _iv_step(x0, scale, weights, rows, sig_e, sig_o, free)
+    rs = np.sqrt(np.mean(np.asarray(r0) ** 2, axis=(0, 1))) / np.asarray(weights)
+    weights = jnp.asarray(1.0 / rs)
+    x = x0
+    converged = False
+    sc = np.asarray(scale)
+
+    def size(step):
+        d = np.asarray(step)[fmask] / sc
+        return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else np.inf
+
+    x_new, *_ = _iv_step(x, scale, weights, rows, sig_e, sig_o, free)
+    step, alpha = x_new - x, IV_DAMPING
+    for _ in range(IV_STEPS):
+        # damped steps, halved while the next step would not be shorter: Zᵀ J leaves out the
+        # instruments' own change, and full steps oscillated, growing, on the synthetic car
+        for _ in range(8):
+            cand = x + alpha * step
+            cand_new, *_ = _iv_step(cand, scale, weights, rows, sig_e, sig_o, free)
+            if size(cand_new - cand) < size(step):
+                break
+            alpha *= 0.5
+        else:
+            break
+        x, step = cand, cand_new - cand
+        alpha = min(1.0, 2.0 * alpha)
+        if size(step) < IV_TOL:
+            break
+    converged = size(step) < IV_TOL
+    _, r, J, Z = _iv_step(x, scale, weights, rows, sig_e, sig_o, free)
+    r, x, J, Z = np.asarray(r), np.asarray(x), np.asarray(J), np.asarray(Z)
+    result = optx.RESULTS.successful if converged else optx.RESULTS.nonlinear_max_steps_reached
+    rs = np.sqrt(np.mean(r**2, axis=(0, 1))) / np.asarray(weights)
+    # sandwich (Zᵀ J)⁻¹ (Σ_t g_t g_tᵀ) (Jᵀ Z)⁻¹, clustered by instant (both halves, both
+    # equations: they share the body's noise)
+    white = r.reshape(-1)
+    p = int(fmask.sum())
+    bread = np.linalg.inv(Z.T @ J)
+    g = (Z * white[:, None]).reshape(2, len(rows), 2, p).sum(axis=(0, 2))
+    meat = g.T @ g
+    n = white.size
+    cov_s = bread @ meat @ bread.T * (len(rows) / (len(rows) - 1) * (n - 1) / max(n - p, 1))
+    rw = r.reshape(2, len(rows), 2)
+    r = r[0] / np.asarray(weights)
+    cov = np.zeros((len(NAMES), len(NAMES)))
+    sc = np.asarray(scale)
+    cov[np.ix_(fmask, fmask)] = cov_s * np.outer(sc, sc)
+    # the Correvit delay's σ is not carried in (`onboard.identify` does it); the report says
+    # the delay removed
+    # the halves' difference holds the noise, their sum the noise and a misfit of the model
+    noise = np.sqrt(np.mean((rw[0] - rw[1]) ** 2, axis=0) / 2.0)
+    white = (rw[0] + rw[1]) / np.sqrt(2.0) / noise
+    con = consistency_from_residuals(
+        [white.T], [white.size], p, ("lateral", "yaw"), measurements=("equations",),
+        note=("the even/odd half-records' residuals, their sum against their difference; "
+              f"limit chi2/dof {onboard.MISFIT_RATIO:g}"))
+    con = dataclasses.replace(con, critical=onboard.MISFIT_RATIO * con.dof,
+                              consistent=bool(np.isfinite(con.chi2)
+                                              and con.chi2 <= onboard.MISFIT_RATIO * con.dof))
+    _ = delay_sigma
+    return JointReport(x, cov, r, rs, float(delay), float(mass),
+                       bool(result == optx.RESULTS.successful), con, ~fmask)
+
+
+def truth(vehicle) -> dict:
+    """The synthetic car's (`diffsusp.tyre.vehicle.Vehicle`) vehicle parameters in `VEHICLE`
+    order, of the whole car (body and the four unsprung point masses at their design
+    position) about the body origin: dict name → value, and the mass."""
+    r = np.asarray(vehicle.corners, float)
+    mu = float(vehicle.unsprung)
+    ixx, iyy, izz = np.asarray(vehicle.inertia, float)
+    inertia = np.diag([ixx, iyy, izz]) + mu * (np.sum(r * r) * np.eye(3) - r.T @ r)
+    return {"I_xx": inertia[0, 0], "I_yy": inertia[1, 1], "I_zz": inertia[2, 2],
+            "I_xz": inertia[0, 2], "m_x_G": mu * r[:, 0].sum(), "m_z_G": mu * r[:, 2].sum(),
+            "mass": float(vehicle.mass) + 4 * mu}
+
+
+__all__ = ["DEFAULT_HELD", "IV_DAMPING", "IV_STEPS", "IV_TOL", "JointReport", "NAMES",
+           "START_RELAXATION", "Signals", "TYRE", "VEHICLE", "equations", "identify",
+           "lateral_forces", "signals", "truth"]
