@@ -1,15 +1,17 @@
 """Benchmark of the static-equilibrium solver.
 
 Run by hand: `python benchmarks/statics.py [--quick]`. Prints a table and writes
-benchmarks/results/statics.json. Measures, after compilation: equilibria per second for batches
-of 1, 13, 100, 1 000 and 10 000 load cases on pseudo_mcpherson and double_wishbone, the latency
-of one solve, the compile time, the cost of the full Jacobian of all marker positions with
-respect to all stiffnesses for the 13 thesis cases, and the same equilibria solved by the plain
-NumPy/SciPy Newton of tests/oracle.py (finite-difference Jacobian) in the same process, reported
-as a ratio. Timings are never asserted anywhere.
+benchmarks/results/statics.json. Measures the programs a first `solve_statics` call on the 13
+thesis cases compiles and that call's warm wall time; after compilation: equilibria per second
+for batches of 1, 13, 100, 1 000 and 10 000 load cases on pseudo_mcpherson and
+double_wishbone, the latency of one solve, the compile time, the cost of the full Jacobian of
+all marker positions with respect to all stiffnesses for the 13 thesis cases, and the same
+equilibria solved by the plain NumPy/SciPy Newton of tests/oracle.py (finite-difference
+Jacobian) in the same process, reported as a ratio. Timings are never asserted anywhere.
 """
 
 import argparse
+import logging
 import os
 import pathlib
 import resource
@@ -29,6 +31,8 @@ from diffsusp.models import double_wishbone, pseudo_mcpherson, thesis_load_cases
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 import oracle  # noqa: E402
+
+CONVERGED = ds.statics.Status.CONVERGED
 
 
 def envelope(n, rng, vertical=(1500.0, 7500.0), horizontal=4000.0):
@@ -67,7 +71,7 @@ def bench_model(name, mech, rng, sizes, baseline_cases):
             rows.append(dict(model=name, cases=n, variant=label, seconds=dt, per_second=n / dt,
                              cpu_seconds=cpu, per_cpu_second=n / cpu, compile_and_first=first,
                              mean_iterations=float(np.mean(sol.iterations)),
-                             failed=int(np.sum(np.asarray(sol.status) != 0))))
+                             failed=int(np.sum(np.asarray(sol.status) != CONVERGED))))
     one = mech.loads(forces={"contact_patch": jnp.array([0.0, 0.0, 4500.0])})
     latency, _ = timed(lambda: ds.solve_statics(mech, one), repeats=20)
     # Baseline: the NumPy/SciPy Newton with a finite-difference Jacobian, same cases.
@@ -105,6 +109,37 @@ def program_cost(name, mech, n_cases, rng):
                 compile=t3 - t2, run=run)
 
 
+def thesis_call(mech):
+    """One `solve_statics` call on the 13 thesis cases, flags included: the programs its first
+    call compiles (names from jax_log_compiles) and the warm wall time (best and median of 50)."""
+    loads = thesis_load_cases(mech)
+    names = []
+
+    class Compiles(logging.Handler):
+        def emit(self, record):
+            message = record.getMessage()
+            if message.startswith("Compiling "):
+                names.append(message.split(" ")[1])
+
+    handler = Compiles()
+    logging.getLogger("jax").addHandler(handler)
+    jax.config.update("jax_log_compiles", True)
+    try:
+        t0 = time.perf_counter()
+        jax.block_until_ready(ds.solve_statics(mech, loads).q)
+        first = time.perf_counter() - t0
+    finally:
+        jax.config.update("jax_log_compiles", False)
+        logging.getLogger("jax").removeHandler(handler)
+    wall = []
+    for _ in range(50):
+        t0 = time.perf_counter()
+        jax.block_until_ready(ds.solve_statics(mech, loads).q)
+        wall.append(time.perf_counter() - t0)
+    return dict(compiled=names, first_call=first, warm_best=min(wall),
+                warm_median=float(np.median(wall)))
+
+
 def jacobian_cost(mech):
     loads = thesis_load_cases(mech)
 
@@ -133,6 +168,7 @@ def main():
     if args.throughput:
         sizes = (1000,)
     results = dict(rows=[], models=[], programs=[])
+    results["thesis_call"] = thesis_call(pseudo_mcpherson())  # first: nothing compiled yet
     for name, mech in (("pseudo_mcpherson", pseudo_mcpherson()),
                        ("double_wishbone", double_wishbone())):
         if not args.throughput:
@@ -151,7 +187,7 @@ def main():
         sol = ds.solve_statics(mech, loads, throw=False, chunk=4096)
         jax.block_until_ready(sol.q)
         results["batch_100k"] = dict(seconds=time.perf_counter() - t0,
-                                     failed=int(np.sum(np.asarray(sol.status) != 0)))
+                                     failed=int(np.sum(np.asarray(sol.status) != CONVERGED)))
     results["load_average"] = os.getloadavg()
     results["max_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
@@ -178,6 +214,11 @@ def main():
               f"{jac['seconds'] * 1e3:.1f} ms (compile+first {jac['compile_and_first']:.1f} s)")
     if "batch_100k" in results:
         print(f"100 000 cases (chunks of 4096): {results['batch_100k']['seconds']:.1f} s")
+    call = results["thesis_call"]
+    print(f"pseudo_mcpherson, one solve_statics call on the 13 thesis cases (flags included): "
+          f"first call {call['first_call']:.1f} s compiling {len(call['compiled'])} program(s) "
+          f"({', '.join(call['compiled'])}); warm {call['warm_best'] * 1e3:.2f} ms best, "
+          f"{call['warm_median'] * 1e3:.2f} ms median")
     print(f"load average during the run (1, 5, 15 min): {results['load_average']}")
     print(f"peak RSS: {results['max_rss_mb']:.0f} MB")
     save_results("statics_throughput" if args.throughput else "statics", results, args.quick)

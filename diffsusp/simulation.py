@@ -18,8 +18,15 @@ import numpy as np
 
 from .errors import InputError, ModelFileError
 from .io import ModelFile, loads_from_table, read_table, results_table
-from .io.tables import RESULT_STATUS, Table, TableWriter
-from .statics import bushing_states, flagged_cases, solve_statics_chunks, spring_states
+from .io.tables import Table, TableWriter
+from .statics import (
+    STATUS_TEXT,
+    Status,
+    bushing_states,
+    flagged_cases,
+    solve_statics_chunks,
+    spring_states,
+)
 
 __all__ = ["CHUNK", "TableRun", "load_cases", "simulate_table"]
 
@@ -68,7 +75,7 @@ class TableRun:
     def empty(cls, n: int) -> "TableRun":
         """A run of `n` cases none of which is solved yet."""
         nan = np.full(n, np.nan)
-        return cls(status=np.full(n, -1, dtype=int), stable=np.zeros(n, bool),
+        return cls(status=np.full(n, int(Status.NOT_SOLVED), dtype=int), stable=np.zeros(n, bool),
                    law_valid=np.zeros(n, bool), residual=nan, constraint_error=nan.copy())
 
     def record(self, start: int, stop: int, sol) -> None:
@@ -85,9 +92,9 @@ class TableRun:
         finite = self.residual[np.isfinite(self.residual)]
         return dict(
             cases=int(self.status.size),
-            converged=int(np.sum(self.status == 0)),
-            not_solved=int(np.sum(self.status == -1)),
-            failed=[dict(case=int(c), status=RESULT_STATUS.get(int(self.status[c]),
+            converged=int(np.sum(self.status == Status.CONVERGED)),
+            not_solved=int(np.sum(self.status == Status.NOT_SOLVED)),
+            failed=[dict(case=int(c), status=STATUS_TEXT.get(int(self.status[c]),
                                                                str(self.status[c])),
                          residual=float(self.residual[c])) for c in flags["failed"]],
             unstable=flags["unstable"].tolist(),
@@ -159,6 +166,6 @@ def _unsolved(mech, n: int):
     """A stand-in solution for cases not solved: NaN outputs, status -1, flags 0."""
     nan = np.full(n, np.nan)
     return types.SimpleNamespace(
-        q=np.full((n, 6 * len(mech.parts)), np.nan), status=np.full(n, -1),
+        q=np.full((n, 6 * len(mech.parts)), np.nan), status=np.full(n, int(Status.NOT_SOLVED)),
         iterations=np.zeros(n), residual=nan, constraint_error=nan, stable=np.zeros(n, bool),
         law_valid=np.zeros(n, bool))

@@ -97,16 +97,37 @@ def pytest_unconfigure(config):
         shutil.rmtree(_owned_cache, ignore_errors=True)
 
 
+# Past these, the compiled programs are dropped at the end of a test module (see below).
+_MAX_MAPPINGS = 24_000  # Linux's vm.max_map_count is 65 530
+_MAX_RSS_BYTES = 5 << 30
+
+
+def _memory_is_filling() -> bool:
+    """True when this process's memory mappings or resident size near their limits (always
+    True where /proc cannot tell)."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            mappings = sum(1 for _ in f)
+        with open("/proc/self/statm") as f:
+            rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError):
+        return True
+    return mappings > _MAX_MAPPINGS or rss > _MAX_RSS_BYTES
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _release_compiled_programs():
-    """Drop every compiled program after each test module. XLA maps each CPU executable's code
-    into memory (~6 mappings each) and JAX's jit caches keep them alive: a worker that compiled
-    one half of the suite passed Linux's vm.max_map_count (65 530) and died with a segmentation
-    fault inside an XLA compile (CI, twice). Modules share programs in memory through their own
-    module-scoped fixtures, and across modules through the run's compilation cache."""
+    """Drop every compiled program after a test module when memory fills. XLA maps each CPU
+    executable's code into memory (~6 mappings each) and JAX's jit caches keep them alive: a
+    worker that compiled one half of the suite passed Linux's vm.max_map_count (65 530) and
+    died with a segmentation fault inside an XLA compile (CI, twice). Until then the programs
+    stay, so that the next modules of the worker reuse the traced and compiled programs they
+    share (the pseudo-McPherson's solves and K&C metrics...) instead of tracing them again;
+    across workers they share the run's compilation cache."""
     yield
-    jax.clear_caches()
-    gc.collect()
+    if _memory_is_filling():
+        jax.clear_caches()
+        gc.collect()
 
 
 # The files whose programs cost the most (measured: compile counts and seconds per file), handed

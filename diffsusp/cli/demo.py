@@ -27,6 +27,13 @@ def _timed(fn):
     return out, time.perf_counter() - t0
 
 
+def _status(code: int) -> str:
+    """The table's status cell: "ok", or the statics' text of why the case stopped."""
+    from diffsusp.statics import STATUS_TEXT, Status
+
+    return "ok" if code == Status.CONVERGED else STATUS_TEXT.get(code, "failed").split(":")[0]
+
+
 def register(app: typer.Typer) -> None:
     """Add `demo` to `app`."""
     app.command("demo")(demo_command)
@@ -68,14 +75,13 @@ def demo_command(
     for col in ("case", "Fz N", "Fy N", "Fx N", "Δx mm", "Δy mm", "Δz mm", "toe°", "camber°",
                 "iter", "status"):
         table.add_column(col, justify="right", no_wrap=True)
-    status_text = {0: "ok", 1: "max steps", 2: "non-finite", 3: "stalled"}
     for c in range(len(TABLE_5_1)):
         fv, fl, fx = TABLE_5_1[c]
         table.add_row(
             str(c + 1), f"{fv:.0f}", f"{fl:.0f}", f"{fx:.0f}",
             *(f"{v:+.2f}" for v in disp[c]),
             *(f"{kc.display(k, m[k][c]):+.3f}" for k in ("toe", "camber")),
-            str(int(sol.iterations[c])), status_text.get(int(sol.status[c]), "failed"),
+            str(int(sol.iterations[c])), _status(int(sol.status[c])),
         )
     term.print(table)
     term.print(

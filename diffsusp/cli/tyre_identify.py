@@ -10,7 +10,9 @@ terminal and to `--report` (.json, .csv, .html: one report object, `bench.BenchR
 parameter value, σ, σ %, status and reason, the consistency verdict; `--hold NAME` holds a
 coefficient at 0), the identified polynomial models to `--out` (.json),
 measured-vs-model figures to `--figures`; `--to-mf FILE.json` converts the polynomials to
-the Magic Formula 1989 set (§3.8, conversion radius `--radius`). Exit codes: 2 bad input
+the Magic Formula 1989 set (§3.8, conversion radius `--radius`); `--speed-test` runs the
+speed test (3-54) (`bench_speed`), `--select CHANNEL:LO:HI` keeps the samples in a range
+first (`bench_select`, thesis §1.3.6.3). Exit codes: 2 bad input
 (missing channels, non-monotonic time, a rate too low for the filter, an unknown structure),
 4 an unstable identified model (∂Fy_pneu/∂δ′ ≥ 0 on the data) unless `--allow-unstable`.
 """
@@ -79,6 +81,18 @@ def identify_command(
         help="Wheel-in-the-air spin-down run (t, segment, omega, FY, optional MZ): its "
              "aerodynamic force against spin speed is identified (laminar, turbulent or both) "
              "and removed from the bench data first.")] = None,
+    speed_test: Annotated[bool, typer.Option(
+        "--speed-test", help="The speed test (3-54): speed terms (omega, omega^2 times the "
+                             "slip and offset load polynomials) join the structure search; "
+                             "the verdict is in the report's notes.")] = False,
+    select: Annotated[list[str] | None, typer.Option(
+        "--select", help="Keep only the samples with CHANNEL in [LO, HI] (repeatable; the "
+                         "table's units: rad, mm/s, N...; d:CH its time derivative, int:CH "
+                         "its integral from the run's start), e.g. steer:-0.01745:0.01745 "
+                         "for |slip| <= 1 deg (thesis §1.3.6).")] = None,
+    select_duration: Annotated[float, typer.Option(
+        "--select-duration", help="--select: the selected runs are cut into segments of "
+                                  "this many seconds (shorter ones dropped).")] = 0.5,
 ):
     """Identify the polynomial tyre model, K_y on F_y and on M_z (two-step, structure search)."""
     structure = Structure(structure).value
@@ -114,10 +128,18 @@ def identify_command(
                 c.print(f"aerodynamic {law.channel} removed: {law.law} law, "
                         f"{law.laminar:.4g}·ω + {law.turbulent:.4g}·ω|ω| "
                         f"(σ {law.sigma[1]:.2g}, {law.sigma[2]:.2g}; ω in rad/s)")
+        if select:  # the predicate sample selection (thesis §1.3.6.3)
+            from diffsusp.tyre import bench_select
+            check_number(select_duration, "--select-duration", positive=True, unit="s")
+            table = bench_select.select(
+                table, dict(bench_select.parse_bound(b) for b in select),
+                duration=select_duration)
+            c.print(f"--select: {len(table['t'])} samples in "
+                    f"{int(table['segment'].max()) + 1} segments of {select_duration:g} s")
         rep = bench.identify(table, structure=structure, cutoff=cutoff,
                              rolling_radius=rolling_radius, significance=significance,
                              sigma_pct_threshold=sigma_pct, fixed=tuple(hold or ()),
-                             median=median)
+                             median=median, speed_test=speed_test)
         c.print(rep.table())
         if report is not None:
             bench.write_reports(report, [rep], extra={"aero": {k: v.to_dict() for k, v in

@@ -59,11 +59,19 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..errors import InputError
+from ..kc.second_order import pinned_solution
 from ..lsq import DEFAULT_LOSS_SCALE, LOSSES, robust
 from ..measure.data import Measurement, as_fit_data
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, solve_statics
-from .least_squares_report import FitReport, LMRun, NullDirection, StepRecord, fit_report
+from .least_squares_report import (
+    FitReport,
+    LMRun,
+    NullDirection,
+    StepRecord,
+    curvature_check,
+    fit_report,
+)
 from .params import Params
 
 __all__ = ["BatchFitReport", "FitReport", "NullDirection", "StepRecord", "least_squares",
@@ -161,6 +169,39 @@ def _rows_impl(problem: _Problem, u, mech, q, status, dq, tangents, prior_scale=
 
 def _predict_impl(data, mech, q, slices):
     return tuple(m.predict(mech, q[a:b]) for m, (a, b) in zip(data, slices, strict=True))
+
+
+@eqx.filter_jit
+def _curvature(problem: _Problem, u, sol, z_bar):
+    """Σᵢ z̄ᵢ∇²zᵢ(u) (p, p) of the whitened data residuals z at u (the fit's equilibria `sol`
+    pinned: `kc.second_order.pinned_solution`), z̄ their values there: p Hessian-vector products,
+    forward mode over the reverse-mode gradient of z·z̄."""
+    def data_rows(v):
+        mech = problem.params.apply(problem.mech, problem.params.to_physical(v))
+        q = pinned_solution(mech, problem.loads, sol).q
+        zs = []
+        for meas, (a, b) in zip(problem.data, problem.slices, strict=True):
+            z = robust(meas.residual(mech, q[a:b]) * meas.weight, problem.loss,
+                       problem.loss_scale)
+            zs.append(jnp.where(jnp.isfinite(z), z, 0.0).reshape(-1))
+        return jnp.concatenate(zs)
+
+    return jax.jacfwd(jax.grad(lambda v: data_rows(v) @ z_bar))(u)
+
+
+def _curvature_check(problem: _Problem, run: LMRun):
+    """The Gauss–Newton-vs-full-Hessian check at the fit's estimate (`CurvatureCheck`)."""
+    params = problem.params
+    u = jnp.asarray(run.u[0])
+    z, jac, _ = (np.asarray(a[0], dtype=float) for a in run.last)
+    n_data = z.size - len(params)
+    mech = params.apply(problem.mech, params.to_physical(u))
+    sol = solve_statics(mech, problem.loads, q0=run.q_last[0], max_steps=problem.inner_max_steps,
+                        throw=False, checks=False)
+    if np.any(np.asarray(sol.status) != Status.CONVERGED):
+        raise InputError("the curvature check needs every equilibrium at the estimate.")
+    s_term = np.asarray(_curvature(problem, u, sol, jnp.asarray(z[:n_data])))
+    return curvature_check(params.names, jac, s_term, np.asarray(params.derivative(u)))
 
 
 def _quiet(**kwargs):
@@ -611,6 +652,7 @@ def least_squares(
     identifiable_sigma: float = 1.0,
     max_sigma_pct: float = 10.0,
     callback: Callable[[int, StepRecord], None] | None = None,
+    curvature: bool = False,
 ) -> tuple[Mechanism, FitReport]:
     """Identify parameters of `mech` by nonlinear least squares through the equilibrium.
 
@@ -658,6 +700,11 @@ def least_squares(
     - `max_sigma_pct`: a log-scaled parameter with a larger σ% is not reported identified
       (`is_identified`, `rows()`), however identifiable (default 10 %, as `direct`).
     - `callback(step, record)`: called after every LM step with its `StepRecord`.
+    - `curvature`: also check the Gauss–Newton covariance against the full Hessian
+      JᵀJ + Σ rᵢ∇²rᵢ at the estimate (`report.curvature`, a `CurvatureCheck`: does the
+      residual curvature change σ by more than `CURVATURE_THRESHOLD`? It does with large
+      residuals, i.e. model mismatch). Exact second derivatives through the equilibrium (p
+      Hessian-vector products, one more compiled program: off by default).
 
     **Returns:** `(mech', report)`: the mechanism at the estimate (a parameter the data do not
     see keeps its start value, `returned_values`) and a `FitReport`.
@@ -674,6 +721,8 @@ def least_squares(
     # The first evaluation is at the start values: the identifiability gate's information.
     report = fit_report(params, problem, run, 0, loss, identifiable_sigma)
     report = dataclasses.replace(report, max_sigma_pct=float(max_sigma_pct))
+    if curvature:
+        report = dataclasses.replace(report, curvature=_curvature_check(problem, run))
     return params.apply(mech, jnp.asarray(returned_values(report))), report
 
 

@@ -29,6 +29,7 @@ from .. import plot
 from ..errors import InputError
 from ..kc.events import evaluate, raw_metrics
 from ..kc.metrics import DERIVATIVE_METRICS, display, display_unit, flagged
+from ..kc.second_order import hessian_vector_product
 from ..model.mechanism import Loads, Mechanism
 from ..statics import Status, marker_poses, solve_statics
 from .params import Params
@@ -83,6 +84,9 @@ class SensitivityReport(Report):
       θ is replaced by 1 unit: per mm).
     - `values`: metric name → `(cases,)`; `params`: names and values θ.
     - `event`, `x_name`, `x`: the K&C event's name and its input per case (empty for a rig).
+    - `direction` `(p,)` and `hvp`: metric name → `(cases, p)` ∇²m·v, the change of each
+      sensitivity per unit step of the parameters along v (second order,
+      `sensitivity(..., direction=v)`; None and empty otherwise).
 
     On the report base (`Report`): `rows()` (metric, rank, parameter, elasticity), `summary()`
     (everything, as plain data), `to_json()`, `write(path)` (.csv, .json).
@@ -98,6 +102,8 @@ class SensitivityReport(Report):
     event: str = ""
     x_name: str = ""
     x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    direction: np.ndarray | None = None
+    hvp: dict = dataclasses.field(default_factory=dict)
 
     def rows(self) -> list[dict]:
         """One row per metric and parameter, by decreasing |elasticity| (the largest over the
@@ -107,8 +113,9 @@ class SensitivityReport(Report):
 
     def summary(self) -> dict:
         """The event, the parameters and θ, and per metric its display unit, its values (in
-        that unit), the Jacobian, the elasticities and the parameters ranked."""
-        return plain({
+        that unit), the Jacobian, the elasticities and the parameters ranked; with a second
+        order (`direction`), v and each metric's Hessian-vector product."""
+        out = {
             "event": self.event, "x": {"name": self.x_name, "values": self.x},
             "params": list(self.params), "theta": self.theta,
             "metrics": {
@@ -117,7 +124,12 @@ class SensitivityReport(Report):
                        "ranked": [[p, v] for p, v in self.ranked(name)]}
                 for name in self.elasticity},
             "units": "jacobian: metric internal units (mm, N, rad) per parameter unit (N/mm, "
-                     "N·mm/rad, mm)"})
+                     "N·mm/rad, mm)"}
+        if self.direction is not None:
+            out["direction"] = self.direction
+            for name, h in self.hvp.items():
+                out["metrics"][name]["hvp"] = h
+        return plain(out)
 
     def ranked(self, metric: str, case: int | None = None) -> list[tuple[str, float]]:
         """Parameters by decreasing |elasticity| of `metric` (at `case`, or the largest over
@@ -197,8 +209,8 @@ def _metric_jacobian(rig, loads, params: Params, theta, derivatives: bool):
 
 
 def sensitivity(event, params, *, loads: Loads | None = None,
-                metrics: Sequence[str] | None = None, derivatives: bool = True
-                ) -> SensitivityReport:
+                metrics: Sequence[str] | None = None, derivatives: bool = True,
+                direction=None) -> SensitivityReport:
     """∂(every K&C metric)/∂(every parameter) over the cases of a K&C event.
 
     **Arguments:**
@@ -210,6 +222,14 @@ def sensitivity(event, params, *, loads: Loads | None = None,
     - `derivatives`: include the derivative metrics (bump steer, compliance steer, wheel
       rate...: second derivatives of the equilibrium, exact, but a much longer compile);
       `False` differentiates the geometric metrics only.
+    - `direction`: second order: a direction v `(p,)` of the parameters, or a parameter name
+      for its unit vector; the report's `hvp` then holds ∇²m·v for every metric (with v on a
+      bushing stiffness, how each metric's sensitivity to every parameter changes with that
+      stiffness). Computed by `kc.hessian_vector_product` (gradients by reverse mode, their
+      derivative along v by forward mode, the equilibria pinned), which also gives the
+      Jacobian. Without `metrics`, the metrics of `sensitivity_metrics` (the registry's
+      sensitivity set, not every metric: a third derivative of every metric is a very large
+      program).
 
     **Returns:** a `SensitivityReport`.
     """
@@ -219,7 +239,15 @@ def sensitivity(event, params, *, loads: Loads | None = None,
         raise InputError("sensitivity of a rig needs `loads` (or pass a KCEvent).")
     params = _as_params(rig.mech, params)
     theta = params.values(rig.mech)
-    values, jac = _metric_jacobian(rig, loads, params, theta, derivatives)
+    hvp = {}
+    if direction is None:
+        values, jac = _metric_jacobian(rig, loads, params, theta, derivatives)
+    else:
+        names = metrics
+        if names is None and hasattr(event, "metrics"):  # a KCEvent: the registry's choice
+            names = sensitivity_metrics(event, derivatives=derivatives)
+        out = hessian_vector_product(rig, params, direction, loads=loads, metrics=names)
+        values, jac, hvp, direction = out.values, out.gradient, out.hvp, out.direction
     values = {k: np.asarray(v) for k, v in values.items()}
     jac = {k: np.asarray(v) for k, v in jac.items()}
     if metrics is not None:
@@ -228,6 +256,7 @@ def sensitivity(event, params, *, loads: Loads | None = None,
             raise InputError(f"unknown metrics {sorted(unknown)}; available: {sorted(values)}.")
         values = {k: values[k] for k in metrics}
         jac = {k: jac[k] for k in metrics}
+    hvp = {k: np.asarray(v) for k, v in hvp.items() if k in jac}
     th = np.asarray(theta)
     unit = np.where(params.log_scaled, th, 1.0)
     elasticity = {}
@@ -237,7 +266,8 @@ def sensitivity(event, params, *, loads: Loads | None = None,
     return SensitivityReport(params=params.names, theta=th, values=values, jacobian=jac,
                              elasticity=elasticity, event=getattr(event, "name", ""),
                              x_name=getattr(event, "x_name", ""),
-                             x=np.asarray(getattr(event, "x", np.zeros(0))))
+                             x=np.asarray(getattr(event, "x", np.zeros(0))),
+                             direction=direction, hvp=hvp)
 
 
 # ----------------------------------------------------------------------------- experiment design

@@ -23,7 +23,8 @@ from .report import (
 )
 from .selection import display_value
 
-__all__ = ["FitReport", "NullDirection", "StepRecord"]
+__all__ = ["CURVATURE_THRESHOLD", "CurvatureCheck", "FitReport", "NullDirection", "StepRecord",
+           "curvature_check"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +55,91 @@ class NullDirection:
     text: str
 
 
+CURVATURE_THRESHOLD = 0.10
+"""`CurvatureCheck.matters` when the full Hessian changes a parameter's σ by more than this
+fraction of its Gauss–Newton σ (10 %: beyond it the reported σ is wrong in its first digit)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CurvatureCheck:
+    """Gauss–Newton against the full Hessian for the covariance at the estimate.
+
+    spec: guaranteed_least_squares §3.6–3.8 (the covariance of the estimate), stiffness §6
+    item 8. The fit's covariance is (JᵀJ)⁻¹ (Gauss–Newton, J the whitened Jacobian with the
+    prior rows); the Hessian of ½Σr² is H = JᵀJ + Σᵢ rᵢ∇²rᵢ. With small residuals (data the
+    model explains, noise only) the curvature term is a sum of noise-signed terms and
+    negligible; with large residuals (model mismatch, a missing parameter) it is not, and
+    (JᵀJ)⁻¹ misstates the uncertainty — then H⁻¹ (the observed information) is the one to read,
+    or the model to fix.
+
+    - `sigma_gauss_newton`, `sigma_full` `(p,)`: 1σ from (JᵀJ)⁻¹ and from H⁻¹ (physical units;
+      `sigma_full` NaN when H is not positive definite); `ratio` σ_full/σ_GN.
+    - `curvature_share` `(p,)`: |Σ rᵢ∇²rᵢ| on the diagonal over (JᵀJ) on the diagonal.
+    - `positive_definite`: H is (the estimate is a minimum of the full model).
+    - `threshold`: `matters` when some |ratio − 1| exceeds it, or H is not positive definite.
+    """
+
+    names: tuple[str, ...]
+    sigma_gauss_newton: np.ndarray
+    sigma_full: np.ndarray
+    ratio: np.ndarray
+    curvature_share: np.ndarray
+    positive_definite: bool
+    threshold: float = CURVATURE_THRESHOLD
+
+    @property
+    def matters(self) -> bool:
+        if not self.positive_definite:
+            return True
+        change = np.abs(self.ratio - 1.0)
+        return bool(np.any(change[np.isfinite(change)] > self.threshold))
+
+    @property
+    def text(self) -> str:
+        if not self.positive_definite:
+            return ("full Hessian not positive definite at the estimate: the residual curvature "
+                    "Σ r∇²r outweighs JᵀJ along some direction; the Gauss–Newton σ does not "
+                    "describe the uncertainty (model mismatch?).")
+        change = np.where(np.isfinite(self.ratio), np.abs(self.ratio - 1.0), 0.0)
+        k = int(np.argmax(change))
+        verdict = "changes" if self.matters else "does not change"
+        return (f"residual curvature Σ r∇²r {verdict} σ by more than "
+                f"{100 * self.threshold:.0f} % (largest: {self.names[k]}, σ full/Gauss–Newton "
+                f"{self.ratio[k]:.3g}).")
+
+
+def curvature_check(names: Sequence[str], jac: np.ndarray, curvature: np.ndarray,
+                    derivative: np.ndarray, threshold: float = CURVATURE_THRESHOLD
+                    ) -> CurvatureCheck:
+    """`CurvatureCheck` from the whitened Jacobian `jac` (rows, p) (prior rows included) and
+    the residual curvature Σ rᵢ∇²rᵢ `(p, p)`, both in internal coordinates u, and
+    `derivative` dθ/du `(p,)`."""
+    jac, curvature = np.asarray(jac, float), np.asarray(curvature, float)
+    d = np.abs(np.asarray(derivative, float))
+    gn = jac.T @ jac
+    full = gn + 0.5 * (curvature + curvature.T)
+
+    def sigma(h):
+        evals, vecs = np.linalg.eigh(h)
+        scale = max(float(np.max(np.abs(evals))), 1e-300)
+        if evals[0] <= 1e-12 * scale:
+            return None
+        return d * np.sqrt(np.diag((vecs / evals) @ vecs.T))
+
+    s_gn = sigma(gn)
+    if s_gn is None:
+        s_gn = np.full(len(d), np.inf)
+    s_full = sigma(full)
+    positive = s_full is not None
+    s_full = np.full(len(d), np.nan) if s_full is None else s_full
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = s_full / s_gn
+        share = np.abs(np.diag(curvature)) / np.diag(gn)
+    return CurvatureCheck(names=tuple(names), sigma_gauss_newton=s_gn, sigma_full=s_full,
+                          ratio=ratio, curvature_share=share, positive_definite=positive,
+                          threshold=float(threshold))
+
+
 @dataclasses.dataclass(frozen=True)
 class FitReport(IdentificationReport):
     """Result of `least_squares`.
@@ -73,6 +159,8 @@ class FitReport(IdentificationReport):
       prior), `chi2` Σr² of the data (non-robust), `n_residuals` (unmasked entries), `dof`.
     - `converged`, `steps`, `accepted_steps`, `history` (one `StepRecord` per LM step),
       `message`.
+    - `curvature`: the Gauss–Newton-vs-full-Hessian check of σ (`CurvatureCheck`), when the
+      fit was asked for it (`least_squares(..., curvature=True)`), else None.
     """
 
     names: tuple[str, ...]
@@ -101,6 +189,7 @@ class FitReport(IdentificationReport):
     stop_reason: str = ""
     max_sigma_pct: float = MAX_SIGMA_PCT
     gate_sigma_pct: np.ndarray | None = None
+    curvature: CurvatureCheck | None = None
 
     family: ClassVar[str] = "least_squares"
 
@@ -222,6 +311,8 @@ class FitReport(IdentificationReport):
         if self.null_space:
             lines.append("not seen by the data (σ of the combination):")
             lines += [f"  {d.text}  (σ {d.sigma:.3g})" for d in self.null_space]
+        if self.curvature is not None:
+            lines.append(f"covariance: {self.curvature.text}")
         return "\n".join(lines)
 
     def csv_rows(self) -> list[dict]:

@@ -610,11 +610,6 @@ def loads_from_table(mech, table: Table):
 
 # ------------------------------------------------------------------------------------- results
 
-RESULT_STATUS = {0: "converged", 1: "max_steps reached", 2: "non-finite", 3: "stalled",
-                 -1: "not solved (the run was interrupted)"}
-"""Meaning of the `status` column of a results table (`diffsusp.statics` status codes)."""
-
-
 FLAG_COLUMNS = ("stable", "law_valid")
 """Result columns after `status`: 1 where the equilibrium is stable (reduced tangent stiffness
 positive definite) / every bushing's projected angles are within their law's validity, 0
@@ -627,9 +622,9 @@ def results_table(mech, sol, loads: Table | None = None, *, first_case: int = 0,
     """One row per load case and a column per output of a batched `StaticSolution`.
 
     Columns (library units): `case` (0-based), the load columns of `loads` (converted to N,
-    N·mm, mm), `status` (see `RESULT_STATUS`), `stable` and `law_valid` (see `FLAG_COLUMNS`),
-    `iterations`, `residual` (largest force row
-    relative to the load scale), `constraint_error` (mm); per part `<part>.x`, `.y`, `.z` (mm,
+    N·mm, mm), `status` (the codes of `diffsusp.statics.Status`), `stable` and `law_valid`
+    (see `FLAG_COLUMNS`), `iterations`, `residual` (largest force row relative to the load
+    scale), `constraint_error` (mm); per part `<part>.x`, `.y`, `.z` (mm,
     translation of the part frame, which is the global frame at design) and `.gx`, `.gy`,
     `.gz` (Gibbs vector of its rotation from design); per bushing `<bushing>.dx` … `.dz`
     (deformation, mm, in J), `.ax` … `.az` (projected angles, rad), `.fx` … `.fz` (N) and

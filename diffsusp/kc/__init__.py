@@ -15,6 +15,7 @@ Definitions and signs (Adams/Car, per side): `diffsusp.kc.metrics`. Which marker
 """
 
 from .corner import Corner, ResolvedCorner, corners_of, default_corner, design_load
+from .designs import DesignBatch, design_batch
 from .events import (
     TABLES,
     KCEvent,
@@ -48,13 +49,14 @@ from .metrics import (
     flagged,
 )
 from .rig import add_driver, remove_drivers, with_rack
+from .second_order import HessianVectorProducts, Selection, hessian_vector_product, select
 
 __all__ = [
-    "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "KCEvent", "Metric", "ResolvedCorner",
-    "Rig", "add_driver", "aligning_torque", "anti_pitch", "braking", "compliance_matrix",
-    "corner_geometry", "corner_loads", "corners_of", "default_corner", "default_plots",
-    "derivative_metrics", "design_load", "display", "display_unit", "evaluate", "flagged",
-    "force_rig", "lateral_force", "load_table", "longitudinal_force", "opposite_travel",
-    "parallel_travel", "remove_drivers", "steering", "traction", "travel_rig", "vertical_force",
-    "with_rack",
+    "DERIVATIVE_METRICS", "METRICS", "TABLES", "Corner", "DesignBatch", "HessianVectorProducts",
+    "KCEvent", "Metric", "ResolvedCorner", "Rig", "Selection", "add_driver", "aligning_torque",
+    "anti_pitch", "braking", "compliance_matrix", "corner_geometry", "corner_loads", "corners_of",
+    "default_corner", "default_plots", "derivative_metrics", "design_batch", "design_load",
+    "display", "display_unit", "evaluate", "flagged", "force_rig", "hessian_vector_product",
+    "lateral_force", "load_table", "longitudinal_force", "opposite_travel", "parallel_travel",
+    "remove_drivers", "select", "steering", "traction", "travel_rig", "vertical_force", "with_rack",
 ]

@@ -37,6 +37,7 @@ from ..model import GROUND, Loads, Mechanism
 from ..statics import (
     STATUS_TEXT,
     StaticSolution,
+    Status,
     bushing_states,
     linearize,
     solve_statics,
@@ -336,12 +337,18 @@ def _derived(rig: Rig, m: dict, jac: dict) -> tuple[dict, dict]:
     return out, compliance
 
 
-@filter_jit
-def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
+def metrics_at(rig: Rig, loads: Loads, sol: StaticSolution):
     """Metrics and their derivatives at the equilibria `sol` (the implicit function theorem:
     dy/du = −J⁻¹ ∂r/∂u with J and ∂r/∂u by autodiff of the KKT residual, the same linear
     solve as `solve_statics`'s custom JVP rule), and the checks `solve_statics` would do
-    (stability margin from the same linearisation, the bushings' projected angles)."""
+    (stability margin from the same linearisation, the bushings' projected angles).
+
+    The second half of `evaluate`, for callers that solve the cases themselves (the design
+    batch) or differentiate the metrics through pinned equilibria (`kc.hessian_vector_product`).
+
+    **Returns:** (metrics: name → (cases,), compliance: corner prefix → (cases, 6, 6),
+    (stable, law_valid) flags (cases,), bushing angles (cases, bushings, 3)); NaN metrics where
+    `sol.status` is not converged."""
     mech = rig.mech
     n = mech.n_coordinates
     basis = _basis(rig)
@@ -366,13 +373,16 @@ def _metrics_kernel(rig: Rig, loads: Loads, sol: StaticSolution):
     derived, compliance = jax.vmap(lambda m_, j_: _derived(rig, m_, j_))(m, jac)
     metrics = {k: v for k, v in m.items() if not k.rsplit("/", 1)[-1].startswith("_")}
     metrics.update(derived)
-    ok = sol.status == 0
+    ok = sol.status == Status.CONVERGED
     metrics = {k: jnp.where(ok, v, jnp.nan) for k, v in metrics.items()}
     compliance = {k: jnp.where(ok[:, None, None], v, jnp.nan) for k, v in compliance.items()}
     angles = jax.lax.stop_gradient(angles)  # for the flags and the warning only
     law = jax.vmap(lambda a: law_validity(mech, None, angles=a))(angles)
     flags = (ok & (margin > STABILITY_TOLERANCE), ok & (law <= 1.0))
     return metrics, compliance, flags, jnp.where(ok[:, None, None], angles, 0.0)
+
+
+_metrics_kernel = filter_jit(metrics_at)
 
 
 def evaluate(rig: Rig, loads: Loads, *, q0: Float[Array, "cases n"] | None = None,
@@ -435,7 +445,7 @@ class KCEvent:
 
     @property
     def converged(self) -> np.ndarray:
-        return np.asarray(self.solution.status) == 0
+        return np.asarray(self.solution.status) == Status.CONVERGED
 
     @property
     def prefixes(self) -> tuple[str, ...]:
@@ -555,7 +565,7 @@ def _run(name, rig, loads, x, x_name, x_unit, held, q0=None, throw=True, label=N
          **solver) -> KCEvent:
     sol, metrics, compliance = evaluate(rig, loads, q0=q0, **solver)
     status = np.asarray(sol.status)
-    bad = np.flatnonzero(status != 0)
+    bad = np.flatnonzero(status != Status.CONVERGED)
     if bad.size and throw:
         c = int(bad[0])
         raise ConvergenceError(

@@ -10,14 +10,8 @@ from .outputs import (
     part_poses,
     spring_states,
 )
-from .solve import (
-    STATUS_TEXT,
-    StaticSolution,
-    Status,
-    solve_statics,
-    solve_statics_chunks,
-    solve_sweep,
-)
+from .solve import StaticSolution, solve_statics, solve_statics_chunks, solve_sweep
+from .status import STATUS_TEXT, Status
 from .validation import ValidationReport, validate
 
 __all__ = [

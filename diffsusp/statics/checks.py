@@ -53,6 +53,7 @@ from ..errors import ModelWarning
 from ..model.mechanism import Loads, Mechanism
 from ._linearize import linearize
 from .outputs import bushing_states
+from .status import Status
 
 STABILITY_TOLERANCE = 1e-9
 """Smallest margin λ_min(S)/max|λ(S)| of a stable equilibrium (see the module docstring)."""
@@ -133,6 +134,36 @@ def stability_margins(mech: Mechanism, stiffness: Float[Array, "cases n n"],
     return jax.lax.map(one, (stiffness, constraint_jacobian))
 
 
+def kkt_stability_margin(mech: Mechanism, jacobian: Float[Array, "k k"]) -> Float[Array, ""]:
+    """`stability_margin` of one equilibrium from a KKT Jacobian in twist coordinates (per part
+    the displacement of its reference point and a rotation vector; `kernel.assemble_twist`),
+    e.g. the one the Newton factorised at the solution: K = −J[:n, :n], Φ_δ = J[n:, :n].
+
+    At a KKT point the reduced stiffness in twist and in Gibbs coordinates are congruent (the
+    moments vanish, so the Gibbs Jacobian is Tᵀ·J·T with T = diag(I, G(b))), hence the same
+    sign of the margin (module docstring); its value differs by the conditioning of G(b),
+    which is 1 at design. The null-space basis comes from a complete QR of Φ_δᵀ (any
+    orthonormal basis gives the same eigenvalues), the smallest LAPACK call that gives one.
+    Not differentiated; NaN when the Jacobian is not finite."""
+    jacobian = jax.lax.stop_gradient(jacobian)
+    n = mech.topology.n
+    d = _coordinate_scale(mech)
+    k = -d[:, None] * jacobian[:n, :n] * d[None, :]
+    a = jacobian[n:, :n] * d[None, :]
+    finite = jnp.all(jnp.isfinite(jacobian))
+    m = a.shape[0]
+    if m:
+        a = jnp.where(finite, a, jnp.eye(*a.shape, dtype=a.dtype))
+        basis = jnp.linalg.qr(a.T, mode="complete")[0][:, m:]
+        k = basis.T @ jnp.where(finite, k, 0.0) @ basis
+    if k.shape[0] == 0:
+        return jnp.ones((), k.dtype)
+    sym = jnp.where(finite, 0.5 * (k + k.T), jnp.eye(k.shape[0], dtype=k.dtype))
+    eig = jnp.linalg.eigvalsh(sym)
+    margin = eig[0] / jnp.maximum(jnp.max(jnp.abs(eig)), jnp.finfo(k.dtype).tiny)
+    return jnp.where(finite, margin, jnp.nan)
+
+
 def _carried_rotations(mech: Mechanism):
     """(bushings, 3) mask of the rotation axes that carry a law (an axis with no law has no
     validity to leave)."""
@@ -159,8 +190,11 @@ def warn_law_validity(mech: Mechanism, angles, stacklevel: int = 2) -> None:
     a law beyond its validity, if any; `angles` (cases, bushings, 3) rad, concrete."""
     if not mech.bushings.names:
         return
-    angles = np.abs(np.asarray(angles)).reshape(-1, len(mech.bushings.names), 3)
-    angles = np.where(np.asarray(_carried_rotations(mech)), angles, 0.0)
+    b = mech.bushings
+    carried = ((np.asarray(b.k_rot) != 0) | (np.asarray(b.cubic_rot) != 0)
+               | np.asarray(b.spline_axes, dtype=bool).reshape(-1, 6)[:, 3:])
+    angles = np.abs(np.asarray(angles)).reshape(-1, len(b.names), 3)
+    angles = np.where(carried, angles, 0.0)
     ratio = angles / np.radians(ANGLE_LIMITS_DEG)
     if np.any(ratio > 1.0):
         c, e, a = np.unravel_index(np.argmax(ratio), ratio.shape)
@@ -229,7 +263,7 @@ def with_flags(mech: Mechanism, loads: Loads, sol):
         index = np.minimum(np.arange(start, start + _FLAG_CHUNK), n - 1)
         real = np.arange(start, start + _FLAG_CHUNK) < n
         out = _flags(mech, jax.tree.map(lambda a, index=index: a[index], loads_h), q[index],
-                     lam[index], (status[index] == 0) & real)
+                     lam[index], (status[index] == Status.CONVERGED) & real)
         stable.append(np.asarray(out[0])[real])
         law_valid.append(np.asarray(out[1])[real])
     stable, law_valid = jnp.asarray(np.concatenate(stable)), jnp.asarray(np.concatenate(law_valid))

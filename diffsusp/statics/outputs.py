@@ -24,6 +24,7 @@ from .kernel import (
     spring_tension,
     to_internal,
 )
+from .status import Status
 
 
 def _batched(fn):
@@ -148,20 +149,21 @@ def flagged_cases(sol) -> dict[str, np.ndarray]:
     equilibrium" (failures are reported per case). `sol` is a `StaticSolution` with a leading
     case axis, or anything with its `status`, `stable` and `law_valid` arrays:
 
-    - 'failed': the cases that did not converge (status > 0; a negative status, a case that
-      was not solved, is in no list);
+    - 'failed': the cases that did not converge (a case that was not solved,
+      `Status.NOT_SOLVED`, is in no list);
     - 'unstable': converged cases whose `stable` flag is False;
     - 'law_invalid': converged cases whose `law_valid` flag is False.
 
     A flag that is None (a solution computed under a transformation) flags no case.
     """
     status = np.atleast_1d(np.asarray(sol.status))
-    converged = status == 0
+    converged = status == Status.CONVERGED
 
     def failing(flag):
         if flag is None:
             return np.zeros(0, dtype=int)
         return np.flatnonzero(converged & ~np.atleast_1d(np.asarray(flag, dtype=bool)))
 
-    return {"failed": np.flatnonzero(status > 0), "unstable": failing(sol.stable),
+    failed = (status != Status.CONVERGED) & (status != Status.NOT_SOLVED)
+    return {"failed": np.flatnonzero(failed), "unstable": failing(sol.stable),
             "law_invalid": failing(sol.law_valid)}

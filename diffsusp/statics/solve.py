@@ -19,8 +19,6 @@ The solution is differentiated implicitly: for a parameter tangent dθ, dy = −
 solution (one more linear solve), in forward and reverse mode; the Newton loop is never unrolled.
 """
 
-import enum
-import os
 import warnings
 from collections.abc import Iterator, Sequence
 
@@ -31,41 +29,31 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..compilation import filter_jit
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, InputError, ModelError
+from ..geometry import projected_angles
 from ..model.mechanism import Loads, Mechanism
 from ._linearize import linearize_internal, scaled_solve
-from .checks import warn_law_validity, with_flags
-from .kernel import assemble_batch, generalised_residual, retract, to_internal, to_public
-from .outputs import bushing_states
+from .checks import STABILITY_TOLERANCE, kkt_stability_margin, law_validity, warn_law_validity
+from .kernel import (
+    assemble_batch,
+    generalised_residual,
+    part_poses_internal,
+    retract,
+    to_internal,
+    to_public,
+)
+from .status import Status
 
-
-class Status(enum.IntEnum):
-    """Why the Newton of a load case stopped: the per-case `StaticSolution.status` codes.
-
-    The arrays hold the integer codes (they live inside compiled programs); compare them with
-    the members (`sol.status == Status.CONVERGED`) and read a code's meaning with
-    `Status(code).text`.
-    """
-
-    CONVERGED = 0
-    MAX_STEPS = 1
-    NONFINITE = 2
-    STALLED = 3
-
-    @property
-    def text(self) -> str:
-        return _STATUS_TEXTS[self]
-
-
-_STATUS_TEXTS = {
-    Status.CONVERGED: "converged",
-    Status.MAX_STEPS: "max_steps reached",
-    Status.NONFINITE: "non-finite",
-    Status.STALLED: "stalled: no descent in the last steps",
-}
-STATUS_TEXT = {int(s): s.text for s in Status}  # code → text (kept for callers of the codes)
 _STALL_STEPS = 4  # consecutive steps shorter than 1/100 of Newton's before giving up
 _MAX_BACKTRACKS = 24  # rejected trial points in all before giving up (each costs an assembly)
+_ARMIJO = 1e-4  # sufficient decrease of the merit, relative to the step length
+_SHORT_STEP = 0.01  # a step length below this counts towards a stall
+_FLOOR_FACTOR = 1e3  # the round-off floor: within this factor of the tolerances ...
+_FLOOR_STEP = 1e-13  # ... and a relative step below this
+_MAX_TURN = 1.0  # rad: the largest rotation of a part in one Newton step
+_POOL = 48  # cases iterated at once; a batch larger than this runs as a pool (see `_newton`)
+_LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
+# one is taken anyway
 
 
 class StaticSolution(eqx.Module):
@@ -77,9 +65,10 @@ class StaticSolution(eqx.Module):
     (largest force row relative to the load scale), `constraint_error` (mm), `stable` (the
     reduced tangent stiffness is positive definite) and `law_valid` (every bushing's projected
     angles within their validity), both False for a case that did not converge
-    (`diffsusp.statics.checks`). The two flags are computed when `solve_statics` /
-    `solve_sweep` are called with concrete arrays; under a transformation (jit, vmap, grad)
-    they are None: call `checks.equilibrium_flags` there if they are needed.
+    (`diffsusp.statics.checks`). The two flags are computed in the solve's own program (from
+    the Newton's last Jacobian) when `solve_statics` / `solve_sweep` are called with concrete
+    arrays; under a transformation (jit, vmap, grad) they are None: call
+    `checks.equilibrium_flags` there if they are needed.
     """
 
     q: Float[Array, "*cases n"]
@@ -120,156 +109,218 @@ def _measures(mech: Mechanism, r, f_scale):
             merit)
 
 
-_MAX_TURN = 1.0  # rad: the largest rotation of a part in one Newton step
-_POOL = 48  # cases iterated at once; a batch larger than this runs as a pool (see `_newton`)
-_LINE_SEARCH = 8  # trial steps (α from 1, each next one 0.1–0.5 of the last) before the last
-# one is taken anyway
+class _Tolerances(eqx.Module):
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
 
 
-def _newton(mech: Mechanism, loads: Loads, q0, *, rtol, atol, max_steps):
+class _NewtonState(eqx.Module):
+    """The Newton of one load case (one pool slot) between two passes.
+
+    `y` is the last accepted point (solver coordinates and multipliers), `residual` the
+    generalised residual there, `step` the capped Newton step from it (twist coordinates) and
+    `alpha` the step length of the next trial point retract(y, alpha·step)."""
+
+    y: Float[Array, " k"]
+    residual: Float[Array, " k"]
+    step: Float[Array, " k"]
+    alpha: Float[Array, ""]
+    merit: Float[Array, ""]
+    force_scale: Float[Array, ""]
+    iteration: Int[Array, ""]
+    trial: Int[Array, ""]  # trial points rejected since the last accepted one
+    stall: Int[Array, ""]  # consecutive accepted steps shorter than _SHORT_STEP
+    backtracks: Int[Array, ""]  # trial points rejected in all
+    status: Int[Array, ""]  # Status.MAX_STEPS while running
+    converged: Bool[Array, ""]
+
+
+def _init(y0, empty) -> _NewtonState:
+    """The state of a case before its first pass: the start point (y0, λ = 0) as the trial
+    point with α = 1 and a zero step; `empty` marks a pool slot without a case."""
+    zero = jnp.zeros((), y0.dtype)
+    count = jnp.zeros((), int)
+    return _NewtonState(
+        y=y0, residual=jnp.zeros_like(y0), step=jnp.zeros_like(y0), alpha=zero + 1.0,
+        merit=zero + jnp.inf, force_scale=zero + 1.0, iteration=count, trial=count,
+        stall=count, backtracks=count, status=count + Status.MAX_STEPS, converged=empty)
+
+
+def _running(s: _NewtonState, tol: _Tolerances):
+    return (s.iteration <= tol.max_steps) & (s.status == Status.MAX_STEPS) & ~s.converged
+
+
+def _done(force, constraint, step, tol: _Tolerances):
+    """Converged (the `_measures` of the residual within the tolerances), or at the round-off
+    floor: within `_FLOOR_FACTOR` × the tolerances and no longer moving."""
+    tight = (force <= tol.rtol) & (constraint <= tol.atol)
+    floor = ((force <= _FLOOR_FACTOR * tol.rtol) & (constraint <= _FLOOR_FACTOR * tol.atol)
+             & (step <= _FLOOR_STEP))
+    return tight | floor
+
+
+def _step(mech: Mechanism, tol: _Tolerances, s: _NewtonState, loads: Loads, y_try, r_twist, jac,
+          dy) -> _NewtonState:
+    """The next state of one case, given the wrench residual, its twist Jacobian and the Newton
+    step J⁻¹·(−r) at its trial point: accept the point (Armijo on the scaled merit) and take
+    the new step, or backtrack."""
+    n = mech.topology.n
+    length = mech.length_scale
+    rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6),
+                            np.zeros(mech.topology.m)])
+    # Convergence and the merit are measured on the generalised forces of the Gibbs
+    # coordinates (F, G(b)ᵀM), as `residual` reports them; the step uses the twist form.
+    r = generalised_residual(y_try[:n], r_twist)
+    merit = _measures(mech, r, s.force_scale)[2]
+    merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
+    first = s.iteration == 0
+    accept = first | (merit <= (1.0 - _ARMIJO * s.alpha) * s.merit) | (
+        s.trial >= _LINE_SEARCH - 1)
+    # The next Newton step from the trial point (used only if it is accepted).
+    f_scale = _force_scale(mech, loads, jac[:n, n:] @ y_try[n:])
+    cap = jnp.max(jnp.abs(dy * rot))
+    dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
+    moved = jnp.max(jnp.abs(s.alpha * s.step[:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
+    # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
+    # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
+    # batch to max_steps.
+    stall = jnp.where(first, 0, jnp.where(s.alpha < _SHORT_STEP, s.stall + 1, 0))
+    status = jnp.where(jnp.all(jnp.isfinite(r)), Status.MAX_STEPS, Status.NONFINITE)
+    status = jnp.where(stall >= _STALL_STEPS, Status.STALLED, status)
+    force, constraint, rescaled = _measures(mech, r, f_scale)
+    accepted = _NewtonState(
+        y=y_try, residual=r, step=dy, alpha=jnp.ones_like(s.alpha), merit=rescaled,
+        force_scale=f_scale, iteration=s.iteration + 1, trial=jnp.zeros_like(s.trial),
+        stall=stall, backtracks=s.backtracks, status=status,
+        converged=_done(force, constraint, jnp.where(first, jnp.inf, moved), tol))
+    # Backtrack to the minimum of the quadratic through φ(0), φ'(0) = −2φ(0) (a Newton
+    # step on ½‖r‖²) and φ(α), kept within [0.1α, 0.5α]; 0.1α if φ(α) is not finite.
+    alpha, phi0 = s.alpha, s.merit
+    curvature = (merit - phi0 + 2.0 * alpha * phi0) / alpha**2
+    shrink = jnp.where(jnp.isfinite(merit) & (curvature > 0),
+                       phi0 / jnp.maximum(curvature * alpha, 1e-300), 0.1)
+    backtracks = s.backtracks + 1
+    running = _running(s, tol)
+    # A stopped case keeps its state; a rejected point changes only the line search's fields.
+    kept = eqx.tree_at(
+        lambda t: (t.alpha, t.trial, t.backtracks, t.status), s,
+        tuple(jnp.where(running, a, b) for a, b in (
+            (alpha * jnp.clip(shrink, 0.1, 0.5), s.alpha), (s.trial + 1, s.trial),
+            (backtracks, s.backtracks),
+            (jnp.where(backtracks >= _MAX_BACKTRACKS, Status.STALLED, s.status), s.status))))
+    return jax.tree.map(lambda a, b: jnp.where(running & accept, a, b), accepted, kept)
+
+
+class _Outcome(eqx.Module):
+    """Per-case result of the Newton besides the solution: how it stopped (`Status` codes),
+    its measures, and the stability margin from its last Jacobian (None unless asked)."""
+
+    status: Int[Array, " cases"]
+    iterations: Int[Array, " cases"]
+    residual: Float[Array, " cases"]
+    constraint_error: Float[Array, " cases"]
+    margin: Float[Array, " cases"] | None = None
+
+
+def _outcome(mech: Mechanism, s: _NewtonState) -> _Outcome:
+    """The `_Outcome` fields of stopped slots (vmapped over them)."""
+    force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s.residual,
+                                                                         s.force_scale)
+    return _Outcome(status=jnp.where(s.converged, Status.CONVERGED, s.status),
+                    iterations=s.iteration - 1, residual=force, constraint_error=constraint)
+
+
+def _newton(mech: Mechanism, loads: Loads, q0, tol: _Tolerances, flags: bool):
     """Damped Newton on the KKT system from (q0, λ = 0), for a batch of load cases (leading
-    axis of `loads` and q0).
+    axis of `loads` and q0): `_init`, then `_step` until not `_running`, per case.
 
     One evaluation of the residual and its Jacobian per loop pass: a pass evaluates the trial
     point; if the scaled merit decreased enough (Armijo) the point is accepted and the next
-    Newton step is solved from the Jacobian just computed, otherwise the step is halved. So a
-    full Newton step costs one assembly and one linear solve, and the program traces the
+    Newton step is solved from the Jacobian just computed, otherwise the step is shortened. So
+    a full Newton step costs one assembly and one linear solve, and the program traces the
     assembly once. Every case runs its own iteration (per-case state); only the assembly's
     scatter is done slot-wide (`kernel.assemble_batch`). At most `_POOL` cases are iterated at
     once and a stopped case's slot takes the next case, so a batch costs the sum of its cases'
     passes (about 5 each), not the slowest case's (up to 40 near the envelope's edge) times every
-    case; each case's iterates do not depend on the others (vmap = loop)."""
+    case; each case's iterates do not depend on the others (vmap = loop).
+
+    With `flags`, the twist Jacobian of the pass where a case stops (the one at its solution
+    when it converged) is kept, and its stability margin (`checks.kkt_stability_margin`)
+    computed after the loop, in the same program."""
     topo = mech.topology
     n = topo.n
-    length = mech.length_scale
-    rot = jnp.asarray(np.r_[np.tile(np.r_[np.zeros(3), np.ones(3)], n // 6), np.zeros(topo.m)])
     cases = q0.shape[0]
-    y0 = jnp.concatenate([q0, jnp.zeros((cases, topo.m), q0.dtype)], axis=1)
-
-    def done(r, f_scale, step):
-        # Converged, or at the round-off floor: within 1000× the tolerances and no longer moving.
-        force, constraint, _ = _measures(mech, r, f_scale)
-        tight = (force <= rtol) & (constraint <= atol)
-        floor = (force <= 1e3 * rtol) & (constraint <= 1e3 * atol) & (step <= 1e-13)
-        return tight | floor
-
-    def running(s):
-        return (s["it"] <= max_steps) & (s["status"] == Status.MAX_STEPS) & ~s["done"]
-
-    def update(s, loads_, y_try, r_twist, jac, dy):
-        """The next state of one case, given the residual, the Jacobian and the Newton step
-        J⁻¹·(−r) at its trial point."""
-        # Convergence and the merit are measured on the generalised forces of the Gibbs
-        # coordinates (F, G(b)ᵀM), as `residual` reports them; the step uses the twist form.
-        r = generalised_residual(y_try[:n], r_twist)
-        merit = _measures(mech, r, s["f_scale"])[2]
-        merit = jnp.where(jnp.isfinite(merit), merit, jnp.inf)
-        first = s["it"] == 0
-        accept = first | (merit <= (1.0 - 1e-4 * s["alpha"]) * s["merit"]) | (
-            s["trial"] >= _LINE_SEARCH - 1)
-        # The next Newton step from the trial point (used only if it is accepted).
-        f_scale = _force_scale(mech, loads_, jac[:n, n:] @ y_try[n:])
-        cap = jnp.max(jnp.abs(dy * rot))
-        dy = dy * jnp.minimum(1.0, _MAX_TURN / jnp.maximum(cap, 1e-300))
-        step = jnp.max(jnp.abs(s["alpha"] * s["dy"][:n])) / (length + jnp.max(jnp.abs(y_try[:n])))
-        # A case whose line search keeps cutting the step to nothing has no equilibrium nearby
-        # (e.g. a suspension pulled past its travel): stop it so that it does not hold the whole
-        # batch to max_steps.
-        stall = jnp.where(first, 0, jnp.where(s["alpha"] < 0.01, s["stall"] + 1, 0))
-        status = jnp.where(jnp.all(jnp.isfinite(r)), Status.MAX_STEPS, Status.NONFINITE)
-        status = jnp.where(stall >= _STALL_STEPS, Status.STALLED, status)
-        accepted = dict(
-            y=y_try, r=r, dy=dy, alpha=jnp.ones_like(s["alpha"]),
-            merit=_measures(mech, r, f_scale)[2], f_scale=f_scale, it=s["it"] + 1,
-            trial=jnp.zeros_like(s["trial"]), status=status, stall=stall,
-            backtracks=s["backtracks"],
-            done=done(r, f_scale, jnp.where(first, jnp.inf, step)),
-        )
-        # Backtrack to the minimum of the quadratic through φ(0), φ'(0) = −2φ(0) (a Newton
-        # step on ½‖r‖²) and φ(α), kept within [0.1α, 0.5α]; 0.1α if φ(α) is not finite.
-        alpha, phi0 = s["alpha"], s["merit"]
-        curvature = (merit - phi0 + 2.0 * alpha * phi0) / alpha**2
-        shrink = jnp.where(jnp.isfinite(merit) & (curvature > 0),
-                           phi0 / jnp.maximum(curvature * alpha, 1e-300), 0.1)
-        backtracks = s["backtracks"] + 1
-        rejected = dict(s, alpha=alpha * jnp.clip(shrink, 0.1, 0.5), trial=s["trial"] + 1,
-                        backtracks=backtracks,
-                        status=jnp.where(backtracks >= _MAX_BACKTRACKS, Status.STALLED,
-                                         s["status"]))
-        new = jax.tree.map(lambda a, b: jnp.where(accept, a, b), accepted, rejected)
-        return jax.tree.map(lambda a, b: jnp.where(running(s), a, b), new, s)
-
     size = n + topo.m
+    y0 = jnp.concatenate([q0, jnp.zeros((cases, topo.m), q0.dtype)], axis=1)
     slots = min(cases, _POOL)
 
     def fresh(case):
-        """The start state of the cases `case` (slots,)."""
-        zero = jnp.zeros(case.shape, y0.dtype)
-        count = jnp.zeros(case.shape, int)
-        return dict(
-            y=y0[jnp.minimum(case, cases - 1)], r=jnp.zeros(case.shape + (size,), y0.dtype),
-            dy=jnp.zeros(case.shape + (size,), y0.dtype), alpha=zero + 1.0,
-            merit=zero + jnp.inf, f_scale=zero + 1.0, it=count, trial=count,
-            status=count + Status.MAX_STEPS, stall=count, backtracks=count,
-            done=case >= cases,  # an empty slot
-        )
-
-    def result(s):
-        force, constraint, _ = jax.vmap(lambda r, f: _measures(mech, r, f))(s["r"], s["f_scale"])
-        status = jnp.where(s["done"], Status.CONVERGED, s["status"])
-        return jnp.stack([status.astype(float), (s["it"] - 1).astype(float), force, constraint,
-                          s["backtracks"].astype(float)], 1)
+        return jax.vmap(_init)(y0[jnp.minimum(case, cases - 1)], case >= cases)
 
     def body(pool):
         # One Newton pass over the slots; a slot whose case has stopped hands its result over
         # and takes the next case waiting (a pool: each case runs its own iteration, so the
         # batch costs the sum of the cases' passes, not the slowest case's times all cases).
-        s, case, queue, y_out, info_out = pool
+        s, case, queue, y_out, out, jac_out = pool
         loads_s = jax.tree.map(lambda a: a[jnp.minimum(case, cases - 1)], loads)
-        y_try = jax.vmap(lambda y, d: retract(y, d, n))(s["y"], s["alpha"][:, None] * s["dy"])
+        y_try = jax.vmap(lambda y, d: retract(y, d, n))(s.y, s.alpha[:, None] * s.step)
         r, jac = assemble_batch(mech, loads_s, y_try[:, :n], y_try[:, n:])
         # The slots' systems are factorised one by one (the same CPU time as one batched call):
         # jaxlib's batched CPU LU splits a batch over its intra-op thread pool and waits for
         # it from a pool thread, and two such calls at once (the batch split over two devices)
         # deadlocked this 2-core machine; a single system is factorised inline.
         dy = jax.lax.map(lambda a: scaled_solve(a[0], -a[1]), (jac, r))
-        s = jax.vmap(update)(s, loads_s, y_try, r, jac, dy)
-        stopped = ~jax.vmap(running)(s) & (case < cases)
+        s = jax.vmap(lambda s_, l_, y_, r_, j_, d_: _step(mech, tol, s_, l_, y_, r_, j_, d_))(
+            s, loads_s, y_try, r, jac, dy)
+        stopped = ~jax.vmap(lambda s_: _running(s_, tol))(s) & (case < cases)
         dest = jnp.where(stopped, case, cases)  # out of range: dropped
-        y_out = y_out.at[dest].set(s["y"], mode="drop")
-        info_out = info_out.at[dest].set(result(s), mode="drop")
+        y_out = y_out.at[dest].set(s.y, mode="drop")
+        out = jax.tree.map(lambda o, v: o.at[dest].set(v, mode="drop"), out, _outcome(mech, s))
+        if flags:
+            jac_out = jac_out.at[dest].set(jac, mode="drop")
         new_case = jnp.where(stopped, queue + jnp.cumsum(stopped) - 1, case)
         new_case = jnp.where(stopped & (new_case >= cases), cases, new_case)
         s = jax.tree.map(lambda a, b: jnp.where(stopped.reshape((-1,) + (1,) * (a.ndim - 1)),
                                                 a, b), fresh(new_case), s)
-        return s, new_case, queue + jnp.sum(stopped), y_out, info_out
+        return s, new_case, queue + jnp.sum(stopped), y_out, out, jac_out
 
     def more(pool):
         s, case = pool[0], pool[1]
-        return jnp.any(jax.vmap(running)(s) & (case < cases))
+        return jnp.any(jax.vmap(lambda s_: _running(s_, tol))(s) & (case < cases))
 
     first = jnp.arange(slots)
-    pool = (fresh(first), first, jnp.asarray(slots), y0, jnp.zeros((cases, 5), y0.dtype))
-    _, _, _, y, info = jax.lax.while_loop(more, body, pool)
-    return y, info
+    zero, count = jnp.zeros(cases, y0.dtype), jnp.zeros(cases, int)
+    out = _Outcome(status=count, iterations=count, residual=zero, constraint_error=zero)
+    jac_out = jnp.zeros((cases, size, size) if flags else (0,), y0.dtype)
+    pool = (fresh(first), first, jnp.asarray(slots), y0, out, jac_out)
+    _, _, _, y, out, jac_out = jax.lax.while_loop(more, body, pool)
+    if flags:
+        converged = out.status == Status.CONVERGED
+        # Case after case (lax.map): each QR and eigen-decomposition is one small LAPACK call
+        # run inline (see `scaled_solve` on batched CPU calls).
+        margin = jax.lax.map(lambda j: kkt_stability_margin(mech, j), jac_out)
+        out = eqx.tree_at(lambda o: o.margin, out, jnp.where(converged, margin, jnp.nan),
+                          is_leaf=lambda x: x is None)
+    return y, out
 
 
 @eqx.filter_custom_jvp
-def _equilibrium(mech, loads, q0, *, rtol, atol, max_steps):
-    """Solver coordinates and multipliers (cases, n + m) and (status, iterations, residual,
-    constraint error) (cases, 4) of a batch of load cases."""
-    return _newton(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+def _equilibrium(mech, loads, q0, *, tol, flags):
+    """Solver coordinates and multipliers (cases, n + m) and the `_Outcome` of a batch of load
+    cases."""
+    return _newton(mech, loads, q0, tol, flags)
 
 
 @_equilibrium.def_jvp
-def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
+def _equilibrium_jvp(primals, tangents, *, tol, flags):
     # Implicit function theorem, case by case: J·dy = −∂r/∂(mech, loads)·t (`linearize`).
     # Everything here stays differentiable (y through this same rule, J and ∂r through
     # autodiff), so derivatives of derivatives — e.g. the sensitivity of bump steer to a
     # stiffness — are exact too.
     mech, loads, q0 = primals
     t_mech, t_loads, _ = tangents
-    y, info = _equilibrium(mech, loads, q0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y, out = _equilibrium(mech, loads, q0, tol=tol, flags=flags)
 
     def tangent(loads_, y_, t_loads_):
         return linearize_internal(mech, loads_, y_).tangent(t_mech, t_loads_)
@@ -278,34 +329,61 @@ def _equilibrium_jvp(primals, tangents, *, rtol, atol, max_steps):
         dy = jax.vmap(lambda l, y_: tangent(l, y_, None))(loads, y)
     else:
         dy = jax.vmap(tangent)(loads, y, t_loads)
-    return (y, info), (dy, jnp.zeros_like(info))
+
+    def zero(a):
+        if jnp.issubdtype(a.dtype, jnp.inexact):
+            return jnp.zeros_like(a)
+        return np.zeros(a.shape, jax.dtypes.float0)
+
+    return (y, out), (dy, jax.tree.map(zero, out))
 
 
-def _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps):
-    """Public-coordinate solutions of a batch of cases (leading axis)."""
+def _bushing_angles(mech: Mechanism, y):
+    """Projected angles (bushings, 3) (rad) of every bushing at solver coordinates y (n,): the
+    rotation of its I marker's axes in its J marker's, AX, AY, AZ (spec stiffness §0); the
+    angles of `bushing_states` without its deformations and forces."""
+    b = mech.bushings
+    part = np.asarray(mech.topology.marker_part)
+    i, j = np.asarray(b.i_marker, dtype=int), np.asarray(b.j_marker, dtype=int)
+    rot = part_poses_internal(y)[1]
+    axes = mech.markers.orientation
+    ai = jnp.einsum("eij,ejk->eik", rot[part[i]], axes[i])
+    aj = jnp.einsum("eij,ejk->eik", rot[part[j]], axes[j])
+    return jax.vmap(projected_angles)(jnp.einsum("eji,ejk->eik", aj, ai))
+
+
+def _solve_batch_cases(mech, loads, q0, tol, flags):
+    """Public-coordinate solutions of a batch of cases (leading axis), and with `flags` the
+    bushings' projected angles (cases, bushings, 3) for the validity warning."""
     y0 = jax.vmap(lambda q: to_internal(mech, q))(q0)
-    y, info = _equilibrium(mech, loads, y0, rtol=rtol, atol=atol, max_steps=max_steps)
+    y, out = _equilibrium(mech, loads, y0, tol=tol, flags=flags)
     n = mech.topology.n
-    return StaticSolution(
-        q=jax.vmap(lambda y_: to_public(mech, y_))(y[:, :n]),
-        multipliers=y[:, n:],
-        status=info[:, 0].astype(int),
-        iterations=info[:, 1].astype(int),
-        residual=info[:, 2],
-        constraint_error=info[:, 3],
-    )
+    q = jax.vmap(lambda y_: to_public(mech, y_))(y[:, :n])
+    sol = StaticSolution(q=q, multipliers=y[:, n:], status=out.status,
+                         iterations=out.iterations, residual=out.residual,
+                         constraint_error=out.constraint_error)
+    if not flags:
+        return sol, None
+    converged = out.status == Status.CONVERGED
+    # The angles of every case with finite coordinates (the warning names a case that did not
+    # converge too, as its pose may be why); the flag only for converged ones.
+    finite = jnp.all(jnp.isfinite(y[:, :n]), axis=1)
+    m_, y_ = jax.lax.stop_gradient((mech, jnp.where(finite[:, None], y[:, :n], 0.0)))
+    if mech.bushings.names:
+        angles = jax.vmap(lambda y1: _bushing_angles(m_, y1))(y_)
+        ratio = jax.vmap(lambda a: law_validity(m_, None, angles=a))(angles)
+    else:
+        angles, ratio = None, jnp.zeros(q.shape[0], q.dtype)
+    sol = eqx.tree_at(lambda s: (s.stable, s.law_valid), sol,
+                      (converged & (out.margin > STABILITY_TOLERANCE), converged & (ratio <= 1.0)),
+                      is_leaf=lambda x: x is None)
+    return sol, angles
 
 
-def _solve_one(mech, loads, q0, rtol, atol, max_steps):
-    sol = _solve_batch_cases(mech, jax.tree.map(lambda a: a[None], loads), q0[None], rtol, atol,
-                             max_steps)
-    return jax.tree.map(lambda a: a[0], sol)
-
-
-def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
+def _solve_cases(mech, loads, q0, tol, flags, chunk):
     n_cases = loads.force.shape[0]
     if chunk is None or n_cases <= chunk:
-        return _solve_batch_cases(mech, loads, q0, rtol, atol, max_steps)
+        return _solve_batch_cases(mech, loads, q0, tol, flags)
     # Chunks of `chunk` cases one after the other (the last one padded by repeating a case).
     n_chunks = -(-n_cases // chunk)
     pad = n_chunks * chunk - n_cases
@@ -314,40 +392,54 @@ def _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk):
         a = jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
         return a.reshape(n_chunks, chunk, *a.shape[1:])
 
-    sol = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, rtol, atol, max_steps),
+    out = jax.lax.map(lambda args: _solve_batch_cases(mech, *args, tol, flags),
                       jax.tree.map(split, (loads, q0)))
-    return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], sol)
+    return jax.tree.map(lambda a: a.reshape(n_chunks * chunk, *a.shape[2:])[:n_cases], out)
 
 
 @filter_jit
-def _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh=None):
+def _solve_batch(mech, loads, q0, tol, flags, chunk, single, mesh=None):
+    """The whole of a `solve_statics` call in one program: (solution, bushing angles or None).
+    `single`: one case without a case axis (added and removed here); q0 is per case or
+    shared."""
+    if single:
+        loads = jax.tree.map(lambda a: a[None], loads)
+    q0 = jnp.broadcast_to(q0, (loads.force.shape[0], q0.shape[-1]))
     if mesh is None:
-        return _solve_cases(mech, loads, q0, rtol, atol, max_steps, chunk)
-    # One share of the cases per device, each solved by its own pool, no communication; the
-    # case count is padded to a multiple of the devices by repeating the last case. (On the
-    # CPU this needs `compilation.CPU_OPTIONS`: see there.)
-    n_cases, k = loads.force.shape[0], mesh.size
-    pad = -n_cases % k
+        out = _solve_cases(mech, loads, q0, tol, flags, chunk)
+    else:
+        # One share of the cases per device, each solved by its own pool, no communication;
+        # the case count is padded to a multiple of the devices by repeating the last case.
+        # (On the CPU this needs `compilation.CPU_OPTIONS`: see there.)
+        n_cases, k = loads.force.shape[0], mesh.size
+        pad = -n_cases % k
 
-    def padded(a):
-        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+        def padded(a):
+            return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
 
-    cases = jax.sharding.PartitionSpec("cases")
-    solve = jax.shard_map(
-        lambda l, q: _solve_cases(mech, l, q, rtol, atol, max_steps, chunk),
-        mesh=mesh, in_specs=(cases, cases), out_specs=cases, check_vma=False)
-    sol = solve(*jax.tree.map(padded, (loads, q0)))
-    return jax.tree.map(lambda a: a[:n_cases], sol)
+        cases = jax.sharding.PartitionSpec("cases")
+        solve = jax.shard_map(
+            lambda l, q: _solve_cases(mech, l, q, tol, flags, chunk),
+            mesh=mesh, in_specs=(cases, cases), out_specs=cases, check_vma=False)
+        out = jax.tree.map(lambda a: a[:n_cases], solve(*jax.tree.map(padded, (loads, q0))))
+    if single:
+        out = jax.tree.map(lambda a: a[0], out)
+    return out
+
+
+def _solve_one(mech, loads, q0, tol, flags):
+    out = _solve_batch_cases(mech, jax.tree.map(lambda a: a[None], loads), q0[None], tol, flags)
+    return jax.tree.map(lambda a: a[0], out)
 
 
 @filter_jit
-def _solve_path(mech, loads, q0, rtol, atol, max_steps):
+def _solve_path(mech, loads, q0, tol, flags):
     def step(q, loads_):
-        sol = _solve_one(mech, loads_, q, rtol, atol, max_steps)
-        return jnp.where(sol.status == Status.CONVERGED, sol.q, q), sol
+        sol, angles = _solve_one(mech, loads_, q, tol, flags)
+        return jnp.where(sol.status == Status.CONVERGED, sol.q, q), (sol, angles)
 
-    _, sols = jax.lax.scan(step, q0, loads)
-    return sols
+    _, out = jax.lax.scan(step, q0, loads)
+    return out
 
 
 def _is_traced(tree) -> bool:
@@ -356,15 +448,18 @@ def _is_traced(tree) -> bool:
 
 def _check_inputs(mech: Mechanism, loads: Loads):
     """Value checks on concrete inputs (traced inputs are checked by `eqx.error_if`)."""
-    for path, leaf in jax.tree_util.tree_leaves_with_path((mech, loads)):
-        if eqx.is_inexact_array(leaf) and not _is_traced(leaf):
-            if not np.all(np.isfinite(np.asarray(leaf))):
-                where = jax.tree_util.keystr(path)
-                owner = "mechanism" if path[0].idx == 0 else "loads"
-                raise ValueError(
-                    f"{owner}{where[3:]} contains non-finite values (NaN or inf); every number "
-                    "of a model and its loads must be finite."
-                )
+    leaves = [(path, leaf) for path, leaf in jax.tree_util.tree_leaves_with_path((mech, loads))
+              if eqx.is_inexact_array(leaf) and not isinstance(leaf, jax.core.Tracer)]
+    # One transfer for every leaf (a copy per leaf cost a warm call a millisecond).
+    values = jax.device_get([leaf for _, leaf in leaves])
+    for (path, _), value in zip(leaves, values, strict=True):
+        if not np.all(np.isfinite(value)):
+            where = jax.tree_util.keystr(path)
+            owner = "mechanism" if path[0].idx == 0 else "loads"
+            raise ModelError(
+                f"{owner}{where[3:]} contains non-finite values (NaN or inf); every number "
+                "of a model and its loads must be finite."
+            )
     if mech.bushings.names:
         for field in ("k_trans", "k_rot"):
             if _is_traced(getattr(mech.bushings, field)):
@@ -372,7 +467,7 @@ def _check_inputs(mech: Mechanism, loads: Loads):
             k = np.asarray(getattr(mech.bushings, field))
             if np.any(k < 0):
                 e, a = np.argwhere(k < 0)[0]
-                raise ValueError(
+                raise ModelError(
                     f"bushing '{mech.bushings.names[e]}' has {field}[{'xyz'[a]}] = {k[e, a]} < 0; "
                     "stiffness must be ≥ 0."
                 )
@@ -380,7 +475,7 @@ def _check_inputs(mech: Mechanism, loads: Loads):
         k = np.asarray(mech.springs.k)
         for e, name in enumerate(mech.springs.names):
             if not mech.springs.tabulated[e] and k[e] <= 0:
-                raise ValueError(f"spring '{name}' has k = {k[e]} ≤ 0; k must be positive.")
+                raise ModelError(f"spring '{name}' has k = {k[e]} ≤ 0; k must be positive.")
 
 
 def _report(sol: StaticSolution, throw: bool, what: str):
@@ -404,45 +499,30 @@ def _report(sol: StaticSolution, throw: bool, what: str):
     return sol
 
 
-@filter_jit
-def _bushing_angles(mech, q):
-    return bushing_states(mech, q)[1]
-
-
-def _check_validity(mech: Mechanism, sol: StaticSolution):
-    """Warn when a bushing's projected angles leave their validity (|AX|, |AY| < 15°,
-    |AZ| < 90°; spec stiffness §0)."""
-    if not mech.bushings.names or _is_traced(sol.q):
-        return
-    warn_law_validity(mech, _bushing_angles(mech, sol.q), stacklevel=3)
-
-
-def _start(mech, loads, q0, n_cases):
+def _start(mech, q0):
+    """The start coordinates as given (per case or shared), checked on the host: broadcasting
+    happens in the solve's program."""
     n = mech.n_coordinates
     if q0 is None:
-        q0 = jnp.zeros(n)
-    q0 = jnp.asarray(q0, dtype=float)
-    if q0.shape[-1:] != (n,):
-        raise ValueError(f"q0 must have {n} coordinates per case; got shape {q0.shape}.")
-    if n_cases is not None and q0.ndim == 1:
-        q0 = jnp.broadcast_to(q0, (n_cases, n))
+        return np.zeros(n)
+    if not isinstance(q0, jax.Array):
+        q0 = np.asarray(q0, dtype=float)
+    if q0.shape[-1:] != (n,) or q0.ndim > 2:
+        raise InputError(f"q0 must have {n} coordinates per case; got shape {q0.shape}.")
     return q0
 
 
 def _mesh(devices):
     """A one-axis ("cases") mesh over `devices` (see `solve_statics`), None for one device."""
-    if devices is None:
-        devices = os.environ.get("DIFFSUSP_DEVICES", "1")
-        devices = int(devices) if devices.isdigit() else devices
     local = jax.local_devices()
     if isinstance(devices, str):
         if devices != "all":
-            raise ValueError(
+            raise InputError(
                 f'devices must be a count, "all" or a list of devices; got {devices!r}.')
         devices = local
-    elif isinstance(devices, int):
+    elif isinstance(devices, (int, np.integer)):
         if not 1 <= devices <= len(local):
-            raise ValueError(f"devices={devices}: {len(local)} local device(s) are available "
+            raise InputError(f"devices={devices}: {len(local)} local device(s) are available "
                              "(on the CPU, ask JAX for more with jax_num_cpu_devices).")
         devices = local[:devices]
     devices = tuple(devices)
@@ -487,11 +567,12 @@ def solve_statics(
     - `devices`: split a table of cases over several devices (`jax.shard_map` over the case
       axis; each device solves its share with its own pool, and the result is the same as on
       one device, gathered on the default device): a count of local devices, "all", or a list
-      of devices. Default: `$DIFFSUSP_DEVICES`, else 1 (the CLI sets "all" and, on the CPU,
-      one device per core). Calls inside jit / vmap / grad run on one device.
+      of devices. Default (None): one device. Calls inside jit / vmap / grad run on one device.
     - `checks`: compute the `stable` / `law_valid` flags and warn about bushing laws beyond
-      their validity (one more compiled program per model); False leaves the flags None, for
-      a caller that checks in its own program (`kc.evaluate`).
+      their validity. They are computed in the solve's own program (one compiled program and
+      one dispatch per call): stability from the Newton's last Jacobian at each solution,
+      validity from the bushings' projected angles (`diffsusp.statics.checks`). False leaves
+      the flags None, for a caller that checks in its own program (`kc.evaluate`).
 
     **Returns:** a `StaticSolution`, differentiable (implicitly) with respect to every float
     leaf of `mech` and `loads`.
@@ -499,21 +580,23 @@ def solve_statics(
     _check_x64()
     _check_inputs(mech, loads)
     n_cases = loads.n_cases
-    q0 = _start(mech, loads, q0, n_cases)
-    if n_cases is None:
-        sol = _solve_batch(mech, jax.tree.map(lambda a: a[None], loads), q0[None], rtol, atol,
-                           max_steps, chunk)
-        sol = jax.tree.map(lambda a: a[0], sol)
-    else:
-        mesh = None if _is_traced((mech, loads, q0)) else _mesh(devices)
+    q0 = _start(mech, q0)
+    if n_cases is None and q0.ndim != 1:
+        raise InputError(f"q0 must be one start ({mech.n_coordinates},) for a single load case; "
+                         f"got shape {q0.shape}.")
+    tol = _Tolerances(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+    traced = _is_traced((mech, loads, q0))
+    flags = checks and not traced
+    mesh = None
+    if n_cases is not None and not traced and devices is not None:
+        mesh = _mesh(devices)
         if mesh is not None and n_cases < mesh.size:
             mesh = None
-        sol = _solve_batch(mech, loads, q0, rtol, atol, max_steps, chunk, mesh)
-        if mesh is not None:  # later programs run on one device, as for an unsplit batch
-            sol = jax.device_put(sol, jax.devices()[0])
-    if checks:
-        sol = with_flags(mech, loads, sol)
-        _check_validity(mech, sol)
+    sol, angles = _solve_batch(mech, loads, q0, tol, flags, chunk, n_cases is None, mesh)
+    if mesh is not None:  # later programs run on one device, as for an unsplit batch
+        sol = jax.device_put(sol, jax.devices()[0])
+    if angles is not None:
+        warn_law_validity(mech, angles, stacklevel=2)
     return _report(sol, throw, "solve_statics")
 
 
@@ -528,16 +611,22 @@ def solve_sweep(
     throw: bool = True,
 ) -> StaticSolution:
     """Equilibria along a path of load cases (wheel travel, load ramp), each case started from
-    the previous solution (`lax.scan`). Arguments as `solve_statics`; `loads` must have a case
+    the previous solution (`lax.scan`), with the `stable` / `law_valid` flags computed in the
+    same program (as `solve_statics`). Arguments as `solve_statics`; `loads` must have a case
     axis, in path order."""
     _check_x64()
     _check_inputs(mech, loads)
     if loads.n_cases is None:
-        raise ValueError("solve_sweep needs loads with a leading case axis (the path).")
-    q0 = _start(mech, loads, q0, None)
-    sol = _solve_path(mech, loads, q0, rtol, atol, max_steps)
-    sol = with_flags(mech, loads, sol)
-    _check_validity(mech, sol)
+        raise InputError("solve_sweep needs loads with a leading case axis (the path).")
+    q0 = _start(mech, q0)
+    if q0.ndim != 1:
+        raise InputError(f"solve_sweep starts from one q0 ({mech.n_coordinates},); got shape "
+                         f"{q0.shape}.")
+    tol = _Tolerances(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+    flags = not _is_traced((mech, loads, q0))
+    sol, angles = _solve_path(mech, loads, q0, tol, flags)
+    if angles is not None:
+        warn_law_validity(mech, angles, stacklevel=2)
     return _report(sol, throw, "solve_sweep")
 
 
@@ -556,9 +645,9 @@ def solve_statics_chunks(
     """
     n = loads.n_cases
     if n is None:
-        raise ValueError("solve_statics_chunks needs loads with a leading case axis.")
+        raise InputError("solve_statics_chunks needs loads with a leading case axis.")
     if chunk < 1:
-        raise ValueError(f"chunk must be at least 1; got {chunk}.")
+        raise InputError(f"chunk must be at least 1; got {chunk}.")
     chunk = min(chunk, max(n, 1))
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)

@@ -81,7 +81,7 @@ from ..identify.report import (
 )
 from ..io.files import write_text_atomic
 from ..lsq import algebra
-from . import relaxation
+from . import bench_speed, relaxation
 from .bench_condition import (  # noqa: F401  (re-exported)
     MAX_SEGMENT,
     REQUIRED,
@@ -225,7 +225,8 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
        `load_well_excited`) the top power of F_z (the thesis
        drops it from every c_{F,X,k}; the rule drops it from the failing block first and
        fires again while a polynomial still changes sign). The camber and offset polynomials
-       (3-21) are not judged (`SIGN_FREE_BLOCKS`: the thesis's own models cross zero there).
+       (3-21) are not judged (`SIGN_FREE_BLOCKS`: the thesis's own models cross zero there),
+       nor the speed corrections of the speed test (`bench_speed.SPEED_BLOCKS`, (3-54)).
     2. **Table 6 counts**, each feature in its own domain (`table6_features`): at each load of
        `loads` (default four across the range), at most one zero of F(δ′) near δ = 0, one
        maximum and one minimum in their domains; extrema outside every domain are not
@@ -238,7 +239,8 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
     loads = loads or tuple(np.linspace(lo, hi, 4))
 
     def find(active: Mapping[str, float], excused=frozenset()):
-        pneu = {n: x for n, x in active.items() if parse_name(n)[1] not in ("Ly", "P2")
+        pneu = {n: x for n, x in active.items()
+                if parse_name(n)[1] not in ("Ly", "P2", bench_speed.SPEED_LY)
                 and x != 0}
         by_block: dict[tuple[str, int], dict[int, float]] = {}
         for n, x in pneu.items():
@@ -251,7 +253,8 @@ def behaviour_rules(output, fz_range, *, rolling_radius=0.294, loads=None, well_
         # 1. deformation load polynomials keep their sign on [lo, hi]
         fz = np.linspace(lo, hi, 41)
         for (block, i), cj in sorted(by_block.items()):
-            if block in SIGN_FREE_BLOCKS or ("sign", block, i) in excused:
+            if (block in SIGN_FREE_BLOCKS + bench_speed.SPEED_BLOCKS
+                    or ("sign", block, i) in excused):
                 continue
             c = sum(v * fz**j for j, v in cj.items())
             if np.min(c) < 0 < np.max(c):
@@ -311,6 +314,8 @@ def coefficient_unit(name: str) -> str:
     top = "N·m" if out == "Mz" else "N"
     if block == "P2":
         return "m/N"
+    if block in bench_speed.SPEED_BLOCKS + (bench_speed.SPEED_LY,):
+        return bench_speed.speed_unit(out, block, i, j)
     if block == "Ly":
         top = "m" if out == "Mz" else "1"
         block, i = "delta", i
@@ -1028,8 +1033,9 @@ def _whiten(xp, e, sources):
 
 def block_masks(names):
     blocks = [parse_name(n)[1] for n in names]
-    return (np.array([b == "Ly" for b in blocks], bool),
-            np.array([b not in ("Ly", "P2") for b in blocks], bool),
+    relax = ("Ly", bench_speed.SPEED_LY)  # the relaxation columns (and the speed test's)
+    return (np.array([b in relax for b in blocks], bool),
+            np.array([b not in relax + ("P2",) for b in blocks], bool),
             np.array([b == "P2" for b in blocks], bool))
 
 
@@ -1063,7 +1069,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                     rolling_radius: float = 0.294,
                     fy_report: "OutputReport | None" = None,
                     final_pass: bool = True, extra=None,
-                    p2_size: float | None = None) -> OutputReport:
+                    p2_size: float | None = None, speed_test: bool = False) -> OutputReport:
     """Two-step identification of one output ("Fy" or "Mz") on conditioned data (spec §3.3):
     step 1 [W_pneu | W_Ly (| W_P2)] with the structure search, step 2 K_y⁻¹ (3-76, 3-77);
     every structure estimated by `two_step` (instrumental variables, noise-model σ).
@@ -1134,16 +1140,29 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
 
     For M_z, `fy_report` (the F_y identification) supplies the instrument of Ḟ_y and its noise
     level; without it the M_z relaxation terms are least squares (biased toward 0 by the F_y
-    noise)."""
+    noise).
+
+    `speed_test=True`: the speed test (3-54) (`bench_speed`): the columns δ′·ω₀^k·F_z^j,
+    ω₀^k·F_z^j and their relaxation images (Ḟ_y/ω)·ω₀^k·F_z^j (ω₀ the run's speed level)
+    join the search as `extra` ones; those the speed levels cannot determine are held at 0
+    and reported not identifiable."""
     y = cond.fy if output == "Fy" else cond.mz
     lip = regressor_model(output, degrees, ly=True, p2=(output == "Mz"))
     own = set(lip.names)
+    samples, speed_why = cond.samples, {}
+    if speed_test:  # the speed test (3-54): the run's speed level ω₀ and its columns
+        omega0, levels = bench_speed.speed_levels(cond.samples, rolling_radius)
+        samples = dict(cond.samples, omega0=omega0)
+        cols = bench_speed.speed_columns(output)
+        speed_why = bench_speed.speed_powers(cols.names, levels)
+        extra = cols if extra is None else extra + cols
+        fixed = list(fixed or ()) + list(speed_why)  # held at 0, reported not identifiable
     if extra is not None:
         for n in extra.names:
             parse_name(n)  # b_<F>_<block>_<i>_<j>, else a clear error
         lip = lip + extra
     names = lip.names
-    X, L, Dp = (np.asarray(a) for a in _parts_program(lip)(cond.samples))
+    X, L, Dp = (np.asarray(a) for a in _parts_program(lip)(samples))
     fydot = np.asarray(cond.samples["fydot_w"])
     H = cond.operator
     W = np.einsum("rm,smp->srp", H, X + L * fydot[..., None]).reshape(-1, len(names))
@@ -1211,7 +1230,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                 removed.pop(n)
                 not_ident[n] = _coupling_reason(cond, why)
         act_names = {names[i] for i in active}
-        for n, why in camber_powers(names, cond.inputs["gamma"]).items():
+        for n, why in (camber_powers(names, cond.inputs["gamma"]) | speed_why).items():
             if n not in act_names:
                 removed.pop(n, None)
                 not_ident[n] = why
@@ -1234,6 +1253,7 @@ def identify_output(cond: Conditioned, output: str, degrees, *, search: bool = T
                              "(search=True) or hold more coefficients fixed.")
         fit = None
         res = estimate(active, check_var=cond.noise[channel] ** 2)
+        not_ident.update(speed_why)
     act = [names[i] for i in active]
     is_pneu = block_masks(act)[1]
     reduced = Coefficients(tuple(act), np.asarray(res["x"]), np.asarray(res["sigma"]))
@@ -1584,13 +1604,14 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
              rolling_radius: float = 294.0, decimate: int | None = None, search: bool = True,
              outputs=("Fy", "Mz"), sigma_pct_threshold: float | None = 10.0,
              significance: float = 1e-3, ic_threshold: float = 0.0, fixed=(),
-             median: int | None = None) -> BenchReport:
+             median: int | None = None, speed_test: bool = False) -> BenchReport:
     """Identify the polynomial tyre model and the lateral stiffnesses K_{Fy,y}, K_{Mz,y} from a
     Flat Trac table (spec §3.3–3.5). `structure`: "just-necessary" (Table 10) or "apriori"
     (Table 5); `search`: run the structure search (else the whole structure estimated as it
     is, `identify_output`); `fixed`: coefficients held at 0 (names of either output);
     `median`: spikes replaced by the running median of that many samples before the
-    filter (`condition`, `median_filter`). Bad
+    filter (`condition`, `median_filter`); `speed_test`: the speed test (3-54) on each output
+    (`identify_output`, `bench_speed`), its verdict in `report.notes`. Bad
     input raises `InputError`; an identified model that is
     unstable on the data (∂F̂y_pneu/∂δ′ ≥ 0 somewhere) is flagged in `report.flags` and
     `report.stable`."""
@@ -1616,8 +1637,12 @@ def identify(table: Mapping, *, structure: str = "just-necessary", cutoff: float
                                      significance=significance, ic_threshold=ic_threshold,
                                      fy_report=reports.get("Fy"),
                                      fixed=[n for n in fixed if n.startswith(f"b_{o}_")]
-                                     or None)
+                                     or None, speed_test=speed_test)
     notes, flags = [], []
+    if speed_test:
+        levels = bench_speed.speed_levels(cond.samples, r_m)[1]
+        for o, r in reports.items():
+            notes += bench_speed.speed_notes(o, r.reduced, levels)
     exc = cond.excitation
     if exc["kappa"] < 1e-6:
         notes.append("K_x is not identifiable: kappa' is not excited (free rolling, std "

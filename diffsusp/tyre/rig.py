@@ -28,7 +28,8 @@ implicitly (`optx.ImplicitAdjoint`, the default): `jax.jvp`/`jax.jacfwd`/`jax.gr
 output with respect to any float leaf of the mechanism (bushing stiffnesses, hardpoints), of
 the tyre (coefficients) or of the inputs are exact, neither unrolled nor finite differences.
 No line search: from the rigid guess the coupled system converges in 3–7 steps on the
-pseudo-McPherson; a case that does not converge in `max_steps` is reported (status 1).
+pseudo-McPherson; a case that does not converge in `max_steps` is reported
+(`diffsusp.statics.Status.MAX_STEPS`).
 
 **Axes and signs** (stated once here; every field of `TyreRigSolution` follows them):
 
@@ -86,13 +87,18 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from ..errors import ConvergenceError, InputError
 from ..kc import ResolvedCorner, corner_geometry, force_rig
 from ..model import Loads, Mechanism
-from ..statics import linearize, linearize_internal, marker_poses, residual, to_public
+from ..statics import (
+    STATUS_TEXT,
+    Status,
+    linearize,
+    linearize_internal,
+    marker_poses,
+    residual,
+    to_public,
+)
 from .mf6 import MagicFormula6, TyreForces, evaluate
 
-__all__ = ["TyreRig", "TyreRigSolution", "tyre_rig", "solve", "STATUS"]
-
-STATUS = {0: "converged", 1: "Newton did not converge on the coupled tyre-suspension equilibrium"}
-"""`TyreRigSolution.status` values."""
+__all__ = ["TyreRig", "TyreRigSolution", "tyre_rig", "solve"]
 
 
 class TyreRig(eqx.Module):
@@ -130,8 +136,8 @@ class TyreRigSolution(eqx.Module):
       `design_steer` [rad]: the steer angle at design (ψ(design));
     - `force`, `moment`: the wrench on the wheel carrier, global components, at the load point
       named by `longitudinal_at` (N, N·mm; F_z included);
-    - `q`: the suspension's public coordinates; `status` (0 converged, `STATUS`), `iterations`
-      (Newton steps).
+    - `q`: the suspension's public coordinates; `status` (`diffsusp.statics.Status` codes),
+      `iterations` (Newton steps).
     """
 
     forces: TyreForces
@@ -344,10 +350,13 @@ def _solve_traced(rig: TyreRig, cases, q0, rtol, atol, max_steps):
         _, f, alpha, gamma, geo = _tyre_state(rig, q, case, design_steer)
         loads = _loads(rig, w, case[0])
         p = _load_point(rig)
-        ok = res.result == optx.RESULTS.successful
+        # optimistix's outcome in the statics' one status vocabulary
+        status = jnp.where(res.result == optx.RESULTS.successful, Status.CONVERGED,
+                           jnp.where(res.result == optx.RESULTS.max_steps_reached,
+                                     Status.MAX_STEPS, Status.STALLED))
         return dict(forces=f, slip_angle=alpha, inclination=gamma, toe=geo["toe"],
                     camber=geo["camber"], steer=geo["steer"], force=loads.force[p],
-                    moment=loads.moment[p], q=q, status=jnp.where(ok, 0, 1),
+                    moment=loads.moment[p], q=q, status=status,
                     iterations=res.stats["num_steps"])
 
     out = jax.vmap(one)(cases, q0)
@@ -411,13 +420,13 @@ def solve(rig: TyreRig, slip_angle: ArrayLike, *, fz: ArrayLike | None = None,
     sol = (_solve_traced if inside else _solve)(rig, case_array, q0, rtol, atol, max_steps)
     if concrete and not isinstance(sol.status, jax.core.Tracer):
         status = np.asarray(sol.status)
-        bad = np.flatnonzero(status != 0)
+        bad = np.flatnonzero(status != Status.CONVERGED)
         if bad.size:
             c = int(bad[0])
             message = (
                 f"tyre rig: case {c} (F_z = {float(cases[0][c]):g} N, slip angle "
                 f"{float(cases[1][c]):g} rad, slip ratio {float(cases[2][c]):g}) did not "
-                f"converge: {STATUS[int(status[c])]} ({bad.size} of {n} cases failed). The "
+                f"converge: {STATUS_TEXT[int(status[c])]} ({bad.size} of {n} cases failed). The "
                 "tyre force may be beyond what the suspension carries: reduce the slip or "
                 "load, or pass throw=False to get per-case statuses.")
             if throw:
