@@ -50,9 +50,7 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
 import scipy.stats
 
 from ..errors import InputError
@@ -68,7 +66,8 @@ _UNITS = {"b_delta_2": "N/(m·kN^2)", "b_delta_1": "N/(m·kN)", "b_delta_0": "N/
           "b_L_1": "1/kN", "b_L_0": "1", "I_xx": "kg·m^2", "I_yy": "kg·m^2",
           "I_zz": "kg·m^2", "I_xz": "kg·m^2", "m_x_G": "kg·m", "m_z_G": "kg·m"}
 _DEFAULT = onboard.Options()
-DEFAULT_HELD = {"b_delta_2": 0.0, "b_L_2": 0.0, "b_L_1": 0.0, "I_xx": 0.0, "I_yy": 0.0}
+DEFAULT_HELD = {"b_L_2": 0.0, "b_L_1": 0.0, "b_L_0": -0.5, "I_xx": 0.0,
+                "I_yy": 0.0}
 """What the joint identification holds by default: the load's curvature of the cornering
 stiffness and the relaxation's load dependence (two equations per instant see the four tyres'
 forces only through the axles' sums: K_δ linear in F_z and one relaxation L_R, as the thesis's
@@ -76,14 +75,19 @@ Table 32 ends up with), and the roll and pitch inertias (their terms, the road n
 times the roll and pitch accelerations, are below the yaw equation's noise; left free, their
 σ is larger than themselves)."""
 START_RELAXATION = -0.4
-IV_STEPS = 60
-"""The most instrumented Gauss–Newton steps of `identify`."""
-IV_TOL = 1e-5
-"""Convergence: the last step below this fraction of the start's magnitude in every
-parameter (far below their σ)."""
-IV_DAMPING = 0.5
-"""The fraction of the instrumented Gauss–Newton step taken."""
 """The relaxation L_R of the linear start (dimensionless, the synthetic car's sign)."""
+RELAXATION_GRID = (-0.1, -0.2, -0.35, -0.6, -1.0, -1.7, -3.0)
+"""The relaxations L_R at which `identify` profiles the cross-product objective for its start."""
+ROWS_PER_WINDOW = 5
+"""The equations' rows per body-estimate window (`onboard.Options.window_time`): denser rows
+add no information (measured), sparser lose it (one row per window: σ twice as large)."""
+RELAXATION_SPREAD = 0.2
+"""The relative change of a held relaxation L_R against which `JointReport.hinges` tests every
+estimate (spec tyre §9 item 8: one tyre's relaxation lengths in Annex G differ by about ±20 %
+between its inflation pressures)."""
+CROSS_TOL = 1e-8
+"""Convergence: the Newton decrement gᵀ H⁻¹ g of the whitened cross-product objective (a
+parameter's step of about 1e-4 of its σ)."""
 
 
 class Signals(eqx.Module):
@@ -173,25 +177,76 @@ def _iv_step(x, scale, weights, rows, sig_e, sig_o, free):
     return full(theta - step), r, J, Z
 
 
-@eqx.filter_jit
-def _linear_start(base, sig, rows, weights, free):
-    """Least squares of the free coefficients but the relaxation's at L_R =
-    `START_RELAXATION`: the equations are linear in them there (the lateral forces are a
-    linear filter of them)."""
-    base = base.at[TYRE.index("b_L_0")].set(START_RELAXATION)
-    free = np.asarray(free) & np.array([n not in ("b_L_2", "b_L_1", "b_L_0") for n in NAMES])
+def _cross(x, scale, weights, rows, sig_e, sig_o, free):
+    """The cross-product objective Q = Σ r_e·r_o of the two half records' whitened residuals,
+    its gradient g = J_eᵀ r_o + J_oᵀ r_e and its Gauss–Newton Hessian H = J_eᵀ J_o + J_oᵀ J_e
+    (scaled parameters). The halves' noises are independent, so E[Q] is the noise-free
+    residuals' sum of squares: its minimum is not pulled by the noise in the regressors
+    (least squares would shorten the noise by lengthening the relaxation)."""
+    _, r, J, Z = _iv_step(x, scale, weights, rows, sig_e, sig_o, free)
+    r, J, Z = np.asarray(r), np.asarray(J), np.asarray(Z)
+    H = Z.T @ J
+    return float(np.sum(r[0] * r[1])), Z.T @ r.reshape(-1), 0.5 * (H + H.T)
 
-    def fn(v):
-        return (equations(base.at[free].set(v), sig)[rows] * weights).ravel()
 
-    v0 = jnp.zeros(int(free.sum()))
-    r0 = fn(v0)
-    J = jax.jacfwd(fn)(v0)
-    s = jnp.linalg.norm(J, axis=0)
-    s = jnp.where(s > 0, s, 1.0)
-    sol = lx.linear_solve(lx.MatrixLinearOperator(J / s), -r0,
-                          lx.AutoLinearSolver(well_posed=False))
-    return base.at[free].set(sol.value / s)
+def _decrement(g, H):
+    """gᵀ H⁻¹ g, or inf where H is not positive definite."""
+    try:
+        c = np.linalg.cholesky(H)
+    except np.linalg.LinAlgError:
+        return np.inf
+    v = np.linalg.solve(c, g)
+    return float(v @ v)
+
+
+def _minimise_cross(x, scale, weights, rows, sig_e, sig_o, free, lr_i, max_steps):
+    """Minimise `_cross`'s Q: the start's relaxation L_R chosen on `RELAXATION_GRID` by the
+    profile of Q (Q is quadratic in every other free parameter: one Newton step minimises it
+    there), then Levenberg–Marquardt steps on Q, accepted where Q decreases, until the Newton
+    decrement gᵀ H⁻¹ g is below `CROSS_TOL` (a step of 1e-4 σ) with H positive definite.
+    Returns (x, converged, steps)."""
+    fmask = np.asarray(free)
+    sc = np.asarray(scale)
+
+    def move(x, d):
+        return x.at[fmask].add(jnp.asarray(d * sc))
+
+    def profile(x):
+        q, g, H = _cross(x, scale, weights, rows, sig_e, sig_o, free)
+        keep = np.arange(g.size) != lr_i
+        try:
+            d = np.zeros(g.size)
+            d[keep] = -np.linalg.solve(H[np.ix_(keep, keep)], g[keep])
+        except np.linalg.LinAlgError:
+            return np.inf, x
+        x = move(x, d)
+        return _cross(x, scale, weights, rows, sig_e, sig_o, free)[0], x
+
+    if lr_i is not None:
+        i = TYRE.index("b_L_0")
+        trials = [profile(x.at[i].set(v)) for v in RELAXATION_GRID]
+        x = min(trials, key=lambda t: t[0])[1]
+    q, g, H = _cross(x, scale, weights, rows, sig_e, sig_o, free)
+    lam = 1e-3
+    for k in range(max_steps):
+        if _decrement(g, H) < CROSS_TOL:
+            return x, True, k
+        D = np.diag(np.maximum(np.abs(np.diag(H)), 1e-12 * np.abs(np.diag(H)).max()))
+        try:
+            np.linalg.cholesky(H + lam * D)
+        except np.linalg.LinAlgError:
+            lam *= 10.0
+            continue
+        d = -np.linalg.solve(H + lam * D, g)
+        xn = move(x, d)
+        qn, gn, Hn = _cross(xn, scale, weights, rows, sig_e, sig_o, free)
+        if np.isfinite(qn) and qn <= q:
+            x, q, g, H, lam = xn, qn, gn, Hn, max(lam / 10.0, 1e-9)
+        else:
+            lam *= 10.0
+            if lam > 1e12:
+                break
+    return x, _decrement(g, H) < CROSS_TOL, max_steps
 
 
 @dataclasses.dataclass(frozen=True)
@@ -211,6 +266,10 @@ class JointReport(IdentificationReport):
     converged: bool
     consistency: object = None
     held_mask_: np.ndarray | None = None
+    relaxation_shift: np.ndarray | None = None
+    """Per parameter (`NAMES`), how far the estimate moves when the held relaxation L_R moves
+    by `RELAXATION_SPREAD` of itself (None: L_R estimated); a parameter that moves by more than
+    its σ is not determined (it hinges on the held value, not on the data)."""
 
     family = "onboard_joint"
 
@@ -247,7 +306,15 @@ class JointReport(IdentificationReport):
         crit = _critical()
         with np.errstate(divide="ignore", invalid="ignore"):
             z2 = (self.estimates / self.sigmas) ** 2
-        return np.isfinite(z2) & (z2 >= crit) & ~self.held
+        return np.isfinite(z2) & (z2 >= crit) & ~self.held & ~self.hinges
+
+    @property
+    def hinges(self):
+        """Per parameter: moves by more than its σ with the held relaxation (`relaxation_shift`)."""
+        if self.relaxation_shift is None:
+            return np.zeros(len(NAMES), bool)
+        with np.errstate(invalid="ignore"):
+            return np.abs(self.relaxation_shift) > self.sigmas
 
     @property
     def reasons(self):
@@ -258,6 +325,10 @@ class JointReport(IdentificationReport):
                 out.append(f"held at {self.estimates[i]:g}")
             elif not self.converged:
                 out.append("the fit did not converge")
+            elif self.hinges[i]:
+                out.append(f"not determined: moves by "
+                           f"{abs(self.relaxation_shift[i]) / self.sigmas[i]:.2g} sigma when "
+                           f"the held L_R moves by {100 * RELAXATION_SPREAD:g} %")
             elif not self.identifiable[i]:
                 out.append(f"not determined: |x|/sigma "
                            f"{abs(self.estimates[i]) / self.sigmas[i]:.2g} < {crit:.3g}")
@@ -337,10 +408,10 @@ def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
     valid = valid_e & valid_o
     t = np.asarray(hv["time"][0])
     half = max(int(round(options.window_time / (t[1] - t[0]) / 2)), 1)
-    stride = stride or 2 * half + 1
+    stride = stride or max(int(round((2 * half + 1) / ROWS_PER_WINDOW)), 1)
+    block = max(-(-(2 * half + 1) // stride), 1)
     rows = np.arange(2 * half + 1, len(t) - 2 * half - 1, stride)
     rows = rows[valid[rows]]
-    sig = sig_e
     if rows.size < 2 * len(NAMES):
         raise InputError(f"{rows.size} valid instants: too few for {len(NAMES)} parameters; "
                          "give a longer record.")
@@ -352,60 +423,60 @@ def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
                          f"{', '.join(NAMES)}.")
     free = tuple(n not in held for n in NAMES)
     base = jnp.asarray([float(held.get(n, 0.0)) for n in NAMES])
-    x0 = _linear_start(base, sig, rows, weights, free)
-    if "b_L_0" in held:
-        x0 = x0.at[TYRE.index("b_L_0")].set(float(held["b_L_0"]))
     fmask = np.asarray(free)
-    # the equations weighted by their residual σ at the start, then instrumented Gauss–Newton
-    # steps on both halves (least squares would drift to a long relaxation: it filters the
-    # measured inputs' noise; on the synthetic car L_R went from −0.5 to −5)
-    scale = jnp.where(jnp.abs(x0[fmask]) > 0, jnp.abs(x0[fmask]), 1.0)
+    lr_i = int(np.flatnonzero(fmask).tolist().index(TYRE.index("b_L_0"))) \
+        if fmask[TYRE.index("b_L_0")] else None
+    # the start: the held values, the free parameters at 0 but a free L_R at
+    # `START_RELAXATION`; the free parameters scaled by their Jacobian columns' norms
+    x0 = base if lr_i is None else base.at[TYRE.index("b_L_0")].set(START_RELAXATION)
+    _, _, J0, _ = _iv_step(x0, jnp.ones(int(fmask.sum())), weights, rows, sig_e, sig_o, free)
+    norms = np.linalg.norm(np.asarray(J0), axis=0)
+    sc = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
+    scale = jnp.asarray(sc)
+    # every free parameter but L_R enters linearly: Q is quadratic in them; the equations
+    # weighted by their residual σ at a first fit, then the fit again
+    x0, *_ = _minimise_cross(x0, scale, weights, rows, sig_e, sig_o, free, lr_i, max_steps)
     _, r0, _, _ = _iv_step(x0, scale, weights, rows, sig_e, sig_o, free)
     rs = np.sqrt(np.mean(np.asarray(r0) ** 2, axis=(0, 1))) / np.asarray(weights)
     weights = jnp.asarray(1.0 / rs)
-    x = x0
-    converged = False
-    sc = np.asarray(scale)
-
-    def size(step):
-        d = np.asarray(step)[fmask] / sc
-        return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else np.inf
-
-    x_new, *_ = _iv_step(x, scale, weights, rows, sig_e, sig_o, free)
-    step, alpha = x_new - x, IV_DAMPING
-    for _ in range(IV_STEPS):
-        # damped steps, halved while the next step would not be shorter: Zᵀ J leaves out the
-        # instruments' own change, and full steps oscillated, growing, on the synthetic car
-        for _ in range(8):
-            cand = x + alpha * step
-            cand_new, *_ = _iv_step(cand, scale, weights, rows, sig_e, sig_o, free)
-            if size(cand_new - cand) < size(step):
-                break
-            alpha *= 0.5
-        else:
-            break
-        x, step = cand, cand_new - cand
-        alpha = min(1.0, 2.0 * alpha)
-        if size(step) < IV_TOL:
-            break
-    converged = size(step) < IV_TOL
+    x, converged, steps = _minimise_cross(x0, scale, weights, rows, sig_e, sig_o, free, lr_i,
+                                          max_steps)
+    shift = None
+    if lr_i is None and held.get("b_L_0", 0.0) != 0.0:
+        # every free parameter enters linearly once L_R is held: Q is quadratic in them, one
+        # Newton step from the estimate is the refit at the moved L_R
+        i = TYRE.index("b_L_0")
+        moved = x.at[i].multiply(1.0 + RELAXATION_SPREAD)
+        _, g1, H1 = _cross(moved, scale, weights, rows, sig_e, sig_o, free)
+        shift = np.zeros(len(NAMES))
+        try:
+            shift[fmask] = -np.linalg.solve(H1, g1) * sc
+        except np.linalg.LinAlgError:
+            shift[fmask] = np.inf
     _, r, J, Z = _iv_step(x, scale, weights, rows, sig_e, sig_o, free)
     r, x, J, Z = np.asarray(r), np.asarray(x), np.asarray(J), np.asarray(Z)
-    result = optx.RESULTS.successful if converged else optx.RESULTS.nonlinear_max_steps_reached
     rs = np.sqrt(np.mean(r**2, axis=(0, 1))) / np.asarray(weights)
     # sandwich (Zᵀ J)⁻¹ (Σ_t g_t g_tᵀ) (Jᵀ Z)⁻¹, clustered by instant (both halves, both
     # equations: they share the body's noise)
     white = r.reshape(-1)
     p = int(fmask.sum())
-    bread = np.linalg.inv(Z.T @ J)
+    try:
+        bread = np.linalg.inv(Z.T @ J)
+    except np.linalg.LinAlgError:
+        bread, converged = np.full((p, p), np.nan), False
     g = (Z * white[:, None]).reshape(2, len(rows), 2, p).sum(axis=(0, 2))
     meat = g.T @ g
+    # and by blocks of one window's rows: the body estimates filter the noise over a window,
+    # so neighbouring rows' scores are correlated (unclustered, σ came out half the spread)
+    m = -(-g.shape[0] // block) * block
+    g = np.concatenate([g, np.zeros((m - g.shape[0], p))]).reshape(-1, block, p).sum(axis=1)
+    meat = g.T @ g
+    n_cl = g.shape[0]
     n = white.size
-    cov_s = bread @ meat @ bread.T * (len(rows) / (len(rows) - 1) * (n - 1) / max(n - p, 1))
+    cov_s = bread @ meat @ bread.T * (n_cl / (n_cl - 1) * (n - 1) / max(n - p, 1))
     rw = r.reshape(2, len(rows), 2)
     r = r[0] / np.asarray(weights)
     cov = np.zeros((len(NAMES), len(NAMES)))
-    sc = np.asarray(scale)
     cov[np.ix_(fmask, fmask)] = cov_s * np.outer(sc, sc)
     # the Correvit delay's σ is not carried in (`onboard.identify` does it); the report says
     # the delay removed
@@ -421,7 +492,7 @@ def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
                                               and con.chi2 <= onboard.MISFIT_RATIO * con.dof))
     _ = delay_sigma
     return JointReport(x, cov, r, rs, float(delay), float(mass),
-                       bool(result == optx.RESULTS.successful), con, ~fmask)
+                       bool(converged), con, ~fmask, shift)
 
 
 def truth(vehicle) -> dict:
@@ -437,6 +508,6 @@ def truth(vehicle) -> dict:
             "mass": float(vehicle.mass) + 4 * mu}
 
 
-__all__ = ["DEFAULT_HELD", "IV_DAMPING", "IV_STEPS", "IV_TOL", "JointReport", "NAMES",
-           "START_RELAXATION", "Signals", "TYRE", "VEHICLE", "equations", "identify",
-           "lateral_forces", "signals", "truth"]
+__all__ = ["CROSS_TOL", "DEFAULT_HELD", "JointReport", "NAMES", "RELAXATION_GRID",
+           "RELAXATION_SPREAD", "ROWS_PER_WINDOW", "START_RELAXATION", "Signals", "TYRE",
+           "VEHICLE", "equations", "identify", "lateral_forces", "signals", "truth"]
