@@ -66,41 +66,72 @@ def test_kc_kinematics_in_the_pipeline(record):
     assert plain.consistency.chi2 / plain.consistency.dof > 10
 
 
-def test_joint_identification_recovers_vehicle_and_tyre(record):
-    """(4-3) without the wheel forces: on the noise-free record the vehicle's yaw inertia,
-    product of inertia and first moments and the tyre's stiffnesses at the axles' loads come
-    back (I_zz within 0.5 %, I_xz within 0.5 % of I_zz, K_δ within 1.5 %, K_φ and K_γ within 10 %,
-    the reduced model's structure; the car's mass given);
-    on a noisy copy (one draw) the instrumented fit converges, is consistent and every estimated
-    vehicle parameter and tyre stiffness is within 3σ of the truth. (One draw does not
-    calibrate σ: the Monte-Carlo of benchmarks/tyre_onboard_joint.py does, and finds the
-    vehicle parameters' σ too small on a quarter of the draws — see `onboard_joint`.)"""
+@pytest.fixture(scope="module")
+def joint(record):
+    """The joint fits (one compiled program): the noise-free record and two noise draws."""
     car, clean, noisy, loads, exact = record
     tr = J.truth(car)
     tv = (float(car.tyre_stiffness), float(car.tyre_radius), float(car.tyre_damping))
-    ref = J.identify(clean, mass=tr["mass"], tyre_vertical=tv, delay=0.0,
-                     kinematics=car.kinematics)
+
+    def fit(data):
+        return J.identify(data, mass=tr["mass"], tyre_vertical=tv, delay=0.0,
+                          kinematics=car.kinematics)
+
+    sens = V.Sensors()
+    draws = [fit(noisy), fit(V.add_noise(clean, sens, jax.random.key(7)))]
+    return tr, tv, fit(clean), draws
+
+
+def test_joint_identification_recovers_vehicle_and_tyre(record, joint):
+    """(4-3) without the wheel forces, on the noise-free record, from a start at zero (not the
+    truth): the yaw inertia within 0.5 %, the product of inertia and the first moments within
+    3 kg·m² (2 mm of the 1.5 t car's centre of mass), the cornering stiffnesses within 1.5 %
+    and the camber stiffness within 2 % of the tyre's at the axles' loads; the torsion
+    stiffness, which the sine cannot separate from the held relaxation L_R (it moves by several
+    σ with a 20 % change of L_R), reported not determined for that reason; the held
+    parameters reported held."""
+    car, _, _, loads, exact = record
+    tr, _, ref, _ = joint
+    assert ref.converged
     x = dict(zip(J.NAMES, ref.estimates, strict=True))
     assert abs(x["I_zz"] / tr["I_zz"] - 1) < 0.005
-    assert abs(x["m_z_G"] - tr["m_z_G"]) < 2.0  # kg·m: 1.3 mm of the 1.5 t car's CG height
-    # the product of inertia within 0.5 % of I_zz (the roll and pitch inertias held at 0 leak
-    # into it: −15 against −6 kg·m²)
-    assert abs(x["I_xz"] - tr["I_xz"]) < 0.005 * tr["I_zz"]
+    for name in ("I_xz", "m_x_G", "m_z_G"):
+        assert abs(x[name] - tr[name]) < 3.0, (name, x[name], tr[name])
     q, _ = _quantities(ref.estimates, ref.covariance, loads)
     assert np.all(np.abs(q[:2] / exact[:2] - 1) < 0.015), q
-    # the reduced model's structure against this tyre's (K_δ linear in the load, one L_R):
-    # 7 % on K_φ and K_γ
-    assert np.all(np.abs(q[[2, 4]] / exact[[2, 4]] - 1) < 0.1), q
-    rep = J.identify(noisy, mass=tr["mass"], tyre_vertical=tv, delay=0.0,
-                     kinematics=car.kinematics)
-    assert rep.converged and rep.consistency.consistent, rep.consistency.summary()
-    for name in ESTIMATED:
-        i = J.NAMES.index(name)
-        assert abs(rep.estimates[i] - tr[name]) < 3 * rep.sigmas[i], (name, rep.estimates[i])
-    q, qs = _quantities(rep.estimates, rep.covariance, loads)
-    assert np.all(np.abs(q - exact) < 3 * qs), (q, exact, qs)
-    assert np.all(rep.held == np.isin(J.NAMES, list(J.DEFAULT_HELD)))
-    assert "joint vehicle + tyre" in rep.table() and rep.to_dict()["converged"]
+    assert abs(q[4] / exact[4] - 1) < 0.02, q
+    status = dict(zip(J.NAMES, ref.statuses, strict=True))
+    why = dict(zip(J.NAMES, ref.status_reasons, strict=True))
+    assert status["b_phi_1"] == "not determined" and "held L_R" in why["b_phi_1"]
+    assert all(status[n] == "held" for n in J.DEFAULT_HELD)
+    assert "joint vehicle + tyre" in ref.table() and ref.to_dict()["converged"]
+
+
+def test_joint_sigma_on_noise_draws(record, joint):
+    """Two noise draws (the Monte-Carlo of benchmarks/tyre_onboard_joint.py does 100: every
+    identified quantity within 3σ in ≥ 98 %, spread/σ 0.76–1.04): each fit converges and is
+    consistent; the yaw inertia, the camber coefficient and the cornering stiffnesses at the
+    loads (|K|/σ ≥ 3.29) are identified; every
+    estimated vehicle parameter and tyre quantity but K_φ is within 3σ of the truth; σ(I_zz)
+    is within [0.67, 1.5] of the Monte-Carlo's spread (64 kg·m²) — a σ too small or too large
+    by half fails."""
+    car, _, _, loads, exact = record
+    tr, tv, _, draws = joint
+    iz = J.NAMES.index("I_zz")
+    for rep in draws:
+        assert rep.converged and rep.consistency.consistent, rep.consistency.summary()
+        status = dict(zip(J.NAMES, rep.statuses, strict=True))
+        assert status["I_zz"] == "identified"
+        assert status["b_gamma_1"] == "identified", status
+        for name in ESTIMATED:
+            i = J.NAMES.index(name)
+            assert abs(rep.estimates[i] - tr[name]) < 3 * rep.sigmas[i], (name, rep.estimates[i])
+        q, qs = _quantities(rep.estimates, rep.covariance, loads)
+        for k in (0, 1, 4):  # K_delta front and rear, K_gamma
+            assert abs(q[k]) > 3.29 * qs[k], (O.QUANTITIES[k], q[k], qs[k])
+            assert abs(q[k] - exact[k]) < 3 * qs[k], (O.QUANTITIES[k], q[k], exact[k], qs[k])
+        assert 0.67 * 64.0 < rep.sigmas[iz] < 1.5 * 64.0, rep.sigmas[iz]
+    noisy = record[2]
     with pytest.raises(InputError):
         J.identify(noisy, mass=-1.0, tyre_vertical=tv)
     with pytest.raises(InputError):

@@ -36,8 +36,8 @@ def test_shipped_tables_are_kc_and_interpolate_off_grid(fresh):
     tables, off = fresh
     shipped = K.load_tables()
     np.testing.assert_allclose(shipped.values, tables.values, rtol=1e-9, atol=1e-12)
-    got = np.array([np.asarray(tables.lookup(0, t, f)) for t, f in zip(OFF_T, OFF_F,
-                                                                      strict=True)])
+    got = np.asarray(jax.jit(jax.vmap(lambda t, f: tables.lookup(0, t, f)))(
+        jnp.asarray(OFF_T), jnp.asarray(OFF_F)))
     want = np.stack([off[k] for k in K.QUANTITIES], axis=1)
     err = np.abs(got - want)
     span = np.ptp(np.asarray(tables.values[0]).reshape(-1, 4), axis=0)
@@ -63,7 +63,8 @@ def test_poses_continuous_and_differentiable():
     differences (relative 2e-4: a step across a knot meets the next cubic) at points inside,
     across a knot and beyond the grid; value and slope continuous
     across the knots (C¹); the right wheels the mirror image of the left ones; the default
-    12-DOF car unchanged by the option's absence."""
+    12-DOF car unchanged by the option's absence. Three compiled programs (pose, its Jacobian,
+    the look-up's value and slopes), each evaluated in batches."""
     tables = K.load_tables()
     corners = Vehicle().corners
 
@@ -71,31 +72,43 @@ def test_poses_continuous_and_differentiable():
         R, O, toe, camber = K.wheel_poses(tables, corners, z, f)
         return jnp.concatenate([R.reshape(-1), O.reshape(-1), toe, camber])
 
+    poses = jax.jit(jax.vmap(pose))
+    jac = jax.jit(jax.vmap(jax.jacfwd(pose, argnums=(0, 1))))
     rng = np.random.default_rng(3)
-    for z0, f0 in [(rng.uniform(-0.05, 0.05, 4), rng.uniform(-2500, 2500, 4)),
-                   (np.full(4, 0.03 + 1e-7), np.full(4, -1e-4)),  # at knots
-                   (np.full(4, 0.07), np.full(4, 3500.0))]:  # beyond the grid
-        z0, f0 = jnp.asarray(z0), jnp.asarray(f0)
-        jz, jf = jax.jacfwd(pose, argnums=(0, 1))(z0, f0)
-        h_z, h_f = 1e-6, 1e-2
-        for k in range(4):
-            e = jnp.zeros(4).at[k].set(1.0)
-            fd_z = (pose(z0 + h_z * e, f0) - pose(z0 - h_z * e, f0)) / (2 * h_z)
-            fd_f = (pose(z0, f0 + h_f * e) - pose(z0, f0 - h_f * e)) / (2 * h_f)
-            np.testing.assert_allclose(jz[:, k], fd_z, rtol=2e-4, atol=1e-8)
-            np.testing.assert_allclose(jf[:, k], fd_f, rtol=2e-4, atol=1e-11)
-    # C¹ across every knot of the travel and the lateral grid
-    for knot in K.TRAVEL_GRID[1:-1]:
-        lo, hi = (jnp.asarray(knot - 1e-9), jnp.asarray(knot + 1e-9))
-        np.testing.assert_allclose(tables.lookup(0, lo, 500.0), tables.lookup(0, hi, 500.0),
-                                   atol=1e-9)
-        np.testing.assert_allclose(jax.jacfwd(tables.lookup, 1)(0, lo, 500.0),
-                                   jax.jacfwd(tables.lookup, 1)(0, hi, 500.0), rtol=1e-5)
-    g = jax.jacfwd(tables.lookup, 2)
-    np.testing.assert_allclose(g(0, 0.01, -1e-7), g(0, 0.01, 1e-7), rtol=1e-6)
+    z0 = np.stack([rng.uniform(-0.05, 0.05, 4), np.full(4, 0.03 + 1e-7),  # inside, at knots
+                   np.full(4, 0.07)])  # beyond the grid
+    f0 = np.stack([rng.uniform(-2500, 2500, 4), np.full(4, -1e-4), np.full(4, 3500.0)])
+    jz, jf = (np.asarray(a) for a in jac(jnp.asarray(z0), jnp.asarray(f0)))
+    h_z, h_f = 1e-6, 1e-2
+    eye = np.eye(4)
+    # every point's ± steps in z and in f for every wheel: one batch
+    zs = np.concatenate([z0[:, None] + s * h_z * eye for s in (1, -1)] +
+                        [np.repeat(z0[:, None], 4, axis=1)] * 2, axis=1)
+    fs = np.concatenate([np.repeat(f0[:, None], 4, axis=1)] * 2 +
+                        [f0[:, None] + s * h_f * eye for s in (1, -1)], axis=1)
+    out = np.asarray(poses(jnp.asarray(zs.reshape(-1, 4)), jnp.asarray(fs.reshape(-1, 4))))
+    out = out.reshape(3, 4, 4, -1)  # point, (z+, z−, f+, f−), wheel, value
+    fd_z = (out[:, 0] - out[:, 1]) / (2 * h_z)
+    fd_f = (out[:, 2] - out[:, 3]) / (2 * h_f)
+    np.testing.assert_allclose(np.swapaxes(jz, 1, 2), fd_z, rtol=2e-4, atol=1e-8)
+    np.testing.assert_allclose(np.swapaxes(jf, 1, 2), fd_f, rtol=2e-4, atol=1e-11)
+
+    # C¹ across every knot of the travel and the lateral grid: value and slopes each side
+    def look(t, f):
+        return tables.lookup(0, t, f)
+
+    both = jax.jit(jax.vmap(lambda t, f: (look(t, f), jax.jacfwd(look, (0, 1))(t, f))))
+    knots = np.asarray(K.TRAVEL_GRID[1:-1])
+    t = np.r_[knots - 1e-9, knots + 1e-9, 0.01, 0.01]
+    f = np.r_[np.full(2 * knots.size, 500.0), -1e-7, 1e-7]
+    val, (d_t, d_f) = jax.tree.map(np.asarray, both(jnp.asarray(t), jnp.asarray(f)))
+    k = knots.size
+    np.testing.assert_allclose(val[:k], val[k:2 * k], atol=1e-9)
+    np.testing.assert_allclose(d_t[:k], d_t[k:2 * k], rtol=1e-5)
+    np.testing.assert_allclose(d_f[-2], d_f[-1], rtol=1e-6)
     # mirror: a left and a right wheel at the same travel with mirrored forces
-    _, O, toe, camber = K.wheel_poses(tables, corners, jnp.full(4, 0.02),
-                                      jnp.array([800.0, -800.0, 500.0, -500.0]))
+    p = np.asarray(poses(jnp.full((1, 4), 0.02), jnp.array([[800.0, -800.0, 500.0, -500.0]])))[0]
+    O, toe, camber = p[36:48].reshape(4, 3), p[48:52], p[52:56]
     np.testing.assert_allclose(toe[0], -toe[1], rtol=1e-12)
     np.testing.assert_allclose(camber[2], -camber[3], rtol=1e-12)
     np.testing.assert_allclose(O[0, 1] - corners[0, 1], -(O[1, 1] - corners[1, 1]), rtol=1e-12)
