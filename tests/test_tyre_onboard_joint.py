@@ -7,6 +7,7 @@ tests/data/onboard_kc_sine.npz (tests/data/make_onboard_kc_record.py); the noise
 The truth: the tyre's stiffnesses at the axles' mean loads, the car's inertia and first moments
 about the body origin (`onboard_joint.truth`)."""
 
+import json
 import pathlib
 
 import jax
@@ -19,6 +20,7 @@ from diffsusp.tyre import onboard as O
 from diffsusp.tyre import onboard_joint as J
 from diffsusp.tyre import vehicle as V
 from diffsusp.tyre import vehicle_kc as K
+from diffsusp.tyre.bench import write_reports
 
 DATA = pathlib.Path(__file__).parent / "data" / "onboard_kc_sine.npz"
 ESTIMATED = ("I_zz", "I_xz", "m_x_G", "m_z_G")
@@ -107,14 +109,15 @@ def test_joint_identification_recovers_vehicle_and_tyre(record, joint):
     assert "joint vehicle + tyre" in ref.table() and ref.to_dict()["converged"]
 
 
-def test_joint_sigma_on_noise_draws(record, joint):
+def test_joint_sigma_on_noise_draws(record, joint, tmp_path):
     """Two noise draws (the Monte-Carlo of benchmarks/tyre_onboard_joint.py does 100: every
     identified quantity within 3σ in ≥ 98 %, spread/σ 0.76–1.04): each fit converges and is
     consistent; the yaw inertia, the camber coefficient and the cornering stiffnesses at the
     loads (|K|/σ ≥ 3.29) are identified; every
     estimated vehicle parameter and tyre quantity but K_φ is within 3σ of the truth; σ(I_zz)
     is within [0.67, 1.5] of the Monte-Carlo's spread (64 kg·m²) — a σ too small or too large
-    by half fails."""
+    by half fails. K_φ alone hinges on the held L_R: the report gives it as a function of L_R
+    among its combinations (written by the CLI's report writer)."""
     car, _, _, loads, exact = record
     tr, tv, _, draws = joint
     iz = J.NAMES.index("I_zz")
@@ -131,6 +134,10 @@ def test_joint_sigma_on_noise_draws(record, joint):
             assert abs(q[k]) > 3.29 * qs[k], (O.QUANTITIES[k], q[k], qs[k])
             assert abs(q[k] - exact[k]) < 3 * qs[k], (O.QUANTITIES[k], q[k], exact[k], qs[k])
         assert 0.67 * 64.0 < rep.sigmas[iz] < 1.5 * 64.0, rep.sigmas[iz]
+        assert [c.split(" =")[0] for c in rep.combinations] == ["b_phi_1"]
+    write_reports(tmp_path / "joint.json", draws[:1], ["joint"])  # the CLI's --report writer
+    saved = json.loads((tmp_path / "joint.json").read_text())["reports"][0]
+    assert saved["combinations"] == list(draws[0].combinations)
     noisy = record[2]
     with pytest.raises(InputError):
         J.identify(noisy, mass=-1.0, tyre_vertical=tv)

@@ -358,6 +358,17 @@ class JointReport(IdentificationReport):
         return tuple(out)
 
     @property
+    def combinations(self):
+        """Per estimate that hinges on the held relaxation (`hinges`): its value as a function
+        of L_R, linear through the estimate and the refit at the moved L_R."""
+        if self.relaxation_shift is None:
+            return ()
+        lr = float(self.estimates[TYRE.index("b_L_0")])
+        slope = np.asarray(self.relaxation_shift) / (RELAXATION_SPREAD * lr)
+        return tuple(f"{n} = {self.estimates[i]:.6g} + {slope[i]:.4g}·(L_R − ({lr:g}))"
+                     for i, n in enumerate(NAMES) if self.hinges[i])
+
+    @property
     def residuals(self):
         return {}
 
