@@ -65,7 +65,7 @@ from ..identify.report import (
     MeasurementResiduals,
     consistency_from_residuals,
 )
-from . import contact
+from . import contact, vehicle_kc
 from .vehicle import WHEELS, add_noise, rot_z
 
 CHANNELS = ("time", "lasers", "correvit", "imu_omega", "imu_velocity", "imu_specific_force",
@@ -213,49 +213,87 @@ def body_twist(data, normal, R, opts: Options, kernels):
 # Tyre inputs (§1.5, §1.6)
 
 
-def tyre_inputs(data, normal, R, twist, kernels, raw_plane=None):
+def carrier_poses(corners, travel, steer, fy=None, kinematics=None):
+    """Body ← carrier poses per wheel (R (4, 3, 3), O (4, 3)) from the travel and steer (m,
+    rad): the 12-DOF model's (travel along z, steer about it) without `kinematics`, the 30-DOF
+    model's K&C tables (`vehicle_kc.wheel_poses`, `fy` the lateral forces along the body's y,
+    N) with them (spec tyre §5.2, §5.5 item 3)."""
+    if kinematics is None:
+        return jax.vmap(rot_z)(steer), corners + travel[:, None] * jnp.array([0.0, 0.0, 1.0])
+    R, O, _, _ = vehicle_kc.wheel_poses(kinematics, corners, travel, fy, steer)
+    return R, O
+
+
+def _body_fy(wrench, Rc):
+    """The wheel-carrier force's body-y component (N): the K&C tables' lateral load."""
+    return jnp.einsum("...kj,...kj->...k", Rc[..., 1, :], wrench[..., :3])
+
+
+def tyre_inputs(data, normal, R, twist, kernels, raw_plane=None, kinematics=None):
     """Per instant and wheel (n, 4): F_z, F_y (tyre frame), δ′, φ′, γ, ω. The tyre-frame
     angles' rates are the smoothed derivative of the angles computed per instant from the raw
     channels and the per-instant plane `raw_plane` (normal, R) — not the derivative of the
     smoothed angles, which would filter them twice while the twist and F_y are filtered once
-    (a bias of ≈ 0.3 σ on a 6 s sine)."""
+    (a bias of ≈ 0.3 σ on a 6 s sine). `kinematics`: the K&C tables of the 30-DOF model
+    (`carrier_poses`; their lateral load is the measured wrench's, in the body's y), or None
+    (the 12-DOF model)."""
     _, smooth, slope, _ = kernels
     # every per-wheel channel smoothed once, as the twist and the plane are by their windows
     steer, travel = _conv(data["steer"], smooth), _conv(data["travel"], smooth)
     steer_rate, travel_rate = _conv(data["steer"], slope), _conv(data["travel"], slope)
     spin = _conv(data["spin"], smooth)
     corners = data["corners"]
-    ez = jnp.array([0.0, 0.0, 1.0])
+    if kinematics is None:
+        fy_raw = jnp.zeros_like(data["travel"])
+    else:  # the 12-DOF pose's body y, then the tables' own (one fixed-point pass)
+        fy_raw = _body_fy(data["wrench"], jax.vmap(jax.vmap(rot_z))(data["steer"]))
+        fy_raw = _body_fy(data["wrench"], jax.vmap(
+            lambda z, b, f: carrier_poses(corners, z, b, f, kinematics)[0])(
+                data["travel"], data["steer"], fy_raw))
+    fy_b, fy_rate = _conv(fy_raw, smooth), _conv(fy_raw, slope)
 
-    def frame(n_b, R_b, tw, beta, z):
-        Rc = jax.vmap(rot_z)(beta)  # body ← carrier
-        O = corners + z[:, None] * ez
+    def frame(n_b, R_b, tw, beta, z, f):
+        Rc, O = carrier_poses(corners, z, beta, f, kinematics)  # body ← carrier
         n_pf = jnp.einsum("kji,j->ki", Rc, n_b)
         d = -(O @ n_b + R_b)
-        f = jax.vmap(contact.tyre_frame_zero_wobble)(n_pf, d)
-        return Rc, O, n_pf, d, jnp.stack([f["xi_hat"], f["h"], f["gamma"]], axis=-1)
+        fr = jax.vmap(contact.tyre_frame_zero_wobble)(n_pf, d)
+        return Rc, O, n_pf, d, jnp.stack([fr["xi_hat"], fr["h"], fr["gamma"]], axis=-1)
 
-    Rc, O, _, _, qp = jax.vmap(frame)(normal, R, twist, steer, travel)
+    Rc, O, _, _, qp = jax.vmap(frame)(normal, R, twist, steer, travel, fy_b)
+    # the carriers' angular and linear velocities relative to the body (body frame)
+    (_, _), (dRc, dO) = jax.vmap(lambda z, b, f, zd, bd, fd: jax.jvp(
+        lambda z_, b_, f_: carrier_poses(corners, z_, b_, f_, kinematics),
+        (z, b, f), (zd, bd, fd)))(travel, steer, fy_b, travel_rate, steer_rate, fy_rate)
+    w_rel = jnp.einsum("tkij,tkjl->tkil", dRc, jnp.swapaxes(Rc, -1, -2))
+    w_rel = jnp.stack([w_rel[..., 2, 1], w_rel[..., 0, 2], w_rel[..., 1, 0]], axis=-1)
     if raw_plane is None:
         qp_rate = _conv(qp, slope)
     else:
-        qp_raw = jax.vmap(frame)(*raw_plane, twist, data["steer"], data["travel"])[-1]
+        qp_raw = jax.vmap(frame)(*raw_plane, twist, data["steer"], data["travel"], fy_raw)[-1]
         qp_rate = _conv(qp_raw, slope)
 
-    def wheel(tw, Rci, Oi, zdi, bdi, q, qd, wrench, spin):
+    def wheel(tw, Rci, Oi, dOi, wri, q, qd, wrench, spin):
         v, w = tw[:3], tw[3:]
-        w_pf = Rci.T @ (w + bdi * ez)
-        v_pf = Rci.T @ (v + jnp.cross(w, Oi) + zdi * ez)
+        w_pf = Rci.T @ (w + wri)
+        v_pf = Rci.T @ (v + jnp.cross(w, Oi) + dOi)
         tau_p = contact.tyre_twist_zero_wobble(jnp.concatenate([v_pf, w_pf]), q, qd)
         Rp, Pp = contact.carrier_to_tyre_closed(q[0], q[2], q[1])
         F = contact.wrench_to_tyre_closed(wrench, Rp, Pp)
-        return F[2], F[1], tau_p[1] / spin, tau_p[5] / spin, q[2]
+        return (F[2], F[1], tau_p[1] / spin, tau_p[5] / spin, q[2], Rci @ Rp[:, 1],
+                Oi + Rci @ Pp)
 
     per = jax.vmap(jax.vmap(wheel, in_axes=(None, 0, 0, 0, 0, 0, 0, 0, 0)))
-    fz, fy, delta_p, phi_p, gamma = per(twist, Rc, O, travel_rate, steer_rate, qp, qp_rate,
-                                        data["wrench"], spin)
+    fz, fy, delta_p, phi_p, gamma, y_p, P = per(twist, Rc, O, dO, w_rel, qp, qp_rate,
+                                                data["wrench"], spin)
+    # the lever arms of each tyre's lateral force in the body's equations (4-1): along the
+    # road plane's lateral direction u, and about the road normal through the body origin
+    u = jnp.array([0.0, 1.0, 0.0]) - normal[:, 1:2] * normal
+    u = u / jnp.linalg.norm(u, axis=-1, keepdims=True)
+    lat_arm = jnp.einsum("tkj,tj->tk", y_p, u)
+    yaw_arm = jnp.einsum("tkj,tj->tk", jnp.cross(P, y_p), normal)
     return {"fz": fz, "fy": fy, "delta_p": delta_p, "phi_p": phi_p, "gamma": gamma,
-            "spin": spin}
+            "spin": spin, "radius": -qp[..., 1], "radius_rate": -qp_rate[..., 1],
+            "lat_arm": lat_arm, "yaw_arm": yaw_arm}
 
 
 # --------------------------------------------------------------------------------------------
@@ -276,7 +314,7 @@ def regression_signals(inputs, valid, kernels, stride, half, remove_offsets=True
     # frequencies of the sweep); the wrench (raw in `inputs`) is smoothed here
     second = np.ones(1) if second is None else second
     s = {k: _conv(_conv(v, smooth) if k in ("fy", "fz") else v, second)[idx]
-         for k, v in inputs.items()}
+         for k, v in inputs.items() if k in ("fz", "fy", "delta_p", "phi_p", "gamma", "spin")}
     s["fy_rate"] = _conv(_conv(inputs["fy"], slope), second)[idx]
     ok = valid[idx]
     weight = ok.astype(float)[:, None]
@@ -450,10 +488,11 @@ def _step(time):
 
 
 def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half: int,
-           dt: float):
+           dt: float, kinematics=None):
     """Steps 1–3 of the pipeline on a checked record: ground plane, body twist, tyre inputs per
     wheel (n, 4) and the per-instant validity (n,) (≥ 3 lasers in every window); `half` the
-    window's half length in samples and `dt` the sampling step (s) (static)."""
+    window's half length in samples and `dt` the sampling step (s) (static); `kinematics` the
+    30-DOF model's K&C tables (`tyre_inputs`) or None."""
     kernels = _kernels(opts.window, 2 * half + 1, dt)
     data = dict(data, correvit=shift_channel(data["correvit"], data["time"], correvit_delay_s))
     normal, R = ground_plane(data["lasers"], data["laser_positions"],
@@ -461,7 +500,7 @@ def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half:
     twist = body_twist(data, normal, R, opts, kernels)
     raw = ground_plane(data["lasers"], data["laser_positions"], data["laser_window_ok"],
                        np.ones(1))
-    tyre = tyre_inputs(data, normal, R, twist, kernels, raw)
+    tyre = tyre_inputs(data, normal, R, twist, kernels, raw, kinematics)
     valid = jnp.sum(data["laser_window_ok"], axis=1) >= 3
     # and the Correvit read `correvit_delay_s` later than the end of the record: none (its
     # shifted copy holds the last value there)
@@ -471,10 +510,47 @@ def inputs(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0, half:
             "kernels": kernels, "half": half}
 
 
+def joint_signals(data: dict, opts: Options = Options(), *, correvit_delay_s=0.0,
+                  kinematics=None) -> dict:
+    """Steps 1–3 on one checked record (`check`) for the joint vehicle + tyre identification
+    (4-1…4-3, `onboard_joint`), at the full rate (one compiled program per record length):
+    per wheel (n, 4) the tyre inputs δ′, φ′, γ, ω, the
+    loaded radius and its rate (m, m/s), the lateral force's arms `lat_arm` (along the road
+    plane's lateral direction u) and `yaw_arm` (m, about the road normal z_r through the
+    body origin); per instant (n, 3) the body's angular velocity ω, its derivative ω̇ and the
+    specific force f_O at the body origin (from the inertial unit, smoothed by the window),
+    z_r and u (body frame); `valid` (n,)."""
+    return _joint_program(data, opts, _window_length(opts, data["time"]), _step(data["time"]),
+                          jnp.asarray(correvit_delay_s, float), kinematics)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _joint_program(data, opts, half, dt, correvit_delay_s, kinematics):
+    if "laser_window_ok" not in data:  # a half record (`halves`)
+        data = dict(data, laser_window_ok=_window_ok(data["laser_valid"], half, opts.window))
+    res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt,
+                 kinematics=kinematics)
+    _, smooth, slope, _ = res["kernels"]
+    w = _conv(data["imu_omega"], smooth)
+    wd = _conv(data["imu_omega"], slope)
+    c0 = data["imu_position"]
+    f_c0 = _conv(data["imu_specific_force"], smooth)
+    f_o = f_c0 - jnp.cross(wd, c0) - jnp.cross(w, jnp.cross(w, c0))
+    normal = res["normal"]
+    u = jnp.array([0.0, 1.0, 0.0]) - normal[:, 1:2] * normal
+    u = u / jnp.linalg.norm(u, axis=-1, keepdims=True)
+    keys = ("delta_p", "phi_p", "gamma", "spin", "radius", "radius_rate", "lat_arm",
+            "yaw_arm")
+    out = {k: res["tyre"][k] for k in keys}
+    out.update(omega=w, omega_dot=wd, f_o=f_o, normal=normal, u=u, valid=res["valid"])
+    return out
+
+
 def _signals(data: dict, opts: Options, *, half: int, dt: float, correvit_delay_s=0.0,
-             remove_offsets=True):
+             remove_offsets=True, kinematics=None):
     """Steps 1–4 on one checked record: the regression signals (m, 4) and the row mask (m,)."""
-    res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt)
+    res = inputs(data, opts, correvit_delay_s=correvit_delay_s, half=half, dt=dt,
+                 kinematics=kinematics)
     half2 = max(int(round(opts.regression_window_time / dt / 2)), 0)
     second = _kernels(opts.window, 2 * half2 + 1, dt)[1] if half2 else None
     stride = opts.stride or 2 * max(half, half2) + 1
@@ -514,16 +590,16 @@ def _window_ok(valid, half, kind):
 
 
 def split_signals(data: dict, opts: Options = Options(), *, half: int, dt: float,
-                  correvit_delay_s=0.0, remove_offsets=True):
+                  correvit_delay_s=0.0, remove_offsets=True, kinematics=None):
     """The regression signals of both halves of a checked record (`halves`): dict of (2, m, 4)
     and the row mask (m,) (valid in both halves); `half` and `dt` those of the half-rate
-    record (static)."""
+    record (static); `kinematics` as `tyre_inputs`."""
     h = halves(data)
 
     def one(d):
         d = dict(d, laser_window_ok=_window_ok(d["laser_valid"], half, opts.window))
         return _signals(d, opts, half=half, dt=dt, correvit_delay_s=correvit_delay_s,
-                        remove_offsets=remove_offsets)
+                        remove_offsets=remove_offsets, kinematics=kinematics)
 
     axes = {k: (0 if k in PER_SAMPLE else None) for k in h}
     sig, ok = jax.vmap(one, in_axes=(axes,))(h)
@@ -860,15 +936,24 @@ def _delay_program(data, options, half, dt):
     return correvit_delay(data, normal, R, kernels, dt=dt, return_sigma=True)
 
 
+def estimate_delay(data: dict, options: Options = Options()):
+    """The Correvit's delay and its σ (s) on a checked record (`check`), as `identify`
+    estimates it (`correvit_delay`, the full-rate record)."""
+    est, sigma, _ = _delay_program(data, options, _window_length(options, data["time"]),
+                                   _step(data["time"]))
+    return float(est), float(sigma)
+
+
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
-def _signals_program(data, options, half, dt, delay, remove_offsets):
+def _signals_program(data, options, half, dt, delay, remove_offsets, kinematics=None):
     return split_signals(data, options, half=half, dt=dt, correvit_delay_s=delay,
-                         remove_offsets=remove_offsets)
+                         remove_offsets=remove_offsets, kinematics=kinematics)
 
 
 def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, False),
              estimate_delay: bool = True, delay: float | None = None, offset: bool = False,
-             remove_offsets: bool = False, options: Options = Options()) -> dict:
+             remove_offsets: bool = False, options: Options = Options(),
+             kinematics=None) -> dict:
     """The on-board pipeline (§5.3, §5.5) on a record (dict of arrays, as
     `diffsusp.tyre.vehicle.measure` returns): per grouping ("all", "front", "rear") and camber
     choice a `Report`. The Correvit delay is estimated (`estimate_delay`, on the full-rate
@@ -889,6 +974,11 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
     two more runs of the signals program at τ ± `DELAY_STEP`): left out, the relaxation's load
     polynomials b_L_* had σ 1.3–1.44× too small over the rehearsal's 200 truths (their errors
     correlated 0.7 with the delay's).
+
+    `kinematics`: the 30-DOF model's K&C tables (`vehicle_kc.kc_tables`, spec tyre §5.2, §5.5
+    item 3): each carrier's toe, camber, track and wheelbase changes from its measured travel
+    and lateral load, in place of the 12-DOF chain (travel along the body's z, the measured
+    steer about it).
 
     **Returns:** {"delay": s, "delay_sigma": s (0 when given), "reports": [Report, …],
     "excluded": int}.
@@ -916,7 +1006,7 @@ def identify(data: dict, *, groupings=("all", "front", "rear"), camber=(True, Fa
     runs = []
     for shift in shifts:
         sig, ok = _signals_program(data, options, half, dt, jnp.asarray(delay + shift, float),
-                                   ro)
+                                   ro, kinematics)
         runs.append(({k: np.asarray(v) for k, v in sig.items()}, np.asarray(ok)))
     ok = runs[0][1]
     if psi is not None:  # the delay's influence summed over each regression instant's stretch
@@ -972,7 +1062,8 @@ QUANTITIES = ("K_delta_front", "K_delta_rear", "K_phi", "L_R", "K_gamma")
 
 
 def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Options(),
-                wheels=(0, 1, 2, 3), camber=True, remove_offsets=False, loads_kn=(4.0, 3.3)):
+                wheels=(0, 1, 2, 3), camber=True, remove_offsets=False, loads_kn=(4.0, 3.3),
+                kinematics=None):
     """The pipeline on many noisy copies of one noise-free record (`vehicle.channels`): per
     key, the Correvit delay estimate and two identifications, "naive" (nothing removed: the
     thesis's pipeline) and "corrected" (the estimated delay removed), each with the
@@ -980,7 +1071,7 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     without camber its column is left out and x, covariance hold 0 there). `delay` (s) delays
     the Correvit in the noisy copies, "delay_sigma" is the estimate's σ (`correvit_delay`; the
     σ here are the sandwich's alone, without the delay's, which `identify` adds). No laser
-    dropouts (use `identify`). Each copy goes
+    dropouts (use `identify`); `kinematics` as `identify`. Each copy goes
     through `check` and the compiled programs of `identify` (delay, signals), so a Monte-Carlo
     and an identification of records of one length compile them once.
 
@@ -994,7 +1085,7 @@ def monte_carlo(truth: dict, sensors, keys, *, delay=0.0, options: Options = Opt
     for key in keys:
         d = check(_noisy(truth, sensors, key, jnp.asarray(delay, float)), options)
         est, est_sigma, _ = _delay_program(d, options, half, dt)
-        fits = [_iv_program(*_signals_program(d, options, half2, dt2, shift, ro),
+        fits = [_iv_program(*_signals_program(d, options, half2, dt2, shift, ro, kinematics),
                             tuple(wheels), camber, tuple(loads_kn))
                 for shift in (jnp.zeros_like(est), est)]
         out.append({"delay": est, "delay_sigma": est_sigma, "naive": fits[0],
@@ -1023,8 +1114,9 @@ def _iv_program(sig, ok, wheels, camber, loads_kn):
 
 
 __all__ = ["CHANNELS", "GROUPINGS", "NAMES", "PER_SAMPLE", "QUANTITIES", "SIGNIFICANCE", "Options",
-           "Report", "consistency", "MISFIT_RATIO",
+           "Report", "carrier_poses", "consistency", "MISFIT_RATIO",
            "DELAY_HAC_WINDOWS", "DELAY_STEP", "body_twist", "check", "correvit_delay",
+           "estimate_delay", "joint_signals",
            "ground_plane", "halves", "identify",
            "inputs", "iv_fit", "iv_solve", "monte_carlo", "names", "quantities", "regression",
            "regressor", "shift_channel", "split_signals", "window_weights"]

@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..mdh import tables as mdh_tables
+from .vehicle_kc import KCTables, wheel_poses
 
 WHEELS = mdh_tables.WHEELS
 GRAVITY = 9.81
@@ -64,10 +65,38 @@ class TyreTruth(eqx.Module):
         return k_d, self.b_phi_1 * fz_kn, self.b_gamma_1 * fz_kn, l_r
 
 
+class MagicTyre(eqx.Module):
+    """A tyre the reduced model (4-16…4-18) was not written against, for rehearsing the
+    identifications: the small-slip behaviour of a Magic Formula tyre (spec tyre §2.2; the
+    1989 set's cornering-stiffness law BCD = a3·sin(2·atan(F_z/a4))), the brush model's
+    torsion stiffness (proportional to the cornering stiffness times the squared contact
+    half-length, ∝ F_z), a camber stiffness ∝ F_z, and the relaxation length of a stretched
+    string, σ = K/C_y (cornering stiffness over the carcass's lateral stiffness). Units as
+    `TyreTruth` (K_δ in N/m of δ′, negative; F_z in kN); the defaults are close to
+    `TyreTruth`'s at 4 kN."""
+
+    a3: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-186000.0))
+    a4: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(6.0))
+    torsion: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-0.0465))
+    camber: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(1500.0))
+    carcass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(358000.0))
+
+    def stiffnesses(self, fz_kn):
+        """(K_δ, K_φ, K_γ, L_R) at F_z [kN]."""
+        k_d = self.a3 * jnp.sin(2.0 * jnp.arctan(fz_kn / self.a4))
+        return k_d, self.torsion * k_d * fz_kn, self.camber * fz_kn, k_d / self.carcass
+
+
 class Vehicle(eqx.Module):
     """Masses, geometry, suspension and tyre of the synthetic car (a mid-size saloon; the
     thesis gives none of these numbers for its Peugeot 406). Corners in `WHEELS` order;
-    `corners` (4, 3) = (L_i, l_i, z0_i) in the body frame (m)."""
+    `corners` (4, 3) = (L_i, l_i, z0_i) in the body frame (m).
+
+    `kinematics`: None for the 12-DOF car (travel along the body's z, steer about it), or the
+    K&C tables of the 30-DOF model (`vehicle_kc.kc_tables`, spec tyre §5.2): each carrier's
+    toe, camber, half-track and wheelbase changes from its travel and the tyre's lateral force
+    (the compliance), the steer added to the toe. The unsprung masses still move along the
+    body's z (the tables' few-mm horizontal shifts are left out of the mass matrix)."""
 
     mass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(1350.0))
     inertia: Float[Array, "3"] = eqx.field(
@@ -84,7 +113,8 @@ class Vehicle(eqx.Module):
     tyre_damping: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(300.0))
     rolling_radius: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(0.294))
     speed_gain: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(3000.0))
-    tyre: TyreTruth = eqx.field(default_factory=TyreTruth)
+    tyre: TyreTruth | MagicTyre = eqx.field(default_factory=TyreTruth)
+    kinematics: KCTables | None = None
 
     def static_loads(self):
         """Static wheel loads (N) from the weight distribution over the axles."""
@@ -119,9 +149,15 @@ def rot_z(a) -> Float[Array, "3 3"]:
     return jnp.stack([jnp.stack([c, -s, z]), jnp.stack([s, c, z]), jnp.stack([z, z, o])])
 
 
-def corner_poses(vehicle: Vehicle, travel: Float[Array, "4"], steer: Float[Array, "4"]):
-    """Wheel-carrier frames in the body frame: (R (4, 3, 3), O (4, 3)) — Table 30's chain of
-    the 12-DOF tree (travel along the body z, steer about it)."""
+def corner_poses(vehicle: Vehicle, travel: Float[Array, "4"], steer: Float[Array, "4"],
+                 fy: Float[Array, "4"] | None = None):
+    """Wheel-carrier frames in the body frame: (R (4, 3, 3), O (4, 3)) — Table 30's chain: of
+    the 12-DOF tree (travel along the body z, steer about it) without `vehicle.kinematics`, of
+    the 30-DOF model with them (`vehicle_kc.wheel_poses`, `fy` the tyres' lateral forces, N)."""
+    if vehicle.kinematics is not None:
+        fy = jnp.zeros(4) if fy is None else fy
+        R, O, _, _ = wheel_poses(vehicle.kinematics, vehicle.corners, travel, fy, steer)
+        return R, O
     O = vehicle.corners + jnp.stack([0 * travel, 0 * travel, travel], axis=1)
     return jax.vmap(rot_z)(steer), O
 
@@ -144,21 +180,29 @@ def _unpack(y):
     return y[:3], y[3:6], y[6:9], y[9:12], y[12:16], y[16:20], y[20:24]
 
 
-def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, steer, steer_rate):
+def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, steer, steer_rate,
+                    fy=None, fy_rate=None):
     """Per corner (4,): the tyre frame and its inputs from the body state (all in the road
     frame except where said): contact point P, axes x_p y_p, camber γ, loaded radius, V_x, V_y
-    of the tyre frame's origin, its yaw rate β̇, and the carrier pose (R, O in the body)."""
+    of the tyre frame's origin, its yaw rate β̇, and the carrier pose (R, O in the body).
+    `fy`, `fy_rate`: the tyres' lateral forces and their rates (the K&C compliance; default
+    0)."""
     R = rotation(*angles)
-    Rc, Oc = corner_poses(vehicle, travel, steer)
+    fy = jnp.zeros(4) if fy is None else fy
+    fy_rate = jnp.zeros(4) if fy_rate is None else fy_rate
+    # the carriers' poses and their rates relative to the body (first order in time)
+    (Rc, Oc), (dRc, dOc) = jax.jvp(lambda z, b, f: corner_poses(vehicle, z, b, f),
+                                   (travel, steer, fy), (travel_rate, steer_rate, fy_rate))
+
     ez = jnp.array([0.0, 0.0, 1.0])
 
-    def one(Rci, Oci, zi, zdi, bi, bdi):
+    def one(Rci, Oci, dRci, dOci):
         def frame(t):
             # pose of the corner at time t to first order (for the frame's own velocities)
             pos = p + t * (R @ v)
             Rb = R + t * (R @ _skew(w))
-            Oi = Oci + t * zdi * ez
-            Ri = Rci @ rot_z(t * bdi)
+            Oi = Oci + t * dOci
+            Ri = Rci + t * dRci
             O_world = pos + Rb @ Oi
             y_w = Rb @ Ri @ jnp.array([0.0, 1.0, 0.0])
             x_p = jnp.cross(y_w, ez)
@@ -176,7 +220,7 @@ def tyre_kinematics(vehicle: Vehicle, p, angles, v, w, travel, travel_rate, stee
                 "vx": jnp.dot(dP, x_p), "vy": jnp.dot(dP, y_p), "yaw_rate": jnp.dot(dx, y_p),
                 "O": O_w}
 
-    return jax.vmap(one)(Rc, Oc, travel, travel_rate, steer, steer_rate)
+    return jax.vmap(one)(Rc, Oc, dRc, dOc)
 
 
 def _skew(a):
@@ -204,8 +248,13 @@ def dynamics(t, y, args):
     beta, beta_rate = steer_fn(t)
     steer = jnp.stack([beta, beta, 0.0 * beta, 0.0 * beta])
     steer_rate = jnp.stack([beta_rate, beta_rate, 0.0 * beta, 0.0 * beta])
-    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate)
+    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy)
     fx, fz, fy_dot, _ = tyre_forces(vehicle, kin, fy, v[0] - speed)
+    if vehicle.kinematics is not None:
+        # the compliance moves the carriers at the rate of F_y, which the carriers' motion
+        # sets: one fixed-point pass (the coupling is ~1e-6 rad/N, its square negligible)
+        kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy, fy_dot)
+        fx, fz, fy_dot, _ = tyre_forces(vehicle, kin, fy, v[0] - speed)
     R = rotation(*ang)
     # tyre forces in the body frame, applied at the contact points (body-frame lever arms)
     f_world = (fx[:, None] * kin["x_p"] + fy[:, None] * kin["y_p"]
@@ -335,7 +384,7 @@ def _truth_channels(vehicle: Vehicle, sensors: Sensors, y, t, beta, beta_rate, s
     R = rotation(*ang)
     steer = jnp.stack([beta, beta, 0.0 * beta, 0.0 * beta])
     steer_rate = jnp.stack([beta_rate, beta_rate, 0.0 * beta, 0.0 * beta])
-    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate)
+    kin = tyre_kinematics(vehicle, p, ang, v, w, z, zd, steer, steer_rate, fy, yd[20:24])
     fx, fz, _, omega = tyre_forces(vehicle, kin, fy, v[0] - speed)
     zg = R[:, 2]
     heights = p[2] + sensors.lasers @ R[2]
@@ -350,7 +399,7 @@ def _truth_channels(vehicle: Vehicle, sensors: Sensors, y, t, beta, beta_rate, s
         w, jnp.cross(w, sensors.imu))
     imu = {"omega": w, "velocity": v + jnp.cross(w, sensors.imu), "specific_force": a_imu - g}
     # wheel-carrier wrench (massless wheel): tyre wrench carried to O, in R_pf
-    Rc, _ = corner_poses(vehicle, z, steer)
+    Rc, _ = corner_poses(vehicle, z, steer, fy)
     f_world = (fx[:, None] * kin["x_p"] + fy[:, None] * kin["y_p"]
                + fz[:, None] * jnp.array([0.0, 0.0, 1.0]))
     Rpf = jnp.einsum("ij,kjl->kil", R, Rc)  # road ← carrier
@@ -428,6 +477,6 @@ _SIGMAS = ("sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity",
            "sigma_moment")
 
 
-__all__ = ["NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle", "WHEELS",
-           "add_noise", "channels", "corner_poses", "dynamics", "initial_state", "measure",
-           "rotation", "simulate", "steering_sine"]
+__all__ = ["MagicTyre", "NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle",
+           "WHEELS", "add_noise", "channels", "corner_poses", "dynamics", "initial_state",
+           "measure", "rotation", "simulate", "steering_sine"]
