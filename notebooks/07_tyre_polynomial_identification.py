@@ -265,10 +265,10 @@ X = setmembership.PolynomialMap.from_terms(("b", "c"), [{(1, 0): 1.0}, {(1, 1): 
 U, centre, radius, _ = setmembership.ellipsoid_box(np.c_[x, z], y, noise_bound=0.05)
 box = setmembership.parameter_set(X, U, centre, radius, [0.0, 0.0], [5.0, 1.0], tol=1e-3)
 print("outer box:", {n: (round(lo, 4), round(hi, 4))
-                     for n, lo, hi in zip(box.names, box.box_lo, box.box_hi)})
+                     for n, lo, hi in zip(box.names, box.box_lo, box.box_hi, strict=True)})
 bb, cc = np.meshgrid(np.linspace(box.box_lo[0], box.box_hi[0], 120),
                      np.linspace(box.box_lo[1], box.box_hi[1], 120))
-inside = np.array([box.contains([b_, c_]) for b_, c_ in zip(bb.ravel(), cc.ravel())])
+inside = np.array([box.contains([b_, c_]) for b_, c_ in zip(bb.ravel(), cc.ravel(), strict=True)])
 fig, ax = plt.subplots(figsize=(4, 3))
 ax.plot(bb.ravel()[inside], cc.ravel()[inside], ".", ms=1, color="0.5", label="the set")
 ax.plot(2.0, 0.3, "r+", ms=10, label="truth")
