@@ -253,8 +253,24 @@ def save(fig: Figure, stem, formats=("png", "svg"), dpi: int = 120) -> list[path
     stem = pathlib.Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
-    for fmt in formats:
-        path = stem.with_suffix("." + fmt)
-        fig.savefig(path, dpi=dpi)
-        paths.append(path)
+    engine = fig.get_layout_engine()
+    if engine is not None and len(formats) > 1:
+        # The layout (constrained: ~40 % of a save) is computed once, at the raster's
+        # resolution (the PNG is the one `savefig` writes), not once per format; the figure
+        # gets its engine back afterwards.
+        shown_dpi = fig.dpi
+        fig.set_dpi(dpi)
+        try:
+            engine.execute(fig)
+        finally:
+            fig.set_dpi(shown_dpi)
+        fig.set_layout_engine("none")
+    try:
+        for fmt in formats:
+            path = stem.with_suffix("." + fmt)
+            fig.savefig(path, dpi=dpi)
+            paths.append(path)
+    finally:
+        if engine is not None and fig.get_layout_engine() is not engine:
+            fig.set_layout_engine(engine)
     return paths

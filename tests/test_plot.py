@@ -50,6 +50,17 @@ def test_kc_curves_models_and_measurements(tmp_path):
     assert b"<svg" in paths[1].read_bytes()[:2000]
 
 
+def test_save_lays_out_once_and_writes_what_savefig_writes(tmp_path):
+    """`save` computes the constrained layout once for both formats: the PNG is the one
+    `savefig` writes with the layout computed for it, and the figure keeps its layout engine."""
+    figs = [plot.kc_curves(event("model A", 1e-4), title="K&C") for _ in range(2)]
+    engine = figs[0].get_layout_engine()
+    png, _ = plot.save(figs[0], tmp_path / "saved")
+    assert figs[0].get_layout_engine() is engine
+    figs[1].savefig(tmp_path / "plain.png", dpi=120)
+    assert png.read_bytes() == (tmp_path / "plain.png").read_bytes()
+
+
 def test_kc_curves_axle_corners_and_given_axes():
     fig = Figure()
     ax = fig.subplots()
