@@ -34,6 +34,7 @@ from jaxtyping import Array, Float
 from .. import kc
 from ..errors import ConvergenceError, InputError
 from ..models import pseudo_mcpherson
+from ..statics import Status
 
 QUANTITIES = ("toe", "camber", "half_track_change", "wheelbase_change")
 """The tabulated K&C metrics (per side, Adams/Car signs): toe (rad, toe-in +), camber (rad,
@@ -66,7 +67,7 @@ def kc_cases(mech, travel, lateral) -> dict:
     driver[:, rig.travel_drivers[0]] = 1000.0 * travel
     loads = eqx.tree_at(lambda ld: ld.driver, loads, jnp.asarray(driver))
     sol, metrics, _ = kc.evaluate(rig, loads)
-    bad = np.flatnonzero(np.asarray(sol.status) != 0)
+    bad = np.flatnonzero(np.asarray(sol.status) != Status.CONVERGED)
     if bad.size:
         raise ConvergenceError(f"K&C case {int(bad[0])} (travel {travel[bad[0]]:.4g} m, "
                                f"lateral {lateral[bad[0]]:.4g} N) did not converge.")
