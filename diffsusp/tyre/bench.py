@@ -565,29 +565,9 @@ class OutputReport(IdentificationReport):
         return fig
 
 
-@dataclasses.dataclass
-class BenchReport(IdentificationReport):
-    """The result of `identify`: `outputs` ("Fy", "Mz" → `OutputReport`), `stable` (the
-    identified F_y model has ∂Fy_pneu/∂δ′ < 0 on every conditioned sample), `min_margin`
-    (max ∂Fy_pneu/∂δ′ over the data, N/m), `flags` (warnings in words), `notes` (what is not
-    identifiable and why), `structure`, `n_rows`, `rate`.
-
-    As the shared report (`IdentificationReport`): the outputs' parameters one after the
-    other (F_y's coefficients and K_Fy_y, then M_z's), and one consistency verdict for the
-    identification: the first output whose fit is inconsistent with the data (its χ² names
-    it; M_z's identification uses F_y's, so no value of either is called identified), else
-    the outputs' χ² together."""
-
-    outputs: dict
-    stable: bool
-    max_margin: float
-    flags: list
-    notes: list
-    structure: str
-    n_rows: int
-    rate: float
-
-    family = "bench"
+class _OutputsReport:
+    """The shared report's parameters of a report made of per-output reports (`outputs`:
+    output name → an `IdentificationReport`): each output's parameters one after the other."""
 
     def _cat(self, attr, dtype=float):
         return np.concatenate([np.asarray(getattr(r, attr), dtype)
@@ -618,10 +598,6 @@ class BenchReport(IdentificationReport):
         return self._cat("identifiable", bool)
 
     @property
-    def held(self) -> np.ndarray:
-        return self._cat("held", bool)
-
-    @property
     def reasons(self) -> tuple[str, ...]:
         return tuple(w for r in self.outputs.values() for w in r.reasons)
 
@@ -635,6 +611,35 @@ class BenchReport(IdentificationReport):
         for r in self.outputs.values():
             out.update(r.residuals)
         return out
+
+
+@dataclasses.dataclass
+class BenchReport(_OutputsReport, IdentificationReport):
+    """The result of `identify`: `outputs` ("Fy", "Mz" → `OutputReport`), `stable` (the
+    identified F_y model has ∂Fy_pneu/∂δ′ < 0 on every conditioned sample), `min_margin`
+    (max ∂Fy_pneu/∂δ′ over the data, N/m), `flags` (warnings in words), `notes` (what is not
+    identifiable and why), `structure`, `n_rows`, `rate`.
+
+    As the shared report (`IdentificationReport`): the outputs' parameters one after the
+    other (F_y's coefficients and K_Fy_y, then M_z's), and one consistency verdict for the
+    identification: the first output whose fit is inconsistent with the data (its χ² names
+    it; M_z's identification uses F_y's, so no value of either is called identified), else
+    the outputs' χ² together."""
+
+    outputs: dict
+    stable: bool
+    max_margin: float
+    flags: list
+    notes: list
+    structure: str
+    n_rows: int
+    rate: float
+
+    family = "bench"
+
+    @property
+    def held(self) -> np.ndarray:
+        return self._cat("held", bool)
 
     @property
     def consistency(self) -> Consistency | None:
@@ -2230,7 +2235,7 @@ class ComplianceReport(IdentificationReport):
 
 
 @dataclasses.dataclass
-class ComplianceSet(IdentificationReport):
+class ComplianceSet(_OutputsReport, IdentificationReport):
     """The result of `identify_compliances`: `outputs` ("Fx", "Fy", "Mz" → `ComplianceReport`),
     `notes`, `n_rows`, `rate`. As the shared report: the outputs' rows one after the other,
     one consistency verdict (the first inconsistent output, else all passed). `table7()`:
@@ -2242,49 +2247,6 @@ class ComplianceSet(IdentificationReport):
     rate: float
 
     family = "bench"
-
-    def _cat(self, attr, dtype=float):
-        return np.concatenate([np.asarray(getattr(r, attr), dtype)
-                               for r in self.outputs.values()])
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(n for r in self.outputs.values() for n in r.names)
-
-    @property
-    def estimates(self) -> np.ndarray:
-        return self._cat("estimates")
-
-    @property
-    def sigmas(self) -> np.ndarray:
-        return self._cat("sigmas")
-
-    @property
-    def sigma_pct(self) -> np.ndarray:
-        return self._cat("sigma_pct")
-
-    @property
-    def estimate_units(self) -> tuple[str, ...]:
-        return tuple(u for r in self.outputs.values() for u in r.estimate_units)
-
-    @property
-    def identifiable(self) -> np.ndarray:
-        return self._cat("identifiable", bool)
-
-    @property
-    def reasons(self) -> tuple[str, ...]:
-        return tuple(w for r in self.outputs.values() for w in r.reasons)
-
-    @property
-    def combinations(self) -> tuple[str, ...]:
-        return ()
-
-    @property
-    def residuals(self) -> dict:
-        out = {}
-        for r in self.outputs.values():
-            out.update(r.residuals)
-        return out
 
     @property
     def consistency(self) -> Consistency | None:
