@@ -194,6 +194,30 @@ def _simulate_all_impl(fy_model, mz_model, fx_model, k_fy, k_mz, seg, t, rolling
 _simulate_all = quick_jit(_simulate_all_impl)
 
 
+def _bench_table(t, u, fx, fy, mz, rng, noise) -> dict:
+    """The bench's channels (segments × samples, raveled) in its units (N, N·mm, mm/s), with
+    white noise of the default σ (`noise` overrides per channel; 0 for none) drawn from
+    `rng`."""
+    n_seg, n_t = fy.shape
+    sig = {"FY": 20.0, "MZ": 2000.0, "FX": 10.0, "FZ": 10.0}
+    sig.update(noise or {})
+    table = {
+        "t": np.tile(np.asarray(t), n_seg),
+        "segment": np.repeat(np.arange(n_seg, dtype=float), n_t),
+        "steer": np.asarray(u["slip"]).ravel(),
+        "camber": np.asarray(u["gamma"]).ravel(),
+        "speed": 1e3 * np.asarray(u["speed"]).ravel(),
+        "omega": np.asarray(u["omega"]).ravel(),
+        "FZ": 1e3 * np.asarray(u["fz"]).ravel(),
+        "FX": np.asarray(fx).ravel(),
+        "FY": np.asarray(fy).ravel(),
+        "MZ": 1e3 * np.asarray(mz).ravel(),
+    }
+    for c in ("FY", "MZ", "FX", "FZ"):
+        table[c] = table[c] + sig[c] * rng.standard_normal(table[c].shape)
+    return table
+
+
 def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *, k_fy: float,
                         k_mz: float, segments: Segments, duration: float = 2.0,
                         rate: float = 200.0, fx_model: PolynomialModel | None = None,
@@ -222,22 +246,7 @@ def synthetic_flat_trac(fy_model: PolynomialModel, mz_model: PolynomialModel, *,
                          "its slip or load range.")
     n_seg, n_t = fy.shape
     rng = np.random.default_rng(seed)
-    sig = {"FY": 20.0, "MZ": 2000.0, "FX": 10.0, "FZ": 10.0}
-    sig.update(noise or {})
-    table = {
-        "t": np.tile(np.asarray(t), n_seg),
-        "segment": np.repeat(np.arange(n_seg, dtype=float), n_t),
-        "steer": np.asarray(u["slip"]).ravel(),
-        "camber": np.asarray(u["gamma"]).ravel(),
-        "speed": 1e3 * np.asarray(u["speed"]).ravel(),
-        "omega": np.asarray(u["omega"]).ravel(),
-        "FZ": 1e3 * np.asarray(u["fz"]).ravel(),
-        "FX": np.asarray(fx).ravel(),
-        "FY": np.asarray(fy).ravel(),
-        "MZ": 1e3 * np.asarray(mz).ravel(),
-    }
-    for c in ("FY", "MZ", "FX", "FZ"):
-        table[c] = table[c] + sig[c] * rng.standard_normal(table[c].shape)
+    table = _bench_table(t, u, fx, fy, mz, rng, noise)
     if disturbances:
         tt = table["t"]
         theta = np.cumsum(table["omega"]) / rate  # wheel angle, per segment up to a constant
@@ -435,22 +444,4 @@ def compliant_flat_trac(tyre: ContactTyre | None = None, *, k_x: float = 3.0e5,
     if not bool(jnp.all(jnp.isfinite(fy)) & jnp.all(jnp.isfinite(mz))):
         raise ModelError("the contact simulation diverged: a segment is past the grip peak "
                          "or the step is too long for the torsion mode (raise `substeps`).")
-    n_seg, n_t = fy.shape
-    rng = np.random.default_rng(seed)
-    sig = {"FY": 20.0, "MZ": 2000.0, "FX": 10.0, "FZ": 10.0}
-    sig.update(noise or {})
-    table = {
-        "t": np.tile(np.asarray(t), n_seg),
-        "segment": np.repeat(np.arange(n_seg, dtype=float), n_t),
-        "steer": np.asarray(u["slip"]).ravel(),
-        "camber": np.asarray(u["gamma"]).ravel(),
-        "speed": 1e3 * np.asarray(u["speed"]).ravel(),
-        "omega": np.asarray(u["omega"]).ravel(),
-        "FZ": 1e3 * np.asarray(u["fz"]).ravel(),
-        "FX": np.asarray(fx).ravel(),
-        "FY": np.asarray(fy).ravel(),
-        "MZ": 1e3 * np.asarray(mz).ravel(),
-    }
-    for c in ("FY", "MZ", "FX", "FZ"):
-        table[c] = table[c] + sig[c] * rng.standard_normal(table[c].shape)
-    return table
+    return _bench_table(t, u, fx, fy, mz, np.random.default_rng(seed), noise)
