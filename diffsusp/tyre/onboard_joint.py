@@ -76,6 +76,7 @@ import scipy.stats
 from ..errors import InputError
 from ..identify.report import IdentificationReport, consistency_from_residuals
 from . import onboard
+from .bench import format_report
 
 TYRE = onboard.NAMES
 VEHICLE = ("I_xx", "I_yy", "I_zz", "I_xz", "m_x_G", "m_z_G")
@@ -377,8 +378,8 @@ class JointReport(IdentificationReport):
                 f"Correvit delay removed {1000 * self.delay:.1f} ms, {len(self.residual)} "
                 f"instants; residual sigma lateral {self.residual_sigma[0]:.3g} N, yaw "
                 f"{self.residual_sigma[1]:.3g} N·m")
-        lines = [head] + [f"{n:10s} {x:14.6g} ± {s:.3g}" for n, x, s in
-                          zip(NAMES, self.estimates, self.sigmas, strict=True)]
+        lines = [head, format_report(self)]  # value, σ, status and reason, the verdict
+        lines += [f"hinges on the held L_R: {c}" for c in self.combinations]
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
