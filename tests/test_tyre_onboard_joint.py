@@ -143,3 +143,33 @@ def test_joint_sigma_on_noise_draws(record, joint, tmp_path):
         J.identify(noisy, mass=-1.0, tyre_vertical=tv)
     with pytest.raises(InputError):
         J.identify(noisy, mass=tr["mass"], tyre_vertical=tv, held={"b_nope": 0.0})
+
+
+def test_cli_joint_with_kc_kinematics(record, joint, tmp_path):
+    """`diffsusp tyre onboard DATA --kinematics kc --joint --mass … --tyre-vertical …`: the
+    library's joint fit of the same record (the module's compiled programs), printed and
+    written with the same statuses: the table, the CSV and the library report agree."""
+    import csv
+
+    from typer.testing import CliRunner
+
+    from diffsusp.cli import app
+
+    _, _, noisy, _, _ = record
+    tr, tv, _, draws = joint
+    path = tmp_path / "run.npz"
+    np.savez(path, **{k: np.asarray(noisy[k]) for k in O.CHANNELS})
+    res = CliRunner().invoke(app, [
+        "tyre", "onboard", str(path), "--kinematics", "kc", "--joint", "--delay", "0",
+        "--mass", str(tr["mass"]), "--tyre-vertical", ",".join(map(str, tv)),
+        "--report", str(tmp_path / "joint.csv")])
+    assert res.exit_code == 0, res.output
+    with (tmp_path / "joint.csv").open() as f:
+        rows = {r["parameter"]: r for r in csv.DictReader(f)}
+    lib = draws[0]
+    assert {n: rows[n]["status"] for n in J.NAMES} == dict(zip(J.NAMES, lib.statuses,
+                                                               strict=True))
+    iz = J.NAMES.index("I_zz")
+    assert float(rows["I_zz"]["estimate"]) == pytest.approx(lib.estimates[iz], rel=1e-9)
+    line = next(ln for ln in res.output.splitlines() if ln.split()[:1] == ["I_zz"])
+    assert line.split()[-1] == "identified"
