@@ -432,9 +432,8 @@ def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
         raise InputError(f"held: unknown parameter(s) {unknown}; the joint model's: "
                          f"{', '.join(NAMES)}.")
     data = onboard.check(data, options)
-    delay_sigma = 0.0
     if delay is None:
-        delay, delay_sigma = onboard.estimate_delay(data, options)
+        delay = onboard.estimate_delay(data, options)[0]
     # the even and the odd samples: two records of one motion with independent noise, the
     # instruments of each other (as `onboard.iv_fit`): the lateral forces are a filter of
     # measured inputs, and least squares would shorten the noise by lengthening the relaxation
@@ -524,7 +523,6 @@ def identify(data: dict, *, mass: float, tyre_vertical, options=_DEFAULT,
     con = dataclasses.replace(con, critical=onboard.MISFIT_RATIO * con.dof,
                               consistent=bool(np.isfinite(con.chi2)
                                               and con.chi2 <= onboard.MISFIT_RATIO * con.dof))
-    _ = delay_sigma
     return JointReport(x, cov, r, rs, float(delay), float(mass),
                        bool(converged), con, ~fmask, shift)
 
