@@ -11,7 +11,6 @@ import json
 import pathlib
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -25,12 +24,7 @@ DATA = pathlib.Path(__file__).parent / "data" / "onboard_sine.npz"
 
 def load_truth():
     veh, sens = V.Vehicle(), V.Sensors()
-    with np.load(DATA) as z:
-        truth = {k: jnp.asarray(z[k], float) for k in z.files if k not in ("t0", "rate")}
-        n = z["lasers"].shape[0]
-        truth["time"] = jnp.asarray(float(z["t0"]) + np.arange(n) / float(z["rate"]))
-    truth.update(laser_positions=sens.lasers, correvit_position=sens.correvit,
-                 imu_position=sens.imu, corners=veh.corners, rolling_radius=veh.rolling_radius)
+    truth = V.load_channels(DATA, veh, sens)
     return veh, sens, truth
 
 

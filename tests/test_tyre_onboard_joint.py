@@ -30,12 +30,7 @@ ESTIMATED = ("I_zz", "I_xz", "m_x_G", "m_z_G")
 def record():
     car = V.Vehicle(kinematics=K.load_tables(), tyre=V.MagicTyre())
     sens = V.Sensors()
-    with np.load(DATA) as z:
-        truth = {k: jnp.asarray(z[k], float) for k in z.files if k not in ("t0", "rate")}
-        n = z["lasers"].shape[0]
-        truth["time"] = jnp.asarray(float(z["t0"]) + np.arange(n) / float(z["rate"]))
-    truth.update(laser_positions=sens.lasers, correvit_position=sens.correvit,
-                 imu_position=sens.imu, corners=car.corners, rolling_radius=car.rolling_radius)
+    truth = V.load_channels(DATA, car, sens)
     fz = np.asarray(truth["true_fz"]).mean(axis=0) / 1000.0
     loads = (float(fz[:2].mean()), float(fz[2:].mean()))
     kd, kp, kg, lr = (np.asarray(a) for a in car.tyre.stiffnesses(jnp.asarray(loads)))

@@ -427,6 +427,20 @@ def channels(vehicle: Vehicle, sensors: Sensors, record: Record, *, speed: float
     return ch
 
 
+def load_channels(path, vehicle: Vehicle, sensors: Sensors) -> dict:
+    """The noise-free channels of a recorded run saved as an .npz (per-sample channels as
+    `channels` gives them, with `t0` and `rate` for the time axis), completed with the sensor
+    positions and the vehicle's corners as `channels` adds them: what `add_noise` takes."""
+    with np.load(path) as z:
+        ch = {k: jnp.asarray(z[k], float) for k in z.files if k not in ("t0", "rate")}
+        n = z["lasers"].shape[0]
+        ch["time"] = jnp.asarray(float(z["t0"]) + np.arange(n) / float(z["rate"]))
+    ch.update(laser_positions=sensors.lasers, correvit_position=sensors.correvit,
+              imu_position=sensors.imu, corners=vehicle.corners,
+              rolling_radius=vehicle.rolling_radius)
+    return ch
+
+
 NOISY = ("correvit", "imu_omega", "imu_specific_force", "imu_velocity", "lasers", "spin",
          "steer", "travel")
 
@@ -479,4 +493,4 @@ _SIGMAS = ("sigma_laser", "sigma_correvit", "sigma_gyro", "sigma_imu_velocity",
 
 __all__ = ["MagicTyre", "NOISY", "Record", "Sensors", "TYRE_NAMES", "TyreTruth", "Vehicle",
            "WHEELS", "add_noise", "channels", "corner_poses", "dynamics", "initial_state",
-           "measure", "rotation", "simulate", "steering_sine"]
+           "load_channels", "measure", "rotation", "simulate", "steering_sine"]
